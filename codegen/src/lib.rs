@@ -1,0 +1,1 @@
+//! plantc-codegen (filled by a later issue).

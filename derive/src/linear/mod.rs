@@ -1,0 +1,1 @@
+//! Numeric linear analysis and design.

@@ -1,0 +1,1 @@
+//! plantc-identify (filled by a later issue).

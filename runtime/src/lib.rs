@@ -1,0 +1,1 @@
+//! plantc-runtime (filled by a later issue).
