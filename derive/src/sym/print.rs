@@ -14,7 +14,6 @@ use super::rational::Rational;
 const PREC_ADD: u8 = 1;
 const PREC_MUL: u8 = 2;
 const PREC_POW: u8 = 3;
-const PREC_ATOM: u8 = 4;
 
 fn factor_class(e: Expr) -> u8 {
     let (b, _) = e.base_and_exp();
