@@ -1,0 +1,210 @@
+//! The Euler-Lagrange equations `d/dt(dL/dq') - dL/dq = Q` of a [`Model`].
+
+use std::fmt;
+
+use super::matrix::{adjugate, determinant};
+use crate::model::Model;
+use crate::sym::{diff, CoordinateSymbols, Expr, Symbol};
+
+/// Why the equations of motion could not be formed.
+#[derive(Clone, Debug, PartialEq)]
+pub enum MechanicsError {
+    /// A generalised force is not affine in an input (e.g. `Vm^2`).
+    NotControlAffine {
+        /// Coordinate whose force is at fault.
+        coordinate: String,
+        /// The input that enters nonlinearly.
+        input: String,
+    },
+    /// The kinetic energy depends on an input or an acceleration.
+    KineticDependsOn {
+        /// The offending symbol.
+        symbol: String,
+    },
+    /// The mass matrix is identically singular (e.g. a coordinate without inertia).
+    SingularMassMatrix,
+}
+
+impl fmt::Display for MechanicsError {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        match self {
+            MechanicsError::NotControlAffine { coordinate, input } => write!(
+                f,
+                "the force on `{coordinate}` is not affine in the input `{input}`; \
+                 plantc needs M(q) q'' + bias = Q0 + B(q, q') u"
+            ),
+            MechanicsError::KineticDependsOn { symbol } => {
+                write!(f, "the kinetic energy must not depend on `{symbol}`")
+            }
+            MechanicsError::SingularMassMatrix => write!(
+                f,
+                "the mass matrix is singular for every state: does every coordinate carry inertia in T?"
+            ),
+        }
+    }
+}
+
+impl std::error::Error for MechanicsError {}
+
+/// `M(q) q'' + bias(q, q') = Q0(q, q') + B(q, q') u`.
+#[derive(Clone, Debug)]
+pub struct Equations {
+    /// Coordinate symbols in order.
+    pub coords: Vec<CoordinateSymbols>,
+    /// Input symbols in order.
+    pub inputs: Vec<Symbol>,
+    /// Mass matrix `M_ij = d^2 T / dq_i' dq_j'` (symmetric).
+    pub mass_matrix: Vec<Vec<Expr>>,
+    /// Coriolis, centrifugal and gravity terms:
+    /// `bias_i = sum_j d(dL/dq_i')/dq_j q_j' - dL/dq_i`.
+    pub bias: Vec<Expr>,
+    /// Generalised forces with the inputs set to zero, `Q0_i`.
+    pub forces: Vec<Expr>,
+    /// Input matrix `B_ij = dQ_i / du_j`.
+    pub input_matrix: Vec<Vec<Expr>>,
+}
+
+impl Equations {
+    /// Right-hand side `r = Q0 - bias + B u` (so that `M q'' = r`).
+    pub fn rhs(&self) -> Vec<Expr> {
+        (0..self.coords.len())
+            .map(|i| {
+                let bu: Expr = self.inputs
+                    .iter()
+                    .enumerate()
+                    .map(|(j, u)| self.input_matrix[i][j] * Expr::symbol(*u))
+                    .sum();
+                self.forces[i] - self.bias[i] + bu
+            })
+            .collect()
+    }
+
+    /// The residual `M q'' + bias - Q0 - B u` of each equation (zero on motion).
+    pub fn residuals(&self) -> Vec<Expr> {
+        let rhs = self.rhs();
+        (0..self.coords.len())
+            .map(|i| {
+                let mq: Expr = self
+                    .coords
+                    .iter()
+                    .enumerate()
+                    .map(|(j, c)| self.mass_matrix[i][j] * Expr::symbol(c.qdd))
+                    .sum();
+                mq - rhs[i]
+            })
+            .collect()
+    }
+}
+
+/// Derive the Euler-Lagrange equations of `model`. Parameters and derived
+/// quantities stay symbolic.
+pub fn derive_equations(model: &Model) -> Result<Equations, MechanicsError> {
+    let coords = model.coordinate_symbols();
+    let inputs = model.input_symbols();
+    for u in &inputs {
+        if model.kinetic.contains(*u) {
+            return Err(MechanicsError::KineticDependsOn {
+                symbol: u.name().to_string(),
+            });
+        }
+    }
+    for c in &coords {
+        if model.kinetic.contains(c.qdd) || model.potential.contains(c.qdd) {
+            return Err(MechanicsError::KineticDependsOn {
+                symbol: c.qdd.name().to_string(),
+            });
+        }
+    }
+    let lagrangian = model.kinetic - model.potential;
+    let n = coords.len();
+    let mut mass_matrix = vec![vec![Expr::zero(); n]; n];
+    let mut bias = vec![Expr::zero(); n];
+    for i in 0..n {
+        let p = diff(lagrangian, coords[i].qd);
+        let mut terms = Vec::with_capacity(n + 1);
+        for j in 0..n {
+            mass_matrix[i][j] = tidy(diff(p, coords[j].qd));
+            terms.push(diff(p, coords[j].q) * Expr::symbol(coords[j].qd));
+        }
+        terms.push(-diff(lagrangian, coords[i].q));
+        bias[i] = tidy(Expr::add_all(terms));
+    }
+    let zero_inputs: std::collections::HashMap<Symbol, Expr> =
+        inputs.iter().map(|u| (*u, Expr::zero())).collect();
+    let mut forces = Vec::with_capacity(n);
+    let mut input_matrix = vec![vec![Expr::zero(); inputs.len()]; n];
+    for (i, q) in model.forces.iter().enumerate() {
+        for (j, u) in inputs.iter().enumerate() {
+            let b = diff(*q, *u);
+            for v in &inputs {
+                if !crate::sym::is_zero(diff(b, *v)) {
+                    return Err(MechanicsError::NotControlAffine {
+                        coordinate: model.coordinates[i].name.clone(),
+                        input: u.name().to_string(),
+                    });
+                }
+            }
+            input_matrix[i][j] = tidy(b);
+        }
+        forces.push(tidy(crate::sym::substitute_symbols(*q, &zero_inputs)));
+    }
+    Ok(Equations {
+        coords,
+        inputs,
+        mass_matrix,
+        bias,
+        forces,
+        input_matrix,
+    })
+}
+
+/// Present an expression in simplified canonical form.
+fn tidy(e: Expr) -> Expr {
+    crate::sym::simplify(e)
+}
+
+/// `x' = f(x) + g(x) u` with `x = (q, q')`, `M^-1 = adj(M) / det(M)`.
+#[derive(Clone, Debug)]
+pub struct ControlAffine {
+    /// State symbols `q, q'`.
+    pub state: Vec<Symbol>,
+    /// Input symbols.
+    pub inputs: Vec<Symbol>,
+    /// Drift `f(x)` (2n entries).
+    pub f: Vec<Expr>,
+    /// Input vector fields, `g[i][j]` = component `i` of the field of input `j`.
+    pub g: Vec<Vec<Expr>>,
+    /// `det M(q)`.
+    pub det_mass: Expr,
+}
+
+/// Form the control-affine system. Uses the adjugate over the determinant and
+/// the canonical form, so `f` and `g` are exact rational functions.
+pub fn control_affine(eqs: &Equations) -> Result<ControlAffine, MechanicsError> {
+    let n = eqs.coords.len();
+    let det = tidy(determinant(&eqs.mass_matrix));
+    if det.is_zero() {
+        return Err(MechanicsError::SingularMassMatrix);
+    }
+    let adj = adjugate(&eqs.mass_matrix);
+    let drift: Vec<Expr> = (0..n).map(|i| eqs.forces[i] - eqs.bias[i]).collect();
+    let mut state: Vec<Symbol> = eqs.coords.iter().map(|c| c.q).collect();
+    state.extend(eqs.coords.iter().map(|c| c.qd));
+    let mut f: Vec<Expr> = eqs.coords.iter().map(|c| Expr::symbol(c.qd)).collect();
+    let mut g = vec![vec![Expr::zero(); eqs.inputs.len()]; 2 * n];
+    for i in 0..n {
+        let num: Expr = (0..n).map(|k| adj[i][k] * drift[k]).sum();
+        f.push(tidy(num / det));
+        for j in 0..eqs.inputs.len() {
+            let num: Expr = (0..n).map(|k| adj[i][k] * eqs.input_matrix[k][j]).sum();
+            g[n + i][j] = tidy(num / det);
+        }
+    }
+    Ok(ControlAffine {
+        state,
+        inputs: eqs.inputs.clone(),
+        f,
+        g,
+        det_mass: det,
+    })
+}

@@ -1,0 +1,363 @@
+//! Lowering a checked `.plant` AST into the symbolic [`Model`].
+
+use std::collections::{HashMap, HashSet};
+use std::fmt;
+use std::path::Path;
+
+use super::{
+    Coordinate, CoordinateKind, ControllerSpec, Derived, Input, Model, Output, Parameter,
+    ParameterSet,
+};
+use crate::lang::ast::{self, BinOp, ExprKind};
+use crate::lang::units::parse_unit;
+use crate::lang::{parse_and_check, Diagnostic, SourceFile};
+use crate::sym::{CoordinateSymbols, Expr, Func, Rational, Symbol};
+
+/// A model loaded from a file, with the warnings and notes its checking produced.
+#[derive(Clone, Debug)]
+pub struct LoadedModel {
+    /// The symbolic model.
+    pub model: Model,
+    /// The source it came from (for rendering diagnostics and for editing).
+    pub source: SourceFile,
+    /// Warnings and notes (never errors).
+    pub diagnostics: Vec<Diagnostic>,
+}
+
+/// Why a model could not be loaded.
+#[derive(Clone, Debug)]
+pub enum LoadError {
+    /// The file could not be read.
+    Io {
+        /// Path as given.
+        path: String,
+        /// The operating system's message.
+        message: String,
+    },
+    /// The file has errors (the diagnostics include any warnings too).
+    Invalid {
+        /// The source.
+        source: SourceFile,
+        /// All diagnostics, errors first in file order.
+        diagnostics: Vec<Diagnostic>,
+    },
+}
+
+impl LoadError {
+    /// The diagnostics rendered as text with file:line:col and carets.
+    pub fn render(&self) -> String {
+        match self {
+            LoadError::Io { path, message } => format!("error: cannot read `{path}`: {message}\n"),
+            LoadError::Invalid { source, diagnostics } => {
+                crate::lang::diagnostic::render(source, diagnostics)
+            }
+        }
+    }
+}
+
+impl fmt::Display for LoadError {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        f.write_str(&self.render())
+    }
+}
+
+impl std::error::Error for LoadError {}
+
+/// Read, check and lower the model file at `path`.
+pub fn load_model(path: &Path) -> Result<LoadedModel, LoadError> {
+    let text = std::fs::read_to_string(path).map_err(|e| LoadError::Io {
+        path: path.display().to_string(),
+        message: e.to_string(),
+    })?;
+    load_model_text(&path.display().to_string(), &text)
+}
+
+/// Check and lower model text (`name` is used in diagnostics).
+pub fn load_model_text(name: &str, text: &str) -> Result<LoadedModel, LoadError> {
+    let source = SourceFile::new(name, text);
+    let checked = parse_and_check(name, text);
+    let has_errors = checked.diagnostics.iter().any(|d| d.is_error());
+    match checked.model {
+        Some(file) if !has_errors => Ok(LoadedModel {
+            model: lower(&file),
+            source,
+            diagnostics: checked.diagnostics,
+        }),
+        _ => Err(LoadError::Invalid {
+            source,
+            diagnostics: checked.diagnostics,
+        }),
+    }
+}
+
+fn number(text: &str) -> Expr {
+    match Rational::from_decimal_str(text) {
+        Some(r) => Expr::rational(r),
+        None => Expr::float(text.parse().unwrap_or(f64::NAN)),
+    }
+}
+
+fn scale_of(unit: Option<&ast::UnitExpr>) -> f64 {
+    unit.and_then(|u| parse_unit(&u.text).ok())
+        .map_or(1.0, |u| u.scale.to_f64())
+}
+
+fn scale_expr(unit: &ast::UnitExpr) -> Expr {
+    match parse_unit(&unit.text) {
+        Ok(u) => {
+            let r = Rational::new(u.scale.ratio.num as i128, u.scale.ratio.den as i128)
+                .map_or(Expr::float(u.scale.ratio.to_f64()), Expr::rational);
+            if u.scale.pi_power == 0 {
+                r
+            } else {
+                r * Expr::float(std::f64::consts::PI).powi(u.scale.pi_power as i64)
+            }
+        }
+        Err(_) => Expr::one(),
+    }
+}
+
+struct Lowerer<'a> {
+    file: &'a ast::ModelFile,
+    lets: HashMap<&'a str, &'a ast::Let>,
+    let_values: HashMap<String, Expr>,
+    params: HashSet<String>,
+    derived: Vec<Derived>,
+    derived_names: HashSet<String>,
+    in_progress: HashSet<String>,
+}
+
+impl<'a> Lowerer<'a> {
+    fn expr(&mut self, e: &ast::Expr) -> Expr {
+        match &e.kind {
+            ExprKind::Number(n) => number(&n.text),
+            ExprKind::Quantity(n, u) => number(&n.text) * scale_expr(u),
+            ExprKind::Pi => Expr::float(std::f64::consts::PI),
+            ExprKind::Name(name) => self.name(name),
+            ExprKind::Deriv(name, k) => Expr::sym(&format!("{name}{}", "'".repeat(*k as usize))),
+            ExprKind::Neg(a) => -self.expr(a),
+            ExprKind::Binary(op, a, b) => {
+                let (x, y) = (self.expr(a), self.expr(b));
+                match op {
+                    BinOp::Add => x + y,
+                    BinOp::Sub => x - y,
+                    BinOp::Mul => x * y,
+                    BinOp::Div => x / y,
+                    BinOp::Pow => x.pow(y),
+                }
+            }
+            ExprKind::Call(f, args) => {
+                let a: Vec<Expr> = args.iter().map(|x| self.expr(x)).collect();
+                match (f.name.as_str(), a.as_slice()) {
+                    ("sqrt", [x]) => x.sqrt(),
+                    ("atan2", [y, x]) => Expr::atan2(*y, *x),
+                    (name, [x]) => match Func::from_name(name) {
+                        Some(func) => Expr::apply(func, *x),
+                        None => Expr::float(f64::NAN),
+                    },
+                    _ => Expr::float(f64::NAN),
+                }
+            }
+        }
+    }
+
+    fn name(&mut self, name: &str) -> Expr {
+        if self.params.contains(name) || self.derived_names.contains(name) {
+            return Expr::sym(name);
+        }
+        if let Some(v) = self.let_values.get(name) {
+            return *v;
+        }
+        if let Some(l) = self.lets.get(name).copied() {
+            if !self.in_progress.insert(name.to_string()) {
+                return Expr::float(f64::NAN); // cycle: the checker reports it
+            }
+            let def = self.expr(&l.expr);
+            self.in_progress.remove(name);
+            let only_params = def
+                .symbols()
+                .iter()
+                .all(|s| self.params.contains(s.name()) || self.derived_names.contains(s.name()));
+            let value = if only_params && !def.is_constant() {
+                let sym = Symbol::new(name);
+                self.derived.push(Derived {
+                    name: name.to_string(),
+                    symbol: sym,
+                    expr: def,
+                });
+                self.derived_names.insert(name.to_string());
+                Expr::symbol(sym)
+            } else {
+                def
+            };
+            self.let_values.insert(name.to_string(), value);
+            return value;
+        }
+        Expr::sym(name)
+    }
+}
+
+/// Lower a checked model file. The file must have passed
+/// [`crate::lang::parse_and_check`] without errors.
+pub fn lower(file: &ast::ModelFile) -> Model {
+    let mut lw = Lowerer {
+        file,
+        lets: file.lets.iter().map(|l| (l.name.name.as_str(), l)).collect(),
+        let_values: HashMap::new(),
+        params: file.parameters.iter().map(|p| p.name.name.clone()).collect(),
+        derived: Vec::new(),
+        derived_names: HashSet::new(),
+        in_progress: HashSet::new(),
+    };
+    // Lower lets in file order so derived quantities are in dependency order.
+    for l in &file.lets {
+        lw.name(&l.name.name);
+    }
+    let coordinates: Vec<Coordinate> = file
+        .coordinates
+        .iter()
+        .map(|c| Coordinate {
+            name: c.name.name.clone(),
+            kind: match c.kind {
+                ast::CoordKind::Angle => CoordinateKind::Angle,
+                ast::CoordKind::Length => CoordinateKind::Length,
+            },
+            symbols: CoordinateSymbols::new(&c.name.name),
+            description: c.doc.as_ref().map(|d| d.value.clone()),
+        })
+        .collect();
+    let inputs = file
+        .inputs
+        .iter()
+        .map(|i| {
+            let s = scale_of(i.unit.as_ref());
+            Input {
+                name: i.name.name.clone(),
+                symbol: Symbol::new(&i.name.name),
+                unit: i.unit.as_ref().map(|u| u.text.clone()).unwrap_or_default(),
+                limits: i.limits.as_ref().map(|b| (b.lo.value() * s, b.hi.value() * s)),
+                description: i.doc.as_ref().map(|d| d.value.clone()),
+            }
+        })
+        .collect();
+    let parameters: Vec<Parameter> = file
+        .parameters
+        .iter()
+        .map(|p| {
+            let s = scale_of(p.unit.as_ref());
+            Parameter {
+                name: p.name.name.clone(),
+                symbol: Symbol::new(&p.name.name),
+                value: p.value.value() * s,
+                unit: p.unit.as_ref().map(|u| u.text.clone()).unwrap_or_default(),
+                description: p.doc.as_ref().map(|d| d.value.clone()),
+                estimate: p.estimate.as_ref().map(|b| (b.lo.value() * s, b.hi.value() * s)),
+            }
+        })
+        .collect();
+    let outputs = file
+        .outputs
+        .iter()
+        .map(|o| Output {
+            name: o.name.name.clone(),
+            expr: match &o.expr {
+                Some(e) => lw.expr(e),
+                None => lw.name(&o.name.name),
+            },
+        })
+        .collect();
+    let kinetic = file.kinetic.first().map_or(Expr::zero(), |k| lw.expr(&k.expr));
+    let potential = file.potential.first().map_or(Expr::zero(), |v| lw.expr(&v.expr));
+    let forces = coordinates
+        .iter()
+        .map(|c| {
+            file.forces
+                .iter()
+                .filter(|f| f.coordinate.name == c.name)
+                .map(|f| lw.expr(&f.expr))
+                .sum()
+        })
+        .collect();
+    // Parameter sets: entries evaluated against the nominal values.
+    let nominal: HashMap<Symbol, f64> = parameters.iter().map(|p| (p.symbol, p.value)).collect();
+    let sets = file
+        .sets
+        .iter()
+        .map(|s| ParameterSet {
+            name: s.name.name.clone(),
+            description: s.title.as_ref().map(|t| t.value.clone()),
+            values: s
+                .entries
+                .iter()
+                .map(|e| {
+                    let decl = file.parameters.iter().find(|p| p.name.name == e.name.name);
+                    let v = match &e.value.kind {
+                        // A bare number is in the parameter's declared unit.
+                        ExprKind::Number(n) => n.value() * scale_of(decl.and_then(|d| d.unit.as_ref())),
+                        _ => lw.expr(&e.value).eval_map(&nominal),
+                    };
+                    (e.name.name.clone(), v)
+                })
+                .collect(),
+        })
+        .collect();
+    let controllers = file.controllers.iter().map(|c| lower_controller(&mut lw, c)).collect();
+    Model {
+        name: file.model.as_ref().map_or("model".to_string(), |m| m.name.name.clone()),
+        description: file.model.as_ref().and_then(|m| m.title.as_ref().map(|t| t.value.clone())),
+        coordinates,
+        inputs,
+        outputs,
+        parameters,
+        derived: lw.derived,
+        sets,
+        kinetic,
+        potential,
+        forces,
+        controllers,
+    }
+}
+
+fn lower_controller(lw: &mut Lowerer<'_>, c: &ast::Controller) -> ControllerSpec {
+    let name = c.name.name.clone();
+    let mut gains: Vec<(String, f64)> = Vec::new();
+    let mut output = None;
+    let mut law = None;
+    for st in &c.body {
+        match st {
+            ast::ControllerStmt::Place { poles, .. } => {
+                return ControllerSpec::Place {
+                    name,
+                    poles: poles.iter().map(|p| p.value()).collect(),
+                }
+            }
+            ast::ControllerStmt::Lqr { q, r, .. } => {
+                return ControllerSpec::Lqr {
+                    name,
+                    q: q.iter().map(|x| x.value()).collect(),
+                    r: r.iter().map(|x| x.value()).collect(),
+                }
+            }
+            ast::ControllerStmt::Gains { values, .. } => {
+                return ControllerSpec::Gains {
+                    name,
+                    k: vec![values.iter().map(|x| x.value()).collect()],
+                }
+            }
+            ast::ControllerStmt::Linearize { output: o, .. } => output = Some(o.name.clone()),
+            ast::ControllerStmt::Gain { name: g, value, .. } => {
+                let env: HashMap<Symbol, f64> =
+                    gains.iter().map(|(n, v)| (Symbol::new(n), *v)).collect();
+                let v = lw.expr(value).eval_map(&env);
+                gains.push((g.name.clone(), v));
+            }
+            ast::ControllerStmt::Law { expr, .. } => law = Some(lw.expr(expr)),
+        }
+    }
+    ControllerSpec::FeedbackLinearization {
+        name,
+        output: output.unwrap_or_default(),
+        gains,
+        v: law.unwrap_or_else(Expr::zero),
+    }
+}

@@ -1,0 +1,236 @@
+//! The symbolic model: what a checked `.plant` file means, independent of its
+//! syntax. Produced by [`lower`] from the checked AST; consumed by mechanics,
+//! analysis, code generation and identification.
+
+mod lower;
+mod values;
+
+pub use lower::{load_model, lower, LoadedModel};
+pub use values::{ParameterValues, ValuesError};
+
+use crate::sym::{CoordinateSymbols, Expr, Symbol};
+
+/// What a generalised coordinate measures.
+#[derive(Copy, Clone, Debug, PartialEq, Eq, serde::Serialize)]
+#[serde(rename_all = "lowercase")]
+pub enum CoordinateKind {
+    /// An angle in rad; its generalised force is a torque.
+    Angle,
+    /// A length in m; its generalised force is a force.
+    Length,
+}
+
+/// A generalised coordinate `q` with its velocity `q'` and acceleration `q''`.
+#[derive(Clone, Debug)]
+pub struct Coordinate {
+    /// Name as written in the model file.
+    pub name: String,
+    /// Angle or length.
+    pub kind: CoordinateKind,
+    /// The symbols `q`, `q'`, `q''`.
+    pub symbols: CoordinateSymbols,
+    /// Free-text description.
+    pub description: Option<String>,
+}
+
+/// An input (actuator command).
+#[derive(Clone, Debug)]
+pub struct Input {
+    /// Name, e.g. `Vm`.
+    pub name: String,
+    /// Its symbol.
+    pub symbol: Symbol,
+    /// Unit as written, e.g. `V`.
+    pub unit: String,
+    /// Saturation limits `(lo, hi)` in SI units, if declared.
+    pub limits: Option<(f64, f64)>,
+    /// Free-text description.
+    pub description: Option<String>,
+}
+
+/// A measured or controlled output `y = h(q, q')`.
+#[derive(Clone, Debug)]
+pub struct Output {
+    /// Name (a coordinate's name for `output alpha`).
+    pub name: String,
+    /// The expression `h`, over coordinates, velocities and parameters.
+    pub expr: Expr,
+}
+
+/// A physical parameter with its nominal value.
+#[derive(Clone, Debug)]
+pub struct Parameter {
+    /// Name.
+    pub name: String,
+    /// Its symbol.
+    pub symbol: Symbol,
+    /// Nominal value in SI units.
+    pub value: f64,
+    /// Unit as written.
+    pub unit: String,
+    /// Free-text description.
+    pub description: Option<String>,
+    /// Bounds `(lo, hi)` in SI units if the parameter is marked `estimate`.
+    pub estimate: Option<(f64, f64)>,
+}
+
+/// A named set of parameter overrides.
+#[derive(Clone, Debug)]
+pub struct ParameterSet {
+    /// Name used with `--set`.
+    pub name: String,
+    /// Free-text description.
+    pub description: Option<String>,
+    /// Overridden values in SI units, in file order.
+    pub values: Vec<(String, f64)>,
+}
+
+/// A definition that depends on parameters only (`let J0h = J1 + m1*l1^2 + ...`).
+/// It stays a symbol in the equations (so they read like a textbook) and is
+/// evaluated from the parameter values.
+#[derive(Clone, Debug)]
+pub struct Derived {
+    /// Name.
+    pub name: String,
+    /// Its symbol.
+    pub symbol: Symbol,
+    /// Definition over parameters and earlier derived quantities.
+    pub expr: Expr,
+}
+
+/// A controller declared in the model file (design data only; the analysis and
+/// code-generation layers give it meaning).
+#[derive(Clone, Debug, PartialEq)]
+pub enum ControllerSpec {
+    /// `u = -K x` with given gains (one row per input).
+    Gains {
+        /// Name.
+        name: String,
+        /// Gains, row-major, one row per input.
+        k: Vec<Vec<f64>>,
+    },
+    /// `u = -K x` with K placed at the given poles.
+    Place {
+        /// Name.
+        name: String,
+        /// Desired closed-loop poles `(re, im)`.
+        poles: Vec<(f64, f64)>,
+    },
+    /// LQR with diagonal weights.
+    Lqr {
+        /// Name.
+        name: String,
+        /// Diagonal of Q.
+        q: Vec<f64>,
+        /// Diagonal of R.
+        r: Vec<f64>,
+    },
+    /// Input-output feedback linearization of an output with an outer law `v`.
+    FeedbackLinearization {
+        /// Name.
+        name: String,
+        /// The output linearized.
+        output: String,
+        /// Named gains with their values (in file order).
+        gains: Vec<(String, f64)>,
+        /// The outer law `v` over `y`, `y'`, ..., coordinates, velocities and gains.
+        v: Expr,
+    },
+}
+
+impl ControllerSpec {
+    /// The controller's name.
+    pub fn name(&self) -> &str {
+        match self {
+            ControllerSpec::Gains { name, .. }
+            | ControllerSpec::Place { name, .. }
+            | ControllerSpec::Lqr { name, .. }
+            | ControllerSpec::FeedbackLinearization { name, .. } => name,
+        }
+    }
+}
+
+/// A mechanical model: Lagrangian `T - V`, generalised forces, inputs, outputs.
+#[derive(Clone, Debug)]
+pub struct Model {
+    /// Model name.
+    pub name: String,
+    /// Description.
+    pub description: Option<String>,
+    /// Generalised coordinates in declaration order (state order is
+    /// `q_1..q_n, q_1'..q_n'`).
+    pub coordinates: Vec<Coordinate>,
+    /// Inputs in declaration order.
+    pub inputs: Vec<Input>,
+    /// Outputs in declaration order.
+    pub outputs: Vec<Output>,
+    /// Parameters in declaration order.
+    pub parameters: Vec<Parameter>,
+    /// Parameter-only definitions in dependency order.
+    pub derived: Vec<Derived>,
+    /// Named parameter sets.
+    pub sets: Vec<ParameterSet>,
+    /// Kinetic energy `T(q, q')`.
+    pub kinetic: Expr,
+    /// Potential energy `V(q)`.
+    pub potential: Expr,
+    /// Generalised force on each coordinate, `Q_i(q, q', u)`.
+    pub forces: Vec<Expr>,
+    /// Controllers declared in the file.
+    pub controllers: Vec<ControllerSpec>,
+}
+
+impl Model {
+    /// Coordinate symbols in order.
+    pub fn coordinate_symbols(&self) -> Vec<CoordinateSymbols> {
+        self.coordinates.iter().map(|c| c.symbols).collect()
+    }
+
+    /// State symbols `q_1..q_n, q_1'..q_n'`.
+    pub fn state_symbols(&self) -> Vec<Symbol> {
+        let mut v: Vec<Symbol> = self.coordinates.iter().map(|c| c.symbols.q).collect();
+        v.extend(self.coordinates.iter().map(|c| c.symbols.qd));
+        v
+    }
+
+    /// State names as used in data files: `theta, alpha, theta_dot, alpha_dot`.
+    pub fn state_names(&self) -> Vec<String> {
+        let mut v: Vec<String> = self.coordinates.iter().map(|c| c.name.clone()).collect();
+        v.extend(self.coordinates.iter().map(|c| format!("{}_dot", c.name)));
+        v
+    }
+
+    /// Input symbols in order.
+    pub fn input_symbols(&self) -> Vec<Symbol> {
+        self.inputs.iter().map(|i| i.symbol).collect()
+    }
+
+    /// Parameter symbols followed by derived-quantity symbols: the order of
+    /// [`ParameterValues::full`].
+    pub fn parameter_symbols(&self) -> Vec<Symbol> {
+        let mut v: Vec<Symbol> = self.parameters.iter().map(|p| p.symbol).collect();
+        v.extend(self.derived.iter().map(|d| d.symbol));
+        v
+    }
+
+    /// Replace derived quantities by their definitions (recursively), leaving an
+    /// expression over base parameters only.
+    pub fn expand_derived(&self, e: Expr) -> Expr {
+        let mut map = std::collections::HashMap::new();
+        for d in &self.derived {
+            let def = crate::sym::substitute_symbols(d.expr, &map);
+            map.insert(d.symbol, def);
+        }
+        crate::sym::substitute_symbols(e, &map)
+    }
+
+    /// Find a parameter by name.
+    pub fn parameter(&self, name: &str) -> Option<&Parameter> {
+        self.parameters.iter().find(|p| p.name == name)
+    }
+
+    /// Find a controller by name.
+    pub fn controller(&self, name: &str) -> Option<&ControllerSpec> {
+        self.controllers.iter().find(|c| c.name() == name)
+    }
+}

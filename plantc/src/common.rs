@@ -1,0 +1,133 @@
+//! Helpers shared by the commands: errors, model loading with parameter
+//! selection, number formatting.
+
+use std::io::Write;
+use std::path::Path;
+
+use plantc_derive::model::{load_model, LoadedModel, ParameterValues};
+
+use crate::cli::ParamArgs;
+use crate::{EXIT_BAD_INPUT, EXIT_FAILURE};
+
+/// A command's failure: the message for stderr and the exit code.
+#[derive(Debug)]
+pub struct CliError {
+    /// What to print (already rendered, may span several lines).
+    pub message: String,
+    /// Process exit code.
+    pub code: i32,
+}
+
+impl CliError {
+    /// Bad input from the user (exit code 2).
+    pub fn input(message: impl Into<String>) -> CliError {
+        CliError { message: message.into(), code: EXIT_BAD_INPUT }
+    }
+
+    /// The computation failed (exit code 1).
+    pub fn failure(message: impl Into<String>) -> CliError {
+        CliError { message: message.into(), code: EXIT_FAILURE }
+    }
+}
+
+/// Load a model, printing its warnings to `err`; errors become a [`CliError`]
+/// with the rendered diagnostics.
+pub fn load(path: &Path, err: &mut dyn Write) -> Result<LoadedModel, CliError> {
+    let loaded = load_model(path).map_err(|e| CliError::input(e.render()))?;
+    if !loaded.diagnostics.is_empty() {
+        let _ = write!(
+            err,
+            "{}",
+            plantc_derive::lang::diagnostic::render(&loaded.source, &loaded.diagnostics)
+        );
+    }
+    Ok(loaded)
+}
+
+/// Parse `--param NAME=VALUE` overrides.
+pub fn parse_overrides(params: &[String]) -> Result<Vec<(String, f64)>, CliError> {
+    params
+        .iter()
+        .map(|p| {
+            let (name, value) = p.split_once('=').ok_or_else(|| {
+                CliError::input(format!("error: `--param {p}`: expected NAME=VALUE, e.g. `--param l2=0.1685`"))
+            })?;
+            let v: f64 = value.trim().parse().map_err(|_| {
+                CliError::input(format!(
+                    "error: `--param {p}`: `{value}` is not a number (values are in SI units)"
+                ))
+            })?;
+            Ok((name.trim().to_string(), v))
+        })
+        .collect()
+}
+
+/// Parameter values from `--set` and `--param`.
+pub fn values(loaded: &LoadedModel, args: &ParamArgs) -> Result<ParameterValues, CliError> {
+    let overrides = parse_overrides(&args.params)?;
+    ParameterValues::new(&loaded.model, args.set.as_deref(), &overrides)
+        .map_err(|e| CliError::input(format!("error: {e}")))
+}
+
+/// Parse `name=value,...` with optional `deg` suffix on values; names must be
+/// in `names`. Returns values in `names` order (unnamed are 0).
+pub fn parse_assignments(text: &str, names: &[String], what: &str) -> Result<Vec<f64>, CliError> {
+    let mut out = vec![0.0; names.len()];
+    for item in text.split(',').map(str::trim).filter(|s| !s.is_empty()) {
+        let (name, value) = item.split_once('=').ok_or_else(|| {
+            CliError::input(format!("error: `{item}`: expected NAME=VALUE"))
+        })?;
+        let name = name.trim();
+        let idx = names.iter().position(|n| n == name).ok_or_else(|| {
+            CliError::input(format!(
+                "error: `{name}` is not a {what} of the model (known: {})",
+                names.join(", ")
+            ))
+        })?;
+        out[idx] = parse_quantity(value)
+            .ok_or_else(|| CliError::input(format!("error: `{value}` is not a number (e.g. 0.1, 10deg)")))?;
+    }
+    Ok(out)
+}
+
+/// A number with an optional `deg` or `rad` suffix, in SI.
+pub fn parse_quantity(text: &str) -> Option<f64> {
+    let t = text.trim();
+    if let Some(d) = t.strip_suffix("deg") {
+        return d.trim().parse::<f64>().ok().map(f64::to_radians);
+    }
+    let t = t.strip_suffix("rad").unwrap_or(t);
+    t.trim().parse().ok()
+}
+
+/// Format a number compactly for tables.
+pub fn num(x: f64) -> String {
+    if x == 0.0 {
+        "0".into()
+    } else if x.abs() >= 1e-3 && x.abs() < 1e5 {
+        let s = format!("{x:.6}");
+        let s = s.trim_end_matches('0').trim_end_matches('.');
+        s.to_string()
+    } else {
+        format!("{x:.6e}")
+    }
+}
+
+/// Print a matrix with row labels.
+pub fn write_matrix(out: &mut dyn Write, name: &str, rows: &[Vec<f64>], labels: &[String]) {
+    let _ = writeln!(out, "{name} =");
+    let cells: Vec<Vec<String>> = rows.iter().map(|r| r.iter().map(|x| num(*x)).collect()).collect();
+    let width = cells.iter().flatten().map(String::len).max().unwrap_or(1);
+    let lw = labels.iter().map(String::len).max().unwrap_or(0);
+    for (i, r) in cells.iter().enumerate() {
+        let label = labels.get(i).map_or("", String::as_str);
+        let _ = write!(out, "  {label:<lw$} [");
+        for (j, c) in r.iter().enumerate() {
+            if j > 0 {
+                let _ = write!(out, " ");
+            }
+            let _ = write!(out, "{c:>width$}");
+        }
+        let _ = writeln!(out, "]");
+    }
+}
