@@ -256,7 +256,7 @@ pub fn lqr(
     )?;
     let smax = svd.singular_values.max();
     let smin = svd.singular_values.min();
-    if !(smin > 2.0 * n as f64 * f64::EPSILON * smax * 1e3) {
+    if smin.is_nan() || smin <= 2.0 * n as f64 * f64::EPSILON * smax * 1e3 {
         return Err(LinearError::CareFailed {
             reason: "stable invariant subspace of the Hamiltonian is not a graph [I; P]",
             residual: f64::NAN,
@@ -292,7 +292,10 @@ pub fn lqr(
 
     let k = &rinv_bt * &p;
     let closed_loop_poles = poles(&(a - b * &k))?;
-    if closed_loop_poles.iter().any(|z| !(z.re < 0.0)) {
+    if closed_loop_poles
+        .iter()
+        .any(|z| z.re.is_nan() || z.re >= 0.0)
+    {
         return Err(LinearError::CareFailed {
             reason: "solution is not stabilizing (closed loop has eigenvalues with Re >= 0)",
             residual: res,

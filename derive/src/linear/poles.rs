@@ -96,7 +96,11 @@ pub fn canonicalize_poles(mut p: Vec<Pole>) -> Vec<Pole> {
                 continue;
             }
             let d = (p[i].re - p[j].re).hypot(p[i].im + p[j].im);
-            if best.map_or(true, |(_, bd)| d < bd) {
+            let closer = match best {
+                None => true,
+                Some((_, bd)) => d < bd,
+            };
+            if closer {
                 best = Some((j, d));
             }
         }
