@@ -70,6 +70,11 @@ fn place_thesis_eq12() {
     for (j, w) in want.iter().enumerate() {
         assert_rel(pl.k[(0, j)], *w, 1e-3, "K Eq. 12");
     }
+    println!(
+        "Eq. 12 K = {:?}, pole error {:e}",
+        pl.k.as_slice(),
+        pl.max_pole_error
+    );
     assert!(pl.max_pole_error < 1e-9, "{}", pl.max_pole_error);
     let r = PlaceReport::from(&pl);
     let json: serde_json::Value = serde_json::from_str(&to_json(&r)).unwrap();
@@ -93,6 +98,11 @@ fn place_thesis_eq13() {
     for (j, w) in want.iter().enumerate() {
         assert_rel(pl.k[(0, j)], *w, 1e-3, "K Eq. 13");
     }
+    println!(
+        "Eq. 13 K = {:?}, pole error {:e}",
+        pl.k.as_slice(),
+        pl.max_pole_error
+    );
     assert!(pl.max_pole_error < 1e-9, "{}", pl.max_pole_error);
 }
 
@@ -150,7 +160,11 @@ fn lqr_thesis_identity_weights() {
     // scipy closed-loop poles: -125.67197354, -5.42049968 +/- 1.93229758i, -0.87689731.
     assert_rel(l.closed_loop_poles[0].re, -125.67197354, 1e-8, "cl pole");
     assert_rel(l.closed_loop_poles[3].re, -0.87689731, 1e-7, "cl pole");
-    println!("LQR K = {}, residual = {:e}", l.k, l.care_residual);
+    println!(
+        "LQR K = {:?}, residual = {:e}",
+        l.k.as_slice(),
+        l.care_residual
+    );
 
     let json: serde_json::Value = serde_json::from_str(&to_json(&LqrReport::from(&l))).unwrap();
     for key in ["K", "P", "closed_loop_poles", "care_residual"] {
