@@ -1,1 +1,28 @@
 //! Numeric linear analysis and design.
+//!
+//! - [`LinearModel`]: `x' = A x + B u` with names, JSON load/save.
+//! - [`poles`], [`parse_poles`]: eigenvalues in canonical order; pole lists.
+//! - [`controllability`]: controllability matrix and SVD rank.
+//! - [`place`]: single-input pole placement (`u = -K x`).
+//! - [`lqr`]: continuous-time LQR via the CARE.
+//! - [`AnalysisReport`], [`PlaceReport`], [`LqrReport`]: the CLI's JSON shapes.
+//!
+//! All functions return [`LinearError`] on bad input instead of panicking.
+
+mod controllability;
+mod error;
+mod linear_model;
+mod lqr;
+mod place;
+mod poles;
+mod report;
+
+pub use controllability::{
+    controllability, controllability_matrix, numerical_rank, Controllability,
+};
+pub use error::LinearError;
+pub use linear_model::{matrix_from_rows, matrix_to_rows, LinearModel};
+pub use lqr::{care_residual, lqr, Lqr};
+pub use place::{char_poly, check_desired_poles, place, pole_match_error, Placement};
+pub use poles::{canonicalize_poles, format_pole, parse_poles, poles, Pole};
+pub use report::{analyze, to_json, AnalysisReport, LqrReport, PlaceReport};
