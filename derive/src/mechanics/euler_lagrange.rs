@@ -65,6 +65,19 @@ pub struct Equations {
 }
 
 impl Equations {
+    /// The same equations with every entry in simplified canonical form.
+    pub fn simplified(&self) -> Equations {
+        let t = |v: &[Expr]| v.iter().map(|e| tidy(*e)).collect::<Vec<_>>();
+        Equations {
+            coords: self.coords.clone(),
+            inputs: self.inputs.clone(),
+            mass_matrix: self.mass_matrix.iter().map(|r| t(r)).collect(),
+            bias: t(&self.bias),
+            forces: t(&self.forces),
+            input_matrix: self.input_matrix.iter().map(|r| t(r)).collect(),
+        }
+    }
+
     /// Right-hand side `r = Q0 - bias + B u` (so that `M q'' = r`).
     pub fn rhs(&self) -> Vec<Expr> {
         (0..self.coords.len())
@@ -97,7 +110,8 @@ impl Equations {
 }
 
 /// Derive the Euler-Lagrange equations of `model`. Parameters and derived
-/// quantities stay symbolic.
+/// quantities stay symbolic. The entries are exact but not simplified (fast);
+/// call [`Equations::simplified`] before presenting them.
 pub fn derive_equations(model: &Model) -> Result<Equations, MechanicsError> {
     let coords = model.coordinate_symbols();
     let inputs = model.input_symbols();
@@ -123,11 +137,11 @@ pub fn derive_equations(model: &Model) -> Result<Equations, MechanicsError> {
         let p = diff(lagrangian, coords[i].qd);
         let mut terms = Vec::with_capacity(n + 1);
         for j in 0..n {
-            mass_matrix[i][j] = tidy(diff(p, coords[j].qd));
+            mass_matrix[i][j] = diff(p, coords[j].qd);
             terms.push(diff(p, coords[j].q) * Expr::symbol(coords[j].qd));
         }
         terms.push(-diff(lagrangian, coords[i].q));
-        bias[i] = tidy(Expr::add_all(terms));
+        bias[i] = Expr::add_all(terms);
     }
     let zero_inputs: std::collections::HashMap<Symbol, Expr> =
         inputs.iter().map(|u| (*u, Expr::zero())).collect();
@@ -137,16 +151,17 @@ pub fn derive_equations(model: &Model) -> Result<Equations, MechanicsError> {
         for (j, u) in inputs.iter().enumerate() {
             let b = diff(*q, *u);
             for v in &inputs {
-                if !crate::sym::is_zero(diff(b, *v)) {
+                let second = diff(b, *v);
+                if !second.is_zero() && !crate::sym::is_zero(second) {
                     return Err(MechanicsError::NotControlAffine {
                         coordinate: model.coordinates[i].name.clone(),
                         input: u.name().to_string(),
                     });
                 }
             }
-            input_matrix[i][j] = tidy(b);
+            input_matrix[i][j] = b;
         }
-        forces.push(tidy(crate::sym::substitute_symbols(*q, &zero_inputs)));
+        forces.push(crate::sym::substitute_symbols(*q, &zero_inputs));
     }
     Ok(Equations {
         coords,

@@ -21,7 +21,9 @@ pub fn run(
 ) -> Result<(), CliError> {
     let loaded = load(path, err)?;
     let model = &loaded.model;
-    let eqs = derive_equations(model).map_err(|e| CliError::failure(format!("error: {e}")))?;
+    let eqs = derive_equations(model)
+        .map_err(|e| CliError::failure(format!("error: {e}")))?
+        .simplified();
     let ca = control_affine(&eqs).map_err(|e| CliError::failure(format!("error: {e}")))?;
     if json {
         let v = serde_json::json!({
