@@ -118,11 +118,26 @@ pub const BUILTINS: &[(&str, usize)] = &[
     ("atan2", 2),
 ];
 
-/// Parses and checks a model file.
+/// Parser errors after which checking still makes sense.
+const NON_BLOCKING: &[&str] = &["plantc::unknown_coordinate_kind"];
+
+/// Short human-readable number.
+fn fmt_num(v: f64) -> String {
+    if v == 0.0 || (1e-3..1e4).contains(&v.abs()) {
+        let s = format!("{v:.6}");
+        s.trim_end_matches('0').trim_end_matches('.').to_string()
+    } else {
+        format!("{v:.4e}")
+    }
+}
+
+/// Parses and checks a model file: syntax errors stop before the semantic
+/// checks (so a half-parsed statement does not cause follow-up errors), and
+/// several syntax or several semantic errors are reported in one run.
 pub fn parse_and_check(file_name: &str, text: &str) -> Checked {
     let _ = file_name;
     let (file, mut diags) = parse(text);
-    if diags.iter().any(|d| d.is_error()) {
+    if diags.iter().any(|d| d.is_error() && !NON_BLOCKING.contains(&d.code)) {
         diags.sort_by_key(|d| (d.primary.start, d.primary.end));
         return Checked {
             model: None,
@@ -624,7 +639,7 @@ impl Checker {
             self.diags.push(
                 Diagnostic::error(
                     "plantc::bad_bounds",
-                    format!("{what} bounds must satisfy lo < hi, found [{}, {}]", b.lo.text, b.hi.text),
+                    format!("{what} must satisfy lo < hi, found [{}, {}]", b.lo.text, b.hi.text),
                     b.span,
                     "empty or reversed interval",
                 )
@@ -674,7 +689,7 @@ impl Checker {
                 );
             }
             if let Some(b) = &p.estimate {
-                if self.bounds_ok(b, "estimate") {
+                if self.bounds_ok(b, "estimate bounds") {
                     let v = p.value.value();
                     if !(b.lo.value() <= v && v <= b.hi.value()) {
                         self.diags.push(
@@ -1088,7 +1103,7 @@ impl Checker {
                                 "plantc::value_outside_estimate",
                                 format!("value for `{}` in set `{}` is outside its estimate bounds", e.name.name, set.name.name),
                                 e.value.span,
-                                format!("= {v:.6e} in SI"),
+                                format!("= {} {} in SI, bounds [{}, {}]", fmt_num(v), pv.unit.dim.base_form(), fmt_num(lo), fmt_num(hi)),
                             )
                             .with_label(b.span, "estimate bounds"),
                         );
@@ -1155,7 +1170,7 @@ impl Checker {
                                     *span,
                                     format!("{} poles", poles.len()),
                                 )
-                                .with_help(format!("the model has {} coordinates, so {n_states} states", file.coordinates.len())),
+                                .with_help(format!("the model has {} coordinate(s), so {n_states} states", file.coordinates.len())),
                             );
                         }
                         for p in poles {

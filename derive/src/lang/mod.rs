@@ -13,3 +13,4 @@ pub use check::{dimension_of, parse_and_check, Checked, Symbols};
 pub use diagnostic::{render, Diagnostic, Severity};
 pub use source::SourceFile;
 pub use span::Span;
+pub mod edit;

@@ -163,7 +163,14 @@ impl<'a> Parser<'a> {
             format!("expected {expected}"),
         );
         if t.tok == Tok::Newline || t.tok == Tok::Eof {
-            d.primary = Span::new(t.span.start, t.span.start);
+            let mut at = t.span.start;
+            if t.tok == Tok::Eof {
+                let trimmed = self.src.trim_end_matches(['\n', '\r']);
+                if trimmed.len() < self.src.len() {
+                    at = trimmed.len();
+                }
+            }
+            d.primary = Span::new(at, at);
             d = d.with_help(
                 "a statement ends at the end of its line; to continue it, end the line with an operator or `=`, or keep brackets open",
             );
@@ -307,7 +314,7 @@ impl<'a> Parser<'a> {
                             )
                             .with_help("use `angle` (unit rad) or `length` (unit m)"),
                         );
-                        return Err(());
+                        CoordKind::Angle
                     }
                 };
                 let doc = self.opt_str();
@@ -791,6 +798,30 @@ impl<'a> Parser<'a> {
         e
     }
 
+    /// After a binary operator a line break continues the expression, unless
+    /// the next line starts a new declaration (then the operator is a typo).
+    fn skip_after_operator(&mut self, op: Span) -> PResult<()> {
+        if self.toks[self.pos].tok != Tok::Newline {
+            return Ok(());
+        }
+        self.skip_newlines();
+        let t = self.toks[self.pos].clone();
+        if t.tok == Tok::Ident && KEYWORDS.contains(&self.text(t.span)) && self.column(t.span.start) == 0 {
+            self.error(
+                Diagnostic::error(
+                    "plantc::syntax",
+                    "expression ends with an operator",
+                    op,
+                    "nothing follows this operator",
+                )
+                .with_label(t.span, "the next line starts a new declaration")
+                .with_help("complete the expression or remove the trailing operator; a line ending with an operator continues on the next line"),
+            );
+            return Err(());
+        }
+        Ok(())
+    }
+
     fn enter(&mut self) -> PResult<()> {
         self.depth += 1;
         if self.depth > MAX_DEPTH {
@@ -843,8 +874,8 @@ impl<'a> Parser<'a> {
                 Tok::Newline if self.continuation_line() => continue,
                 _ => break,
             };
-            self.bump();
-            self.skip_newlines();
+            let op_tok = self.bump();
+            self.skip_after_operator(op_tok.span)?;
             let rhs = self.term()?;
             let span = lhs.span.to(rhs.span);
             lhs = Expr::new(ExprKind::Binary(op, Box::new(lhs), Box::new(rhs)), span);
@@ -860,8 +891,8 @@ impl<'a> Parser<'a> {
                 Tok::Slash => BinOp::Div,
                 _ => break,
             };
-            self.bump();
-            self.skip_newlines();
+            let op_tok = self.bump();
+            self.skip_after_operator(op_tok.span)?;
             let rhs = self.unary()?;
             let span = lhs.span.to(rhs.span);
             lhs = Expr::new(ExprKind::Binary(op, Box::new(lhs), Box::new(rhs)), span);
@@ -910,8 +941,8 @@ impl<'a> Parser<'a> {
             return Err(());
         }
         if t.tok == Tok::Caret {
-            self.bump();
-            self.skip_newlines();
+            let op_tok = self.bump();
+            self.skip_after_operator(op_tok.span)?;
             let exp = self.unary()?;
             let span = base.span.to(exp.span);
             return Ok(Expr::new(ExprKind::Binary(BinOp::Pow, Box::new(base), Box::new(exp)), span));
