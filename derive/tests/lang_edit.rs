@@ -17,7 +17,11 @@ fn fixture() -> String {
 fn assert_only_changed(before: &str, after: &str, start: usize, end: usize, new: &str) {
     assert_eq!(&after[..start], &before[..start], "prefix changed");
     assert_eq!(&after[start..start + new.len()], new, "edited span");
-    assert_eq!(&after[start + new.len()..], &before[end..], "suffix changed");
+    assert_eq!(
+        &after[start + new.len()..],
+        &before[end..],
+        "suffix changed"
+    );
 }
 
 fn valid(text: &str) {
@@ -87,7 +91,9 @@ fn set_estimate_replaces_existing_bounds() {
 fn set_estimate_adds_bounds() {
     let src = fixture();
     let out = set_estimate(&src, "J2", "5e-4", "3e-3").unwrap();
-    let at = src.find("\"pendulum inertia about its centre of mass\"").unwrap()
+    let at = src
+        .find("\"pendulum inertia about its centre of mass\"")
+        .unwrap()
         + "\"pendulum inertia about its centre of mass\"".len();
     assert_only_changed(&src, &out, at, at, " estimate [5e-4, 3e-3]");
     valid(&out);

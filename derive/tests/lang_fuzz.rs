@@ -13,9 +13,41 @@ fn run(text: &str) {
 
 /// Pieces that make mutations likely to hit interesting paths.
 const TOKENS: &[&str] = &[
-    "(", ")", "[", "]", "{", "}", "'", "''", "^", "*", "/", "+", "-", "=", ",", "\n", "\"", "#",
-    "1e-3", "2+3i", "theta", "alpha'", "sin(", "viscous_friction(", "[kg*m^2]", "[m^(1/2)]",
-    "let ", "force ", "set ", "controller ", "\r\n", "é", "\t", "pi", "^-1",
+    "(",
+    ")",
+    "[",
+    "]",
+    "{",
+    "}",
+    "'",
+    "''",
+    "^",
+    "*",
+    "/",
+    "+",
+    "-",
+    "=",
+    ",",
+    "\n",
+    "\"",
+    "#",
+    "1e-3",
+    "2+3i",
+    "theta",
+    "alpha'",
+    "sin(",
+    "viscous_friction(",
+    "[kg*m^2]",
+    "[m^(1/2)]",
+    "let ",
+    "force ",
+    "set ",
+    "controller ",
+    "\r\n",
+    "é",
+    "\t",
+    "pi",
+    "^-1",
 ];
 
 #[derive(Debug, Clone)]
@@ -83,7 +115,11 @@ proptest! {
 
 #[test]
 fn deep_nesting_is_an_error_not_a_crash() {
-    let deep = format!("model m\nlet x = {}1{}\n", "(".repeat(5000), ")".repeat(5000));
+    let deep = format!(
+        "model m\nlet x = {}1{}\n",
+        "(".repeat(5000),
+        ")".repeat(5000)
+    );
     let c = parse_and_check("deep.plant", &deep);
     assert!(c.has_errors());
     let minus = format!("model m\nlet x = {}1\n", "-".repeat(5000));

@@ -7,7 +7,10 @@ fn check_fixture(name: &str) -> plantc_derive::lang::Checked {
     let text = std::fs::read_to_string(&path).unwrap();
     let checked = parse_and_check(name, &text);
     if checked.has_errors() {
-        panic!("{}", render(&SourceFile::new(name, text), &checked.diagnostics));
+        panic!(
+            "{}",
+            render(&SourceFile::new(name, text), &checked.diagnostics)
+        );
     }
     checked
 }

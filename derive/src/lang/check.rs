@@ -8,6 +8,7 @@ use super::parser::parse;
 use super::span::Span;
 use super::units::{parse_unit, Dim, Ratio, Unit};
 use std::collections::{BTreeMap, HashMap};
+use std::ops::{Add, Div, Mul, Neg};
 
 /// Result of [`parse_and_check`].
 #[derive(Debug, Clone)]
@@ -25,7 +26,9 @@ pub struct Checked {
 impl Checked {
     /// True if any diagnostic is an error.
     pub fn has_errors(&self) -> bool {
-        self.diagnostics.iter().any(|d| d.severity == Severity::Error)
+        self.diagnostics
+            .iter()
+            .any(|d| d.severity == Severity::Error)
     }
 
     /// The errors only.
@@ -137,7 +140,10 @@ fn fmt_num(v: f64) -> String {
 pub fn parse_and_check(file_name: &str, text: &str) -> Checked {
     let _ = file_name;
     let (file, mut diags) = parse(text);
-    if diags.iter().any(|d| d.is_error() && !NON_BLOCKING.contains(&d.code)) {
+    if diags
+        .iter()
+        .any(|d| d.is_error() && !NON_BLOCKING.contains(&d.code))
+    {
         diags.sort_by_key(|d| (d.primary.start, d.primary.end));
         return Checked {
             model: None,
@@ -162,6 +168,7 @@ pub fn parse_and_check(file_name: &str, text: &str) -> Checked {
 
 /// Dimension of an expression given resolved symbols (e.g. from
 /// [`Checked::symbols`]); the first problem found is returned as an error.
+#[allow(clippy::result_large_err)] // cold path; Diagnostic is plain data
 pub fn dimension_of(expr: &Expr, symbols: &Symbols) -> Result<Dim, Diagnostic> {
     let mut diags = Vec::new();
     let d = Infer {
@@ -173,7 +180,12 @@ pub fn dimension_of(expr: &Expr, symbols: &Symbols) -> Result<Dim, Diagnostic> {
     match (d, diags.into_iter().find(|d| d.is_error())) {
         (_, Some(e)) => Err(e),
         (Some(d), None) => Ok(d),
-        (None, None) => Err(Diagnostic::error("plantc::unknown_dimension", "dimension unknown", expr.span, "here")),
+        (None, None) => Err(Diagnostic::error(
+            "plantc::unknown_dimension",
+            "dimension unknown",
+            expr.span,
+            "here",
+        )),
     }
 }
 
@@ -261,7 +273,10 @@ fn did_you_mean(s: &[String]) -> Option<String> {
         1 => Some(format!("did you mean `{}`?", s[0])),
         _ => Some(format!(
             "did you mean one of {}?",
-            s.iter().map(|x| format!("`{x}`")).collect::<Vec<_>>().join(", ")
+            s.iter()
+                .map(|x| format!("`{x}`"))
+                .collect::<Vec<_>>()
+                .join(", ")
         )),
     }
 }
@@ -354,7 +369,10 @@ impl Infer<'_> {
                         self.diags.push(
                             Diagnostic::error(
                                 "plantc::not_a_value",
-                                format!("`{n}` is {} and cannot be used in an expression", s.kind.describe()),
+                                format!(
+                                    "`{n}` is {} and cannot be used in an expression",
+                                    s.kind.describe()
+                                ),
                                 e.span,
                                 "used here",
                             )
@@ -368,7 +386,10 @@ impl Infer<'_> {
                         self.diags.push(
                             Diagnostic::error(
                                 "plantc::not_constant",
-                                format!("`{n}` is {}; only parameters and numbers are allowed here", s.kind.describe()),
+                                format!(
+                                    "`{n}` is {}; only parameters and numbers are allowed here",
+                                    s.kind.describe()
+                                ),
                                 e.span,
                                 "not a constant",
                             )
@@ -392,12 +413,17 @@ impl Infer<'_> {
                         self.diags.push(
                             Diagnostic::error(
                                 "plantc::bad_derivative",
-                                format!("`{n}` is {}; only coordinates have time derivatives", s.kind.describe()),
+                                format!(
+                                    "`{n}` is {}; only coordinates have time derivatives",
+                                    s.kind.describe()
+                                ),
                                 e.span,
                                 "derivative of a non-coordinate",
                             )
                             .with_label(s.span, format!("`{n}` declared here"))
-                            .with_help("`'` marks a time derivative of a coordinate, e.g. `theta'`"),
+                            .with_help(
+                                "`'` marks a time derivative of a coordinate, e.g. `theta'`",
+                            ),
                         );
                         None
                     }
@@ -420,7 +446,10 @@ impl Infer<'_> {
                                     format!("this is {db}"),
                                 )
                                 .with_label(a.span, format!("this is {da}"))
-                                .with_help(format!("both sides of `{}` must have the same unit", op.symbol())),
+                                .with_help(format!(
+                                    "both sides of `{}` must have the same unit",
+                                    op.symbol()
+                                )),
                             );
                             return None;
                         }
@@ -431,14 +460,12 @@ impl Infer<'_> {
                     BinOp::Pow => {
                         if let Some(db) = db {
                             if !db.is_none() {
-                                self.diags.push(
-                                    Diagnostic::error(
-                                        "plantc::unit_mismatch",
-                                        format!("an exponent must be dimensionless, found {db}"),
-                                        b.span,
-                                        format!("this is {db}"),
-                                    ),
-                                );
+                                self.diags.push(Diagnostic::error(
+                                    "plantc::unit_mismatch",
+                                    format!("an exponent must be dimensionless, found {db}"),
+                                    b.span,
+                                    format!("this is {db}"),
+                                ));
                                 return None;
                             }
                         }
@@ -503,7 +530,11 @@ impl Infer<'_> {
             );
             d.help = did_you_mean(&suggest(&f.name, cands)).or(Some(format!(
                 "built-in functions: {}",
-                BUILTINS.iter().map(|(n, _)| *n).collect::<Vec<_>>().join(" ")
+                BUILTINS
+                    .iter()
+                    .map(|(n, _)| *n)
+                    .collect::<Vec<_>>()
+                    .join(" ")
             )));
             self.diags.push(d);
             for a in args {
@@ -515,7 +546,11 @@ impl Infer<'_> {
         if args.len() != arity {
             self.diags.push(Diagnostic::error(
                 "plantc::wrong_arity",
-                format!("`{}` takes {arity} argument(s), found {}", f.name, args.len()),
+                format!(
+                    "`{}` takes {arity} argument(s), found {}",
+                    f.name,
+                    args.len()
+                ),
                 e.span,
                 "wrong number of arguments",
             ));
@@ -532,7 +567,9 @@ impl Infer<'_> {
                     self.diags.push(
                         Diagnostic::error(
                             "plantc::unit_mismatch",
-                            format!("`atan2` needs two arguments of the same unit, found {d0} and {d1}"),
+                            format!(
+                                "`atan2` needs two arguments of the same unit, found {d0} and {d1}"
+                            ),
                             args[1].span,
                             format!("this is {d1}"),
                         )
@@ -564,8 +601,13 @@ impl Infer<'_> {
 fn unit_error(u: &UnitExpr, err: super::units::UnitError) -> Diagnostic {
     let s = u.span.start + err.start.min(u.text.len());
     let e = (u.span.start + err.end.min(u.text.len())).max(s);
-    Diagnostic::error("plantc::unknown_unit", err.message, Span::new(s, e), "in this unit")
-        .with_help(err.help)
+    Diagnostic::error(
+        "plantc::unknown_unit",
+        err.message,
+        Span::new(s, e),
+        "in this unit",
+    )
+    .with_help(err.help)
 }
 
 struct Checker {
@@ -618,7 +660,10 @@ impl Checker {
                     name.span,
                     format!("declared again here as {}", kind.describe()),
                 )
-                .with_label(prev.span, format!("first declared here as {}", prev.kind.describe()))
+                .with_label(
+                    prev.span,
+                    format!("first declared here as {}", prev.kind.describe()),
+                )
                 .with_help("every name must be declared once; rename one of them"),
             );
             return;
@@ -639,7 +684,10 @@ impl Checker {
             self.diags.push(
                 Diagnostic::error(
                     "plantc::bad_bounds",
-                    format!("{what} must satisfy lo < hi, found [{}, {}]", b.lo.text, b.hi.text),
+                    format!(
+                        "{what} must satisfy lo < hi, found [{}, {}]",
+                        b.lo.text, b.hi.text
+                    ),
                     b.span,
                     "empty or reversed interval",
                 )
@@ -664,7 +712,11 @@ impl Checker {
         }
         // declarations
         for c in &file.coordinates {
-            self.declare(&c.name, SymbolKind::Coordinate(c.kind), Some(coord_dim(c.kind)));
+            self.declare(
+                &c.name,
+                SymbolKind::Coordinate(c.kind),
+                Some(coord_dim(c.kind)),
+            );
         }
         for i in &file.inputs {
             let u = self.resolve_unit(&i.unit);
@@ -695,7 +747,10 @@ impl Checker {
                         self.diags.push(
                             Diagnostic::warning(
                                 "plantc::value_outside_estimate",
-                                format!("value {} of `{}` is outside its estimate bounds", p.value.text, p.name.name),
+                                format!(
+                                    "value {} of `{}` is outside its estimate bounds",
+                                    p.value.text, p.name.name
+                                ),
                                 p.value.span,
                                 "outside the bounds",
                             )
@@ -751,20 +806,28 @@ impl Checker {
                             .syms
                             .names
                             .iter()
-                            .filter(|(_, s)| matches!(s.kind, SymbolKind::Coordinate(_) | SymbolKind::Let))
+                            .filter(|(_, s)| {
+                                matches!(s.kind, SymbolKind::Coordinate(_) | SymbolKind::Let)
+                            })
                             .map(|(n, _)| n.as_str())
                             .collect();
                         let mut d = Diagnostic::error(
                             "plantc::bad_output",
                             match other {
                                 None => format!("unknown name `{}`", o.name.name),
-                                Some(k) => format!("`{}` is {}, not a coordinate or a `let`", o.name.name, k.describe()),
+                                Some(k) => format!(
+                                    "`{}` is {}, not a coordinate or a `let`",
+                                    o.name.name,
+                                    k.describe()
+                                ),
                             },
                             o.name.span,
                             "an output must be a coordinate or a `let` name",
                         );
-                        d.help = did_you_mean(&suggest(&o.name.name, cands))
-                            .or(Some(format!("or give it a definition: `output {} = ...`", o.name.name)));
+                        d.help = did_you_mean(&suggest(&o.name.name, cands)).or(Some(format!(
+                            "or give it a definition: `output {} = ...`",
+                            o.name.name
+                        )));
                         self.diags.push(d);
                     }
                 },
@@ -859,7 +922,9 @@ impl Checker {
                         "plantc::bad_force",
                         match other {
                             None => format!("unknown coordinate `{}`", q.name),
-                            Some(s) => format!("`{}` is {}, not a coordinate", q.name, s.kind.describe()),
+                            Some(s) => {
+                                format!("`{}` is {}, not a coordinate", q.name, s.kind.describe())
+                            }
                         },
                         q.span,
                         "a force acts on a coordinate",
@@ -921,7 +986,13 @@ impl Checker {
                     Ok(x) => x,
                     Err(d) => {
                         self.diags.push(d);
-                        Expr::new(ExprKind::Number(NumLit { text: "0".into(), span: e.span }), e.span)
+                        Expr::new(
+                            ExprKind::Number(NumLit {
+                                text: "0".into(),
+                                span: e.span,
+                            }),
+                            e.span,
+                        )
                     }
                 };
             }
@@ -990,7 +1061,10 @@ impl Checker {
                         .with_help("a `let` may use other lets in any order, but not itself, directly or indirectly");
                         for &m in &members {
                             if m != v {
-                                d = d.with_label(file.lets[m].name.span, format!("`{}` is defined here", file.lets[m].name.name));
+                                d = d.with_label(
+                                    file.lets[m].name.span,
+                                    format!("`{}` is defined here", file.lets[m].name.name),
+                                );
                             }
                         }
                         self.diags.push(d);
@@ -1047,15 +1121,23 @@ impl Checker {
             for e in &set.entries {
                 let param = file.parameters.iter().find(|p| p.name.name == e.name.name);
                 let Some(param) = param else {
-                    let cands: Vec<&str> = file.parameters.iter().map(|p| p.name.name.as_str()).collect();
+                    let cands: Vec<&str> = file
+                        .parameters
+                        .iter()
+                        .map(|p| p.name.name.as_str())
+                        .collect();
                     let mut d = Diagnostic::error(
                         "plantc::unknown_parameter",
-                        format!("set `{}` gives a value to `{}`, which is not a parameter", set.name.name, e.name.name),
+                        format!(
+                            "set `{}` gives a value to `{}`, which is not a parameter",
+                            set.name.name, e.name.name
+                        ),
                         e.name.span,
                         "not a parameter",
                     );
-                    d.help = did_you_mean(&suggest(&e.name.name, cands))
-                        .or(Some("a set can only change the values of declared parameters".into()));
+                    d.help = did_you_mean(&suggest(&e.name.name, cands)).or(Some(
+                        "a set can only change the values of declared parameters".into(),
+                    ));
                     self.diags.push(d);
                     self.infer(&e.value, Ctx::Constant);
                     continue;
@@ -1080,7 +1162,10 @@ impl Checker {
                     continue;
                 };
                 if d != pv.unit.dim {
-                    let unit = param.unit.as_ref().map_or("1".to_string(), |u| u.text.clone());
+                    let unit = param
+                        .unit
+                        .as_ref()
+                        .map_or("1".to_string(), |u| u.text.clone());
                     self.diags.push(
                         Diagnostic::error(
                             "plantc::unit_mismatch",
@@ -1088,8 +1173,13 @@ impl Checker {
                             e.value.span,
                             format!("expected {}, found {d}", pv.unit.dim),
                         )
-                        .with_label(param.name.span, format!("`{}` is declared in [{unit}]", e.name.name))
-                        .with_help(format!("write quantities with their unit in brackets, e.g. `1.0 [{unit}]`")),
+                        .with_label(
+                            param.name.span,
+                            format!("`{}` is declared in [{unit}]", e.name.name),
+                        )
+                        .with_help(format!(
+                            "write quantities with their unit in brackets, e.g. `1.0 [{unit}]`"
+                        )),
                     );
                     continue;
                 }
@@ -1101,9 +1191,18 @@ impl Checker {
                         self.diags.push(
                             Diagnostic::warning(
                                 "plantc::value_outside_estimate",
-                                format!("value for `{}` in set `{}` is outside its estimate bounds", e.name.name, set.name.name),
+                                format!(
+                                    "value for `{}` in set `{}` is outside its estimate bounds",
+                                    e.name.name, set.name.name
+                                ),
                                 e.value.span,
-                                format!("= {} {} in SI, bounds [{}, {}]", fmt_num(v), pv.unit.dim.base_form(), fmt_num(lo), fmt_num(hi)),
+                                format!(
+                                    "= {} {} in SI, bounds [{}, {}]",
+                                    fmt_num(v),
+                                    pv.unit.dim.base_form(),
+                                    fmt_num(lo),
+                                    fmt_num(hi)
+                                ),
                             )
                             .with_label(b.span, "estimate bounds"),
                         );
@@ -1145,7 +1244,10 @@ impl Checker {
                 self.diags.push(
                     Diagnostic::error(
                         "plantc::controller_kind",
-                        format!("controller `{}` has more than one design statement", c.name.name),
+                        format!(
+                            "controller `{}` has more than one design statement",
+                            c.name.name
+                        ),
                         extra.span(),
                         "second design statement",
                     )
@@ -1166,11 +1268,17 @@ impl Checker {
                             self.diags.push(
                                 Diagnostic::error(
                                     "plantc::pole_count",
-                                    format!("expected {n_states} poles (two per coordinate), found {}", poles.len()),
+                                    format!(
+                                        "expected {n_states} poles (two per coordinate), found {}",
+                                        poles.len()
+                                    ),
                                     *span,
                                     format!("{} poles", poles.len()),
                                 )
-                                .with_help(format!("the model has {} coordinate(s), so {n_states} states", file.coordinates.len())),
+                                .with_help(format!(
+                                    "the model has {} coordinate(s), so {n_states} states",
+                                    file.coordinates.len()
+                                )),
                             );
                         }
                         for p in poles {
@@ -1183,7 +1291,9 @@ impl Checker {
                                         p.span,
                                         "no conjugate partner",
                                     )
-                                    .with_help("a real system's poles come in pairs `a+bi`, `a-bi`"),
+                                    .with_help(
+                                        "a real system's poles come in pairs `a+bi`, `a-bi`",
+                                    ),
                                 );
                             }
                         }
@@ -1201,7 +1311,11 @@ impl Checker {
                                 "wrong number of weights",
                             ).with_help("Q and R are the diagonals of the LQR weight matrices"));
                         }
-                        for w in q.iter().filter(|w| !(w.value() >= 0.0)).chain(r.iter().filter(|w| !(w.value() > 0.0))) {
+                        for w in q
+                            .iter()
+                            .filter(|w| w.value().is_nan() || w.value() < 0.0)
+                            .chain(r.iter().filter(|w| w.value().is_nan() || w.value() <= 0.0))
+                        {
                             self.diags.push(Diagnostic::error(
                                 "plantc::bad_weight",
                                 "LQR weights must be >= 0 for Q and > 0 for R",
@@ -1222,7 +1336,8 @@ impl Checker {
                     }
                     ControllerStmt::Linearize { output, .. } => {
                         if !file.outputs.iter().any(|o| o.name.name == output.name) {
-                            let cands: Vec<&str> = file.outputs.iter().map(|o| o.name.name.as_str()).collect();
+                            let cands: Vec<&str> =
+                                file.outputs.iter().map(|o| o.name.name.as_str()).collect();
                             let mut d = Diagnostic::error(
                                 "plantc::unknown_output",
                                 format!("`{}` is not a declared output", output.name),
@@ -1245,8 +1360,13 @@ impl Checker {
                         }
                         if let Some(prev) = gains.get(&name.name) {
                             self.diags.push(
-                                Diagnostic::error("plantc::duplicate_definition", format!("gain `{}` is declared twice", name.name), name.span, "declared again here")
-                                    .with_label(*prev, "first declared here"),
+                                Diagnostic::error(
+                                    "plantc::duplicate_definition",
+                                    format!("gain `{}` is declared twice", name.name),
+                                    name.span,
+                                    "declared again here",
+                                )
+                                .with_label(*prev, "first declared here"),
                             );
                         }
                         gains.insert(name.name.clone(), name.span);

@@ -56,7 +56,12 @@ pub struct Diagnostic {
 
 impl Diagnostic {
     /// A new error.
-    pub fn error(code: &'static str, message: impl Into<String>, primary: Span, label: impl Into<String>) -> Diagnostic {
+    pub fn error(
+        code: &'static str,
+        message: impl Into<String>,
+        primary: Span,
+        label: impl Into<String>,
+    ) -> Diagnostic {
         Diagnostic {
             severity: Severity::Error,
             code,
@@ -69,7 +74,12 @@ impl Diagnostic {
     }
 
     /// A new warning.
-    pub fn warning(code: &'static str, message: impl Into<String>, primary: Span, label: impl Into<String>) -> Diagnostic {
+    pub fn warning(
+        code: &'static str,
+        message: impl Into<String>,
+        primary: Span,
+        label: impl Into<String>,
+    ) -> Diagnostic {
         Diagnostic {
             severity: Severity::Warning,
             ..Diagnostic::error(code, message, primary, label)
@@ -77,7 +87,12 @@ impl Diagnostic {
     }
 
     /// A new note.
-    pub fn note(code: &'static str, message: impl Into<String>, primary: Span, label: impl Into<String>) -> Diagnostic {
+    pub fn note(
+        code: &'static str,
+        message: impl Into<String>,
+        primary: Span,
+        label: impl Into<String>,
+    ) -> Diagnostic {
         Diagnostic {
             severity: Severity::Note,
             ..Diagnostic::error(code, message, primary, label)
@@ -155,7 +170,11 @@ pub fn render(source: &SourceFile, diagnostics: &[Diagnostic]) -> String {
         out.push('\n');
     }
     let count = |s: Severity| diagnostics.iter().filter(|d| d.severity == s).count();
-    let (e, w, n) = (count(Severity::Error), count(Severity::Warning), count(Severity::Note));
+    let (e, w, n) = (
+        count(Severity::Error),
+        count(Severity::Warning),
+        count(Severity::Note),
+    );
     let plural = |k: usize, what: &str| format!("{k} {what}{}", if k == 1 { "" } else { "s" });
     out.push_str(&format!(
         "{}: {}, {}, {}\n",
@@ -170,7 +189,12 @@ pub fn render(source: &SourceFile, diagnostics: &[Diagnostic]) -> String {
 /// Renders a single diagnostic (see [`render`]).
 pub fn render_one(source: &SourceFile, d: &Diagnostic, out: &mut String) {
     let (line, col) = source.line_col(d.primary.start);
-    out.push_str(&format!("{}[{}]: {}\n", d.severity.as_str(), d.code, d.message));
+    out.push_str(&format!(
+        "{}[{}]: {}\n",
+        d.severity.as_str(),
+        d.code,
+        d.message
+    ));
     // (line index, col start, width, is_primary, text)
     let mut marks: Vec<(usize, usize, usize, bool, &str)> = Vec::new();
     let p = locate(source, d.primary);
@@ -210,7 +234,12 @@ pub fn render_one(source: &SourceFile, d: &Diagnostic, out: &mut String) {
             } else {
                 format!(" {}", m.4)
             };
-            out.push_str(&format!("{pad} | {}{}{}\n", " ".repeat(m.1), ch.repeat(m.2), label));
+            out.push_str(&format!(
+                "{pad} | {}{}{}\n",
+                " ".repeat(m.1),
+                ch.repeat(m.2),
+                label
+            ));
         }
     }
     if let Some(h) = &d.help {

@@ -42,7 +42,9 @@ pub enum EditError {
 impl fmt::Display for EditError {
     fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
         match self {
-            EditError::InvalidSource(d) => write!(f, "the model file has {} syntax error(s)", d.len()),
+            EditError::InvalidSource(d) => {
+                write!(f, "the model file has {} syntax error(s)", d.len())
+            }
             EditError::UnknownParameter { name, suggestions } => {
                 write!(f, "no parameter `{name}`")?;
                 if !suggestions.is_empty() {
@@ -150,7 +152,9 @@ fn find_param<'m>(m: &'m ModelFile, name: &str) -> Result<&'m super::ast::Parame
 
 /// Offset just after the end of the line containing `offset` (after its `\n`).
 fn after_line(text: &str, offset: usize) -> usize {
-    text[offset..].find('\n').map_or(text.len(), |i| offset + i + 1)
+    text[offset..]
+        .find('\n')
+        .map_or(text.len(), |i| offset + i + 1)
 }
 
 fn line_ending(text: &str) -> &'static str {
@@ -211,7 +215,10 @@ pub fn add_force_term(text: &str, coordinate: &str, term_text: &str) -> Result<S
     if !m.coordinates.iter().any(|c| c.name.name == coordinate) {
         return Err(EditError::UnknownCoordinate {
             name: coordinate.to_string(),
-            suggestions: suggest(coordinate, m.coordinates.iter().map(|c| c.name.name.as_str())),
+            suggestions: suggest(
+                coordinate,
+                m.coordinates.iter().map(|c| c.name.name.as_str()),
+            ),
         });
     }
     let edit = match m.forces.iter().find(|f| f.coordinate.name == coordinate) {
@@ -230,7 +237,13 @@ pub fn add_force_term(text: &str, coordinate: &str, term_text: &str) -> Result<S
                 .iter()
                 .map(|f| f.span.end)
                 .max()
-                .or_else(|| m.kinetic.iter().chain(m.potential.iter()).map(|e| e.span.end).max())
+                .or_else(|| {
+                    m.kinetic
+                        .iter()
+                        .chain(m.potential.iter())
+                        .map(|e| e.span.end)
+                        .max()
+                })
                 .unwrap_or(text.len());
             insert_line(text, anchor, &format!("force {coordinate} = {body}"))
         }

@@ -98,9 +98,15 @@ pub fn lookup(name: &str) -> Option<&'static Effect> {
 /// Expands an effect call (`call` must be an [`ExprKind::Call`] of a known
 /// effect) acting on `coordinate` into a plain expression. Every node of the
 /// result gets the call's span, except substituted arguments, which keep theirs.
+#[allow(clippy::result_large_err)] // cold path; Diagnostic is plain data
 pub fn expand(call: &Expr, coordinate: &Ident) -> Result<Expr, Diagnostic> {
     let ExprKind::Call(name, args) = &call.kind else {
-        return Err(Diagnostic::error("plantc::not_an_effect", "not an effect call", call.span, "expected an effect call"));
+        return Err(Diagnostic::error(
+            "plantc::not_an_effect",
+            "not an effect call",
+            call.span,
+            "expected an effect call",
+        ));
     };
     let Some(effect) = lookup(&name.name) else {
         return Err(Diagnostic::error(
@@ -112,16 +118,28 @@ pub fn expand(call: &Expr, coordinate: &Ident) -> Result<Expr, Diagnostic> {
     };
     let (lo, hi) = effect.arity();
     if args.len() < lo || args.len() > hi {
-        let expected = if lo == hi { format!("{lo}") } else { format!("{lo} or {hi}") };
+        let expected = if lo == hi {
+            format!("{lo}")
+        } else {
+            format!("{lo} or {hi}")
+        };
         return Err(Diagnostic::error(
             "plantc::wrong_arity",
-            format!("`{}` takes {expected} argument(s), found {}", effect.name, args.len()),
+            format!(
+                "`{}` takes {expected} argument(s), found {}",
+                effect.name,
+                args.len()
+            ),
             call.span,
             "wrong number of arguments",
         )
         .with_help(format!("{}: {}", effect.signature(), effect.doc)));
     }
-    let formula = if args.len() == hi { effect.formula_full } else { effect.formula };
+    let formula = if args.len() == hi {
+        effect.formula_full
+    } else {
+        effect.formula
+    };
     let template = parse_expr(formula).map_err(|_| {
         Diagnostic::error(
             "plantc::internal",
@@ -130,7 +148,12 @@ pub fn expand(call: &Expr, coordinate: &Ident) -> Result<Expr, Diagnostic> {
             "here",
         )
     })?;
-    let names: Vec<&str> = effect.params.iter().chain(effect.optional.iter()).copied().collect();
+    let names: Vec<&str> = effect
+        .params
+        .iter()
+        .chain(effect.optional.iter())
+        .copied()
+        .collect();
     Ok(substitute(&template, call.span, coordinate, &names, args))
 }
 
@@ -157,7 +180,9 @@ fn substitute(t: &Expr, span: Span, q: &Ident, names: &[&str], args: &[Expr]) ->
                 name: f.name.clone(),
                 span,
             },
-            xs.iter().map(|x| substitute(x, span, q, names, args)).collect(),
+            xs.iter()
+                .map(|x| substitute(x, span, q, names, args))
+                .collect(),
         ),
         ExprKind::Number(n) => ExprKind::Number(super::ast::NumLit {
             text: n.text.clone(),

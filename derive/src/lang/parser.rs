@@ -271,7 +271,9 @@ impl<'a> Parser<'a> {
             if t.tok == Tok::Eof {
                 break;
             }
-            let r = self.statement(&mut file).and_then(|_| self.end_of_statement(false));
+            let r = self
+                .statement(&mut file)
+                .and_then(|_| self.end_of_statement(false));
             if r.is_err() {
                 self.recover(false);
             }
@@ -283,7 +285,11 @@ impl<'a> Parser<'a> {
 
     fn statement(&mut self, file: &mut ModelFile) -> PResult<()> {
         let t = self.peek_token();
-        let kw = if t.tok == Tok::Ident { self.text(t.span) } else { "" };
+        let kw = if t.tok == Tok::Ident {
+            self.text(t.span)
+        } else {
+            ""
+        };
         let start = t.span.start;
         match kw {
             "model" => {
@@ -507,7 +513,10 @@ impl<'a> Parser<'a> {
                     t.span,
                     "not a declaration",
                 )
-                .with_help(format!("a line starts with one of: {}", KEYWORDS.join(", ")));
+                .with_help(format!(
+                    "a line starts with one of: {}",
+                    KEYWORDS.join(", ")
+                ));
                 if t.tok == Tok::Ident {
                     if let Some(s) = super::check::suggest(kw, KEYWORDS.iter().copied()).first() {
                         d = d.with_help(format!("did you mean `{s}`?"));
@@ -557,7 +566,11 @@ impl<'a> Parser<'a> {
     fn controller_stmt(&mut self) -> PResult<ControllerStmt> {
         let t = self.peek_token();
         let start = t.span.start;
-        let kw = if t.tok == Tok::Ident { self.text(t.span) } else { "" };
+        let kw = if t.tok == Tok::Ident {
+            self.text(t.span)
+        } else {
+            ""
+        };
         let stmt = match kw {
             "place" => {
                 self.bump();
@@ -679,7 +692,11 @@ impl<'a> Parser<'a> {
         let n = self.expect(Tok::Number, "a number")?;
         let digits = self.text(n.span);
         Ok(NumLit {
-            text: if neg { format!("-{digits}") } else { digits.to_string() },
+            text: if neg {
+                format!("-{digits}")
+            } else {
+                digits.to_string()
+            },
             span: Span::new(start, n.span.end),
         })
     }
@@ -771,11 +788,21 @@ impl<'a> Parser<'a> {
                         outer: open.span.to(t.span),
                     });
                 }
-                Tok::Newline | Tok::Eof | Tok::LBracket | Tok::LBrace | Tok::RBrace | Tok::Str(_) => {
+                Tok::Newline
+                | Tok::Eof
+                | Tok::LBracket
+                | Tok::LBrace
+                | Tok::RBrace
+                | Tok::Str(_) => {
                     self.error(
-                        Diagnostic::error("plantc::syntax", "unclosed `[` in a unit", open.span, "this `[` is not closed")
-                            .with_label(Span::new(t.span.start, t.span.start), "expected `]` here")
-                            .with_help("units are written in brackets on one line, e.g. `[kg*m^2]`"),
+                        Diagnostic::error(
+                            "plantc::syntax",
+                            "unclosed `[` in a unit",
+                            open.span,
+                            "this `[` is not closed",
+                        )
+                        .with_label(Span::new(t.span.start, t.span.start), "expected `]` here")
+                        .with_help("units are written in brackets on one line, e.g. `[kg*m^2]`"),
                     );
                     return Err(());
                 }
@@ -806,7 +833,10 @@ impl<'a> Parser<'a> {
         }
         self.skip_newlines();
         let t = self.toks[self.pos].clone();
-        if t.tok == Tok::Ident && KEYWORDS.contains(&self.text(t.span)) && self.column(t.span.start) == 0 {
+        if t.tok == Tok::Ident
+            && KEYWORDS.contains(&self.text(t.span))
+            && self.column(t.span.start) == 0
+        {
             self.error(
                 Diagnostic::error(
                     "plantc::syntax",
@@ -945,7 +975,10 @@ impl<'a> Parser<'a> {
             self.skip_after_operator(op_tok.span)?;
             let exp = self.unary()?;
             let span = base.span.to(exp.span);
-            return Ok(Expr::new(ExprKind::Binary(BinOp::Pow, Box::new(base), Box::new(exp)), span));
+            return Ok(Expr::new(
+                ExprKind::Binary(BinOp::Pow, Box::new(base), Box::new(exp)),
+                span,
+            ));
         }
         Ok(base)
     }
@@ -1008,13 +1041,7 @@ impl<'a> Parser<'a> {
                     let close = self.bump();
                     self.nl_depth -= 1;
                     return Ok(Expr::new(
-                        ExprKind::Call(
-                            Ident {
-                                name,
-                                span: t.span,
-                            },
-                            args,
-                        ),
+                        ExprKind::Call(Ident { name, span: t.span }, args),
                         t.span.to(close.span),
                     ));
                 }
@@ -1034,7 +1061,9 @@ impl<'a> Parser<'a> {
                             span,
                             "too many `'`",
                         )
-                        .with_help("only first (`q'`) and second (`q''`) time derivatives are allowed"),
+                        .with_help(
+                            "only first (`q'`) and second (`q''`) time derivatives are allowed",
+                        ),
                     );
                     return Err(());
                 }

@@ -7,6 +7,7 @@
 //! `pi/180` rad and `rpm` is `2*pi/60` rad/s.
 
 use std::fmt;
+use std::ops::{Add, Div, Mul, Neg};
 
 /// A small exact rational number (always normalised, `den > 0`).
 ///
@@ -69,21 +70,21 @@ impl Ratio {
         Ratio::new(n, 1)
     }
 
-    /// Sum.
-    pub fn add(self, o: Ratio) -> Ratio {
+    fn add_r(self, o: Ratio) -> Ratio {
         Ratio::from_i128(
             self.num as i128 * o.den as i128 + o.num as i128 * self.den as i128,
             self.den as i128 * o.den as i128,
         )
     }
 
-    /// Product.
-    pub fn mul(self, o: Ratio) -> Ratio {
-        Ratio::from_i128(self.num as i128 * o.num as i128, self.den as i128 * o.den as i128)
+    fn mul_r(self, o: Ratio) -> Ratio {
+        Ratio::from_i128(
+            self.num as i128 * o.num as i128,
+            self.den as i128 * o.den as i128,
+        )
     }
 
-    /// Negation.
-    pub fn neg(self) -> Ratio {
+    fn neg_r(self) -> Ratio {
         Ratio::from_i128(-(self.num as i128), self.den as i128)
     }
 
@@ -186,15 +187,16 @@ impl Dim {
     }
     /// kg*m^2/s^2 (energy, torque).
     pub fn energy() -> Dim {
-        Dim::mass().mul(Dim::length().powi(2)).div(Dim::time().powi(2))
+        Dim::mass()
+            .mul(Dim::length().powi(2))
+            .div(Dim::time().powi(2))
     }
     /// kg*m/s^2.
     pub fn force() -> Dim {
         Dim::mass().mul(Dim::length()).div(Dim::time().powi(2))
     }
 
-    /// Product of dimensions.
-    pub fn mul(self, o: Dim) -> Dim {
+    fn mul_d(self, o: Dim) -> Dim {
         let mut r = self;
         for i in 0..4 {
             r.0[i] = r.0[i].add(o.0[i]);
@@ -202,8 +204,7 @@ impl Dim {
         r
     }
 
-    /// Quotient of dimensions.
-    pub fn div(self, o: Dim) -> Dim {
+    fn div_d(self, o: Dim) -> Dim {
         self.mul(o.pow(Ratio::int(-1)))
     }
 
@@ -234,7 +235,11 @@ impl Dim {
             if e.is_zero() {
                 continue;
             }
-            let (list, e) = if e.num < 0 { (&mut den, e.neg()) } else { (&mut num, *e) };
+            let (list, e) = if e.num < 0 {
+                (&mut den, e.neg())
+            } else {
+                (&mut num, *e)
+            };
             if e == Ratio::ONE {
                 list.push(BASE_UNITS[i].to_string());
             } else if e.den == 1 {
@@ -243,7 +248,11 @@ impl Dim {
                 list.push(format!("{}^({})", BASE_UNITS[i], e));
             }
         }
-        let n = if num.is_empty() { "1".to_string() } else { num.join("*") };
+        let n = if num.is_empty() {
+            "1".to_string()
+        } else {
+            num.join("*")
+        };
         if den.is_empty() {
             n
         } else {
@@ -258,7 +267,10 @@ impl Dim {
             ("N", Dim::force()),
             ("W", Dim::energy().div(Dim::time())),
             ("V", Dim::energy().div(Dim::time()).div(Dim::current())),
-            ("ohm", Dim::energy().div(Dim::time()).div(Dim::current().powi(2))),
+            (
+                "ohm",
+                Dim::energy().div(Dim::time()).div(Dim::current().powi(2)),
+            ),
             ("N*m*s", Dim::energy().mul(Dim::time())),
             ("N*s/m", Dim::force().mul(Dim::time()).div(Dim::length())),
         ];
@@ -296,8 +308,7 @@ impl Scale {
         pi_power: 0,
     };
 
-    /// Product.
-    pub fn mul(self, o: Scale) -> Scale {
+    fn mul_s(self, o: Scale) -> Scale {
         Scale {
             ratio: self.ratio.mul(o.ratio),
             pi_power: self.pi_power.saturating_add(o.pi_power),
@@ -397,25 +408,120 @@ fn d_ohm() -> Dim {
 
 /// The known units. Add rows here to support more.
 pub const UNITS: &[UnitDef] = &[
-    UnitDef { name: "kg", dim: Dim::mass, scale: sc(1, 1, 0), doc: "kilogram" },
-    UnitDef { name: "g", dim: Dim::mass, scale: sc(1, 1000, 0), doc: "gram" },
-    UnitDef { name: "m", dim: Dim::length, scale: sc(1, 1, 0), doc: "metre" },
-    UnitDef { name: "cm", dim: Dim::length, scale: sc(1, 100, 0), doc: "centimetre" },
-    UnitDef { name: "mm", dim: Dim::length, scale: sc(1, 1000, 0), doc: "millimetre" },
-    UnitDef { name: "s", dim: Dim::time, scale: sc(1, 1, 0), doc: "second" },
-    UnitDef { name: "ms", dim: Dim::time, scale: sc(1, 1000, 0), doc: "millisecond" },
-    UnitDef { name: "A", dim: Dim::current, scale: sc(1, 1, 0), doc: "ampere" },
-    UnitDef { name: "mA", dim: Dim::current, scale: sc(1, 1000, 0), doc: "milliampere" },
-    UnitDef { name: "V", dim: d_volt, scale: sc(1, 1, 0), doc: "volt" },
-    UnitDef { name: "ohm", dim: d_ohm, scale: sc(1, 1, 0), doc: "ohm" },
-    UnitDef { name: "N", dim: Dim::force, scale: sc(1, 1, 0), doc: "newton" },
-    UnitDef { name: "J", dim: Dim::energy, scale: sc(1, 1, 0), doc: "joule" },
-    UnitDef { name: "W", dim: d_energy_per_s, scale: sc(1, 1, 0), doc: "watt" },
-    UnitDef { name: "rad", dim: d_none, scale: sc(1, 1, 0), doc: "radian (dimensionless)" },
-    UnitDef { name: "deg", dim: d_none, scale: sc(1, 180, 1), doc: "degree = pi/180 rad" },
-    UnitDef { name: "rev", dim: d_none, scale: sc(2, 1, 1), doc: "revolution = 2*pi rad" },
-    UnitDef { name: "rpm", dim: d_per_s, scale: sc(1, 30, 1), doc: "revolution per minute = 2*pi/60 rad/s" },
-    UnitDef { name: "Hz", dim: d_per_s, scale: sc(1, 1, 0), doc: "hertz = 1/s" },
+    UnitDef {
+        name: "kg",
+        dim: Dim::mass,
+        scale: sc(1, 1, 0),
+        doc: "kilogram",
+    },
+    UnitDef {
+        name: "g",
+        dim: Dim::mass,
+        scale: sc(1, 1000, 0),
+        doc: "gram",
+    },
+    UnitDef {
+        name: "m",
+        dim: Dim::length,
+        scale: sc(1, 1, 0),
+        doc: "metre",
+    },
+    UnitDef {
+        name: "cm",
+        dim: Dim::length,
+        scale: sc(1, 100, 0),
+        doc: "centimetre",
+    },
+    UnitDef {
+        name: "mm",
+        dim: Dim::length,
+        scale: sc(1, 1000, 0),
+        doc: "millimetre",
+    },
+    UnitDef {
+        name: "s",
+        dim: Dim::time,
+        scale: sc(1, 1, 0),
+        doc: "second",
+    },
+    UnitDef {
+        name: "ms",
+        dim: Dim::time,
+        scale: sc(1, 1000, 0),
+        doc: "millisecond",
+    },
+    UnitDef {
+        name: "A",
+        dim: Dim::current,
+        scale: sc(1, 1, 0),
+        doc: "ampere",
+    },
+    UnitDef {
+        name: "mA",
+        dim: Dim::current,
+        scale: sc(1, 1000, 0),
+        doc: "milliampere",
+    },
+    UnitDef {
+        name: "V",
+        dim: d_volt,
+        scale: sc(1, 1, 0),
+        doc: "volt",
+    },
+    UnitDef {
+        name: "ohm",
+        dim: d_ohm,
+        scale: sc(1, 1, 0),
+        doc: "ohm",
+    },
+    UnitDef {
+        name: "N",
+        dim: Dim::force,
+        scale: sc(1, 1, 0),
+        doc: "newton",
+    },
+    UnitDef {
+        name: "J",
+        dim: Dim::energy,
+        scale: sc(1, 1, 0),
+        doc: "joule",
+    },
+    UnitDef {
+        name: "W",
+        dim: d_energy_per_s,
+        scale: sc(1, 1, 0),
+        doc: "watt",
+    },
+    UnitDef {
+        name: "rad",
+        dim: d_none,
+        scale: sc(1, 1, 0),
+        doc: "radian (dimensionless)",
+    },
+    UnitDef {
+        name: "deg",
+        dim: d_none,
+        scale: sc(1, 180, 1),
+        doc: "degree = pi/180 rad",
+    },
+    UnitDef {
+        name: "rev",
+        dim: d_none,
+        scale: sc(2, 1, 1),
+        doc: "revolution = 2*pi rad",
+    },
+    UnitDef {
+        name: "rpm",
+        dim: d_per_s,
+        scale: sc(1, 30, 1),
+        doc: "revolution per minute = 2*pi/60 rad/s",
+    },
+    UnitDef {
+        name: "Hz",
+        dim: d_per_s,
+        scale: sc(1, 1, 0),
+        doc: "hertz = 1/s",
+    },
 ];
 
 /// Looks up a unit symbol in [`UNITS`].
@@ -529,7 +635,12 @@ pub fn parse_unit(text: &str) -> Result<Unit, UnitError> {
                 if i < n && b[i] == b')' {
                     i += 1;
                 } else {
-                    return Err(err(es, i, "unclosed `(` in unit exponent".into(), "write e.g. `m^(1/2)`"));
+                    return Err(err(
+                        es,
+                        i,
+                        "unclosed `(` in unit exponent".into(),
+                        "write e.g. `m^(1/2)`",
+                    ));
                 }
             }
             match parsed {
@@ -567,11 +678,56 @@ pub fn parse_unit(text: &str) -> Result<Unit, UnitError> {
                 return Err(err(
                     i,
                     i + 1,
-                    format!("unexpected `{}` in unit", text[i..].chars().next().unwrap_or(' ')),
+                    format!(
+                        "unexpected `{}` in unit",
+                        text[i..].chars().next().unwrap_or(' ')
+                    ),
                     "units are products and quotients like `kg*m^2` or `m/s^2`",
                 ))
             }
         }
         i += 1;
+    }
+}
+
+impl Add for Ratio {
+    type Output = Ratio;
+    fn add(self, o: Ratio) -> Ratio {
+        self.add_r(o)
+    }
+}
+
+impl Mul for Ratio {
+    type Output = Ratio;
+    fn mul(self, o: Ratio) -> Ratio {
+        self.mul_r(o)
+    }
+}
+
+impl Neg for Ratio {
+    type Output = Ratio;
+    fn neg(self) -> Ratio {
+        self.neg_r()
+    }
+}
+
+impl Mul for Dim {
+    type Output = Dim;
+    fn mul(self, o: Dim) -> Dim {
+        self.mul_d(o)
+    }
+}
+
+impl Div for Dim {
+    type Output = Dim;
+    fn div(self, o: Dim) -> Dim {
+        self.div_d(o)
+    }
+}
+
+impl Mul for Scale {
+    type Output = Scale;
+    fn mul(self, o: Scale) -> Scale {
+        self.mul_s(o)
     }
 }
