@@ -296,11 +296,25 @@ impl<'a> Parser<'a> {
                 self.bump();
                 let name = self.ident("a model name")?;
                 let title = self.opt_str();
-                file.model = file.model.take().or(Some(ModelDecl {
+                if let Some(first) = &file.model {
+                    let first = first.span;
+                    self.error(
+                        Diagnostic::error(
+                            "plantc::duplicate_definition",
+                            "a file declares one model",
+                            Span::new(start, self.prev_end()),
+                            "second `model` line",
+                        )
+                        .with_label(first, "first `model` line")
+                        .with_help("put each model in its own file"),
+                    );
+                    return Err(());
+                }
+                file.model = Some(ModelDecl {
                     name,
                     title,
                     span: Span::new(start, self.prev_end()),
-                }));
+                });
             }
             "coordinate" => {
                 self.bump();
