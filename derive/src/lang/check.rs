@@ -1,0 +1,1454 @@
+//! Semantic checks: name resolution, duplicates, let cycles, derivatives,
+//! dimensional analysis, parameter sets and controllers.
+
+use super::ast::*;
+use super::diagnostic::{Diagnostic, Severity};
+use super::effects;
+use super::parser::parse;
+use super::span::Span;
+use super::units::{parse_unit, Dim, Ratio, Unit};
+use std::collections::{BTreeMap, HashMap};
+use std::ops::{Add, Div, Mul, Neg};
+
+/// Result of [`parse_and_check`].
+#[derive(Debug, Clone)]
+pub struct Checked {
+    /// The tree, when the file parsed without syntax errors (it may still
+    /// have semantic errors: see [`Checked::has_errors`]). Force expressions
+    /// have their effects expanded ([`Force::expr`]).
+    pub model: Option<ModelFile>,
+    /// All diagnostics, sorted by position.
+    pub diagnostics: Vec<Diagnostic>,
+    /// Resolved declarations (units, SI values, dimensions), when `model` is set.
+    pub symbols: Option<Symbols>,
+}
+
+impl Checked {
+    /// True if any diagnostic is an error.
+    pub fn has_errors(&self) -> bool {
+        self.diagnostics
+            .iter()
+            .any(|d| d.severity == Severity::Error)
+    }
+
+    /// The errors only.
+    pub fn errors(&self) -> impl Iterator<Item = &Diagnostic> {
+        self.diagnostics.iter().filter(|d| d.is_error())
+    }
+}
+
+/// What a name denotes.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum SymbolKind {
+    /// A generalised coordinate.
+    Coordinate(CoordKind),
+    /// A control input.
+    Input,
+    /// A parameter.
+    Parameter,
+    /// A `let` definition.
+    Let,
+    /// A named output (`output tip = ...`).
+    Output,
+    /// The kinetic or potential energy name.
+    Energy,
+}
+
+impl SymbolKind {
+    fn describe(self) -> &'static str {
+        match self {
+            SymbolKind::Coordinate(_) => "a coordinate",
+            SymbolKind::Input => "an input",
+            SymbolKind::Parameter => "a parameter",
+            SymbolKind::Let => "a `let` definition",
+            SymbolKind::Output => "an output",
+            SymbolKind::Energy => "an energy",
+        }
+    }
+}
+
+/// A declared name.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Symbol {
+    /// What it is.
+    pub kind: SymbolKind,
+    /// Where its name is declared.
+    pub span: Span,
+    /// Its dimension, if known (unknown after an error).
+    pub dim: Option<Dim>,
+}
+
+/// A parameter's declared unit and its value converted to SI.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct ParamValue {
+    /// Declared unit (dimension and exact scale to SI).
+    pub unit: Unit,
+    /// Value in SI (`literal * unit.scale`).
+    pub si_value: f64,
+}
+
+/// Resolved declarations of a model.
+#[derive(Debug, Clone, Default, PartialEq)]
+pub struct Symbols {
+    /// Every declared name.
+    pub names: BTreeMap<String, Symbol>,
+    /// Parameters with units and SI values.
+    pub parameters: BTreeMap<String, ParamValue>,
+    /// Inputs with their units.
+    pub inputs: BTreeMap<String, Unit>,
+    /// `let` names in an order where each only uses earlier ones (cycles left out).
+    pub let_order: Vec<String>,
+}
+
+impl Symbols {
+    /// Dimension of a declared name.
+    pub fn dim(&self, name: &str) -> Option<Dim> {
+        self.names.get(name).and_then(|s| s.dim)
+    }
+}
+
+/// Built-in functions: name, number of arguments.
+pub const BUILTINS: &[(&str, usize)] = &[
+    ("sin", 1),
+    ("cos", 1),
+    ("tan", 1),
+    ("sqrt", 1),
+    ("exp", 1),
+    ("ln", 1),
+    ("abs", 1),
+    ("sign", 1),
+    ("tanh", 1),
+    ("atan2", 2),
+];
+
+/// Parser errors after which checking still makes sense.
+const NON_BLOCKING: &[&str] = &["plantc::unknown_coordinate_kind"];
+
+/// Short human-readable number.
+fn fmt_num(v: f64) -> String {
+    if v == 0.0 || (1e-3..1e4).contains(&v.abs()) {
+        let s = format!("{v:.6}");
+        s.trim_end_matches('0').trim_end_matches('.').to_string()
+    } else {
+        format!("{v:.4e}")
+    }
+}
+
+/// Parses and checks a model file: syntax errors stop before the semantic
+/// checks (so a half-parsed statement does not cause follow-up errors), and
+/// several syntax or several semantic errors are reported in one run.
+pub fn parse_and_check(file_name: &str, text: &str) -> Checked {
+    let _ = file_name;
+    let (file, mut diags) = parse(text);
+    if diags
+        .iter()
+        .any(|d| d.is_error() && !NON_BLOCKING.contains(&d.code))
+    {
+        diags.sort_by_key(|d| (d.primary.start, d.primary.end));
+        return Checked {
+            model: None,
+            diagnostics: diags,
+            symbols: None,
+        };
+    }
+    let mut c = Checker {
+        syms: Symbols::default(),
+        diags,
+        lets: HashMap::new(),
+    };
+    let file = c.check(file);
+    let mut diags = c.diags;
+    diags.sort_by_key(|d| (d.primary.start, d.primary.end));
+    Checked {
+        model: Some(file),
+        diagnostics: diags,
+        symbols: Some(c.syms),
+    }
+}
+
+/// Dimension of an expression given resolved symbols (e.g. from
+/// [`Checked::symbols`]); the first problem found is returned as an error.
+#[allow(clippy::result_large_err)] // cold path; Diagnostic is plain data
+pub fn dimension_of(expr: &Expr, symbols: &Symbols) -> Result<Dim, Diagnostic> {
+    let mut diags = Vec::new();
+    let d = Infer {
+        syms: symbols,
+        diags: &mut diags,
+        ctx: Ctx::Force,
+    }
+    .infer(expr);
+    match (d, diags.into_iter().find(|d| d.is_error())) {
+        (_, Some(e)) => Err(e),
+        (Some(d), None) => Ok(d),
+        (None, None) => Err(Diagnostic::error(
+            "plantc::unknown_dimension",
+            "dimension unknown",
+            expr.span,
+            "here",
+        )),
+    }
+}
+
+/// Evaluates a constant expression over parameters (SI values), `pi` and
+/// built-in functions. `None` if it uses anything else.
+pub fn eval_si(expr: &Expr, symbols: &Symbols) -> Option<f64> {
+    Some(match &expr.kind {
+        ExprKind::Number(n) => n.value(),
+        ExprKind::Quantity(n, u) => n.value() * parse_unit(&u.text).ok()?.scale.to_f64(),
+        ExprKind::Name(n) => symbols.parameters.get(n)?.si_value,
+        ExprKind::Pi => std::f64::consts::PI,
+        ExprKind::Deriv(..) => return None,
+        ExprKind::Neg(a) => -eval_si(a, symbols)?,
+        ExprKind::Binary(op, a, b) => {
+            let (a, b) = (eval_si(a, symbols)?, eval_si(b, symbols)?);
+            match op {
+                BinOp::Add => a + b,
+                BinOp::Sub => a - b,
+                BinOp::Mul => a * b,
+                BinOp::Div => a / b,
+                BinOp::Pow => a.powf(b),
+            }
+        }
+        ExprKind::Call(f, args) => {
+            let v: Option<Vec<f64>> = args.iter().map(|a| eval_si(a, symbols)).collect();
+            let v = v?;
+            let x = *v.first()?;
+            match (f.name.as_str(), v.len()) {
+                ("sin", 1) => x.sin(),
+                ("cos", 1) => x.cos(),
+                ("tan", 1) => x.tan(),
+                ("sqrt", 1) => x.sqrt(),
+                ("exp", 1) => x.exp(),
+                ("ln", 1) => x.ln(),
+                ("abs", 1) => x.abs(),
+                ("sign", 1) => {
+                    if x == 0.0 {
+                        0.0
+                    } else {
+                        x.signum()
+                    }
+                }
+                ("tanh", 1) => x.tanh(),
+                ("atan2", 2) => x.atan2(v[1]),
+                _ => return None,
+            }
+        }
+    })
+}
+
+/// Up to three names from `candidates` close to `name` (edit distance),
+/// best first.
+pub fn suggest<'a>(name: &str, candidates: impl IntoIterator<Item = &'a str>) -> Vec<String> {
+    let max = (name.chars().count() / 3).max(1);
+    let mut v: Vec<(usize, String)> = candidates
+        .into_iter()
+        .filter(|c| *c != name)
+        .map(|c| (edit_distance(name, c), c.to_string()))
+        .filter(|(d, c)| *d <= max || (c.to_lowercase() == name.to_lowercase()))
+        .collect();
+    v.sort();
+    v.dedup();
+    v.into_iter().take(3).map(|(_, c)| c).collect()
+}
+
+/// Levenshtein distance over chars.
+pub fn edit_distance(a: &str, b: &str) -> usize {
+    let a: Vec<char> = a.chars().collect();
+    let b: Vec<char> = b.chars().collect();
+    let mut prev: Vec<usize> = (0..=b.len()).collect();
+    for i in 1..=a.len() {
+        let mut cur = vec![i; b.len() + 1];
+        for j in 1..=b.len() {
+            let cost = usize::from(a[i - 1] != b[j - 1]);
+            cur[j] = (prev[j] + 1).min(cur[j - 1] + 1).min(prev[j - 1] + cost);
+        }
+        prev = cur;
+    }
+    prev[b.len()]
+}
+
+fn did_you_mean(s: &[String]) -> Option<String> {
+    match s.len() {
+        0 => None,
+        1 => Some(format!("did you mean `{}`?", s[0])),
+        _ => Some(format!(
+            "did you mean one of {}?",
+            s.iter()
+                .map(|x| format!("`{x}`"))
+                .collect::<Vec<_>>()
+                .join(", ")
+        )),
+    }
+}
+
+/// Where an expression appears; decides which names and calls are allowed.
+#[derive(Clone, Copy, PartialEq, Eq)]
+enum Ctx {
+    /// let, output, kinetic, potential.
+    Model,
+    /// force line (effects already expanded).
+    Force,
+    /// set value or controller gain: parameters and constants only.
+    Constant,
+}
+
+struct Infer<'a> {
+    syms: &'a Symbols,
+    diags: &'a mut Vec<Diagnostic>,
+    ctx: Ctx,
+}
+
+fn coord_dim(k: CoordKind) -> Dim {
+    match k {
+        CoordKind::Angle => Dim::NONE,
+        CoordKind::Length => Dim::length(),
+    }
+}
+
+/// The constant rational value of an exponent expression, if it is one.
+pub fn const_ratio(e: &Expr) -> Option<Ratio> {
+    match &e.kind {
+        ExprKind::Number(n) => Ratio::parse_decimal(&n.text),
+        ExprKind::Neg(a) => const_ratio(a).map(Ratio::neg),
+        ExprKind::Binary(op, a, b) => {
+            let (a, b) = (const_ratio(a)?, const_ratio(b)?);
+            match op {
+                BinOp::Add => Some(a.add(b)),
+                BinOp::Sub => Some(a.add(b.neg())),
+                BinOp::Mul => Some(a.mul(b)),
+                BinOp::Div if !b.is_zero() => Some(a.mul(b.recip())),
+                _ => None,
+            }
+        }
+        _ => None,
+    }
+}
+
+impl Infer<'_> {
+    fn unknown_name(&mut self, name: &str, span: Span) {
+        let cands: Vec<&str> = self
+            .syms
+            .names
+            .iter()
+            .filter(|(_, s)| match self.ctx {
+                Ctx::Constant => s.kind == SymbolKind::Parameter,
+                _ => !matches!(s.kind, SymbolKind::Output | SymbolKind::Energy),
+            })
+            .map(|(n, _)| n.as_str())
+            .chain(std::iter::once("pi"))
+            .collect();
+        let mut d = Diagnostic::error(
+            "plantc::unknown_name",
+            format!("unknown name `{name}`"),
+            span,
+            "not declared",
+        );
+        d.help = did_you_mean(&suggest(name, cands)).or(Some(
+            "declare it with `parameter`, `let`, `coordinate` or `input`".into(),
+        ));
+        self.diags.push(d);
+    }
+
+    fn infer(&mut self, e: &Expr) -> Option<Dim> {
+        match &e.kind {
+            ExprKind::Number(_) | ExprKind::Pi => Some(Dim::NONE),
+            ExprKind::Quantity(_, u) => match parse_unit(&u.text) {
+                Ok(u) => Some(u.dim),
+                Err(err) => {
+                    self.diags.push(unit_error(u, err));
+                    None
+                }
+            },
+            ExprKind::Name(n) => {
+                let Some(s) = self.syms.names.get(n) else {
+                    self.unknown_name(n, e.span);
+                    return None;
+                };
+                match s.kind {
+                    SymbolKind::Output | SymbolKind::Energy => {
+                        self.diags.push(
+                            Diagnostic::error(
+                                "plantc::not_a_value",
+                                format!(
+                                    "`{n}` is {} and cannot be used in an expression",
+                                    s.kind.describe()
+                                ),
+                                e.span,
+                                "used here",
+                            )
+                            .with_label(s.span, "declared here")
+                            .with_help("define shared quantities with `let` and use that name"),
+                        );
+                        None
+                    }
+                    SymbolKind::Parameter => s.dim,
+                    _ if self.ctx == Ctx::Constant => {
+                        self.diags.push(
+                            Diagnostic::error(
+                                "plantc::not_constant",
+                                format!(
+                                    "`{n}` is {}; only parameters and numbers are allowed here",
+                                    s.kind.describe()
+                                ),
+                                e.span,
+                                "not a constant",
+                            )
+                            .with_label(s.span, "declared here"),
+                        );
+                        None
+                    }
+                    _ => s.dim,
+                }
+            }
+            ExprKind::Deriv(n, k) => {
+                let Some(s) = self.syms.names.get(n) else {
+                    self.unknown_name(n, Span::new(e.span.start, e.span.start + n.len()));
+                    return None;
+                };
+                match s.kind {
+                    SymbolKind::Coordinate(kind) if self.ctx != Ctx::Constant => {
+                        Some(coord_dim(kind).div(Dim::time().powi(*k as i64)))
+                    }
+                    _ => {
+                        self.diags.push(
+                            Diagnostic::error(
+                                "plantc::bad_derivative",
+                                format!(
+                                    "`{n}` is {}; only coordinates have time derivatives",
+                                    s.kind.describe()
+                                ),
+                                e.span,
+                                "derivative of a non-coordinate",
+                            )
+                            .with_label(s.span, format!("`{n}` declared here"))
+                            .with_help(
+                                "`'` marks a time derivative of a coordinate, e.g. `theta'`",
+                            ),
+                        );
+                        None
+                    }
+                }
+            }
+            ExprKind::Neg(a) => self.infer(a),
+            ExprKind::Binary(op, a, b) => {
+                let da = self.infer(a);
+                let db = self.infer(b);
+                match op {
+                    BinOp::Add | BinOp::Sub => {
+                        let (da, db) = (da?, db?);
+                        if da != db {
+                            let verb = if *op == BinOp::Add { "add" } else { "subtract" };
+                            self.diags.push(
+                                Diagnostic::error(
+                                    "plantc::unit_mismatch",
+                                    format!("cannot {verb} {da} and {db}"),
+                                    b.span,
+                                    format!("this is {db}"),
+                                )
+                                .with_label(a.span, format!("this is {da}"))
+                                .with_help(format!(
+                                    "both sides of `{}` must have the same unit",
+                                    op.symbol()
+                                )),
+                            );
+                            return None;
+                        }
+                        Some(da)
+                    }
+                    BinOp::Mul => Some(da?.mul(db?)),
+                    BinOp::Div => Some(da?.div(db?)),
+                    BinOp::Pow => {
+                        if let Some(db) = db {
+                            if !db.is_none() {
+                                self.diags.push(Diagnostic::error(
+                                    "plantc::unit_mismatch",
+                                    format!("an exponent must be dimensionless, found {db}"),
+                                    b.span,
+                                    format!("this is {db}"),
+                                ));
+                                return None;
+                            }
+                        }
+                        let da = da?;
+                        if da.is_none() {
+                            return db.map(|_| Dim::NONE);
+                        }
+                        match const_ratio(b) {
+                            Some(r) => Some(da.pow(r)),
+                            None => {
+                                self.diags.push(
+                                    Diagnostic::error(
+                                        "plantc::non_constant_exponent",
+                                        format!("a quantity with unit {da} can only be raised to a constant power"),
+                                        b.span,
+                                        "not a constant number",
+                                    )
+                                    .with_label(a.span, format!("this is {da}"))
+                                    .with_help("use a number exponent like `^2` or `^(1/2)`, or make the base dimensionless"),
+                                );
+                                None
+                            }
+                        }
+                    }
+                }
+            }
+            ExprKind::Call(f, args) => self.call(e, f, args),
+        }
+    }
+
+    fn call(&mut self, e: &Expr, f: &Ident, args: &[Expr]) -> Option<Dim> {
+        if let Some(eff) = effects::lookup(&f.name) {
+            let _ = eff;
+            self.diags.push(
+                Diagnostic::error(
+                    "plantc::effect_outside_force",
+                    format!("effect `{}` can only be used in a `force` line", f.name),
+                    e.span,
+                    "not in a force line",
+                )
+                .with_help(format!(
+                    "an effect is the force on the coordinate of its line, e.g. `force theta = tau + {}`",
+                    eff.signature()
+                )),
+            );
+            for a in args {
+                self.infer(a);
+            }
+            return None;
+        }
+        let Some(&(_, arity)) = BUILTINS.iter().find(|(n, _)| *n == f.name) else {
+            let cands: Vec<&str> = BUILTINS
+                .iter()
+                .map(|(n, _)| *n)
+                .chain(effects::EFFECTS.iter().map(|e| e.name))
+                .collect();
+            let mut d = Diagnostic::error(
+                "plantc::unknown_function",
+                format!("unknown function `{}`", f.name),
+                f.span,
+                "not a built-in function or effect",
+            );
+            d.help = did_you_mean(&suggest(&f.name, cands)).or(Some(format!(
+                "built-in functions: {}",
+                BUILTINS
+                    .iter()
+                    .map(|(n, _)| *n)
+                    .collect::<Vec<_>>()
+                    .join(" ")
+            )));
+            self.diags.push(d);
+            for a in args {
+                self.infer(a);
+            }
+            return None;
+        };
+        let dims: Vec<Option<Dim>> = args.iter().map(|a| self.infer(a)).collect();
+        if args.len() != arity {
+            self.diags.push(Diagnostic::error(
+                "plantc::wrong_arity",
+                format!(
+                    "`{}` takes {arity} argument(s), found {}",
+                    f.name,
+                    args.len()
+                ),
+                e.span,
+                "wrong number of arguments",
+            ));
+            return None;
+        }
+        let d0 = dims[0]?;
+        match f.name.as_str() {
+            "sqrt" => Some(d0.pow(Ratio::new(1, 2))),
+            "abs" => Some(d0),
+            "sign" => Some(Dim::NONE),
+            "atan2" => {
+                let d1 = dims[1]?;
+                if d0 != d1 {
+                    self.diags.push(
+                        Diagnostic::error(
+                            "plantc::unit_mismatch",
+                            format!(
+                                "`atan2` needs two arguments of the same unit, found {d0} and {d1}"
+                            ),
+                            args[1].span,
+                            format!("this is {d1}"),
+                        )
+                        .with_label(args[0].span, format!("this is {d0}")),
+                    );
+                    return None;
+                }
+                Some(Dim::NONE)
+            }
+            _ => {
+                if !d0.is_none() {
+                    self.diags.push(
+                        Diagnostic::error(
+                            "plantc::unit_mismatch",
+                            format!("`{}` needs a dimensionless argument, found {d0}", f.name),
+                            args[0].span,
+                            format!("expected 1 (dimensionless), found {d0}"),
+                        )
+                        .with_help("angles are in rad (dimensionless); make the argument a ratio, e.g. `x/L`"),
+                    );
+                    return None;
+                }
+                Some(Dim::NONE)
+            }
+        }
+    }
+}
+
+fn unit_error(u: &UnitExpr, err: super::units::UnitError) -> Diagnostic {
+    let s = u.span.start + err.start.min(u.text.len());
+    let e = (u.span.start + err.end.min(u.text.len())).max(s);
+    Diagnostic::error(
+        "plantc::unknown_unit",
+        err.message,
+        Span::new(s, e),
+        "in this unit",
+    )
+    .with_help(err.help)
+}
+
+struct Checker {
+    syms: Symbols,
+    diags: Vec<Diagnostic>,
+    lets: HashMap<String, usize>,
+}
+
+impl Checker {
+    fn infer(&mut self, e: &Expr, ctx: Ctx) -> Option<Dim> {
+        Infer {
+            syms: &self.syms,
+            diags: &mut self.diags,
+            ctx,
+        }
+        .infer(e)
+    }
+
+    fn resolve_unit(&mut self, u: &Option<UnitExpr>) -> Option<Unit> {
+        match u {
+            None => Some(Unit::ONE),
+            Some(u) => match parse_unit(&u.text) {
+                Ok(x) => Some(x),
+                Err(err) => {
+                    self.diags.push(unit_error(u, err));
+                    None
+                }
+            },
+        }
+    }
+
+    fn declare(&mut self, name: &Ident, kind: SymbolKind, dim: Option<Dim>) {
+        if BUILTINS.iter().any(|(n, _)| *n == name.name) || name.name == "pi" {
+            self.diags.push(
+                Diagnostic::error(
+                    "plantc::reserved_name",
+                    format!("`{}` is a built-in name", name.name),
+                    name.span,
+                    "reserved",
+                )
+                .with_help("choose another name"),
+            );
+            return;
+        }
+        if let Some(prev) = self.syms.names.get(&name.name) {
+            self.diags.push(
+                Diagnostic::error(
+                    "plantc::duplicate_definition",
+                    format!("`{}` is declared twice", name.name),
+                    name.span,
+                    format!("declared again here as {}", kind.describe()),
+                )
+                .with_label(
+                    prev.span,
+                    format!("first declared here as {}", prev.kind.describe()),
+                )
+                .with_help("every name must be declared once; rename one of them"),
+            );
+            return;
+        }
+        self.syms.names.insert(
+            name.name.clone(),
+            Symbol {
+                kind,
+                span: name.span,
+                dim,
+            },
+        );
+    }
+
+    fn bounds_ok(&mut self, b: &Bounds, what: &str) -> bool {
+        let (lo, hi) = (b.lo.value(), b.hi.value());
+        if lo.partial_cmp(&hi) != Some(std::cmp::Ordering::Less) {
+            self.diags.push(
+                Diagnostic::error(
+                    "plantc::bad_bounds",
+                    format!(
+                        "{what} must satisfy lo < hi, found [{}, {}]",
+                        b.lo.text, b.hi.text
+                    ),
+                    b.span,
+                    "empty or reversed interval",
+                )
+                .with_help("write the lower bound first, e.g. `[1e-4, 5e-3]`"),
+            );
+            return false;
+        }
+        true
+    }
+
+    fn check(&mut self, mut file: ModelFile) -> ModelFile {
+        if file.model.is_none() {
+            self.diags.push(
+                Diagnostic::error(
+                    "plantc::missing_model",
+                    "missing `model` declaration",
+                    Span::new(0, 0),
+                    "expected here",
+                )
+                .with_help("start the file with `model my_model \"description\"`"),
+            );
+        }
+        // declarations
+        for c in &file.coordinates {
+            self.declare(
+                &c.name,
+                SymbolKind::Coordinate(c.kind),
+                Some(coord_dim(c.kind)),
+            );
+        }
+        for i in &file.inputs {
+            let u = self.resolve_unit(&i.unit);
+            if let Some(u) = u {
+                self.syms.inputs.insert(i.name.name.clone(), u);
+            }
+            self.declare(&i.name, SymbolKind::Input, u.map(|u| u.dim));
+            if let Some(l) = &i.limits {
+                self.bounds_ok(l, "limits");
+            }
+        }
+        for p in &file.parameters {
+            let u = self.resolve_unit(&p.unit);
+            self.declare(&p.name, SymbolKind::Parameter, u.map(|u| u.dim));
+            if let Some(u) = u {
+                self.syms.parameters.insert(
+                    p.name.name.clone(),
+                    ParamValue {
+                        unit: u,
+                        si_value: p.value.value() * u.scale.to_f64(),
+                    },
+                );
+            }
+            if let Some(b) = &p.estimate {
+                if self.bounds_ok(b, "estimate bounds") {
+                    let v = p.value.value();
+                    if !(b.lo.value() <= v && v <= b.hi.value()) {
+                        self.diags.push(
+                            Diagnostic::warning(
+                                "plantc::value_outside_estimate",
+                                format!(
+                                    "value {} of `{}` is outside its estimate bounds",
+                                    p.value.text, p.name.name
+                                ),
+                                p.value.span,
+                                "outside the bounds",
+                            )
+                            .with_label(b.span, "estimate bounds")
+                            .with_help("widen the bounds or change the nominal value"),
+                        );
+                    }
+                }
+            }
+        }
+        for (i, l) in file.lets.iter().enumerate() {
+            self.declare(&l.name, SymbolKind::Let, None);
+            self.lets.entry(l.name.name.clone()).or_insert(i);
+        }
+        for o in &file.outputs {
+            if o.expr.is_some() {
+                self.declare(&o.name, SymbolKind::Output, None);
+            }
+        }
+        for e in file.kinetic.iter().chain(file.potential.iter()) {
+            self.declare(&e.name, SymbolKind::Energy, Some(Dim::energy()));
+        }
+        self.check_lets(&file);
+        // outputs
+        let mut output_names: BTreeMap<String, Span> = BTreeMap::new();
+        for o in &file.outputs {
+            if let Some(prev) = output_names.get(&o.name.name) {
+                self.diags.push(
+                    Diagnostic::error(
+                        "plantc::duplicate_definition",
+                        format!("output `{}` is declared twice", o.name.name),
+                        o.name.span,
+                        "declared again here",
+                    )
+                    .with_label(*prev, "first declared here"),
+                );
+                continue;
+            }
+            output_names.insert(o.name.name.clone(), o.name.span);
+            match &o.expr {
+                Some(e) => {
+                    let d = self.infer(e, Ctx::Model);
+                    if let Some(s) = self.syms.names.get_mut(&o.name.name) {
+                        if s.kind == SymbolKind::Output {
+                            s.dim = d;
+                        }
+                    }
+                }
+                None => match self.syms.names.get(&o.name.name).map(|s| s.kind) {
+                    Some(SymbolKind::Coordinate(_)) | Some(SymbolKind::Let) => {}
+                    other => {
+                        let cands: Vec<&str> = self
+                            .syms
+                            .names
+                            .iter()
+                            .filter(|(_, s)| {
+                                matches!(s.kind, SymbolKind::Coordinate(_) | SymbolKind::Let)
+                            })
+                            .map(|(n, _)| n.as_str())
+                            .collect();
+                        let mut d = Diagnostic::error(
+                            "plantc::bad_output",
+                            match other {
+                                None => format!("unknown name `{}`", o.name.name),
+                                Some(k) => format!(
+                                    "`{}` is {}, not a coordinate or a `let`",
+                                    o.name.name,
+                                    k.describe()
+                                ),
+                            },
+                            o.name.span,
+                            "an output must be a coordinate or a `let` name",
+                        );
+                        d.help = did_you_mean(&suggest(&o.name.name, cands)).or(Some(format!(
+                            "or give it a definition: `output {} = ...`",
+                            o.name.name
+                        )));
+                        self.diags.push(d);
+                    }
+                },
+            }
+        }
+        // energies
+        match file.kinetic.as_slice() {
+            [] => self.diags.push(
+                Diagnostic::error(
+                    "plantc::missing_kinetic",
+                    "the model has no kinetic energy",
+                    file.model.as_ref().map_or(Span::new(0, 0), |m| m.name.span),
+                    "in this model",
+                )
+                .with_help("add a line like `kinetic T = 1/2*m*x'^2`; the equations of motion come from T - V"),
+            ),
+            [_, rest @ ..] => {
+                for r in rest {
+                    self.diags.push(
+                        Diagnostic::error(
+                            "plantc::duplicate_definition",
+                            "kinetic energy is declared twice",
+                            r.span,
+                            "second `kinetic` line",
+                        )
+                        .with_label(file.kinetic[0].span, "first declared here")
+                        .with_help("write the whole kinetic energy in one `kinetic` statement"),
+                    );
+                }
+            }
+        }
+        if file.potential.is_empty() && !file.kinetic.is_empty() {
+            self.diags.push(
+                Diagnostic::note(
+                    "plantc::no_potential",
+                    "no potential energy declared; V = 0 is assumed",
+                    file.kinetic[0].span,
+                    "only kinetic energy",
+                )
+                .with_help("add `potential V = ...` if gravity or springs act on the system"),
+            );
+        }
+        for r in file.potential.iter().skip(1) {
+            self.diags.push(
+                Diagnostic::error(
+                    "plantc::duplicate_definition",
+                    "potential energy is declared twice",
+                    r.span,
+                    "second `potential` line",
+                )
+                .with_label(file.potential[0].span, "first declared here"),
+            );
+        }
+        for (e, which) in file
+            .kinetic
+            .iter()
+            .map(|e| (e, "kinetic"))
+            .chain(file.potential.iter().map(|e| (e, "potential")))
+        {
+            if let Some(d) = self.infer(&e.expr, Ctx::Model) {
+                if d != Dim::energy() {
+                    self.diags.push(
+                        Diagnostic::error(
+                            "plantc::not_an_energy",
+                            format!("{which} energy `{}` is not an energy", e.name.name),
+                            e.expr.span,
+                            format!("expected {}, found {d}", Dim::energy()),
+                        )
+                        .with_help("check the units of the parameters in this expression (e.g. mass kg, inertia kg*m^2)"),
+                    );
+                }
+            }
+        }
+        // forces
+        let mut forced: BTreeMap<String, Span> = BTreeMap::new();
+        for f in file.forces.iter_mut() {
+            let q = f.coordinate.clone();
+            let kind = match self.syms.names.get(&q.name) {
+                Some(Symbol {
+                    kind: SymbolKind::Coordinate(k),
+                    ..
+                }) => Some(*k),
+                other => {
+                    let cands: Vec<&str> = self
+                        .syms
+                        .names
+                        .iter()
+                        .filter(|(_, s)| matches!(s.kind, SymbolKind::Coordinate(_)))
+                        .map(|(n, _)| n.as_str())
+                        .collect();
+                    let mut d = Diagnostic::error(
+                        "plantc::bad_force",
+                        match other {
+                            None => format!("unknown coordinate `{}`", q.name),
+                            Some(s) => {
+                                format!("`{}` is {}, not a coordinate", q.name, s.kind.describe())
+                            }
+                        },
+                        q.span,
+                        "a force acts on a coordinate",
+                    );
+                    d.help = did_you_mean(&suggest(&q.name, cands));
+                    self.diags.push(d);
+                    None
+                }
+            };
+            if kind.is_some() {
+                if let Some(prev) = forced.get(&q.name) {
+                    self.diags.push(
+                        Diagnostic::error(
+                            "plantc::duplicate_force",
+                            format!("coordinate `{}` has two `force` lines", q.name),
+                            f.span,
+                            "second force line",
+                        )
+                        .with_label(*prev, "first force line")
+                        .with_help("add all terms in one line: `force q = a + b`"),
+                    );
+                } else {
+                    forced.insert(q.name.clone(), f.span);
+                }
+            }
+            f.expr = self.expand_effects(&f.written, &q);
+            if let (Some(k), Some(d)) = (kind, self.infer(&f.expr, Ctx::Force)) {
+                let expected = match k {
+                    CoordKind::Angle => Dim::energy(),
+                    CoordKind::Length => Dim::force(),
+                };
+                if d != expected {
+                    let what = match k {
+                        CoordKind::Angle => "a torque",
+                        CoordKind::Length => "a force",
+                    };
+                    self.diags.push(
+                        Diagnostic::error(
+                            "plantc::force_dimension",
+                            format!("the force on `{}` must be {what}", q.name),
+                            f.written.span,
+                            format!("expected {expected}, found {d}"),
+                        )
+                        .with_label(q.span, format!("`{}` is {}", q.name, if k == CoordKind::Angle { "an angle" } else { "a length" }))
+                        .with_help("a generalised force on an angle is a torque (N*m); on a length it is a force (N)"),
+                    );
+                }
+            }
+        }
+        self.check_sets(&file);
+        self.check_controllers(&file);
+        file
+    }
+
+    fn expand_effects(&mut self, e: &Expr, q: &Ident) -> Expr {
+        let kind = match &e.kind {
+            ExprKind::Call(f, _) if effects::lookup(&f.name).is_some() => {
+                return match effects::expand(e, q) {
+                    Ok(x) => x,
+                    Err(d) => {
+                        self.diags.push(d);
+                        Expr::new(
+                            ExprKind::Number(NumLit {
+                                text: "0".into(),
+                                span: e.span,
+                            }),
+                            e.span,
+                        )
+                    }
+                };
+            }
+            ExprKind::Neg(a) => ExprKind::Neg(Box::new(self.expand_effects(a, q))),
+            ExprKind::Binary(op, a, b) => ExprKind::Binary(
+                *op,
+                Box::new(self.expand_effects(a, q)),
+                Box::new(self.expand_effects(b, q)),
+            ),
+            other => other.clone(),
+        };
+        Expr::new(kind, e.span)
+    }
+
+    fn check_lets(&mut self, file: &ModelFile) {
+        // dependency graph among lets
+        let n = file.lets.len();
+        let mut deps: Vec<Vec<(usize, Span)>> = vec![Vec::new(); n];
+        for (i, l) in file.lets.iter().enumerate() {
+            if self.lets.get(&l.name.name) != Some(&i) {
+                continue;
+            }
+            l.expr.walk(&mut |x| {
+                if let ExprKind::Name(name) = &x.kind {
+                    if let Some(&j) = self.lets.get(name) {
+                        deps[i].push((j, x.span));
+                    }
+                }
+            });
+        }
+        // iterative DFS: 0 = new, 1 = on stack, 2 = done
+        let mut state = vec![0u8; n];
+        let mut in_cycle = vec![false; n];
+        let mut order = Vec::new();
+        for root in 0..n {
+            if state[root] != 0 || self.lets.get(&file.lets[root].name.name) != Some(&root) {
+                continue;
+            }
+            let mut stack: Vec<(usize, usize)> = vec![(root, 0)];
+            state[root] = 1;
+            while let Some(&mut (v, ref mut k)) = stack.last_mut() {
+                if *k < deps[v].len() {
+                    let (w, sp) = deps[v][*k];
+                    *k += 1;
+                    if state[w] == 0 {
+                        state[w] = 1;
+                        stack.push((w, 0));
+                    } else if state[w] == 1 {
+                        // cycle: from w along the stack to v, back to w
+                        let pos = stack.iter().position(|(x, _)| *x == w).unwrap_or(0);
+                        let members: Vec<usize> = stack[pos..].iter().map(|(x, _)| *x).collect();
+                        for &m in &members {
+                            in_cycle[m] = true;
+                        }
+                        let path: Vec<&str> = members
+                            .iter()
+                            .map(|&m| file.lets[m].name.name.as_str())
+                            .chain(std::iter::once(file.lets[w].name.name.as_str()))
+                            .collect();
+                        let mut d = Diagnostic::error(
+                            "plantc::let_cycle",
+                            format!("`let` definitions depend on each other in a cycle: {}", path.join(" -> ")),
+                            sp,
+                            format!("`{}` uses `{}`", file.lets[v].name.name, file.lets[w].name.name),
+                        )
+                        .with_help("a `let` may use other lets in any order, but not itself, directly or indirectly");
+                        for &m in &members {
+                            if m != v {
+                                d = d.with_label(
+                                    file.lets[m].name.span,
+                                    format!("`{}` is defined here", file.lets[m].name.name),
+                                );
+                            }
+                        }
+                        self.diags.push(d);
+                    }
+                } else {
+                    state[v] = 2;
+                    order.push(v);
+                    stack.pop();
+                }
+            }
+        }
+        for v in order {
+            let l = &file.lets[v];
+            let depends_on_cycle = in_cycle[v] || deps[v].iter().any(|(w, _)| in_cycle[*w]);
+            if depends_on_cycle {
+                in_cycle[v] = true;
+                continue;
+            }
+            let d = self.infer(&l.expr, Ctx::Model);
+            if let Some(s) = self.syms.names.get_mut(&l.name.name) {
+                if s.kind == SymbolKind::Let {
+                    s.dim = d;
+                }
+            }
+            self.syms.let_order.push(l.name.name.clone());
+        }
+    }
+
+    fn check_sets(&mut self, file: &ModelFile) {
+        let mut seen: BTreeMap<String, (Span, &str)> = BTreeMap::new();
+        let blocks = file
+            .sets
+            .iter()
+            .map(|s| (&s.name, "set"))
+            .chain(file.controllers.iter().map(|c| (&c.name, "controller")));
+        for (name, what) in blocks {
+            if let Some((prev, pw)) = seen.get(&name.name) {
+                self.diags.push(
+                    Diagnostic::error(
+                        "plantc::duplicate_definition",
+                        format!("{what} `{}` is declared twice", name.name),
+                        name.span,
+                        "declared again here",
+                    )
+                    .with_label(*prev, format!("first declared here as a {pw}"))
+                    .with_help("sets and controllers need distinct names"),
+                );
+            } else {
+                seen.insert(name.name.clone(), (name.span, what));
+            }
+        }
+        for set in &file.sets {
+            let mut entries: BTreeMap<&str, Span> = BTreeMap::new();
+            for e in &set.entries {
+                let param = file.parameters.iter().find(|p| p.name.name == e.name.name);
+                let Some(param) = param else {
+                    let cands: Vec<&str> = file
+                        .parameters
+                        .iter()
+                        .map(|p| p.name.name.as_str())
+                        .collect();
+                    let mut d = Diagnostic::error(
+                        "plantc::unknown_parameter",
+                        format!(
+                            "set `{}` gives a value to `{}`, which is not a parameter",
+                            set.name.name, e.name.name
+                        ),
+                        e.name.span,
+                        "not a parameter",
+                    );
+                    d.help = did_you_mean(&suggest(&e.name.name, cands)).or(Some(
+                        "a set can only change the values of declared parameters".into(),
+                    ));
+                    self.diags.push(d);
+                    self.infer(&e.value, Ctx::Constant);
+                    continue;
+                };
+                if let Some(prev) = entries.get(e.name.name.as_str()) {
+                    self.diags.push(
+                        Diagnostic::error(
+                            "plantc::duplicate_entry",
+                            format!("`{}` is set twice in set `{}`", e.name.name, set.name.name),
+                            e.name.span,
+                            "set again here",
+                        )
+                        .with_label(*prev, "first set here"),
+                    );
+                    continue;
+                }
+                entries.insert(&e.name.name, e.name.span);
+                let Some(pv) = self.syms.parameters.get(&e.name.name).copied() else {
+                    continue;
+                };
+                let Some(d) = self.infer(&e.value, Ctx::Constant) else {
+                    continue;
+                };
+                if d != pv.unit.dim {
+                    let unit = param
+                        .unit
+                        .as_ref()
+                        .map_or("1".to_string(), |u| u.text.clone());
+                    self.diags.push(
+                        Diagnostic::error(
+                            "plantc::unit_mismatch",
+                            format!("value for `{}` has the wrong unit", e.name.name),
+                            e.value.span,
+                            format!("expected {}, found {d}", pv.unit.dim),
+                        )
+                        .with_label(
+                            param.name.span,
+                            format!("`{}` is declared in [{unit}]", e.name.name),
+                        )
+                        .with_help(format!(
+                            "write quantities with their unit in brackets, e.g. `1.0 [{unit}]`"
+                        )),
+                    );
+                    continue;
+                }
+                if let (Some(b), Some(v)) = (&param.estimate, eval_si(&e.value, &self.syms)) {
+                    let s = pv.unit.scale.to_f64();
+                    let (lo, hi) = (b.lo.value() * s, b.hi.value() * s);
+                    let tol = 1e-12 * lo.abs().max(hi.abs());
+                    if v < lo - tol || v > hi + tol {
+                        self.diags.push(
+                            Diagnostic::warning(
+                                "plantc::value_outside_estimate",
+                                format!(
+                                    "value for `{}` in set `{}` is outside its estimate bounds",
+                                    e.name.name, set.name.name
+                                ),
+                                e.value.span,
+                                format!(
+                                    "= {} {} in SI, bounds [{}, {}]",
+                                    fmt_num(v),
+                                    pv.unit.dim.base_form(),
+                                    fmt_num(lo),
+                                    fmt_num(hi)
+                                ),
+                            )
+                            .with_label(b.span, "estimate bounds"),
+                        );
+                    }
+                }
+            }
+        }
+    }
+
+    fn check_controllers(&mut self, file: &ModelFile) {
+        let n_states = 2 * file.coordinates.len();
+        let n_inputs = file.inputs.len();
+        for c in &file.controllers {
+            let designs: Vec<&ControllerStmt> = c
+                .body
+                .iter()
+                .filter(|s| {
+                    matches!(
+                        s,
+                        ControllerStmt::Place { .. }
+                            | ControllerStmt::Lqr { .. }
+                            | ControllerStmt::Gains { .. }
+                            | ControllerStmt::Linearize { .. }
+                    )
+                })
+                .collect();
+            if designs.is_empty() {
+                self.diags.push(
+                    Diagnostic::error(
+                        "plantc::controller_kind",
+                        format!("controller `{}` has no design statement", c.name.name),
+                        c.name.span,
+                        "what kind of controller is this?",
+                    )
+                    .with_help("add one of `place poles [...]`, `lqr Q [...] R [...]`, `gains K [...]`, `linearize output y`"),
+                );
+            }
+            for extra in designs.iter().skip(1) {
+                self.diags.push(
+                    Diagnostic::error(
+                        "plantc::controller_kind",
+                        format!(
+                            "controller `{}` has more than one design statement",
+                            c.name.name
+                        ),
+                        extra.span(),
+                        "second design statement",
+                    )
+                    .with_label(designs[0].span(), "first one")
+                    .with_help("declare each design as its own controller"),
+                );
+            }
+            let linearize = c.body.iter().find_map(|s| match s {
+                ControllerStmt::Linearize { output, .. } => Some(output),
+                _ => None,
+            });
+            let mut gains: BTreeMap<String, Span> = BTreeMap::new();
+            let mut has_law = false;
+            for s in &c.body {
+                match s {
+                    ControllerStmt::Place { poles, span } => {
+                        if poles.len() != n_states {
+                            self.diags.push(
+                                Diagnostic::error(
+                                    "plantc::pole_count",
+                                    format!(
+                                        "expected {n_states} poles (two per coordinate), found {}",
+                                        poles.len()
+                                    ),
+                                    *span,
+                                    format!("{} poles", poles.len()),
+                                )
+                                .with_help(format!(
+                                    "the model has {} coordinate(s), so {n_states} states",
+                                    file.coordinates.len()
+                                )),
+                            );
+                        }
+                        for p in poles {
+                            let (re, im) = p.value();
+                            if im != 0.0 && !poles.iter().any(|o| o.value() == (re, -im)) {
+                                self.diags.push(
+                                    Diagnostic::error(
+                                        "plantc::pole_conjugate",
+                                        "a complex pole needs its conjugate in the list",
+                                        p.span,
+                                        "no conjugate partner",
+                                    )
+                                    .with_help(
+                                        "a real system's poles come in pairs `a+bi`, `a-bi`",
+                                    ),
+                                );
+                            }
+                        }
+                    }
+                    ControllerStmt::Lqr { q, r, span } => {
+                        if q.len() != n_states || r.len() != n_inputs {
+                            self.diags.push(Diagnostic::error(
+                                "plantc::weight_count",
+                                format!(
+                                    "expected {n_states} state weights and {n_inputs} input weight(s), found {} and {}",
+                                    q.len(),
+                                    r.len()
+                                ),
+                                *span,
+                                "wrong number of weights",
+                            ).with_help("Q and R are the diagonals of the LQR weight matrices"));
+                        }
+                        for w in q
+                            .iter()
+                            .filter(|w| w.value().is_nan() || w.value() < 0.0)
+                            .chain(r.iter().filter(|w| w.value().is_nan() || w.value() <= 0.0))
+                        {
+                            self.diags.push(Diagnostic::error(
+                                "plantc::bad_weight",
+                                "LQR weights must be >= 0 for Q and > 0 for R",
+                                w.span,
+                                "invalid weight",
+                            ));
+                        }
+                    }
+                    ControllerStmt::Gains { values, span, .. } => {
+                        if values.len() != n_states * n_inputs {
+                            self.diags.push(Diagnostic::error(
+                                "plantc::gain_count",
+                                format!("expected {} gains ({n_states} states x {n_inputs} inputs), found {}", n_states * n_inputs, values.len()),
+                                *span,
+                                "wrong number of gains",
+                            ));
+                        }
+                    }
+                    ControllerStmt::Linearize { output, .. } => {
+                        if !file.outputs.iter().any(|o| o.name.name == output.name) {
+                            let cands: Vec<&str> =
+                                file.outputs.iter().map(|o| o.name.name.as_str()).collect();
+                            let mut d = Diagnostic::error(
+                                "plantc::unknown_output",
+                                format!("`{}` is not a declared output", output.name),
+                                output.span,
+                                "not an output",
+                            );
+                            d.help = did_you_mean(&suggest(&output.name, cands))
+                                .or(Some(format!("declare it with `output {}`", output.name)));
+                            self.diags.push(d);
+                        }
+                    }
+                    ControllerStmt::Gain { name, value, span } => {
+                        if linearize.is_none() {
+                            self.diags.push(Diagnostic::error(
+                                "plantc::controller_kind",
+                                "`gain` lines belong to a `linearize output` controller",
+                                *span,
+                                "no `linearize output` in this controller",
+                            ));
+                        }
+                        if let Some(prev) = gains.get(&name.name) {
+                            self.diags.push(
+                                Diagnostic::error(
+                                    "plantc::duplicate_definition",
+                                    format!("gain `{}` is declared twice", name.name),
+                                    name.span,
+                                    "declared again here",
+                                )
+                                .with_label(*prev, "first declared here"),
+                            );
+                        }
+                        gains.insert(name.name.clone(), name.span);
+                        self.infer(value, Ctx::Constant);
+                    }
+                    ControllerStmt::Law { target, expr, span } => {
+                        has_law = true;
+                        if linearize.is_none() {
+                            self.diags.push(Diagnostic::error(
+                                "plantc::controller_kind",
+                                "a law `v = ...` belongs to a `linearize output` controller",
+                                *span,
+                                "no `linearize output` in this controller",
+                            ));
+                        }
+                        if target.name != "v" {
+                            self.diags.push(
+                                Diagnostic::error("plantc::bad_law", format!("unknown controller statement `{} = ...`", target.name), target.span, "expected `v`")
+                                    .with_help("the outer law of feedback linearization is written `v = ...` (y'' = v)"),
+                            );
+                        }
+                        self.check_law(expr, &gains);
+                    }
+                }
+            }
+            if linearize.is_some() && !has_law {
+                self.diags.push(
+                    Diagnostic::error(
+                        "plantc::missing_law",
+                        format!("controller `{}` has no law `v = ...`", c.name.name),
+                        c.name.span,
+                        "feedback linearization needs an outer law",
+                    )
+                    .with_help("e.g. `v = -wn^2*y - 2*zeta*wn*y'`"),
+                );
+            }
+        }
+    }
+
+    /// Law names: gains, `y`, `y'`, coordinates (and derivatives), parameters.
+    fn check_law(&mut self, e: &Expr, gains: &BTreeMap<String, Span>) {
+        let mut errs = Vec::new();
+        e.walk(&mut |x| match &x.kind {
+            ExprKind::Name(n) => {
+                let ok = n == "y"
+                    || gains.contains_key(n)
+                    || matches!(
+                        self.syms.names.get(n).map(|s| s.kind),
+                        Some(SymbolKind::Coordinate(_)) | Some(SymbolKind::Parameter)
+                    );
+                if !ok {
+                    let cands: Vec<&str> = gains
+                        .keys()
+                        .map(|s| s.as_str())
+                        .chain(std::iter::once("y"))
+                        .chain(
+                            self.syms
+                                .names
+                                .iter()
+                                .filter(|(_, s)| matches!(s.kind, SymbolKind::Coordinate(_) | SymbolKind::Parameter))
+                                .map(|(n, _)| n.as_str()),
+                        )
+                        .collect();
+                    let mut d = Diagnostic::error("plantc::unknown_name", format!("unknown name `{n}` in the law"), x.span, "not a gain, `y`, a coordinate or a parameter");
+                    d.help = did_you_mean(&suggest(n, cands)).or(Some("declare gains with `gain name = value`".into()));
+                    errs.push(d);
+                }
+            }
+            ExprKind::Deriv(n, k) => {
+                let ok = (n == "y" && *k == 1) || matches!(self.syms.names.get(n).map(|s| s.kind), Some(SymbolKind::Coordinate(_)));
+                if !ok {
+                    errs.push(
+                        Diagnostic::error("plantc::bad_derivative", format!("`{n}{}` is not available in the law", "'".repeat(*k as usize)), x.span, "not allowed here")
+                            .with_help("the law may use `y`, `y'` (output and its derivative), coordinates and their derivatives"),
+                    );
+                }
+            }
+            ExprKind::Call(f, _) if !BUILTINS.iter().any(|(b, _)| *b == f.name) => {
+                errs.push(Diagnostic::error("plantc::unknown_function", format!("unknown function `{}`", f.name), f.span, "not a built-in function"));
+            }
+            _ => {}
+        });
+        self.diags.extend(errs);
+    }
+}

@@ -1,0 +1,286 @@
+//! Lossless editing of model files.
+//!
+//! Each function changes one thing in the source text and leaves every other
+//! byte untouched (comments, alignment, line endings). The result is parsed
+//! and checked again; an edit that would introduce an error is refused.
+
+use super::ast::ModelFile;
+use super::check::{parse_and_check, suggest};
+use super::diagnostic::Diagnostic;
+use super::lexer::{lex, Tok};
+use super::span::Span;
+use std::collections::BTreeSet;
+use std::fmt;
+
+/// Why an edit was refused.
+#[derive(Debug, Clone, PartialEq)]
+pub enum EditError {
+    /// The original text does not parse; the diagnostics say why.
+    InvalidSource(Vec<Diagnostic>),
+    /// No parameter of that name.
+    UnknownParameter {
+        /// The name asked for.
+        name: String,
+        /// Close names that exist.
+        suggestions: Vec<String>,
+    },
+    /// No coordinate of that name.
+    UnknownCoordinate {
+        /// The name asked for.
+        name: String,
+        /// Close names that exist.
+        suggestions: Vec<String>,
+    },
+    /// The given text is not a plain number literal (optionally negative).
+    NotANumber(String),
+    /// The given declaration is not a single `parameter` line.
+    NotAParameterDeclaration(String),
+    /// The edited file would have these new errors.
+    WouldBreak(Vec<Diagnostic>),
+}
+
+impl fmt::Display for EditError {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        match self {
+            EditError::InvalidSource(d) => {
+                write!(f, "the model file has {} syntax error(s)", d.len())
+            }
+            EditError::UnknownParameter { name, suggestions } => {
+                write!(f, "no parameter `{name}`")?;
+                if !suggestions.is_empty() {
+                    write!(f, " (did you mean {}?)", suggestions.join(", "))?;
+                }
+                Ok(())
+            }
+            EditError::UnknownCoordinate { name, suggestions } => {
+                write!(f, "no coordinate `{name}`")?;
+                if !suggestions.is_empty() {
+                    write!(f, " (did you mean {}?)", suggestions.join(", "))?;
+                }
+                Ok(())
+            }
+            EditError::NotANumber(t) => write!(f, "`{t}` is not a number literal"),
+            EditError::NotAParameterDeclaration(t) => {
+                write!(f, "`{t}` is not a single `parameter` declaration")
+            }
+            EditError::WouldBreak(d) => {
+                write!(f, "the edit would make the model invalid: ")?;
+                let msgs: Vec<&str> = d.iter().map(|d| d.message.as_str()).collect();
+                f.write_str(&msgs.join("; "))
+            }
+        }
+    }
+}
+
+impl std::error::Error for EditError {}
+
+/// Formats a float as a number literal of the model language (shortest
+/// round-trip text, exponent form for very small or large magnitudes).
+pub fn number_text(v: f64) -> String {
+    let a = v.abs();
+    if a != 0.0 && !(1e-4..1e6).contains(&a) {
+        format!("{v:e}")
+    } else {
+        format!("{v}")
+    }
+}
+
+fn parse_ok(text: &str) -> Result<(ModelFile, BTreeSet<(String, String)>), EditError> {
+    let c = parse_and_check("<edit>", text);
+    let errors = c
+        .diagnostics
+        .iter()
+        .filter(|d| d.is_error())
+        .map(|d| (d.code.to_string(), d.message.clone()))
+        .collect();
+    match c.model {
+        Some(m) => Ok((m, errors)),
+        None => Err(EditError::InvalidSource(c.diagnostics)),
+    }
+}
+
+/// Applies replacements (non-overlapping spans) and re-checks the result
+/// against the errors the original already had.
+fn apply(
+    text: &str,
+    before: &BTreeSet<(String, String)>,
+    mut edits: Vec<(Span, String)>,
+) -> Result<String, EditError> {
+    edits.sort_by_key(|(s, _)| std::cmp::Reverse(s.start));
+    let mut out = text.to_string();
+    for (s, r) in edits {
+        out.replace_range(s.start..s.end, &r);
+    }
+    let c = parse_and_check("<edit>", &out);
+    let new: Vec<Diagnostic> = c
+        .diagnostics
+        .into_iter()
+        .filter(|d| d.is_error() && !before.contains(&(d.code.to_string(), d.message.clone())))
+        .collect();
+    if new.is_empty() {
+        Ok(out)
+    } else {
+        Err(EditError::WouldBreak(new))
+    }
+}
+
+fn check_number(t: &str) -> Result<String, EditError> {
+    let t = t.trim();
+    let body = t.strip_prefix('-').unwrap_or(t);
+    let mut d = Vec::new();
+    let toks = lex(body, &mut d);
+    let ok = d.is_empty()
+        && toks.len() == 2
+        && toks[0].tok == Tok::Number
+        && toks[0].span == Span::new(0, body.len());
+    if ok {
+        Ok(t.to_string())
+    } else {
+        Err(EditError::NotANumber(t.to_string()))
+    }
+}
+
+fn find_param<'m>(m: &'m ModelFile, name: &str) -> Result<&'m super::ast::Parameter, EditError> {
+    m.parameters
+        .iter()
+        .find(|p| p.name.name == name)
+        .ok_or_else(|| EditError::UnknownParameter {
+            name: name.to_string(),
+            suggestions: suggest(name, m.parameters.iter().map(|p| p.name.name.as_str())),
+        })
+}
+
+/// Offset just after the end of the line containing `offset` (after its `\n`).
+fn after_line(text: &str, offset: usize) -> usize {
+    text[offset..]
+        .find('\n')
+        .map_or(text.len(), |i| offset + i + 1)
+}
+
+fn line_ending(text: &str) -> &'static str {
+    if text.contains("\r\n") {
+        "\r\n"
+    } else {
+        "\n"
+    }
+}
+
+/// Inserts a full line after the line containing `offset` (or at the end).
+fn insert_line(text: &str, offset: usize, line: &str) -> (Span, String) {
+    let nl = line_ending(text);
+    let at = after_line(text, offset);
+    if at == text.len() && !text.is_empty() && !text.ends_with('\n') {
+        (Span::new(at, at), format!("{nl}{line}"))
+    } else {
+        (Span::new(at, at), format!("{line}{nl}"))
+    }
+}
+
+/// Replaces the value literal of parameter `name` by `value_text` (a number
+/// in the parameter's declared unit, e.g. `0.0031` or `-2e-3`).
+pub fn set_parameter_value(text: &str, name: &str, value_text: &str) -> Result<String, EditError> {
+    let value = check_number(value_text)?;
+    let (m, before) = parse_ok(text)?;
+    let p = find_param(&m, name)?;
+    apply(text, &before, vec![(p.value.span, value)])
+}
+
+/// Sets the estimate bounds of parameter `name` (in its declared unit),
+/// replacing existing bounds or appending ` estimate [lo, hi]` to its line.
+pub fn set_estimate(text: &str, name: &str, lo: &str, hi: &str) -> Result<String, EditError> {
+    let lo = check_number(lo)?;
+    let hi = check_number(hi)?;
+    let (m, before) = parse_ok(text)?;
+    let p = find_param(&m, name)?;
+    let edits = match &p.estimate {
+        Some(b) => vec![(b.lo.span, lo), (b.hi.span, hi)],
+        None => vec![(
+            Span::new(p.span.end, p.span.end),
+            format!(" estimate [{lo}, {hi}]"),
+        )],
+    };
+    apply(text, &before, edits)
+}
+
+/// Adds a term such as `+ coulomb_friction(Fc_alpha)` to the force on
+/// `coordinate` (a term without a leading sign gets `+ `). If the coordinate
+/// has no `force` line, `force q = term` is added after the last force line
+/// (or after the energies when there is none).
+pub fn add_force_term(text: &str, coordinate: &str, term_text: &str) -> Result<String, EditError> {
+    let term = term_text.trim();
+    if term.contains('\n') || term.is_empty() {
+        return Err(EditError::WouldBreak(Vec::new()));
+    }
+    let (m, before) = parse_ok(text)?;
+    if !m.coordinates.iter().any(|c| c.name.name == coordinate) {
+        return Err(EditError::UnknownCoordinate {
+            name: coordinate.to_string(),
+            suggestions: suggest(
+                coordinate,
+                m.coordinates.iter().map(|c| c.name.name.as_str()),
+            ),
+        });
+    }
+    let edit = match m.forces.iter().find(|f| f.coordinate.name == coordinate) {
+        Some(f) => {
+            let t = if term.starts_with('+') || term.starts_with('-') {
+                format!(" {term}")
+            } else {
+                format!(" + {term}")
+            };
+            (Span::new(f.expr_end, f.expr_end), t)
+        }
+        None => {
+            let body = term.strip_prefix('+').map_or(term, str::trim_start);
+            let anchor = m
+                .forces
+                .iter()
+                .map(|f| f.span.end)
+                .max()
+                .or_else(|| {
+                    m.kinetic
+                        .iter()
+                        .chain(m.potential.iter())
+                        .map(|e| e.span.end)
+                        .max()
+                })
+                .unwrap_or(text.len());
+            insert_line(text, anchor, &format!("force {coordinate} = {body}"))
+        }
+    };
+    apply(text, &before, vec![edit])
+}
+
+/// Adds a parameter declaration line (e.g.
+/// `parameter Fc_alpha = 0.001 [N*m] "pendulum dry friction" estimate [0, 0.01]`)
+/// after the last parameter, or after the other declarations if there is none.
+pub fn add_parameter(text: &str, decl_line: &str) -> Result<String, EditError> {
+    let decl = decl_line.trim();
+    let (single, _) = super::parser::parse(decl);
+    let ok = !decl.contains('\n')
+        && single.parameters.len() == 1
+        && single.coordinates.is_empty()
+        && single.lets.is_empty()
+        && single.model.is_none()
+        && decl.starts_with("parameter");
+    if !ok {
+        return Err(EditError::NotAParameterDeclaration(decl.to_string()));
+    }
+    let (m, before) = parse_ok(text)?;
+    let anchor = m
+        .parameters
+        .iter()
+        .map(|p| p.span.end)
+        .max()
+        .or_else(|| {
+            m.coordinates
+                .iter()
+                .map(|c| c.span.end)
+                .chain(m.inputs.iter().map(|i| i.span.end))
+                .chain(m.outputs.iter().map(|o| o.span.end))
+                .chain(m.model.iter().map(|d| d.span.end))
+                .max()
+        })
+        .unwrap_or(text.len());
+    apply(text, &before, vec![insert_line(text, anchor, decl)])
+}
