@@ -10,6 +10,7 @@ pub mod poly;
 pub mod print;
 pub mod rational;
 pub mod subst;
+pub mod tape;
 
 pub use canonical::{
     canonical, equivalent, is_zero, simplify, try_canonical, try_is_zero, try_simplify,
@@ -19,3 +20,4 @@ pub use expr::{Expr, Func, Node, Symbol};
 pub use poly::CanonError;
 pub use rational::Rational;
 pub use subst::{substitute, substitute_symbols};
+pub use tape::{Instr, Tape, TapeError};
