@@ -3,13 +3,21 @@
 //! identically zero expressions, printing (plain and LaTeX) and compiled numeric
 //! tapes.
 
+pub mod canonical;
 pub mod diff;
 pub mod expr;
+pub mod poly;
 pub mod print;
 pub mod rational;
 pub mod subst;
+pub mod tape;
 
+pub use canonical::{
+    canonical, equivalent, is_zero, simplify, try_canonical, try_is_zero, try_simplify,
+};
 pub use diff::{diff, jacobian, time_derivative, CoordinateSymbols};
 pub use expr::{Expr, Func, Node, Symbol};
+pub use poly::CanonError;
 pub use rational::Rational;
 pub use subst::{substitute, substitute_symbols};
+pub use tape::{Instr, Tape, TapeError};

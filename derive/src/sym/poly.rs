@@ -1,0 +1,675 @@
+//! Sparse multivariate polynomials with exact rational coefficients over
+//! "atoms" (symbols, `sin(u)`, `cos(u)`, roots and opaque function
+//! applications), reduced modulo side relations such as `sin(u)^2 = 1 - cos(u)^2`.
+//!
+//! This is the arithmetic engine behind [`crate::sym::canonical`]. All
+//! coefficient arithmetic is checked; overflow surfaces as
+//! [`CanonError::Overflow`] instead of a panic.
+//!
+//! Ordering is structural ([`structural_cmp`] on the atoms), never by interning
+//! id or hash order, so every result is deterministic.
+
+use std::cmp::Ordering;
+use std::collections::HashMap;
+use std::fmt;
+
+use super::expr::{structural_cmp, Expr};
+use super::rational::Rational;
+
+/// Why an exact computation was abandoned.
+#[derive(Copy, Clone, Debug, PartialEq, Eq, Hash)]
+pub enum CanonError {
+    /// A rational coefficient or an exponent overflowed.
+    Overflow,
+    /// A denominator is identically zero.
+    DivisionByZero,
+    /// An intermediate polynomial exceeded the term limit.
+    TooLarge,
+}
+
+impl fmt::Display for CanonError {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        f.write_str(match self {
+            CanonError::Overflow => "exact arithmetic overflowed",
+            CanonError::DivisionByZero => "division by an identically zero expression",
+            CanonError::TooLarge => "intermediate polynomial too large",
+        })
+    }
+}
+
+impl std::error::Error for CanonError {}
+
+/// Result alias for exact polynomial arithmetic.
+pub type CResult<T> = Result<T, CanonError>;
+
+/// Maximum number of terms of any intermediate polynomial.
+pub const MAX_TERMS: usize = 200_000;
+
+pub(crate) fn radd(a: Rational, b: Rational) -> CResult<Rational> {
+    a.checked_add(b).ok_or(CanonError::Overflow)
+}
+pub(crate) fn rmul(a: Rational, b: Rational) -> CResult<Rational> {
+    a.checked_mul(b).ok_or(CanonError::Overflow)
+}
+pub(crate) fn rdiv(a: Rational, b: Rational) -> CResult<Rational> {
+    if b.is_zero() {
+        return Err(CanonError::DivisionByZero);
+    }
+    a.checked_div(b).ok_or(CanonError::Overflow)
+}
+pub(crate) fn rneg(a: Rational) -> CResult<Rational> {
+    a.checked_neg().ok_or(CanonError::Overflow)
+}
+
+fn igcd(mut a: i128, mut b: i128) -> i128 {
+    a = a.abs();
+    b = b.abs();
+    while b != 0 {
+        let t = a % b;
+        a = b;
+        b = t;
+    }
+    a
+}
+
+/// A polynomial variable: an interned expression ordered structurally.
+#[derive(Copy, Clone, PartialEq, Eq, Hash, Debug)]
+pub struct Atom(pub Expr);
+
+impl PartialOrd for Atom {
+    fn partial_cmp(&self, other: &Self) -> Option<Ordering> {
+        Some(self.cmp(other))
+    }
+}
+
+impl Ord for Atom {
+    fn cmp(&self, other: &Self) -> Ordering {
+        if self.0 == other.0 {
+            Ordering::Equal
+        } else {
+            structural_cmp(self.0, other.0)
+        }
+    }
+}
+
+/// A monomial: atoms in increasing structural order with positive exponents.
+#[derive(Clone, PartialEq, Eq, Hash, Debug, Default)]
+pub struct Mono {
+    deg: u32,
+    vars: Vec<(Atom, u32)>,
+}
+
+impl Mono {
+    /// The empty monomial `1`.
+    pub fn one() -> Mono {
+        Mono::default()
+    }
+
+    /// `a^e`.
+    pub fn atom(a: Atom, e: u32) -> Mono {
+        if e == 0 {
+            return Mono::one();
+        }
+        Mono {
+            deg: e,
+            vars: vec![(a, e)],
+        }
+    }
+
+    /// Total degree.
+    pub fn deg(&self) -> u32 {
+        self.deg
+    }
+
+    /// The atoms with their exponents.
+    pub fn vars(&self) -> &[(Atom, u32)] {
+        &self.vars
+    }
+
+    /// True for the monomial `1`.
+    pub fn is_one(&self) -> bool {
+        self.vars.is_empty()
+    }
+
+    /// Exponent of `a`.
+    pub fn exp_of(&self, a: Atom) -> u32 {
+        match self.vars.binary_search_by(|(b, _)| b.cmp(&a)) {
+            Ok(i) => self.vars[i].1,
+            Err(_) => 0,
+        }
+    }
+
+    /// The same monomial with the exponent of `a` set to `e`.
+    pub fn with_exp(&self, a: Atom, e: u32) -> Mono {
+        let mut vars = self.vars.clone();
+        let mut deg = self.deg;
+        match vars.binary_search_by(|(b, _)| b.cmp(&a)) {
+            Ok(i) => {
+                deg = deg - vars[i].1 + e;
+                if e == 0 {
+                    vars.remove(i);
+                } else {
+                    vars[i].1 = e;
+                }
+            }
+            Err(i) => {
+                if e > 0 {
+                    deg += e;
+                    vars.insert(i, (a, e));
+                }
+            }
+        }
+        Mono { deg, vars }
+    }
+
+    /// Product.
+    pub fn mul(&self, o: &Mono) -> CResult<Mono> {
+        if o.is_one() {
+            return Ok(self.clone());
+        }
+        if self.is_one() {
+            return Ok(o.clone());
+        }
+        let mut vars = Vec::with_capacity(self.vars.len() + o.vars.len());
+        let (mut i, mut j) = (0, 0);
+        while i < self.vars.len() && j < o.vars.len() {
+            let (a, ea) = self.vars[i];
+            let (b, eb) = o.vars[j];
+            match a.cmp(&b) {
+                Ordering::Less => {
+                    vars.push((a, ea));
+                    i += 1;
+                }
+                Ordering::Greater => {
+                    vars.push((b, eb));
+                    j += 1;
+                }
+                Ordering::Equal => {
+                    vars.push((a, ea.checked_add(eb).ok_or(CanonError::Overflow)?));
+                    i += 1;
+                    j += 1;
+                }
+            }
+        }
+        vars.extend_from_slice(&self.vars[i..]);
+        vars.extend_from_slice(&o.vars[j..]);
+        Ok(Mono {
+            deg: self.deg.checked_add(o.deg).ok_or(CanonError::Overflow)?,
+            vars,
+        })
+    }
+
+    /// `self / o` if `o` divides `self`.
+    pub fn div(&self, o: &Mono) -> Option<Mono> {
+        let mut vars = Vec::with_capacity(self.vars.len());
+        let mut j = 0;
+        for &(a, ea) in &self.vars {
+            if j < o.vars.len() && o.vars[j].0 == a {
+                let eb = o.vars[j].1;
+                j += 1;
+                match ea.cmp(&eb) {
+                    Ordering::Less => return None,
+                    Ordering::Equal => {}
+                    Ordering::Greater => vars.push((a, ea - eb)),
+                }
+            } else {
+                if j < o.vars.len() && o.vars[j].0 < a {
+                    return None;
+                }
+                vars.push((a, ea));
+            }
+        }
+        if j < o.vars.len() {
+            return None;
+        }
+        Some(Mono {
+            deg: self.deg - o.deg,
+            vars,
+        })
+    }
+
+    /// Greatest common divisor.
+    pub fn gcd(&self, o: &Mono) -> Mono {
+        let mut vars = Vec::new();
+        let (mut i, mut j) = (0, 0);
+        while i < self.vars.len() && j < o.vars.len() {
+            let (a, ea) = self.vars[i];
+            let (b, eb) = o.vars[j];
+            match a.cmp(&b) {
+                Ordering::Less => i += 1,
+                Ordering::Greater => j += 1,
+                Ordering::Equal => {
+                    vars.push((a, ea.min(eb)));
+                    i += 1;
+                    j += 1;
+                }
+            }
+        }
+        Mono {
+            deg: vars.iter().map(|v| v.1).sum(),
+            vars,
+        }
+    }
+
+    /// As an expression (a product of atom powers).
+    pub fn to_expr(&self) -> Expr {
+        Expr::mul_all(self.vars.iter().map(|(a, e)| a.0.powi(*e as i64)))
+    }
+}
+
+impl PartialOrd for Mono {
+    fn partial_cmp(&self, other: &Self) -> Option<Ordering> {
+        Some(self.cmp(other))
+    }
+}
+
+/// Graded lexicographic order; structurally smaller atoms rank higher.
+impl Ord for Mono {
+    fn cmp(&self, o: &Self) -> Ordering {
+        match self.deg.cmp(&o.deg) {
+            Ordering::Equal => {}
+            c => return c,
+        }
+        for (&(a, ea), &(b, eb)) in self.vars.iter().zip(o.vars.iter()) {
+            if a != b {
+                return if a < b {
+                    Ordering::Greater
+                } else {
+                    Ordering::Less
+                };
+            }
+            match ea.cmp(&eb) {
+                Ordering::Equal => {}
+                c => return c,
+            }
+        }
+        self.vars.len().cmp(&o.vars.len())
+    }
+}
+
+/// A polynomial: nonzero terms sorted by decreasing monomial.
+#[derive(Clone, PartialEq, Eq, Hash, Debug, Default)]
+pub struct Poly {
+    terms: Vec<(Mono, Rational)>,
+}
+
+impl PartialOrd for Poly {
+    fn partial_cmp(&self, other: &Self) -> Option<Ordering> {
+        Some(self.cmp(other))
+    }
+}
+
+impl Ord for Poly {
+    fn cmp(&self, o: &Self) -> Ordering {
+        for ((ma, ca), (mb, cb)) in self.terms.iter().zip(o.terms.iter()) {
+            match ma.cmp(mb).then_with(|| ca.cmp(cb)) {
+                Ordering::Equal => {}
+                c => return c,
+            }
+        }
+        self.terms.len().cmp(&o.terms.len())
+    }
+}
+
+/// Side relations `atom^q = replacement` used to reduce monomials
+/// (`sin(u)^2 = 1 - cos(u)^2`, `(B^(1/q))^q = B`).
+#[derive(Clone, Debug, Default)]
+pub struct Rules {
+    rules: HashMap<Atom, (u32, Poly)>,
+}
+
+impl Rules {
+    /// No relations.
+    pub fn new() -> Rules {
+        Rules::default()
+    }
+
+    /// Register `a^q = p` (`p` must itself be reduced).
+    pub fn insert(&mut self, a: Atom, q: u32, p: Poly) {
+        self.rules.entry(a).or_insert((q, p));
+    }
+
+    /// Is there a relation for `a`?
+    pub fn has(&self, a: Atom) -> bool {
+        self.rules.contains_key(&a)
+    }
+
+    fn rewrite(&self, m: &Mono) -> Option<(Mono, &Poly)> {
+        if self.rules.is_empty() {
+            return None;
+        }
+        for &(a, e) in &m.vars {
+            if let Some((q, p)) = self.rules.get(&a) {
+                if e >= *q {
+                    return Some((m.with_exp(a, e - q), p));
+                }
+            }
+        }
+        None
+    }
+
+    /// Collect terms into a reduced polynomial.
+    pub fn collect<I: IntoIterator<Item = (Mono, Rational)>>(&self, terms: I) -> CResult<Poly> {
+        let mut acc: HashMap<Mono, Rational> = HashMap::new();
+        let mut work: Vec<(Mono, Rational)> = terms.into_iter().collect();
+        while let Some((m, c)) = work.pop() {
+            if c.is_zero() {
+                continue;
+            }
+            if let Some((rest, p)) = self.rewrite(&m) {
+                for (pm, pc) in &p.terms {
+                    work.push((rest.mul(pm)?, rmul(c, *pc)?));
+                }
+                if work.len() > MAX_TERMS {
+                    return Err(CanonError::TooLarge);
+                }
+                continue;
+            }
+            match acc.get_mut(&m) {
+                Some(v) => *v = radd(*v, c)?,
+                None => {
+                    acc.insert(m, c);
+                    if acc.len() > MAX_TERMS {
+                        return Err(CanonError::TooLarge);
+                    }
+                }
+            }
+        }
+        let mut terms: Vec<(Mono, Rational)> =
+            acc.into_iter().filter(|(_, c)| !c.is_zero()).collect();
+        terms.sort_by(|a, b| b.0.cmp(&a.0));
+        Ok(Poly { terms })
+    }
+}
+
+impl Poly {
+    /// Zero.
+    pub fn zero() -> Poly {
+        Poly::default()
+    }
+
+    /// A constant.
+    pub fn constant(c: Rational) -> Poly {
+        Poly::term(Mono::one(), c)
+    }
+
+    /// A single term.
+    pub fn term(m: Mono, c: Rational) -> Poly {
+        if c.is_zero() {
+            Poly::zero()
+        } else {
+            Poly {
+                terms: vec![(m, c)],
+            }
+        }
+    }
+
+    /// The atom itself.
+    pub fn atom(a: Atom) -> Poly {
+        Poly::term(Mono::atom(a, 1), Rational::ONE)
+    }
+
+    /// Terms, leading (largest) first.
+    pub fn terms(&self) -> &[(Mono, Rational)] {
+        &self.terms
+    }
+
+    /// Number of terms.
+    pub fn len(&self) -> usize {
+        self.terms.len()
+    }
+
+    /// True if zero.
+    pub fn is_zero(&self) -> bool {
+        self.terms.is_empty()
+    }
+
+    /// The value if constant.
+    pub fn as_constant(&self) -> Option<Rational> {
+        match self.terms.as_slice() {
+            [] => Some(Rational::ZERO),
+            [(m, c)] if m.is_one() => Some(*c),
+            _ => None,
+        }
+    }
+
+    /// Leading term.
+    pub fn leading(&self) -> Option<&(Mono, Rational)> {
+        self.terms.first()
+    }
+
+    /// Sum.
+    pub fn add(&self, o: &Poly) -> CResult<Poly> {
+        let mut terms = Vec::with_capacity(self.terms.len() + o.terms.len());
+        let (mut i, mut j) = (0, 0);
+        while i < self.terms.len() && j < o.terms.len() {
+            let (ma, ca) = &self.terms[i];
+            let (mb, cb) = &o.terms[j];
+            match ma.cmp(mb) {
+                Ordering::Greater => {
+                    terms.push((ma.clone(), *ca));
+                    i += 1;
+                }
+                Ordering::Less => {
+                    terms.push((mb.clone(), *cb));
+                    j += 1;
+                }
+                Ordering::Equal => {
+                    let c = radd(*ca, *cb)?;
+                    if !c.is_zero() {
+                        terms.push((ma.clone(), c));
+                    }
+                    i += 1;
+                    j += 1;
+                }
+            }
+        }
+        terms.extend_from_slice(&self.terms[i..]);
+        terms.extend_from_slice(&o.terms[j..]);
+        Ok(Poly { terms })
+    }
+
+    /// Negation.
+    pub fn neg(&self) -> CResult<Poly> {
+        self.scale(Rational::MINUS_ONE)
+    }
+
+    /// Difference.
+    pub fn sub(&self, o: &Poly) -> CResult<Poly> {
+        self.add(&o.neg()?)
+    }
+
+    /// Multiply by a constant.
+    pub fn scale(&self, c: Rational) -> CResult<Poly> {
+        if c.is_zero() {
+            return Ok(Poly::zero());
+        }
+        let terms = self
+            .terms
+            .iter()
+            .map(|(m, a)| Ok((m.clone(), rmul(*a, c)?)))
+            .collect::<CResult<Vec<_>>>()?;
+        Ok(Poly { terms })
+    }
+
+    /// Multiply by `c * m`, reducing.
+    pub fn mul_term(&self, m: &Mono, c: Rational, rules: &Rules) -> CResult<Poly> {
+        if m.is_one() {
+            return self.scale(c);
+        }
+        let mut v = Vec::with_capacity(self.terms.len());
+        for (a, ca) in &self.terms {
+            v.push((a.mul(m)?, rmul(*ca, c)?));
+        }
+        rules.collect(v)
+    }
+
+    /// Product, reduced.
+    pub fn mul(&self, o: &Poly, rules: &Rules) -> CResult<Poly> {
+        if self.is_zero() || o.is_zero() {
+            return Ok(Poly::zero());
+        }
+        if let Some(c) = self.as_constant() {
+            return o.scale(c);
+        }
+        if let Some(c) = o.as_constant() {
+            return self.scale(c);
+        }
+        if self.terms.len().saturating_mul(o.terms.len()) > 4 * MAX_TERMS {
+            return Err(CanonError::TooLarge);
+        }
+        let mut v = Vec::with_capacity(self.terms.len() * o.terms.len());
+        for (ma, ca) in &self.terms {
+            for (mb, cb) in &o.terms {
+                v.push((ma.mul(mb)?, rmul(*ca, *cb)?));
+            }
+        }
+        rules.collect(v)
+    }
+
+    /// Non-negative integer power.
+    pub fn pow(&self, n: u32, rules: &Rules) -> CResult<Poly> {
+        let mut acc = Poly::constant(Rational::ONE);
+        for _ in 0..n {
+            acc = acc.mul(self, rules)?;
+        }
+        Ok(acc)
+    }
+
+    /// `self / g` if `g` divides `self` exactly (modulo the rules), by
+    /// multivariate division on leading terms. May miss a divisor (returns
+    /// `None`) but never returns a wrong quotient.
+    pub fn div_exact(&self, g: &Poly, rules: &Rules) -> CResult<Option<Poly>> {
+        let Some((lm_g, lc_g)) = g.leading() else {
+            return Err(CanonError::DivisionByZero);
+        };
+        if let Some(c) = g.as_constant() {
+            return Ok(Some(self.scale(rdiv(Rational::ONE, c)?)?));
+        }
+        if self.is_zero() {
+            return Ok(Some(Poly::zero()));
+        }
+        // Cheap rejection: total degree.
+        if g.terms.iter().map(|t| t.0.deg).max() > self.terms.iter().map(|t| t.0.deg).max()
+            && rules.rules.is_empty()
+        {
+            return Ok(None);
+        }
+        let max_steps = 4 * self.terms.len() + 64;
+        let mut r = self.clone();
+        let mut q: Vec<(Mono, Rational)> = Vec::new();
+        let mut steps = 0;
+        while let Some((lm_r, lc_r)) = r.leading() {
+            steps += 1;
+            if steps > max_steps {
+                return Ok(None);
+            }
+            let Some(t) = lm_r.div(lm_g) else {
+                return Ok(None);
+            };
+            let c = rdiv(*lc_r, *lc_g)?;
+            let sub = g.mul_term(&t, c, rules)?;
+            q.push((t, c));
+            r = r.sub(&sub)?;
+        }
+        Ok(Some(rules.collect(q)?))
+    }
+
+    /// Rational content with the sign of the leading coefficient: `self / content`
+    /// has coprime integer coefficients and a positive leading coefficient.
+    pub fn content(&self) -> CResult<Rational> {
+        let Some((_, lc)) = self.leading() else {
+            return Ok(Rational::ONE);
+        };
+        let mut g: i128 = 0;
+        let mut l: i128 = 1;
+        for (_, c) in &self.terms {
+            g = igcd(g, c.numer());
+            let d = c.denom();
+            l = (l / igcd(l, d))
+                .checked_mul(d)
+                .ok_or(CanonError::Overflow)?;
+        }
+        let r = Rational::new(g, l).ok_or(CanonError::Overflow)?;
+        if lc.is_negative() {
+            rneg(r)
+        } else {
+            Ok(r)
+        }
+    }
+
+    /// Greatest common monomial divisor of all terms.
+    pub fn mono_gcd(&self) -> Mono {
+        let mut it = self.terms.iter();
+        let Some((first, _)) = it.next() else {
+            return Mono::one();
+        };
+        let mut g = first.clone();
+        for (m, _) in it {
+            if g.is_one() {
+                break;
+            }
+            g = g.gcd(m);
+        }
+        g
+    }
+
+    /// Divide every term by a monomial that divides all of them.
+    pub fn div_mono(&self, m: &Mono) -> Poly {
+        if m.is_one() {
+            return self.clone();
+        }
+        let terms = self
+            .terms
+            .iter()
+            .map(|(a, c)| (a.div(m).expect("monomial divides every term"), *c))
+            .collect();
+        Poly { terms }
+    }
+
+    /// As an expression (a sum of terms).
+    pub fn to_expr(&self) -> Expr {
+        Expr::add_all(
+            self.terms
+                .iter()
+                .map(|(m, c)| Expr::rational(*c) * m.to_expr()),
+        )
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn p(e: &[(&[(&str, u32)], i128)]) -> Poly {
+        let rules = Rules::new();
+        rules
+            .collect(e.iter().map(|(vs, c)| {
+                let mut m = Mono::one();
+                for (n, k) in vs.iter() {
+                    m = m.mul(&Mono::atom(Atom(Expr::sym(n)), *k)).unwrap();
+                }
+                (m, Rational::int(*c))
+            }))
+            .unwrap()
+    }
+
+    #[test]
+    fn division() {
+        let rules = Rules::new();
+        // (x^2 - y^2) / (x - y) = x + y
+        let f = p(&[(&[("x", 2)], 1), (&[("y", 2)], -1)]);
+        let g = p(&[(&[("x", 1)], 1), (&[("y", 1)], -1)]);
+        let q = f.div_exact(&g, &rules).unwrap().unwrap();
+        assert_eq!(q, p(&[(&[("x", 1)], 1), (&[("y", 1)], 1)]));
+        let h = p(&[(&[("x", 1)], 1), (&[], 1)]);
+        assert_eq!(f.div_exact(&h, &rules).unwrap(), None);
+    }
+
+    #[test]
+    fn content_and_gcd() {
+        let f = p(&[(&[("x", 2), ("y", 1)], -6), (&[("x", 1), ("y", 1)], 4)]);
+        assert_eq!(f.content().unwrap(), Rational::int(-2));
+        assert_eq!(f.mono_gcd(), p(&[(&[("x", 1), ("y", 1)], 1)]).terms[0].0);
+    }
+}

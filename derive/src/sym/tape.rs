@@ -1,0 +1,741 @@
+//! Compiled numeric tapes: a linear instruction list over `f64` slots.
+//!
+//! [`Tape::compile`] lowers a set of output expressions once:
+//!
+//! * common subexpressions come for free from the DAG (each node is lowered once);
+//! * integer powers become multiplication chains (`x^5 = (x^2)^2 * x`), negative
+//!   powers and `x * y^-1` become divisions, `x^(1/2)` a square root;
+//! * `a + (-1)*b` becomes a subtraction, `(-1)*x` a negation;
+//! * `sin(u)` and `cos(u)` of the same argument are fused into one `SinCos`;
+//! * slots are reused once their value is dead (linear-scan liveness), so the
+//!   scratch buffer is small.
+//!
+//! [`Tape::eval`] then runs without allocation. The instruction list is public
+//! (read-only) so a code generator can translate it.
+
+use std::collections::{HashMap, HashSet};
+use std::fmt;
+
+use super::expr::{Expr, Func, Node, Symbol};
+use super::rational::Rational;
+
+/// One tape instruction. Operands and destinations are scratch slot indices.
+#[derive(Copy, Clone, Debug, PartialEq)]
+pub enum Instr {
+    /// `dst = value`
+    Const {
+        /// destination slot
+        dst: u32,
+        /// constant
+        value: f64,
+    },
+    /// `dst = inputs[index]`
+    Input {
+        /// destination slot
+        dst: u32,
+        /// index into the input vector
+        index: u32,
+    },
+    /// `dst = a + b`
+    Add {
+        /// destination slot
+        dst: u32,
+        /// left operand
+        a: u32,
+        /// right operand
+        b: u32,
+    },
+    /// `dst = a - b`
+    Sub {
+        /// destination slot
+        dst: u32,
+        /// left operand
+        a: u32,
+        /// right operand
+        b: u32,
+    },
+    /// `dst = a * b`
+    Mul {
+        /// destination slot
+        dst: u32,
+        /// left operand
+        a: u32,
+        /// right operand
+        b: u32,
+    },
+    /// `dst = a / b`
+    Div {
+        /// destination slot
+        dst: u32,
+        /// numerator
+        a: u32,
+        /// denominator
+        b: u32,
+    },
+    /// `dst = -a`
+    Neg {
+        /// destination slot
+        dst: u32,
+        /// operand
+        a: u32,
+    },
+    /// `dst = sqrt(a)`
+    Sqrt {
+        /// destination slot
+        dst: u32,
+        /// operand
+        a: u32,
+    },
+    /// `dst = a.powf(b)`
+    Pow {
+        /// destination slot
+        dst: u32,
+        /// base
+        a: u32,
+        /// exponent
+        b: u32,
+    },
+    /// `dst = f(a)`
+    Func {
+        /// destination slot
+        dst: u32,
+        /// function
+        f: Func,
+        /// argument
+        a: u32,
+    },
+    /// `(sin_dst, cos_dst) = a.sin_cos()`
+    SinCos {
+        /// destination of the sine
+        sin_dst: u32,
+        /// destination of the cosine
+        cos_dst: u32,
+        /// argument
+        a: u32,
+    },
+    /// `dst = atan2(y, x)`
+    Atan2 {
+        /// destination slot
+        dst: u32,
+        /// y
+        y: u32,
+        /// x
+        x: u32,
+    },
+}
+
+impl Instr {
+    fn operands(&self) -> [Option<u32>; 2] {
+        match *self {
+            Instr::Const { .. } | Instr::Input { .. } => [None, None],
+            Instr::Add { a, b, .. }
+            | Instr::Sub { a, b, .. }
+            | Instr::Mul { a, b, .. }
+            | Instr::Div { a, b, .. }
+            | Instr::Pow { a, b, .. } => [Some(a), Some(b)],
+            Instr::Atan2 { y, x, .. } => [Some(y), Some(x)],
+            Instr::Neg { a, .. }
+            | Instr::Sqrt { a, .. }
+            | Instr::Func { a, .. }
+            | Instr::SinCos { a, .. } => [Some(a), None],
+        }
+    }
+
+    fn dsts(&self) -> [Option<u32>; 2] {
+        match *self {
+            Instr::SinCos {
+                sin_dst, cos_dst, ..
+            } => [Some(sin_dst), Some(cos_dst)],
+            Instr::Const { dst, .. }
+            | Instr::Input { dst, .. }
+            | Instr::Add { dst, .. }
+            | Instr::Sub { dst, .. }
+            | Instr::Mul { dst, .. }
+            | Instr::Div { dst, .. }
+            | Instr::Neg { dst, .. }
+            | Instr::Sqrt { dst, .. }
+            | Instr::Pow { dst, .. }
+            | Instr::Func { dst, .. }
+            | Instr::Atan2 { dst, .. } => [Some(dst), None],
+        }
+    }
+
+    fn map(&self, m: &mut impl FnMut(u32) -> u32, d: &mut impl FnMut(u32) -> u32) -> Instr {
+        match *self {
+            Instr::Const { dst, value } => Instr::Const { dst: d(dst), value },
+            Instr::Input { dst, index } => Instr::Input { dst: d(dst), index },
+            Instr::Add { dst, a, b } => {
+                let (a, b) = (m(a), m(b));
+                Instr::Add { dst: d(dst), a, b }
+            }
+            Instr::Sub { dst, a, b } => {
+                let (a, b) = (m(a), m(b));
+                Instr::Sub { dst: d(dst), a, b }
+            }
+            Instr::Mul { dst, a, b } => {
+                let (a, b) = (m(a), m(b));
+                Instr::Mul { dst: d(dst), a, b }
+            }
+            Instr::Div { dst, a, b } => {
+                let (a, b) = (m(a), m(b));
+                Instr::Div { dst: d(dst), a, b }
+            }
+            Instr::Pow { dst, a, b } => {
+                let (a, b) = (m(a), m(b));
+                Instr::Pow { dst: d(dst), a, b }
+            }
+            Instr::Atan2 { dst, y, x } => {
+                let (y, x) = (m(y), m(x));
+                Instr::Atan2 { dst: d(dst), y, x }
+            }
+            Instr::Neg { dst, a } => {
+                let a = m(a);
+                Instr::Neg { dst: d(dst), a }
+            }
+            Instr::Sqrt { dst, a } => {
+                let a = m(a);
+                Instr::Sqrt { dst: d(dst), a }
+            }
+            Instr::Func { dst, f, a } => {
+                let a = m(a);
+                Instr::Func { dst: d(dst), f, a }
+            }
+            Instr::SinCos {
+                sin_dst,
+                cos_dst,
+                a,
+            } => {
+                let a = m(a);
+                Instr::SinCos {
+                    sin_dst: d(sin_dst),
+                    cos_dst: d(cos_dst),
+                    a,
+                }
+            }
+        }
+    }
+}
+
+impl fmt::Display for Instr {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        match *self {
+            Instr::Const { dst, value } => write!(f, "s{dst} = {value:?}"),
+            Instr::Input { dst, index } => write!(f, "s{dst} = in[{index}]"),
+            Instr::Add { dst, a, b } => write!(f, "s{dst} = s{a} + s{b}"),
+            Instr::Sub { dst, a, b } => write!(f, "s{dst} = s{a} - s{b}"),
+            Instr::Mul { dst, a, b } => write!(f, "s{dst} = s{a} * s{b}"),
+            Instr::Div { dst, a, b } => write!(f, "s{dst} = s{a} / s{b}"),
+            Instr::Neg { dst, a } => write!(f, "s{dst} = -s{a}"),
+            Instr::Sqrt { dst, a } => write!(f, "s{dst} = sqrt(s{a})"),
+            Instr::Pow { dst, a, b } => write!(f, "s{dst} = s{a} ^ s{b}"),
+            Instr::Func { dst, f: g, a } => write!(f, "s{dst} = {}(s{a})", g.name()),
+            Instr::SinCos {
+                sin_dst,
+                cos_dst,
+                a,
+            } => write!(f, "(s{sin_dst}, s{cos_dst}) = sin_cos(s{a})"),
+            Instr::Atan2 { dst, y, x } => write!(f, "s{dst} = atan2(s{y}, s{x})"),
+        }
+    }
+}
+
+/// Why a tape could not be compiled.
+#[derive(Clone, Debug, PartialEq, Eq)]
+pub enum TapeError {
+    /// An output mentions a symbol that is not among the inputs.
+    UnknownSymbol(Symbol),
+}
+
+impl fmt::Display for TapeError {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        match self {
+            TapeError::UnknownSymbol(s) => write!(f, "symbol `{s}` is not among the tape inputs"),
+        }
+    }
+}
+
+impl std::error::Error for TapeError {}
+
+/// A compiled evaluation program for a vector of expressions.
+#[derive(Clone)]
+pub struct Tape {
+    inputs: Vec<Symbol>,
+    instrs: Vec<Instr>,
+    outputs: Vec<u32>,
+    n_slots: usize,
+}
+
+/// Lowering to SSA values (value ids are later mapped to slots).
+struct Lower {
+    instrs: Vec<Instr>,
+    n_values: u32,
+    memo: HashMap<Expr, u32>,
+    consts: HashMap<u64, u32>,
+    powi_memo: HashMap<(u32, u64), u32>,
+    input_index: HashMap<Symbol, u32>,
+    /// Argument -> (sin node, cos node) where both occur.
+    fused: HashMap<Expr, (Expr, Expr)>,
+}
+
+impl Lower {
+    fn fresh(&mut self) -> u32 {
+        let v = self.n_values;
+        self.n_values += 1;
+        v
+    }
+
+    fn push2(&mut self, make: impl FnOnce(u32) -> Instr) -> u32 {
+        let dst = self.fresh();
+        self.instrs.push(make(dst));
+        dst
+    }
+
+    fn constant(&mut self, value: f64) -> u32 {
+        if let Some(&v) = self.consts.get(&value.to_bits()) {
+            return v;
+        }
+        let v = self.push2(|dst| Instr::Const { dst, value });
+        self.consts.insert(value.to_bits(), v);
+        v
+    }
+
+    fn powi(&mut self, base: u32, n: u64) -> u32 {
+        if n == 1 {
+            return base;
+        }
+        if let Some(&v) = self.powi_memo.get(&(base, n)) {
+            return v;
+        }
+        let v = if n % 2 == 0 {
+            let h = self.powi(base, n / 2);
+            self.push2(|dst| Instr::Mul { dst, a: h, b: h })
+        } else {
+            let h = self.powi(base, n - 1);
+            self.push2(|dst| Instr::Mul { dst, a: h, b: base })
+        };
+        self.powi_memo.insert((base, n), v);
+        v
+    }
+
+    /// `base ^ r` for a positive rational `r`, or `None` if not special.
+    fn pos_pow(&mut self, base: Expr, r: Rational) -> Option<u32> {
+        if r.is_integer() {
+            let n = u64::try_from(r.numer()).ok()?;
+            if n > 64 {
+                return None;
+            }
+            let b = self.lower(base);
+            return Some(self.powi(b, n));
+        }
+        if r.denom() == 2 {
+            let n = u64::try_from(r.numer()).ok()?;
+            if n > 64 {
+                return None;
+            }
+            let b = self.lower(base);
+            let s = self.push2(|dst| Instr::Sqrt { dst, a: b });
+            return Some(self.powi(s, n));
+        }
+        None
+    }
+
+    fn product(&mut self, vals: &[u32]) -> Option<u32> {
+        let mut it = vals.iter().copied();
+        let first = it.next()?;
+        Some(it.fold(first, |acc, v| {
+            self.push2(|dst| Instr::Mul { dst, a: acc, b: v })
+        }))
+    }
+
+    fn lower(&mut self, e: Expr) -> u32 {
+        if let Some(&v) = self.memo.get(&e) {
+            return v;
+        }
+        let v = match e.node() {
+            Node::Rational(r) => self.constant(r.to_f64()),
+            Node::Float(b) => self.constant(b.value()),
+            Node::Symbol(s) => {
+                let index = self.input_index[s];
+                self.push2(|dst| Instr::Input { dst, index })
+            }
+            Node::Add(ts) => {
+                let mut pos = Vec::new();
+                let mut neg = Vec::new();
+                for t in ts.iter() {
+                    let (c, rest) = t.coeff_and_rest();
+                    if c.is_negative() {
+                        let mag = if c == Rational::MINUS_ONE {
+                            rest
+                        } else {
+                            Expr::rational(c.abs()) * rest
+                        };
+                        neg.push(self.lower(mag));
+                    } else {
+                        pos.push(self.lower(*t));
+                    }
+                }
+                let mut acc = match pos.first() {
+                    Some(&p) => pos[1..]
+                        .iter()
+                        .fold(p, |acc, &b| self.push2(|dst| Instr::Add { dst, a: acc, b })),
+                    None => {
+                        let n0 = neg.remove(0);
+                        self.push2(|dst| Instr::Neg { dst, a: n0 })
+                    }
+                };
+                for b in neg {
+                    let a = acc;
+                    acc = self.push2(|dst| Instr::Sub { dst, a, b });
+                }
+                acc
+            }
+            Node::Mul(fs) => {
+                let mut negate = false;
+                let mut num = Vec::new();
+                let mut den = Vec::new();
+                for f in fs.iter() {
+                    if let Some(c) = f.as_rational() {
+                        if c == Rational::MINUS_ONE {
+                            negate = true;
+                            continue;
+                        }
+                    }
+                    let (b, x) = f.base_and_exp();
+                    match x.as_rational() {
+                        Some(r) if r.is_negative() => match self.pos_pow(b, r.abs()) {
+                            Some(v) => den.push(v),
+                            None => num.push(self.lower(*f)),
+                        },
+                        _ => num.push(self.lower(*f)),
+                    }
+                }
+                let n = self.product(&num);
+                let d = self.product(&den);
+                let v = match (n, d) {
+                    (Some(n), None) => n,
+                    (Some(a), Some(b)) => self.push2(|dst| Instr::Div { dst, a, b }),
+                    (None, Some(b)) => {
+                        let a = self.constant(if negate { -1.0 } else { 1.0 });
+                        negate = false;
+                        self.push2(|dst| Instr::Div { dst, a, b })
+                    }
+                    (None, None) => self.constant(1.0),
+                };
+                if negate {
+                    self.push2(|dst| Instr::Neg { dst, a: v })
+                } else {
+                    v
+                }
+            }
+            Node::Pow(b, x) => {
+                let special = match x.as_rational() {
+                    Some(r) if r.is_negative() => self.pos_pow(*b, r.abs()).map(|d| {
+                        let one = self.constant(1.0);
+                        self.push2(|dst| Instr::Div { dst, a: one, b: d })
+                    }),
+                    Some(r) => self.pos_pow(*b, r),
+                    None => None,
+                };
+                match special {
+                    Some(v) => v,
+                    None => {
+                        let a = self.lower(*b);
+                        let bb = self.lower(*x);
+                        self.push2(|dst| Instr::Pow { dst, a, b: bb })
+                    }
+                }
+            }
+            Node::Func(f, u) => {
+                if matches!(f, Func::Sin | Func::Cos) {
+                    if let Some(&(s, c)) = self.fused.get(u) {
+                        let a = self.lower(*u);
+                        let sin_dst = self.fresh();
+                        let cos_dst = self.fresh();
+                        self.instrs.push(Instr::SinCos {
+                            sin_dst,
+                            cos_dst,
+                            a,
+                        });
+                        self.memo.insert(s, sin_dst);
+                        self.memo.insert(c, cos_dst);
+                        return self.memo[&e];
+                    }
+                }
+                let a = self.lower(*u);
+                let f = *f;
+                self.push2(|dst| Instr::Func { dst, f, a })
+            }
+            Node::Atan2(y, x) => {
+                let y = self.lower(*y);
+                let x = self.lower(*x);
+                self.push2(|dst| Instr::Atan2 { dst, y, x })
+            }
+        };
+        self.memo.insert(e, v);
+        v
+    }
+}
+
+impl Tape {
+    /// Compile `outputs` as functions of `inputs` (in that order).
+    pub fn compile(outputs: &[Expr], inputs: &[Symbol]) -> Result<Tape, TapeError> {
+        let mut input_index = HashMap::new();
+        for (i, s) in inputs.iter().enumerate() {
+            input_index.entry(*s).or_insert(i as u32);
+        }
+        // Scan the DAG: check symbols, find sin/cos pairs.
+        let mut seen = HashSet::new();
+        let mut stack: Vec<Expr> = outputs.to_vec();
+        let mut sins: HashMap<Expr, Expr> = HashMap::new();
+        let mut coss: HashMap<Expr, Expr> = HashMap::new();
+        let mut unknown: Option<Symbol> = None;
+        while let Some(e) = stack.pop() {
+            if !seen.insert(e) {
+                continue;
+            }
+            match e.node() {
+                Node::Symbol(s) if !input_index.contains_key(s) => {
+                    if unknown.is_none_or(|u| *s < u) {
+                        unknown = Some(*s);
+                    }
+                }
+                Node::Func(Func::Sin, u) => {
+                    sins.insert(*u, e);
+                }
+                Node::Func(Func::Cos, u) => {
+                    coss.insert(*u, e);
+                }
+                _ => {}
+            }
+            stack.extend(e.children());
+        }
+        if let Some(s) = unknown {
+            return Err(TapeError::UnknownSymbol(s));
+        }
+        let fused = sins
+            .iter()
+            .filter_map(|(u, s)| coss.get(u).map(|c| (*u, (*s, *c))))
+            .collect();
+        let mut lw = Lower {
+            instrs: Vec::new(),
+            n_values: 0,
+            memo: HashMap::new(),
+            consts: HashMap::new(),
+            powi_memo: HashMap::new(),
+            input_index,
+            fused,
+        };
+        let out_vals: Vec<u32> = outputs.iter().map(|e| lw.lower(*e)).collect();
+        Ok(allocate(
+            lw.instrs,
+            lw.n_values as usize,
+            &out_vals,
+            inputs.to_vec(),
+        ))
+    }
+
+    /// The input symbols, in order.
+    pub fn inputs(&self) -> &[Symbol] {
+        &self.inputs
+    }
+
+    /// The instruction list.
+    pub fn instructions(&self) -> &[Instr] {
+        &self.instrs
+    }
+
+    /// The slot holding each output after evaluation.
+    pub fn output_slots(&self) -> &[u32] {
+        &self.outputs
+    }
+
+    /// Required length of the `scratch` buffer.
+    pub fn scratch_len(&self) -> usize {
+        self.n_slots
+    }
+
+    /// Number of outputs.
+    pub fn n_outputs(&self) -> usize {
+        self.outputs.len()
+    }
+
+    /// Evaluate without allocating. Panics if `inputs.len()` differs from the
+    /// number of inputs, `out` is shorter than the number of outputs or
+    /// `scratch` shorter than [`Tape::scratch_len`].
+    pub fn eval(&self, inputs: &[f64], out: &mut [f64], scratch: &mut [f64]) {
+        assert_eq!(inputs.len(), self.inputs.len(), "tape input length");
+        assert!(out.len() >= self.outputs.len(), "tape output length");
+        assert!(scratch.len() >= self.n_slots, "tape scratch length");
+        let s = scratch;
+        for ins in &self.instrs {
+            match *ins {
+                Instr::Const { dst, value } => s[dst as usize] = value,
+                Instr::Input { dst, index } => s[dst as usize] = inputs[index as usize],
+                Instr::Add { dst, a, b } => s[dst as usize] = s[a as usize] + s[b as usize],
+                Instr::Sub { dst, a, b } => s[dst as usize] = s[a as usize] - s[b as usize],
+                Instr::Mul { dst, a, b } => s[dst as usize] = s[a as usize] * s[b as usize],
+                Instr::Div { dst, a, b } => s[dst as usize] = s[a as usize] / s[b as usize],
+                Instr::Neg { dst, a } => s[dst as usize] = -s[a as usize],
+                Instr::Sqrt { dst, a } => s[dst as usize] = s[a as usize].sqrt(),
+                Instr::Pow { dst, a, b } => s[dst as usize] = s[a as usize].powf(s[b as usize]),
+                Instr::Func { dst, f, a } => s[dst as usize] = f.eval(s[a as usize]),
+                Instr::SinCos {
+                    sin_dst,
+                    cos_dst,
+                    a,
+                } => {
+                    let (sv, cv) = s[a as usize].sin_cos();
+                    s[sin_dst as usize] = sv;
+                    s[cos_dst as usize] = cv;
+                }
+                Instr::Atan2 { dst, y, x } => s[dst as usize] = s[y as usize].atan2(s[x as usize]),
+            }
+        }
+        for (o, slot) in out.iter_mut().zip(&self.outputs) {
+            *o = s[*slot as usize];
+        }
+    }
+
+    /// Evaluate into a fresh vector (allocates).
+    pub fn eval_vec(&self, inputs: &[f64]) -> Vec<f64> {
+        let mut out = vec![0.0; self.outputs.len()];
+        let mut scratch = vec![0.0; self.n_slots];
+        self.eval(inputs, &mut out, &mut scratch);
+        out
+    }
+}
+
+/// Map SSA values to slots, reusing a slot once its value is dead.
+fn allocate(instrs: Vec<Instr>, n_values: usize, outs: &[u32], inputs: Vec<Symbol>) -> Tape {
+    const LIVE_FOREVER: usize = usize::MAX;
+    let mut last_use = vec![0usize; n_values];
+    for (i, ins) in instrs.iter().enumerate() {
+        for d in ins.dsts().into_iter().flatten() {
+            last_use[d as usize] = i;
+        }
+        for a in ins.operands().into_iter().flatten() {
+            last_use[a as usize] = i;
+        }
+    }
+    for &o in outs {
+        last_use[o as usize] = LIVE_FOREVER;
+    }
+    let mut slot_of = vec![u32::MAX; n_values];
+    let mut free: Vec<u32> = Vec::new();
+    let mut n_slots: u32 = 0;
+    let mut out_instrs = Vec::with_capacity(instrs.len());
+    for (i, ins) in instrs.iter().enumerate() {
+        // Operands dying here release their slots before the destination is
+        // assigned: every instruction reads all operands before writing.
+        let mut dying: Vec<u32> = Vec::new();
+        for a in ins.operands().into_iter().flatten() {
+            if last_use[a as usize] == i && !dying.contains(&a) {
+                dying.push(a);
+            }
+        }
+        let mapped_ops: Vec<u32> = ins
+            .operands()
+            .into_iter()
+            .flatten()
+            .map(|a| slot_of[a as usize])
+            .collect();
+        for a in dying {
+            free.push(slot_of[a as usize]);
+        }
+        free.sort_unstable_by(|a, b| b.cmp(a));
+        let mut k = 0;
+        let new = ins.map(
+            &mut |_| {
+                let s = mapped_ops[k];
+                k += 1;
+                s
+            },
+            &mut |d| {
+                let s = free.pop().unwrap_or_else(|| {
+                    n_slots += 1;
+                    n_slots - 1
+                });
+                slot_of[d as usize] = s;
+                s
+            },
+        );
+        // Values defined here but never used afterwards are dead at once.
+        for d in ins.dsts().into_iter().flatten() {
+            if last_use[d as usize] == i {
+                free.push(slot_of[d as usize]);
+            }
+        }
+        out_instrs.push(new);
+    }
+    Tape {
+        inputs,
+        outputs: outs.iter().map(|o| slot_of[*o as usize]).collect(),
+        instrs: out_instrs,
+        n_slots: n_slots as usize,
+    }
+}
+
+impl fmt::Debug for Tape {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        writeln!(
+            f,
+            "Tape({} inputs, {} instructions, {} slots)",
+            self.inputs.len(),
+            self.instrs.len(),
+            self.n_slots
+        )?;
+        for (i, s) in self.inputs.iter().enumerate() {
+            writeln!(f, "  in[{i}] = {s}")?;
+        }
+        for ins in &self.instrs {
+            writeln!(f, "  {ins}")?;
+        }
+        for (i, o) in self.outputs.iter().enumerate() {
+            writeln!(f, "  out[{i}] = s{o}")?;
+        }
+        Ok(())
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn fuses_and_matches_tree() {
+        let x = Expr::sym("x");
+        let y = Expr::sym("y");
+        let e1 = x.sin() * x.cos() - y.powi(5) / (x + 1);
+        let e2 = x.sin().powi(-2) + (x * x + 1).sqrt() - 3 * y;
+        let t = Tape::compile(&[e1, e2], &[Symbol::new("x"), Symbol::new("y")]).unwrap();
+        let n_sincos = t
+            .instructions()
+            .iter()
+            .filter(|i| matches!(i, Instr::SinCos { .. }))
+            .count();
+        assert_eq!(n_sincos, 1, "{t:?}");
+        assert!(!t
+            .instructions()
+            .iter()
+            .any(|i| matches!(i, Instr::Pow { .. })));
+        let v = t.eval_vec(&[0.3, -1.7]);
+        for (got, e) in v.iter().zip([e1, e2]) {
+            let want = e.eval_with(&mut |s| if s.name() == "x" { 0.3 } else { -1.7 });
+            assert!((got - want).abs() <= 1e-12 * want.abs().max(1.0));
+        }
+    }
+
+    #[test]
+    fn unknown_symbol_is_named() {
+        let e = Expr::sym("x") + Expr::sym("zeta");
+        let err = Tape::compile(&[e], &[Symbol::new("x")]).unwrap_err();
+        assert_eq!(err, TapeError::UnknownSymbol(Symbol::new("zeta")));
+        assert!(err.to_string().contains("zeta"));
+    }
+
+    #[test]
+    fn send_sync_clone() {
+        fn check<T: Send + Sync + Clone>() {}
+        check::<Tape>();
+    }
+}
