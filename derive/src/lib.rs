@@ -11,6 +11,9 @@
 //! - [`linear`]: numeric linear analysis and design (controllability, poles,
 //!   pole placement, LQR).
 
+pub mod analysis;
 pub mod lang;
 pub mod linear;
+pub mod mechanics;
+pub mod model;
 pub mod sym;

@@ -10,7 +10,7 @@ use super::{
 };
 use crate::lang::ast::{self, BinOp, ExprKind};
 use crate::lang::units::parse_unit;
-use crate::lang::{parse_and_check, Diagnostic, SourceFile};
+use crate::lang::{eval_si, parse_and_check, Diagnostic, SourceFile, Symbols};
 use crate::sym::{CoordinateSymbols, Expr, Func, Rational, Symbol};
 
 /// A model loaded from a file, with the warnings and notes its checking produced.
@@ -79,7 +79,7 @@ pub fn load_model_text(name: &str, text: &str) -> Result<LoadedModel, LoadError>
     let has_errors = checked.diagnostics.iter().any(|d| d.is_error());
     match checked.model {
         Some(file) if !has_errors => Ok(LoadedModel {
-            model: lower(&file),
+            model: lower(&file, checked.symbols.as_ref()),
             source,
             diagnostics: checked.diagnostics,
         }),
@@ -118,7 +118,6 @@ fn scale_expr(unit: &ast::UnitExpr) -> Expr {
 }
 
 struct Lowerer<'a> {
-    file: &'a ast::ModelFile,
     lets: HashMap<&'a str, &'a ast::Let>,
     let_values: HashMap<String, Expr>,
     params: HashSet<String>,
@@ -199,9 +198,8 @@ impl<'a> Lowerer<'a> {
 
 /// Lower a checked model file. The file must have passed
 /// [`crate::lang::parse_and_check`] without errors.
-pub fn lower(file: &ast::ModelFile) -> Model {
+pub fn lower(file: &ast::ModelFile, symbols: Option<&Symbols>) -> Model {
     let mut lw = Lowerer {
-        file,
         lets: file.lets.iter().map(|l| (l.name.name.as_str(), l)).collect(),
         let_values: HashMap::new(),
         params: file.parameters.iter().map(|p| p.name.name.clone()).collect(),
@@ -290,12 +288,10 @@ pub fn lower(file: &ast::ModelFile) -> Model {
                 .entries
                 .iter()
                 .map(|e| {
-                    let decl = file.parameters.iter().find(|p| p.name.name == e.name.name);
-                    let v = match &e.value.kind {
-                        // A bare number is in the parameter's declared unit.
-                        ExprKind::Number(n) => n.value() * scale_of(decl.and_then(|d| d.unit.as_ref())),
-                        _ => lw.expr(&e.value).eval_map(&nominal),
-                    };
+                    // Values in SI, against the parameters' declared values.
+                    let v = symbols
+                        .and_then(|s| eval_si(&e.value, s))
+                        .unwrap_or_else(|| lw.expr(&e.value).eval_map(&nominal));
                     (e.name.name.clone(), v)
                 })
                 .collect(),
