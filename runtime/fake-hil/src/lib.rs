@@ -1,0 +1,1 @@
+//! Fake Quanser HIL library (being written).
