@@ -98,3 +98,98 @@ pub fn parse_log(text: &str, allow_cut_last: bool) -> Result<Vec<Row>, String> {
     }
     Ok(rows)
 }
+
+/// Builds (once per test process) and locates the fake HIL cdylib.
+///
+/// Runs `cargo build -p plantc-fake-hil` with the cargo that runs the tests,
+/// then looks for the library next to the test binary's profile directory
+/// (`target/<profile>/`), falling back to `<workspace>/target/debug/`.
+pub fn fake_hil_lib() -> PathBuf {
+    use std::sync::OnceLock;
+    static PATH: OnceLock<Result<PathBuf, String>> = OnceLock::new();
+    PATH.get_or_init(build_fake_hil)
+        .clone()
+        .unwrap_or_else(|e| panic!("cannot build/locate the fake HIL: {e}"))
+}
+
+fn build_fake_hil() -> Result<PathBuf, String> {
+    let workspace = PathBuf::from(env!("CARGO_MANIFEST_DIR"))
+        .parent()
+        .ok_or("no workspace dir")?
+        .to_path_buf();
+    let status = std::process::Command::new(env!("CARGO"))
+        .args(["build", "-p", "plantc-fake-hil"])
+        .current_dir(&workspace)
+        .status()
+        .map_err(|e| format!("running cargo: {e}"))?;
+    if !status.success() {
+        return Err(format!("cargo build -p plantc-fake-hil: {status}"));
+    }
+    let name = format!(
+        "{}plantc_fake_hil{}",
+        std::env::consts::DLL_PREFIX,
+        std::env::consts::DLL_SUFFIX
+    );
+    let mut candidates = Vec::new();
+    if let Ok(exe) = std::env::current_exe() {
+        // target/<profile>/deps/<test> -> target/<profile>/
+        if let Some(dir) = exe.parent().and_then(|d| d.parent()) {
+            candidates.push(dir.join(&name));
+            // A test profile directory other than debug: the build went to debug.
+            if let Some(target) = dir.parent() {
+                candidates.push(target.join("debug").join(&name));
+            }
+        }
+    }
+    if let Ok(t) = std::env::var("CARGO_TARGET_DIR") {
+        candidates.push(PathBuf::from(t).join("debug").join(&name));
+    }
+    candidates.push(workspace.join("target").join("debug").join(&name));
+    candidates
+        .iter()
+        .find(|p| p.is_file())
+        .cloned()
+        .ok_or_else(|| format!("{name} not found in {candidates:?}"))
+}
+
+/// Parsed fake-HIL trace: voltages of successful writes and the output at close.
+#[derive(Debug, Default)]
+pub struct Trace {
+    pub ok_writes: Vec<f64>,
+    pub failed_writes: usize,
+    pub close_output: Option<f64>,
+    pub expired: bool,
+    pub lines: Vec<String>,
+}
+
+pub fn read_trace(path: &std::path::Path) -> Trace {
+    let text = std::fs::read_to_string(path).unwrap_or_default();
+    let mut tr = Trace::default();
+    for line in text.lines() {
+        tr.lines.push(line.to_string());
+        let mut it = line.split_whitespace();
+        let _t = it.next();
+        match it.next() {
+            Some("write") => {
+                let _ch = it.next();
+                let v = it
+                    .next()
+                    .and_then(|v| v.strip_prefix("v="))
+                    .and_then(|v| v.parse::<f64>().ok());
+                match (v, it.next()) {
+                    (Some(v), Some("ok")) => tr.ok_writes.push(v),
+                    _ => tr.failed_writes += 1,
+                }
+            }
+            Some("close") => {
+                tr.close_output = it
+                    .next()
+                    .and_then(|v| v.strip_prefix("output="))
+                    .and_then(|v| v.parse().ok())
+            }
+            Some("watchdog_expired") => tr.expired = true,
+            _ => {}
+        }
+    }
+    tr
+}
