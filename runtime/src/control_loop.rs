@@ -170,9 +170,17 @@ pub fn run_with_events(
         let _ = backend.close();
         return Err(e.into());
     }
+    let mut _rt_guard = None;
     if !virtual_time && config.os_realtime {
-        let rt = try_realtime(config.rt_priority);
-        notes.extend(rt.notes);
+        let g = try_realtime(config.rt_priority);
+        if g.setup.priority {
+            notes.push("real-time priority (SCHED_FIFO) set for the loop".to_string());
+        }
+        if g.setup.memory_locked {
+            notes.push("memory locked for the loop".to_string());
+        }
+        notes.extend(g.setup.notes.iter().cloned());
+        _rt_guard = Some(g);
     } else if !virtual_time {
         notes.push("real-time priority and memory locking not requested".to_string());
     }
@@ -193,6 +201,7 @@ pub fn run_with_events(
     }));
     // Every exit path: close (writes 0 V) and flush the log.
     let close_result = backend.close();
+    drop(_rt_guard);
     if let Some(l) = log.as_deref_mut() {
         l.flush();
         if let Some(e) = l.error() {
