@@ -39,9 +39,13 @@ fn main() {
             std::process::exit(2);
         }
     };
-    let result = run_with_events(&cfg, &mut backend, &mut controller, Some(&mut log), &mut |t| {
-        println!("{t}")
-    });
+    let result = run_with_events(
+        &cfg,
+        &mut backend,
+        &mut controller,
+        Some(&mut log),
+        &mut |t| println!("{t}"),
+    );
     match result {
         Ok(report) => print!("{report}"),
         Err(e) => {

@@ -72,7 +72,10 @@ impl RunConfig {
     fn validate(&self, n_encoders: usize) -> Result<(), RuntimeError> {
         let bad = |s: String| Err(RuntimeError::InvalidConfig(s));
         if !(self.rate_hz.is_finite() && self.rate_hz > 0.0 && self.rate_hz <= MAX_RATE_HZ) {
-            return bad(format!("rate {} Hz not in (0, {MAX_RATE_HZ}]", self.rate_hz));
+            return bad(format!(
+                "rate {} Hz not in (0, {MAX_RATE_HZ}]",
+                self.rate_hz
+            ));
         }
         if self.state_names.len() != 2 * n_encoders || n_encoders == 0 {
             return bad(format!(
@@ -86,7 +89,9 @@ impl RunConfig {
         }
         let (lo, hi) = self.input_limits[0];
         if !(lo.is_finite() && hi.is_finite() && lo <= 0.0 && 0.0 <= hi) {
-            return bad(format!("input limits ({lo}, {hi}) must be finite and contain 0"));
+            return bad(format!(
+                "input limits ({lo}, {hi}) must be finite and contain 0"
+            ));
         }
         if !(self.velocity_bandwidth.is_finite() && self.velocity_bandwidth > 0.0) {
             return bad("velocity bandwidth must be > 0".into());
@@ -385,15 +390,7 @@ fn cycle_loop(
             }
         }
         if let Some(l) = log.as_deref_mut() {
-            l.row(
-                t,
-                &x,
-                &counts,
-                &u_out,
-                &u_cmd,
-                sup.state().label(),
-                overran,
-            );
+            l.row(t, &x, &counts, &u_out, &u_cmd, sup.state().label(), overran);
         }
         if sup.state().is_fault() {
             break;

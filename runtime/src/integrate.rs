@@ -35,19 +35,19 @@ pub fn rk4_step(plant: &dyn Plant, x: &mut [f64], u: &[f64], h: f64, s: &mut Rk4
         return;
     }
     plant.derivatives(x, u, &mut s.k1);
-    for i in 0..n {
-        s.tmp[i] = x[i] + 0.5 * h * s.k1[i];
+    for ((t, xi), k) in s.tmp.iter_mut().zip(x.iter()).zip(&s.k1) {
+        *t = xi + 0.5 * h * k;
     }
     plant.derivatives(&s.tmp, u, &mut s.k2);
-    for i in 0..n {
-        s.tmp[i] = x[i] + 0.5 * h * s.k2[i];
+    for ((t, xi), k) in s.tmp.iter_mut().zip(x.iter()).zip(&s.k2) {
+        *t = xi + 0.5 * h * k;
     }
     plant.derivatives(&s.tmp, u, &mut s.k3);
-    for i in 0..n {
-        s.tmp[i] = x[i] + h * s.k3[i];
+    for ((t, xi), k) in s.tmp.iter_mut().zip(x.iter()).zip(&s.k3) {
+        *t = xi + h * k;
     }
     plant.derivatives(&s.tmp, u, &mut s.k4);
-    for i in 0..n {
-        x[i] += h / 6.0 * (s.k1[i] + 2.0 * s.k2[i] + 2.0 * s.k3[i] + s.k4[i]);
+    for (i, xi) in x.iter_mut().enumerate() {
+        *xi += h / 6.0 * (s.k1[i] + 2.0 * s.k2[i] + 2.0 * s.k3[i] + s.k4[i]);
     }
 }

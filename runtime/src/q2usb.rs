@@ -15,8 +15,8 @@
 use crate::backend::{Backend, BackendError, EncoderMap, Tick};
 use crate::hil_ffi::{null_card, null_task, t_card, t_task, HilApi, HARDWARE_CLOCK_0, INFINITE};
 use crate::pacer::Pacer;
-use std::ffi::CString;
 use std::f64::consts::PI;
+use std::ffi::CString;
 use std::path::PathBuf;
 use std::time::Instant;
 
@@ -66,7 +66,9 @@ impl Default for Q2UsbConfig {
             library_path: None,
             card_type: "q2_usb".into(),
             card_identifier: "0".into(),
-            card_options: Some("d0=digital;d1=digital;led=auto;update_rate=normal;decimation=1".into()),
+            card_options: Some(
+                "d0=digital;d1=digital;led=auto;update_rate=normal;decimation=1".into(),
+            ),
             encoders: vec![
                 EncoderChannel {
                     channel: 0,
@@ -120,10 +122,14 @@ impl Q2Usb {
             return Err(BackendError::InvalidConfig("no encoders configured".into()));
         }
         if !(config.watchdog_timeout_s.is_finite() && config.watchdog_timeout_s > 0.0) {
-            return Err(BackendError::InvalidConfig("watchdog timeout must be > 0".into()));
+            return Err(BackendError::InvalidConfig(
+                "watchdog timeout must be > 0".into(),
+            ));
         }
         if !(config.motor_sign == 1.0 || config.motor_sign == -1.0) {
-            return Err(BackendError::InvalidConfig("motor_sign must be +1 or -1".into()));
+            return Err(BackendError::InvalidConfig(
+                "motor_sign must be +1 or -1".into(),
+            ));
         }
         let api = HilApi::load(config.library_path.as_deref())?;
         let card_type = CString::new(config.card_type.as_str())
@@ -206,8 +212,8 @@ impl Q2Usb {
                         self.api.error_message(r)
                     ));
                 } else {
-                    self.watchdog_available = self.api.watchdog_start.is_some()
-                        && self.api.watchdog_reload.is_some();
+                    self.watchdog_available =
+                        self.api.watchdog_start.is_some() && self.api.watchdog_reload.is_some();
                 }
             }
             None => {
@@ -304,8 +310,9 @@ impl Backend for Q2Usb {
                             message: self.api.error_message(r),
                         });
                     }
-                    self.notes
-                        .push(format!("hil_watchdog_start failed ({r}); running without watchdog"));
+                    self.notes.push(format!(
+                        "hil_watchdog_start failed ({r}); running without watchdog"
+                    ));
                 } else {
                     self.watchdog_running = true;
                 }
@@ -415,7 +422,11 @@ impl Backend for Q2Usb {
             return Err(BackendError::Closed);
         }
         let (lo, hi) = self.config.analog_range;
-        let v = if volts.is_finite() { volts.clamp(lo, hi) } else { 0.0 };
+        let v = if volts.is_finite() {
+            volts.clamp(lo, hi)
+        } else {
+            0.0
+        };
         self.write_raw(v)
     }
 

@@ -75,7 +75,7 @@ impl SimBackend {
         config: SimConfig,
     ) -> Result<Self, BackendError> {
         let n = plant.state_names().len();
-        if x0.len() != n || n == 0 || n % 2 != 0 {
+        if x0.len() != n || n == 0 || n & 1 == 1 {
             return Err(BackendError::InvalidConfig(format!(
                 "sim: x0 has {} entries, plant has {} states (need an even, equal number)",
                 x0.len(),
@@ -88,7 +88,8 @@ impl SimBackend {
                 "sim: the plant needs at least one input and one limit per input".into(),
             ));
         }
-        if !(config.counts_per_rev.is_finite() && config.counts_per_rev > 0.0) || config.substeps == 0
+        if !(config.counts_per_rev.is_finite() && config.counts_per_rev > 0.0)
+            || config.substeps == 0
         {
             return Err(BackendError::InvalidConfig(
                 "sim: counts_per_rev must be > 0 and substeps >= 1".into(),
@@ -158,7 +159,9 @@ impl Backend for SimBackend {
             return Err(BackendError::Closed);
         }
         if !(period_s.is_finite() && period_s > 0.0) {
-            return Err(BackendError::InvalidConfig("sim: period must be > 0".into()));
+            return Err(BackendError::InvalidConfig(
+                "sim: period must be > 0".into(),
+            ));
         }
         self.period = period_s;
         self.pacer = self.config.real_time.then(|| Pacer::new(period_s));

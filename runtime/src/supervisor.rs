@@ -216,7 +216,11 @@ impl Supervisor {
     /// Checks the measured state and encoder counts of one sample.
     pub fn check(&mut self, t: f64, x: &[f64], counts: &[i32]) -> Option<Transition> {
         let theta = x.get(self.config.arm_index).copied().unwrap_or(f64::NAN);
-        let alpha = wrap_pi(x.get(self.config.pendulum_index).copied().unwrap_or(f64::NAN));
+        let alpha = wrap_pi(
+            x.get(self.config.pendulum_index)
+                .copied()
+                .unwrap_or(f64::NAN),
+        );
         let changed = counts != self.last_counts.as_slice();
         if changed {
             for (d, s) in self.last_counts.iter_mut().zip(counts) {
@@ -235,10 +239,10 @@ impl Supervisor {
                 None
             }
             SupervisorState::Engaged => {
-                if !(alpha.abs() <= self.config.fall_angle_rad) {
+                if alpha.is_nan() || alpha.abs() > self.config.fall_angle_rad {
                     return self.fault(t, FaultKind::PendulumFell);
                 }
-                if !(theta.abs() <= self.config.arm_limit_rad) {
+                if theta.is_nan() || theta.abs() > self.config.arm_limit_rad {
                     return self.fault(t, FaultKind::ArmLimit);
                 }
                 if let Some(limit) = self.config.encoder_stuck_s {

@@ -22,7 +22,11 @@ fn example_binary() -> PathBuf {
     let name = format!("sim_realtime{}", std::env::consts::EXE_SUFFIX);
     let exe = std::env::current_exe().unwrap();
     let mut candidates = Vec::new();
-    if let Some(target) = exe.parent().and_then(|d| d.parent()).and_then(|d| d.parent()) {
+    if let Some(target) = exe
+        .parent()
+        .and_then(|d| d.parent())
+        .and_then(|d| d.parent())
+    {
         candidates.push(target.join("debug").join("examples").join(&name));
     }
     if let Ok(t) = std::env::var("CARGO_TARGET_DIR") {
@@ -92,6 +96,11 @@ fn kill_9_leaves_a_parsable_log_missing_at_most_100_ms() {
     assert!(missing <= 0.105, "missing {:.1} ms", missing * 1e3);
     // Consecutive samples, none lost in the middle of the file.
     for w in rows.windows(2) {
-        assert!(w[1].t - w[0].t < 0.0015 || w[1].overrun, "{} -> {}", w[0].t, w[1].t);
+        assert!(
+            w[1].t - w[0].t < 0.0015 || w[1].overrun,
+            "{} -> {}",
+            w[0].t,
+            w[1].t
+        );
     }
 }

@@ -5,8 +5,8 @@ mod common;
 
 use common::{fake_hil_lib, parse_log, read_trace, tmp_path, Row, Trace, K_THESIS};
 use plantc_runtime::{
-    run_with_events, BackendError, FaultKind, LogWriter, Q2Usb, Q2UsbConfig, RunConfig,
-    RunReport, RuntimeError, StateFeedback, SupervisorState,
+    run_with_events, BackendError, FaultKind, LogWriter, Q2Usb, Q2UsbConfig, RunConfig, RunReport,
+    RuntimeError, StateFeedback, SupervisorState,
 };
 use std::sync::Mutex;
 
@@ -32,9 +32,12 @@ fn run_fake(name: &str, spec: &str, seconds: f64, allow_no_watchdog: bool) -> Ou
         allow_no_watchdog,
         ..Q2UsbConfig::default()
     };
-    let mut run_cfg = RunConfig::default();
-    run_cfg.duration_s = Some(seconds);
-    run_cfg.os_realtime = false;
+    let run_cfg = RunConfig {
+        duration_s: Some(seconds),
+        // The fake board runs in virtual time: no real-time priority.
+        os_realtime: false,
+        ..RunConfig::default()
+    };
     let result = match Q2Usb::open(cfg) {
         Ok(mut board) => {
             let mut log = LogWriter::create(&log_path).expect("log");
@@ -67,8 +70,17 @@ fn run_fake(name: &str, spec: &str, seconds: f64, allow_no_watchdog: bool) -> Ou
 
 fn assert_zero_volts_last(o: &Outcome) {
     let last = o.trace.ok_writes.last().copied();
-    assert_eq!(last, Some(0.0), "last successful write must be 0 V: {:?}", &o.trace.lines[o.trace.lines.len().saturating_sub(8)..]);
-    assert_eq!(o.trace.close_output, Some(0.0), "output at close must be 0 V");
+    assert_eq!(
+        last,
+        Some(0.0),
+        "last successful write must be 0 V: {:?}",
+        &o.trace.lines[o.trace.lines.len().saturating_sub(8)..]
+    );
+    assert_eq!(
+        o.trace.close_output,
+        Some(0.0),
+        "output at close must be 0 V"
+    );
 }
 
 fn assert_fault(o: &Outcome, kind: FaultKind) {
@@ -100,11 +112,19 @@ fn balances_through_the_fake_board() {
 
 #[test]
 fn read_error_faults() {
-    let o = run_fake("read_error", "alpha0=5deg,fault=read_error@2.0", 10.0, false);
+    let o = run_fake(
+        "read_error",
+        "alpha0=5deg,fault=read_error@2.0",
+        10.0,
+        false,
+    );
     assert_fault(&o, FaultKind::ReadError);
     let r = o.result.as_ref().unwrap();
     let detail = r.fault_detail.as_deref().unwrap_or("");
-    assert!(detail.contains("-101") && detail.contains("injected read_error"), "{detail}");
+    assert!(
+        detail.contains("-101") && detail.contains("injected read_error"),
+        "{detail}"
+    );
     let t = o.rows.last().unwrap().t;
     assert!((t - 2.0).abs() < 0.01, "{t}");
 }
@@ -130,12 +150,20 @@ fn watchdog_not_reloaded_expires() {
     assert_fault(&o, FaultKind::WatchdogExpired);
     assert!(o.trace.expired);
     let t = o.rows.last().unwrap().t;
-    assert!((1.09..1.2).contains(&t), "expiry 0.1 s after 1.0 s, got {t}");
+    assert!(
+        (1.09..1.2).contains(&t),
+        "expiry 0.1 s after 1.0 s, got {t}"
+    );
 }
 
 #[test]
 fn watchdog_refused_blocks_start_without_override() {
-    let o = run_fake("wd_refused", "alpha0=5deg,fault=watchdog_refused", 5.0, false);
+    let o = run_fake(
+        "wd_refused",
+        "alpha0=5deg,fault=watchdog_refused",
+        5.0,
+        false,
+    );
     match &o.result {
         Err(RuntimeError::Backend(BackendError::WatchdogRefused { code, message })) => {
             assert_eq!(*code, -102);
@@ -150,7 +178,12 @@ fn watchdog_refused_blocks_start_without_override() {
 
 #[test]
 fn watchdog_refused_runs_with_override() {
-    let o = run_fake("wd_override", "alpha0=5deg,fault=watchdog_refused", 5.0, true);
+    let o = run_fake(
+        "wd_override",
+        "alpha0=5deg,fault=watchdog_refused",
+        5.0,
+        true,
+    );
     let r = o.result.as_ref().expect("run");
     assert_eq!(r.final_state, SupervisorState::Engaged, "{r}");
     assert_zero_volts_last(&o);
@@ -161,6 +194,9 @@ fn falls_back_to_os_timing_without_tasks() {
     // Real time: hil_read_encoder paced by the OS clock at 1 kHz for 1 s.
     let o = run_fake("no_tasks", "alpha0=5deg,no_tasks", 1.0, false);
     let r = o.result.as_ref().expect("run");
-    assert!(!r.final_state.is_fault() || r.final_state == SupervisorState::Fault(FaultKind::Overrun), "{r}");
+    assert!(
+        !r.final_state.is_fault() || r.final_state == SupervisorState::Fault(FaultKind::Overrun),
+        "{r}"
+    );
     assert_zero_volts_last(&o);
 }

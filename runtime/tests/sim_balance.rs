@@ -8,7 +8,11 @@ use plantc_runtime::{
     SimConfig, SimNoise, StateFeedback, SupervisorState,
 };
 
-fn balance(sim: SimConfig, seconds: f64, name: &str) -> (plantc_runtime::RunReport, Vec<common::Row>) {
+fn balance(
+    sim: SimConfig,
+    seconds: f64,
+    name: &str,
+) -> (plantc_runtime::RunReport, Vec<common::Row>) {
     let plant = RotaryPendulumReference::default();
     let mut cfg = RunConfig::for_plant(&plant);
     cfg.duration_s = Some(seconds);

@@ -1,8 +1,7 @@
 //! Real-time timing of the sim backend; prints the run report's numbers.
 
 use plantc_runtime::{
-    run, RotaryPendulumReference, RunConfig, SimBackend, SimConfig, StateFeedback,
-    SupervisorState,
+    run, RotaryPendulumReference, RunConfig, SimBackend, SimConfig, StateFeedback, SupervisorState,
 };
 
 fn timed(rate: f64, seconds: f64) {

@@ -1,7 +1,7 @@
 //! The simulated board: the reference pendulum, encoders, one analog output,
 //! a watchdog, one encoder-reader task, in virtual time.
 
-use crate::config::{Fault, FakeConfig};
+use crate::config::{FakeConfig, Fault};
 use crate::errors::*;
 use plantc_runtime::integrate::{rk4_step, Rk4Scratch};
 use plantc_runtime::RotaryPendulumReference;
@@ -176,7 +176,9 @@ impl Card {
 
     pub fn write(&mut self, channel: u32, v: f64) -> i32 {
         if self.watchdog.expired {
-            self.trace_line(format_args!("write ch={channel} v={v:.6} err=watchdog_expired"));
+            self.trace_line(format_args!(
+                "write ch={channel} v={v:.6} err=watchdog_expired"
+            ));
             return ERR_WATCHDOG_EXPIRED;
         }
         if !v.is_finite() {

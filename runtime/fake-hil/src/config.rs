@@ -54,7 +54,10 @@ impl Default for FakeConfig {
 fn angle(v: &str) -> Result<f64, String> {
     let v = v.trim();
     if let Some(d) = v.strip_suffix("deg") {
-        d.trim().parse::<f64>().map(f64::to_radians).map_err(|e| format!("{v}: {e}"))
+        d.trim()
+            .parse::<f64>()
+            .map(f64::to_radians)
+            .map_err(|e| format!("{v}: {e}"))
     } else {
         let r = v.strip_suffix("rad").unwrap_or(v);
         r.trim().parse::<f64>().map_err(|e| format!("{v}: {e}"))
@@ -134,7 +137,8 @@ mod tests {
         let c = FakeConfig::parse("alpha0=5deg,fault=read_error@2.0").unwrap();
         assert!((c.alpha0 - 5f64.to_radians()).abs() < 1e-12);
         assert_eq!(c.faults, vec![Fault::ReadError(2.0)]);
-        let c = FakeConfig::parse("fault=watchdog_refused, period=0.5ms, fault=slow_calls@1s").unwrap();
+        let c =
+            FakeConfig::parse("fault=watchdog_refused, period=0.5ms, fault=slow_calls@1s").unwrap();
         assert!(c.watchdog_refused);
         assert_eq!(c.period, 0.0005);
         assert_eq!(c.faults, vec![Fault::SlowCalls(1.0)]);

@@ -419,7 +419,9 @@ pub unsafe extern "C" fn hil_task_start(
             t.period = 1.0 / frequency;
             t.started = true;
         }
-        c.trace_line(format_args!("task_start clock={clock} frequency={frequency}"));
+        c.trace_line(format_args!(
+            "task_start clock={clock} frequency={frequency}"
+        ));
         0
     })
 }
@@ -512,4 +514,3 @@ pub unsafe extern "C" fn msg_get_error_messageA(
         0
     })
 }
-

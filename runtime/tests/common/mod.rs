@@ -90,7 +90,7 @@ pub fn parse_log(text: &str, allow_cut_last: bool) -> Result<Vec<Row>, String> {
                 o => return Err(format!("line {}: overrun {o:?}", i + 2)),
             },
         };
-        if !(row.t > prev_t) {
+        if row.t.is_nan() || row.t <= prev_t {
             return Err(format!("line {}: t not increasing", i + 2));
         }
         prev_t = row.t;
