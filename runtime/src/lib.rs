@@ -10,6 +10,20 @@
 //!   voltage written is 0 V.
 //!
 //! [`RotaryPendulumReference`] is the hand-written physics of the test doubles.
+//!
+//! ```
+//! use plantc_runtime::*;
+//!
+//! let plant = RotaryPendulumReference::default();
+//! let mut config = RunConfig::for_plant(&plant);
+//! config.duration_s = Some(1.0);
+//! let x0 = vec![0.0, 5f64.to_radians(), 0.0, 0.0];
+//! let mut backend = SimBackend::new(Box::new(plant), x0, SimConfig::default())?;
+//! let mut controller = StateFeedback::new(vec![-7.8914, 37.8313, -2.9850, 3.6222]);
+//! let report = run(&config, &mut backend, &mut controller, None)?;
+//! assert_eq!(report.final_state, SupervisorState::Engaged);
+//! # Ok::<(), Box<dyn std::error::Error>>(())
+//! ```
 
 pub mod backend;
 pub mod control_loop;
