@@ -1,1 +1,57 @@
-//! plantc-runtime (filled by a later issue).
+//! plantc-runtime: runs a controller against a plant, simulated or real.
+//!
+//! - [`Plant`] and [`Controller`] are the interfaces generated code is adapted to.
+//! - [`Backend`] abstracts the hardware: [`SimBackend`] integrates a plant in
+//!   (virtual or real) time; [`Q2Usb`] drives a Quanser Q2-USB through the HIL C
+//!   library loaded at run time.
+//! - [`run`] executes the fixed-rate loop under the safety [`Supervisor`]
+//!   (Idle -> Armed -> Engaged -> Fault), logs every sample as CSV through a
+//!   [`LogWriter`] and returns a [`RunReport`]. On every exit path the last
+//!   voltage written is 0 V.
+//!
+//! [`RotaryPendulumReference`] is the hand-written physics of the test doubles.
+//!
+//! ```
+//! use plantc_runtime::*;
+//!
+//! let plant = RotaryPendulumReference::default();
+//! let mut config = RunConfig::for_plant(&plant);
+//! config.duration_s = Some(1.0);
+//! let x0 = vec![0.0, 5f64.to_radians(), 0.0, 0.0];
+//! let mut backend = SimBackend::new(Box::new(plant), x0, SimConfig::default())?;
+//! let mut controller = StateFeedback::new(vec![-7.8914, 37.8313, -2.9850, 3.6222]);
+//! let report = run(&config, &mut backend, &mut controller, None)?;
+//! assert_eq!(report.final_state, SupervisorState::Engaged);
+//! # Ok::<(), Box<dyn std::error::Error>>(())
+//! ```
+
+pub mod backend;
+pub mod control_loop;
+pub mod controller;
+pub mod error;
+pub mod hil_ffi;
+pub mod histogram;
+pub mod integrate;
+pub mod log;
+pub mod pacer;
+pub mod plant;
+pub mod prng;
+pub mod q2usb;
+pub mod reference_pendulum;
+pub mod report;
+pub mod rt_os;
+pub mod sim;
+pub mod supervisor;
+pub mod velocity_filter;
+
+pub use backend::{Backend, BackendError, EncoderMap, Tick};
+pub use control_loop::{run, run_with_events, RunConfig, MAX_RATE_HZ};
+pub use controller::{Controller, StateFeedback};
+pub use error::RuntimeError;
+pub use log::{LogError, LogWriter};
+pub use plant::Plant;
+pub use q2usb::{EncoderChannel, Q2Usb, Q2UsbConfig};
+pub use reference_pendulum::{PendulumParams, RotaryPendulumReference};
+pub use report::{Percentiles, RunReport};
+pub use sim::{SimBackend, SimConfig, SimNoise};
+pub use supervisor::{FaultKind, Supervisor, SupervisorConfig, SupervisorState, Transition};

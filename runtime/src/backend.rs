@@ -1,0 +1,162 @@
+//! The hardware abstraction the control loop drives: encoders in, one motor
+//! voltage out, a sample clock and a watchdog.
+
+use std::f64::consts::PI;
+use std::fmt;
+
+/// How one encoder's counts map to a state angle:
+/// `angle = sign * counts * 2 pi / counts_per_rev + offset_rad`, then wrapped
+/// into `(-pi, pi]` if `wrap` is set.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct EncoderMap {
+    /// Counts per revolution (4096 for the SRV02/ROTPEN quadrature encoders).
+    pub counts_per_rev: f64,
+    /// +1 or -1.
+    pub sign: f64,
+    /// Angle at zero counts (e.g. pi for a pendulum zeroed while hanging).
+    pub offset_rad: f64,
+    /// Wrap the angle into `(-pi, pi]` (for the pendulum, so upright is 0 whichever way it was raised).
+    pub wrap: bool,
+}
+
+impl EncoderMap {
+    /// A plain map: `counts_per_rev`, sign +1, no offset, no wrapping.
+    pub fn plain(counts_per_rev: f64) -> Self {
+        Self {
+            counts_per_rev,
+            sign: 1.0,
+            offset_rad: 0.0,
+            wrap: false,
+        }
+    }
+
+    /// The continuous (unwrapped) angle for `counts`; used for differentiation.
+    pub fn angle_unwrapped(&self, counts: i32) -> f64 {
+        self.sign * f64::from(counts) * 2.0 * PI / self.counts_per_rev + self.offset_rad
+    }
+
+    /// The state angle for `counts` (wrapped if configured).
+    pub fn angle(&self, counts: i32) -> f64 {
+        let a = self.angle_unwrapped(counts);
+        if self.wrap {
+            wrap_pi(a)
+        } else {
+            a
+        }
+    }
+}
+
+/// Wraps an angle into `(-pi, pi]`.
+pub fn wrap_pi(a: f64) -> f64 {
+    if !a.is_finite() {
+        return a;
+    }
+    let mut r = a.rem_euclid(2.0 * PI);
+    if r > PI {
+        r -= 2.0 * PI;
+    }
+    r
+}
+
+/// One sample instant reported by [`Backend::wait_next_period`].
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Tick {
+    /// Time of this sample on the backend's clock, seconds since start.
+    pub t: f64,
+    /// Sample instants that were skipped because the loop was late (0 normally).
+    pub missed: u32,
+}
+
+/// Errors of a backend. Small, with the data needed to diagnose them.
+#[derive(Debug, Clone, PartialEq)]
+pub enum BackendError {
+    /// A HIL function returned an error code (message from `msg_get_error_messageA`).
+    Hil {
+        /// The C function that failed.
+        function: &'static str,
+        /// The HIL error code (negative).
+        code: i32,
+        /// Quanser's message for the code, or a fallback text.
+        message: String,
+    },
+    /// The board watchdog expired (outputs went to the 0 V expiration state).
+    WatchdogExpired,
+    /// The board refused to arm the watchdog and no override was given.
+    WatchdogRefused {
+        /// The HIL error code.
+        code: i32,
+        /// Quanser's message for the code.
+        message: String,
+    },
+    /// The HIL library could not be loaded.
+    Load {
+        /// Library path or name that was tried.
+        path: String,
+        /// The loader's reason.
+        reason: String,
+    },
+    /// A required symbol is missing from the HIL library.
+    MissingSymbol(&'static str),
+    /// The configuration is unusable.
+    InvalidConfig(String),
+    /// A call that needs `start` first.
+    NotStarted,
+    /// The backend was already closed.
+    Closed,
+}
+
+impl fmt::Display for BackendError {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        match self {
+            BackendError::Hil {
+                function,
+                code,
+                message,
+            } => write!(f, "{function} failed with HIL error {code}: {message}"),
+            BackendError::WatchdogExpired => write!(f, "the board watchdog expired"),
+            BackendError::WatchdogRefused { code, message } => write!(
+                f,
+                "the board refused the watchdog expiration state (HIL error {code}: {message}); \
+                 refusing to drive the motor without a hardware watchdog (override: allow_no_watchdog)"
+            ),
+            BackendError::Load { path, reason } => {
+                write!(f, "cannot load HIL library {path}: {reason}")
+            }
+            BackendError::MissingSymbol(s) => write!(f, "HIL library lacks symbol {s}"),
+            BackendError::InvalidConfig(s) => write!(f, "invalid backend configuration: {s}"),
+            BackendError::NotStarted => write!(f, "backend not started"),
+            BackendError::Closed => write!(f, "backend already closed"),
+        }
+    }
+}
+
+impl std::error::Error for BackendError {}
+
+/// A data-acquisition backend: the simulator or a Quanser board.
+///
+/// Call order: [`Backend::start`] once, then per sample
+/// [`Backend::wait_next_period`], [`Backend::read_encoders`],
+/// [`Backend::reload_watchdog`], [`Backend::write_voltage`]; finally
+/// [`Backend::close`], which must write 0 V and be idempotent. Implementations
+/// must also write 0 V when dropped without `close`. Per-sample calls must not
+/// allocate except to report an error.
+pub trait Backend {
+    /// The encoder-to-angle maps, one per encoder, in state order (positions).
+    fn encoders(&self) -> &[EncoderMap];
+    /// Whether the clock is virtual (the loop runs as fast as it can).
+    fn is_virtual_time(&self) -> bool;
+    /// Starts the sample clock with the given period (seconds) and arms the watchdog.
+    fn start(&mut self, period_s: f64) -> Result<(), BackendError>;
+    /// Blocks until the next sample instant and returns it. The first call returns t = 0.
+    fn wait_next_period(&mut self) -> Result<Tick, BackendError>;
+    /// Encoder counts at the current sample, one per encoder.
+    fn read_encoders(&mut self, counts: &mut [i32]) -> Result<(), BackendError>;
+    /// Writes the motor voltage (already clamped by the loop).
+    fn write_voltage(&mut self, volts: f64) -> Result<(), BackendError>;
+    /// Reloads the hardware watchdog; [`BackendError::WatchdogExpired`] if it had expired.
+    fn reload_watchdog(&mut self) -> Result<(), BackendError> {
+        Ok(())
+    }
+    /// Stops the clock, writes 0 V and releases the hardware. Idempotent.
+    fn close(&mut self) -> Result<(), BackendError>;
+}
