@@ -12,6 +12,7 @@
 //!   pole placement, LQR).
 
 pub mod analysis;
+pub mod control;
 pub mod lang;
 pub mod linear;
 pub mod mechanics;
