@@ -41,12 +41,14 @@ fn double_pendulum_accelerations() {
     let qdd = [Expr::symbol(c1.qdd), Expr::symbol(c2.qdd)];
     let m: Vec<Vec<Expr>> = eqs
         .iter()
-        .map(|e| qdd.iter().map(|a| canonical(diff(*e, a.as_symbol().unwrap()))).collect())
+        .map(|e| {
+            qdd.iter()
+                .map(|a| canonical(diff(*e, a.as_symbol().unwrap())))
+                .collect()
+        })
         .collect();
-    let zero_acc = std::collections::HashMap::from([
-        (c1.qdd, Expr::zero()),
-        (c2.qdd, Expr::zero()),
-    ]);
+    let zero_acc =
+        std::collections::HashMap::from([(c1.qdd, Expr::zero()), (c2.qdd, Expr::zero())]);
     let h: Vec<Expr> = eqs
         .iter()
         .map(|e| canonical(plantc_derive::sym::substitute_symbols(*e, &zero_acc)))
@@ -94,10 +96,16 @@ fn furuta_mass_matrix_inverse_cost() {
             std::hint::black_box(canonical(e));
         }
     }
-    println!("2x2 Furuta mass-matrix inverse: {:?} per canonicalisation of all 4 entries", t0.elapsed() / n);
+    println!(
+        "2x2 Furuta mass-matrix inverse: {:?} per canonicalisation of all 4 entries",
+        t0.elapsed() / n
+    );
     let t0 = Instant::now();
     for _ in 0..n {
         std::hint::black_box(is_zero(m11 * inv[0] + m12 * inv[2] - 1));
     }
-    println!("is_zero(M11*Minv11 + M12*Minv21 - 1): {:?}", t0.elapsed() / n);
+    println!(
+        "is_zero(M11*Minv11 + M12*Minv21 - 1): {:?}",
+        t0.elapsed() / n
+    );
 }

@@ -419,6 +419,11 @@ impl Poly {
         self.terms.len()
     }
 
+    /// True if there are no terms (the zero polynomial).
+    pub fn is_empty(&self) -> bool {
+        self.terms.is_empty()
+    }
+
     /// True if zero.
     pub fn is_zero(&self) -> bool {
         self.terms.is_empty()
