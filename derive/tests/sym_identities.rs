@@ -111,3 +111,49 @@ fn show() {
     let x = s("x");
     println!("{}", simplify((3 * x).sin() + x.tan()));
 }
+
+#[test]
+fn factor_signs_are_canonical() {
+    let (a, b) = (s("a"), s("b"));
+    assert_eq!(canonical(1 / (a - b)), -canonical(1 / (b - a)));
+    assert_eq!(canonical((b - a) / (a - b)), Expr::int(-1));
+    assert!(is_zero((a - b).sin() + (b - a).sin()));
+    assert!(is_zero((2 * a - 2 * b).cos() - (2 * b - 2 * a).cos()));
+}
+
+#[test]
+fn tape_reuses_slots_and_dumps() {
+    use plantc_derive::sym::{Instr, Tape};
+    let (x, y) = (s("x"), s("y"));
+    let e = (x.sin() * y.cos() + x.cos() * y.sin()).powi(3) / (1 + x.powi(2)) - y;
+    let tape = Tape::compile(&[e], &[Symbol::new("x"), Symbol::new("y")]).unwrap();
+    let dump = format!("{tape:?}");
+    assert!(dump.contains("sin_cos"), "{dump}");
+    assert!(tape.scratch_len() < tape.instructions().len(), "{dump}");
+    assert!(tape
+        .instructions()
+        .iter()
+        .any(|i| matches!(i, Instr::Sub { .. })));
+    assert!(tape
+        .instructions()
+        .iter()
+        .any(|i| matches!(i, Instr::Div { .. })));
+    let v = tape.eval_vec(&[0.4, 1.1]);
+    let want = e.eval_with(&mut |sy| if sy.name() == "x" { 0.4 } else { 1.1 });
+    assert!((v[0] - want).abs() <= 1e-12 * want.abs());
+}
+
+#[test]
+fn overflow_falls_back_gracefully() {
+    use plantc_derive::sym::{try_canonical, CanonError, Rational};
+    let x = s("x");
+    let big = Expr::rational(Rational::int(10i128.pow(30)));
+    let e = (x + big).powi(6);
+    assert_eq!(try_canonical(e), Err(CanonError::Overflow));
+    assert_eq!(canonical(e), e);
+    assert!(!is_zero(e - x));
+    assert_eq!(
+        try_canonical(1 / (x.sin().powi(2) + x.cos().powi(2) - 1)),
+        Err(CanonError::DivisionByZero)
+    );
+}

@@ -289,6 +289,14 @@ impl Ctx {
     fn convert_node(&mut self, e: Expr) -> CResult<RatFn> {
         match e.node() {
             Node::Rational(r) => Ok(RatFn::constant(*r)),
+            Node::Float(b) if b.value().is_finite() && b.value() < 0.0 => {
+                // Sign-normalise inexact constants so that `-(2.5*x)` cancels `2.5*x`.
+                let r = self.atom(Expr::float(-b.value()));
+                Ok(RatFn {
+                    num: r.num.neg()?,
+                    den: r.den,
+                })
+            }
             Node::Float(_) | Node::Symbol(_) => Ok(self.atom(e)),
             Node::Add(ts) => {
                 let items = ts

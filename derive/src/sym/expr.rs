@@ -10,7 +10,7 @@
 //! Constructors apply cheap local simplifications only (flattening, constant
 //! folding, collecting like terms and powers, sorting operands into a
 //! deterministic structural order). Deeper normalisation (expansion, trigonometric
-//! identities, common denominators) lives in [`crate::sym::canonical`].
+//! identities, common denominators) lives in [`crate::sym::canonical`](mod@crate::sym::canonical).
 
 use std::cmp::Ordering;
 use std::collections::HashMap;

@@ -2,7 +2,7 @@
 //! "atoms" (symbols, `sin(u)`, `cos(u)`, roots and opaque function
 //! applications), reduced modulo side relations such as `sin(u)^2 = 1 - cos(u)^2`.
 //!
-//! This is the arithmetic engine behind [`crate::sym::canonical`]. All
+//! This is the arithmetic engine behind [`crate::sym::canonical`](mod@crate::sym::canonical). All
 //! coefficient arithmetic is checked; overflow surfaces as
 //! [`CanonError::Overflow`] instead of a panic.
 //!
@@ -417,6 +417,11 @@ impl Poly {
     /// Number of terms.
     pub fn len(&self) -> usize {
         self.terms.len()
+    }
+
+    /// True if there are no terms (the zero polynomial).
+    pub fn is_empty(&self) -> bool {
+        self.terms.is_empty()
     }
 
     /// True if zero.

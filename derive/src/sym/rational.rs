@@ -275,11 +275,28 @@ impl Ord for Rational {
             o.num.checked_mul(self.den),
         ) {
             (Some(a), Some(b)) => a.cmp(&b),
-            _ => self
-                .to_f64()
-                .partial_cmp(&o.to_f64())
-                .unwrap_or(Ordering::Equal),
+            _ => cmp_frac(self.num, self.den, o.num, o.den),
         }
+    }
+}
+
+/// Exact comparison of `a/b` and `c/d` (`b, d > 0`) without overflow, by
+/// comparing integer parts and then the reciprocals of the fractional parts.
+fn cmp_frac(mut a: i128, mut b: i128, mut c: i128, mut d: i128) -> Ordering {
+    loop {
+        let (qa, ra) = (a.div_euclid(b), a.rem_euclid(b));
+        let (qc, rc) = (c.div_euclid(d), c.rem_euclid(d));
+        if qa != qc {
+            return qa.cmp(&qc);
+        }
+        match (ra == 0, rc == 0) {
+            (true, true) => return Ordering::Equal,
+            (true, false) => return Ordering::Less,
+            (false, true) => return Ordering::Greater,
+            (false, false) => {}
+        }
+        // ra/b < rc/d  <=>  d/rc < b/ra
+        (a, b, c, d) = (d, rc, b, ra);
     }
 }
 
@@ -325,5 +342,13 @@ mod tests {
         );
         assert_eq!(Rational::int(2).checked_pow_rational(Rational::new(1, 2).unwrap()), None);
         assert_eq!(Rational::approximate(0.75, 1000), Rational::new(3, 4));
+        // Ordering stays exact when the cross products overflow.
+        let big = i128::MAX / 3;
+        let x = Rational::new(big, big - 1).unwrap();
+        let y = Rational::new(big - 1, big - 2).unwrap();
+        assert_eq!(x.cmp(&y), Ordering::Less);
+        assert_eq!(y.cmp(&x), Ordering::Greater);
+        assert_eq!(x.cmp(&x), Ordering::Equal);
+        assert_eq!(x.checked_neg().unwrap().cmp(&y), Ordering::Less);
     }
 }

@@ -306,7 +306,7 @@ impl Lower {
         if let Some(&v) = self.powi_memo.get(&(base, n)) {
             return v;
         }
-        let v = if n % 2 == 0 {
+        let v = if n.is_multiple_of(2) {
             let h = self.powi(base, n / 2);
             self.push2(|dst| Instr::Mul { dst, a: h, b: h })
         } else {
@@ -494,10 +494,10 @@ impl Tape {
                 continue;
             }
             match e.node() {
-                Node::Symbol(s) if !input_index.contains_key(s) => {
-                    if unknown.is_none_or(|u| *s < u) {
-                        unknown = Some(*s);
-                    }
+                Node::Symbol(s)
+                    if !input_index.contains_key(s) && unknown.is_none_or(|u| *s < u) =>
+                {
+                    unknown = Some(*s);
                 }
                 Node::Func(Func::Sin, u) => {
                     sins.insert(*u, e);
