@@ -1,1 +1,22 @@
-//! plantc-identify (filled by a later issue).
+//! plantc-identify: measured data, fit metrics and residual diagnostics for
+//! identifying a plant model from experiments.
+//!
+//! - [`read_experiment`] / [`read_experiments`] load CSV or MAT v5 files into
+//!   [`Experiment`]s, checked against a [`ChannelSpec`].
+//! - [`compare`] computes fit % and RMSE per channel ([`FitReport`]).
+//! - [`where_it_fails`] and [`residual_summary`] locate where a model misses.
+//! - [`plot_comparison`] draws measured vs simulated and residuals to SVG.
+
+mod csv_reader;
+pub mod data;
+pub mod error;
+mod mat_reader;
+pub mod plausibility;
+pub mod units;
+
+pub use data::{
+    parse_channel_map, read_experiment, read_experiment_with, read_experiments, Channel,
+    ChannelSpec, Experiment, ReadOptions,
+};
+pub use error::{CellProblem, DataError, DataWarning};
+pub use units::Kind;
