@@ -20,3 +20,14 @@ pub use data::{
 };
 pub use error::{CellProblem, DataError, DataWarning};
 pub use units::Kind;
+
+pub mod metrics;
+pub mod plot;
+pub mod where_it_fails;
+
+pub use metrics::{compare, fit_percent, rmse, ChannelFit, ExperimentFit, FitReport, MetricsError};
+pub use plot::{plot_comparison, render_comparison, PlotError};
+pub use where_it_fails::{
+    residual_summary, where_it_fails, ChannelDiagnosis, FailOptions, Finding, FindingKind,
+    GroupStats, ResidualSummary,
+};
