@@ -4,7 +4,7 @@
 //! - [`read_experiment`] / [`read_experiments`] load CSV or MAT v5 files into
 //!   [`Experiment`]s, checked against a [`ChannelSpec`].
 //! - [`compare`] computes fit % and RMSE per channel ([`FitReport`]).
-//! - [`where_it_fails`] and [`residual_summary`] locate where a model misses.
+//! - [`where_it_fails()`] and [`residual_summary`] locate where a model misses.
 //! - [`plot_comparison`] draws measured vs simulated and residuals to SVG.
 
 mod csv_reader;

@@ -87,7 +87,7 @@ pub(crate) fn read_mat(
     let Some((array, transposed)) = pick else {
         return Err(mat_err(
             format!(
-                "no numeric matrix with {rows} rows (time + {}) found; arrays: [{listing}]",
+                "no numeric matrix with {rows} rows (time + {}) found in the MAT file; arrays: [{listing}]",
                 names.join(",")
             ),
             "give one name per signal row after time with `--channels theta,alpha,Vm`",

@@ -16,9 +16,14 @@
 //!   the 95th percentile of |velocity|, against all other samples.
 //!
 //! Findings (each with its ratio) are emitted when, with R = `ratio_threshold` (2):
-//! RMSE(small amplitude)/RMSE(large) > R or the inverse; RMSE(low speed)/RMSE(high)
-//! > R or the inverse; RMSE(turnarounds)/RMSE(elsewhere) > R; RMSE(last
-//! segment)/RMSE(first) > R or the inverse; |mean| > 0.5 RMSE (bias). Bins with
+//!
+//! - RMSE(small amplitude) / RMSE(large) > R, or the inverse;
+//! - RMSE(low speed) / RMSE(high speed) > R, or the inverse;
+//! - RMSE(turnarounds) / RMSE(elsewhere) > R;
+//! - RMSE(last segment) / RMSE(first segment) > R, or the inverse;
+//! - |mean| > 0.5 RMSE (bias).
+//!
+//! Bins with
 //! fewer than `min_bin_fraction` (5 %) of the samples or fewer than 20 samples
 //! are not compared (the turnaround group needs only 1 %, since turnarounds are
 //! brief). When the measured signal is quantised (see
@@ -324,7 +329,7 @@ fn diagnose(
     // Turnarounds are brief by nature: their group needs 1 % of the samples.
     let min_turn = ((0.01 * n as f64).ceil() as usize).max(20);
     let usable = |g: &GroupStats, min: usize| g.n >= min && g.rmse.is_some();
-    let above_floor = |x: f64| floor.map_or(true, |f| x > 2.0 * f);
+    let above_floor = |x: f64| !floor.is_some_and(|f| x <= 2.0 * f);
     let mut findings = Vec::new();
     let mut push = |kind, ratio: f64, sentence: String| {
         findings.push(Finding {
