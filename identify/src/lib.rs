@@ -1,1 +1,33 @@
-//! plantc-identify (filled by a later issue).
+//! plantc-identify: measured data, fit metrics and residual diagnostics for
+//! identifying a plant model from experiments.
+//!
+//! - [`read_experiment`] / [`read_experiments`] load CSV or MAT v5 files into
+//!   [`Experiment`]s, checked against a [`ChannelSpec`].
+//! - [`compare`] computes fit % and RMSE per channel ([`FitReport`]).
+//! - [`where_it_fails()`] and [`residual_summary`] locate where a model misses.
+//! - [`plot_comparison`] draws measured vs simulated and residuals to SVG.
+
+mod csv_reader;
+pub mod data;
+pub mod error;
+mod mat_reader;
+pub mod plausibility;
+pub mod units;
+
+pub use data::{
+    parse_channel_map, read_experiment, read_experiment_with, read_experiments, Channel,
+    ChannelSpec, Experiment, ReadOptions,
+};
+pub use error::{CellProblem, DataError, DataWarning};
+pub use units::Kind;
+
+pub mod metrics;
+pub mod plot;
+pub mod where_it_fails;
+
+pub use metrics::{compare, fit_percent, rmse, ChannelFit, ExperimentFit, FitReport, MetricsError};
+pub use plot::{plot_comparison, render_comparison, PlotError};
+pub use where_it_fails::{
+    residual_summary, where_it_fails, ChannelDiagnosis, FailOptions, Finding, FindingKind,
+    GroupStats, ResidualSummary,
+};

@@ -1,0 +1,267 @@
+//! CSV files with one header line: time in column `t`, channels matched by name,
+//! unit suffixes (`alpha[deg]`) converted to SI, extra columns kept.
+
+use std::path::Path;
+
+use crate::data::{
+    experiment_name, sampling_warning, Channel, ChannelSpec, Experiment, MIN_SAMPLES,
+};
+use crate::error::{CellProblem, DataError, DataWarning};
+use crate::units::{lookup_unit, split_header, Kind};
+
+/// How one column is read.
+struct ColumnPlan {
+    /// 0-based field index.
+    index: usize,
+    /// Channel name.
+    name: String,
+    /// Full header.
+    header: String,
+    /// Factor to SI.
+    factor: f64,
+    /// Unit note for the channel.
+    note: Option<String>,
+    /// Needed (time or in the spec): bad cells are errors. Otherwise bad cells drop it.
+    needed: bool,
+}
+
+/// Reads a CSV experiment. See [`crate::read_experiment`].
+pub(crate) fn read_csv(
+    path: &Path,
+    spec: &ChannelSpec,
+) -> Result<(Experiment, Vec<DataWarning>), DataError> {
+    let file = path.to_path_buf();
+    let io_err = |e: std::io::Error| DataError::Io {
+        file: file.clone(),
+        message: e.to_string(),
+    };
+    let reader = std::fs::File::open(path).map_err(io_err)?;
+    let mut rdr = csv::ReaderBuilder::new()
+        .flexible(true)
+        .trim(csv::Trim::All)
+        .comment(Some(b'#'))
+        .from_reader(std::io::BufReader::new(reader));
+    let csv_err = |e: csv::Error| DataError::Csv {
+        file: file.clone(),
+        line: e.position().map(|p| p.line()),
+        message: e.to_string(),
+    };
+    let headers = rdr.headers().map_err(csv_err)?.clone();
+    let mut warnings = Vec::new();
+
+    // Header names without suffixes, duplicates rejected.
+    let split: Vec<(String, Option<String>)> = headers
+        .iter()
+        .map(|h| {
+            let (n, u) = split_header(h);
+            (n.to_string(), u.map(str::to_string))
+        })
+        .collect();
+    for (j, (name, _)) in split.iter().enumerate() {
+        if let Some(i) = split[..j].iter().position(|(n, _)| n == name) {
+            if name.is_empty() {
+                continue;
+            }
+            return Err(DataError::DuplicateColumn {
+                file,
+                column: name.clone(),
+                first: i + 1,
+                second: j + 1,
+            });
+        }
+    }
+    let found: Vec<String> = split.iter().map(|(n, _)| n.clone()).collect();
+
+    // Plan the needed columns: time, then the spec's channels.
+    let needed: Vec<(String, Kind)> = std::iter::once(("t".to_string(), Kind::Time))
+        .chain(spec.all().cloned())
+        .collect();
+    let mut plans: Vec<ColumnPlan> = Vec::new();
+    for (name, kind) in &needed {
+        let Some(index) = found.iter().position(|n| n == name) else {
+            return Err(DataError::MissingColumn {
+                file,
+                column: name.clone(),
+                found,
+                expected: spec.expected_names(),
+            });
+        };
+        let header = headers.get(index).unwrap_or_default().to_string();
+        let (factor, note) = match &split[index].1 {
+            None => (1.0, None),
+            Some(u) => match lookup_unit(u) {
+                None => {
+                    return Err(DataError::UnknownUnit {
+                        file,
+                        column: index + 1,
+                        header,
+                        unit: u.clone(),
+                        kind: *kind,
+                    })
+                }
+                Some(unit) if *kind != Kind::Other && unit.kind != *kind => {
+                    return Err(DataError::IncompatibleUnit {
+                        file,
+                        column: index + 1,
+                        header,
+                        unit: u.clone(),
+                        expected: *kind,
+                        found: unit.kind,
+                    })
+                }
+                Some(unit) => (unit.factor, Some(unit_note(u, unit.kind))),
+            },
+        };
+        plans.push(ColumnPlan {
+            index,
+            name: name.clone(),
+            header,
+            factor,
+            note,
+            needed: true,
+        });
+    }
+    // Extra columns, in file order.
+    for (index, (name, unit)) in split.iter().enumerate() {
+        if plans.iter().any(|p| p.index == index) || name.is_empty() {
+            continue;
+        }
+        let header = headers.get(index).unwrap_or_default().to_string();
+        let (factor, note) = match unit {
+            None => (1.0, None),
+            Some(u) => match lookup_unit(u) {
+                Some(unit) => (unit.factor, Some(unit_note(u, unit.kind))),
+                None => {
+                    warnings.push(DataWarning::UnknownExtraUnit {
+                        file: file.clone(),
+                        column: header.clone(),
+                    });
+                    (1.0, Some(u.clone()))
+                }
+            },
+        };
+        plans.push(ColumnPlan {
+            index,
+            name: name.clone(),
+            header,
+            factor,
+            note,
+            needed: false,
+        });
+    }
+
+    // Read the rows.
+    let t_col = plans[0].index;
+    let mut values: Vec<Vec<f64>> = vec![Vec::new(); plans.len()];
+    let mut dropped: Vec<Option<u64>> = vec![None; plans.len()];
+    let mut record = csv::StringRecord::new();
+    loop {
+        match rdr.read_record(&mut record) {
+            Ok(true) => {}
+            Ok(false) => break,
+            Err(e) => return Err(csv_err(e)),
+        }
+        let line = record.position().map(|p| p.line()).unwrap_or(0);
+        for (k, plan) in plans.iter().enumerate() {
+            let cell = record.get(plan.index).unwrap_or("");
+            let parsed = parse_cell(cell);
+            match parsed {
+                Ok(v) => values[k].push(v * plan.factor),
+                Err(problem) if plan.needed => {
+                    return Err(DataError::BadCell {
+                        file,
+                        line,
+                        column: plan.index + 1,
+                        column_name: plan.header.clone(),
+                        problem,
+                    })
+                }
+                Err(_) => {
+                    if dropped[k].is_none() {
+                        dropped[k] = Some(line);
+                    }
+                    values[k].push(f64::NAN);
+                }
+            }
+        }
+        // Time must strictly increase (checked in file order).
+        let t = &values[0];
+        let n = t.len();
+        if n >= 2 && t[n - 1] <= t[n - 2] {
+            return Err(DataError::TimeNotIncreasing {
+                file,
+                line,
+                column: t_col + 1,
+                previous: t[n - 2],
+                value: t[n - 1],
+            });
+        }
+    }
+    let n = values[0].len();
+    if n < MIN_SAMPLES {
+        return Err(DataError::TooShort {
+            file,
+            samples: n,
+            minimum: MIN_SAMPLES,
+        });
+    }
+
+    let mut columns = values.into_iter();
+    let t = columns.next().unwrap_or_default();
+    let mut channels = Vec::new();
+    for (k, (plan, vals)) in plans
+        .iter()
+        .zip(std::iter::once(Vec::new()).chain(columns))
+        .enumerate()
+    {
+        if k == 0 {
+            continue;
+        }
+        if let Some(line) = dropped[k] {
+            warnings.push(DataWarning::DroppedColumn {
+                file: file.clone(),
+                column: plan.header.clone(),
+                line,
+            });
+            continue;
+        }
+        channels.push(Channel {
+            name: plan.name.clone(),
+            unit_note: plan.note.clone(),
+            values: vals,
+        });
+    }
+    warnings.extend(sampling_warning(&file, &t));
+    Ok((
+        Experiment {
+            name: experiment_name(path),
+            file,
+            t,
+            channels,
+        },
+        warnings,
+    ))
+}
+
+/// The unit note for a suffix: `rad` for SI, `deg -> rad` for a conversion.
+pub(crate) fn unit_note(symbol: &str, kind: Kind) -> String {
+    let si = kind.si_unit();
+    if symbol == si || si.is_empty() {
+        symbol.to_string()
+    } else {
+        format!("{symbol} -> {si}")
+    }
+}
+
+/// Parses one cell as a finite number.
+fn parse_cell(cell: &str) -> Result<f64, CellProblem> {
+    let s = cell.trim();
+    if s.is_empty() {
+        return Err(CellProblem::Empty);
+    }
+    match s.parse::<f64>() {
+        Ok(v) if v.is_finite() => Ok(v),
+        Ok(_) => Err(CellProblem::NotFinite(s.to_string())),
+        Err(_) => Err(CellProblem::Unparsable(s.to_string())),
+    }
+}

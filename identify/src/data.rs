@@ -1,0 +1,249 @@
+//! Measured experiments: time plus named channels, read from CSV or MAT v5 files.
+
+use std::path::{Path, PathBuf};
+
+use crate::error::{DataError, DataWarning};
+use crate::units::Kind;
+
+/// Fewest samples a file must have.
+pub const MIN_SAMPLES: usize = 10;
+
+/// One measured signal, in SI units.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Channel {
+    /// Channel name (header without unit suffix).
+    pub name: String,
+    /// Where the unit came from: `Some("deg -> rad")` when converted,
+    /// `Some("rad")` when the header named the SI unit, `None` without suffix.
+    pub unit_note: Option<String>,
+    /// Samples, one per time instant.
+    pub values: Vec<f64>,
+}
+
+/// One experiment: a time vector and channels of the same length.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Experiment {
+    /// Name (the file stem).
+    pub name: String,
+    /// The file it came from.
+    pub file: PathBuf,
+    /// Time in s, strictly increasing.
+    pub t: Vec<f64>,
+    /// Channels: the expected ones in the order of the [`ChannelSpec`]
+    /// (coordinates, then inputs), then extra columns in file order.
+    pub channels: Vec<Channel>,
+}
+
+impl Experiment {
+    /// The channel with this name.
+    pub fn channel(&self, name: &str) -> Option<&Channel> {
+        self.channels.iter().find(|c| c.name == name)
+    }
+
+    /// The values of the channel with this name.
+    pub fn values(&self, name: &str) -> Option<&[f64]> {
+        self.channel(name).map(|c| c.values.as_slice())
+    }
+
+    /// Number of samples.
+    pub fn len(&self) -> usize {
+        self.t.len()
+    }
+
+    /// True when there are no samples (never for a file that was read).
+    pub fn is_empty(&self) -> bool {
+        self.t.is_empty()
+    }
+
+    /// Median sampling interval in s (None for fewer than two samples).
+    pub fn sample_time(&self) -> Option<f64> {
+        median_dt(&self.t)
+    }
+
+    /// The channel names, in order.
+    pub fn channel_names(&self) -> Vec<&str> {
+        self.channels.iter().map(|c| c.name.as_str()).collect()
+    }
+}
+
+/// The channels a model needs from a file: coordinates (angles or lengths) and
+/// inputs, each with its kind. Only names and kinds: no dependency on the model.
+#[derive(Clone, Debug, Default, PartialEq)]
+pub struct ChannelSpec {
+    /// Measured coordinates, e.g. `("theta", Kind::Angle)`.
+    pub coordinates: Vec<(String, Kind)>,
+    /// Inputs, e.g. `("Vm", Kind::Voltage)`.
+    pub inputs: Vec<(String, Kind)>,
+}
+
+impl ChannelSpec {
+    /// An empty spec.
+    pub fn new() -> Self {
+        Self::default()
+    }
+
+    /// Adds an angle coordinate.
+    pub fn angle(mut self, name: &str) -> Self {
+        self.coordinates.push((name.to_string(), Kind::Angle));
+        self
+    }
+
+    /// Adds a length coordinate.
+    pub fn length(mut self, name: &str) -> Self {
+        self.coordinates.push((name.to_string(), Kind::Length));
+        self
+    }
+
+    /// Adds an input of the given kind (e.g. [`Kind::Voltage`]).
+    pub fn input(mut self, name: &str, kind: Kind) -> Self {
+        self.inputs.push((name.to_string(), kind));
+        self
+    }
+
+    /// All expected channels, coordinates first.
+    pub fn all(&self) -> impl Iterator<Item = &(String, Kind)> {
+        self.coordinates.iter().chain(self.inputs.iter())
+    }
+
+    /// The kind of a channel, if the spec names it.
+    pub fn kind_of(&self, name: &str) -> Option<Kind> {
+        self.all().find(|(n, _)| n == name).map(|(_, k)| *k)
+    }
+
+    /// Expected names with time first, for messages.
+    pub(crate) fn expected_names(&self) -> Vec<String> {
+        std::iter::once("t".to_string())
+            .chain(self.all().map(|(n, _)| n.clone()))
+            .collect()
+    }
+}
+
+/// Options for reading files.
+#[derive(Clone, Debug, Default, PartialEq)]
+pub struct ReadOptions {
+    /// For MAT files: names of the signal rows after the time row
+    /// (`--channels theta,alpha,Vm`). Without it, the spec's order
+    /// (coordinates, then inputs) is assumed and a warning says so.
+    pub mat_channels: Option<Vec<String>>,
+}
+
+/// Parses a channel mapping argument like `theta,alpha,Vm` (names may carry a
+/// unit suffix: `alpha[deg]`).
+pub fn parse_channel_map(arg: &str) -> Result<Vec<String>, DataError> {
+    let names: Vec<String> = arg.split(',').map(|s| s.trim().to_string()).collect();
+    if names.iter().any(|n| n.is_empty()) {
+        return Err(DataError::ChannelMap {
+            message: format!("empty name in `{arg}`"),
+        });
+    }
+    for (i, n) in names.iter().enumerate() {
+        if names[..i].contains(n) {
+            return Err(DataError::ChannelMap {
+                message: format!("`{n}` given twice in `{arg}`"),
+            });
+        }
+    }
+    Ok(names)
+}
+
+/// Reads one experiment (CSV by default, MAT v5 for `.mat`) and checks it
+/// against the channels the model expects. Returns the experiment and any
+/// warnings; never panics on bad input.
+pub fn read_experiment(
+    path: &Path,
+    expected: &ChannelSpec,
+) -> Result<(Experiment, Vec<DataWarning>), DataError> {
+    read_experiment_with(path, expected, &ReadOptions::default())
+}
+
+/// [`read_experiment`] with options (channel mapping for MAT files).
+pub fn read_experiment_with(
+    path: &Path,
+    expected: &ChannelSpec,
+    options: &ReadOptions,
+) -> Result<(Experiment, Vec<DataWarning>), DataError> {
+    let ext = path
+        .extension()
+        .and_then(|e| e.to_str())
+        .map(|e| e.to_ascii_lowercase());
+    let (exp, mut warnings) = match ext.as_deref() {
+        Some("mat") => crate::mat_reader::read_mat(path, expected, options)?,
+        Some("csv") | Some("txt") | None => crate::csv_reader::read_csv(path, expected)?,
+        Some(_) => {
+            // Sniff: a MAT v5 file starts with a 116-byte text header "MATLAB 5.0".
+            match std::fs::read(path) {
+                Ok(bytes) if bytes.starts_with(b"MATLAB") => {
+                    crate::mat_reader::read_mat(path, expected, options)?
+                }
+                Ok(_) => crate::csv_reader::read_csv(path, expected)?,
+                Err(e) => {
+                    return Err(DataError::Io {
+                        file: path.to_path_buf(),
+                        message: e.to_string(),
+                    })
+                }
+            }
+        }
+    };
+    warnings.extend(crate::plausibility::check(&exp, expected));
+    Ok((exp, warnings))
+}
+
+/// Reads several files: one experiment each. Stops at the first error.
+pub fn read_experiments<P: AsRef<Path>>(
+    paths: &[P],
+    expected: &ChannelSpec,
+    options: &ReadOptions,
+) -> Result<(Vec<Experiment>, Vec<DataWarning>), DataError> {
+    let mut exps = Vec::with_capacity(paths.len());
+    let mut warnings = Vec::new();
+    for p in paths {
+        let (e, w) = read_experiment_with(p.as_ref(), expected, options)?;
+        exps.push(e);
+        warnings.extend(w);
+    }
+    Ok((exps, warnings))
+}
+
+/// The experiment name for a file: its stem.
+pub(crate) fn experiment_name(path: &Path) -> String {
+    path.file_stem()
+        .map(|s| s.to_string_lossy().into_owned())
+        .unwrap_or_else(|| path.display().to_string())
+}
+
+/// Index of the first sample whose time does not exceed the previous one.
+pub(crate) fn first_non_increasing(t: &[f64]) -> Option<usize> {
+    t.windows(2).position(|w| w[1] <= w[0]).map(|i| i + 1)
+}
+
+/// Median of the positive sampling intervals.
+pub(crate) fn median_dt(t: &[f64]) -> Option<f64> {
+    if t.len() < 2 {
+        return None;
+    }
+    let mut d: Vec<f64> = t.windows(2).map(|w| w[1] - w[0]).collect();
+    d.sort_by(f64::total_cmp);
+    Some(d[d.len() / 2])
+}
+
+/// A warning if the sampling interval varies by more than 1 %.
+pub(crate) fn sampling_warning(file: &Path, t: &[f64]) -> Option<DataWarning> {
+    let med = median_dt(t)?;
+    let (mut lo, mut hi) = (f64::INFINITY, 0.0f64);
+    for w in t.windows(2) {
+        let d = w[1] - w[0];
+        lo = lo.min(d);
+        hi = hi.max(d);
+    }
+    if (hi - med) > 0.01 * med || (med - lo) > 0.01 * med {
+        Some(DataWarning::IrregularSampling {
+            file: file.to_path_buf(),
+            median_dt: med,
+            min_dt: lo,
+            max_dt: hi,
+        })
+    } else {
+        None
+    }
+}

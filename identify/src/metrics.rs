@@ -1,0 +1,241 @@
+//! Fit metrics between measured and simulated experiments: fit % (as MATLAB's
+//! `compare`, normalised root-mean-square error) and RMSE, per channel and pooled.
+
+use std::collections::BTreeMap;
+use std::fmt;
+
+use serde::{Deserialize, Serialize};
+
+use crate::data::Experiment;
+
+/// Why metrics cannot be computed.
+#[derive(Clone, Debug, PartialEq)]
+pub enum MetricsError {
+    /// Measured and simulated signals differ in length.
+    LengthMismatch {
+        /// Experiment name.
+        experiment: String,
+        /// Channel name.
+        channel: String,
+        /// Measured samples.
+        measured: usize,
+        /// Simulated samples.
+        simulated: usize,
+    },
+    /// A channel is absent from the measured or simulated experiment.
+    MissingChannel {
+        /// Experiment name.
+        experiment: String,
+        /// Channel name.
+        channel: String,
+        /// `"measured"` or `"simulated"`.
+        side: &'static str,
+    },
+    /// A signal holds NaN or infinity (a diverged simulation, typically).
+    NotFinite {
+        /// Experiment name.
+        experiment: String,
+        /// Channel name.
+        channel: String,
+        /// 0-based sample index.
+        index: usize,
+    },
+    /// No samples to compare.
+    Empty,
+    /// Different numbers of measured and simulated experiments.
+    ExperimentCount {
+        /// Measured experiments.
+        measured: usize,
+        /// Simulated experiments.
+        simulated: usize,
+    },
+}
+
+impl fmt::Display for MetricsError {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        match self {
+            MetricsError::LengthMismatch {
+                experiment,
+                channel,
+                measured,
+                simulated,
+            } => write!(
+                f,
+                "{experiment}: channel `{channel}` has {measured} measured but {simulated} simulated samples"
+            ),
+            MetricsError::MissingChannel {
+                experiment,
+                channel,
+                side,
+            } => write!(f, "{experiment}: no {side} channel `{channel}`"),
+            MetricsError::NotFinite {
+                experiment,
+                channel,
+                index,
+            } => write!(
+                f,
+                "{experiment}: channel `{channel}` is not finite at sample {index} (did the simulation diverge?)"
+            ),
+            MetricsError::Empty => write!(f, "no samples to compare"),
+            MetricsError::ExperimentCount {
+                measured,
+                simulated,
+            } => write!(
+                f,
+                "{measured} measured experiments but {simulated} simulated ones"
+            ),
+        }
+    }
+}
+
+impl std::error::Error for MetricsError {}
+
+/// Fit of one channel.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct ChannelFit {
+    /// 100 (1 - ||y - yhat|| / ||y - mean(y)||); `None` (JSON null) when the
+    /// measured channel is constant, where the ratio is undefined.
+    pub fit_percent: Option<f64>,
+    /// sqrt(mean((y - yhat)^2)), in the channel's SI unit.
+    pub rmse: f64,
+}
+
+/// Fits of one experiment's channels.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct ExperimentFit {
+    /// The measured file.
+    pub file: String,
+    /// Channel name to fit, sorted by name.
+    pub channels: BTreeMap<String, ChannelFit>,
+}
+
+/// Fits of all experiments, with the RMSE pooled over all experiments, channels
+/// and samples. Serialises as
+/// `{"experiments": [{"file": ..., "channels": {"theta": {"fit_percent": .., "rmse": ..}}}], "rmse": ..}`.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct FitReport {
+    /// Per experiment, in input order.
+    pub experiments: Vec<ExperimentFit>,
+    /// sqrt(sum of all squared residuals / number of residuals). Mixes units if
+    /// the channels have different ones (rad and m).
+    pub rmse: f64,
+}
+
+/// Checks lengths and finiteness of a pair of signals.
+fn check(y: &[f64], yhat: &[f64], experiment: &str, channel: &str) -> Result<(), MetricsError> {
+    if y.len() != yhat.len() {
+        return Err(MetricsError::LengthMismatch {
+            experiment: experiment.into(),
+            channel: channel.into(),
+            measured: y.len(),
+            simulated: yhat.len(),
+        });
+    }
+    if y.is_empty() {
+        return Err(MetricsError::Empty);
+    }
+    if let Some(index) = y
+        .iter()
+        .zip(yhat)
+        .position(|(a, b)| !a.is_finite() || !b.is_finite())
+    {
+        return Err(MetricsError::NotFinite {
+            experiment: experiment.into(),
+            channel: channel.into(),
+            index,
+        });
+    }
+    Ok(())
+}
+
+/// Sum of squared residuals.
+fn sse(y: &[f64], yhat: &[f64]) -> f64 {
+    y.iter().zip(yhat).map(|(a, b)| (a - b) * (a - b)).sum()
+}
+
+/// Root-mean-square error between measured `y` and simulated `yhat`.
+pub fn rmse(y: &[f64], yhat: &[f64]) -> Result<f64, MetricsError> {
+    check(y, yhat, "", "")?;
+    Ok((sse(y, yhat) / y.len() as f64).sqrt())
+}
+
+/// Fit % as MATLAB's `compare`: 100 (1 - ||y - yhat|| / ||y - mean(y)||).
+/// 100 is perfect, 0 is no better than the mean, negative is worse.
+/// `Ok(None)` when `y` is constant.
+pub fn fit_percent(y: &[f64], yhat: &[f64]) -> Result<Option<f64>, MetricsError> {
+    check(y, yhat, "", "")?;
+    let mean = y.iter().sum::<f64>() / y.len() as f64;
+    let den: f64 = y
+        .iter()
+        .map(|a| (a - mean) * (a - mean))
+        .sum::<f64>()
+        .sqrt();
+    if den == 0.0 {
+        return Ok(None);
+    }
+    Ok(Some(100.0 * (1.0 - sse(y, yhat).sqrt() / den)))
+}
+
+/// Compares measured experiments with simulated ones (same order, same
+/// sample instants) on the named channels.
+pub fn compare(
+    measured: &[Experiment],
+    simulated: &[Experiment],
+    channels: &[&str],
+) -> Result<FitReport, MetricsError> {
+    if measured.len() != simulated.len() {
+        return Err(MetricsError::ExperimentCount {
+            measured: measured.len(),
+            simulated: simulated.len(),
+        });
+    }
+    let mut experiments = Vec::new();
+    let (mut total_sse, mut total_n) = (0.0, 0usize);
+    for (m, s) in measured.iter().zip(simulated) {
+        let mut fits = BTreeMap::new();
+        for &ch in channels {
+            let (y, yhat) = channel_pair(m, s, ch)?;
+            check(y, yhat, &m.name, ch)?;
+            let e = sse(y, yhat);
+            total_sse += e;
+            total_n += y.len();
+            fits.insert(
+                ch.to_string(),
+                ChannelFit {
+                    fit_percent: fit_percent(y, yhat)?,
+                    rmse: (e / y.len() as f64).sqrt(),
+                },
+            );
+        }
+        experiments.push(ExperimentFit {
+            file: m.file.display().to_string(),
+            channels: fits,
+        });
+    }
+    if total_n == 0 {
+        return Err(MetricsError::Empty);
+    }
+    Ok(FitReport {
+        experiments,
+        rmse: (total_sse / total_n as f64).sqrt(),
+    })
+}
+
+/// The measured and simulated values of one channel.
+pub(crate) fn channel_pair<'a>(
+    m: &'a Experiment,
+    s: &'a Experiment,
+    ch: &str,
+) -> Result<(&'a [f64], &'a [f64]), MetricsError> {
+    let y = m.values(ch).ok_or_else(|| MetricsError::MissingChannel {
+        experiment: m.name.clone(),
+        channel: ch.to_string(),
+        side: "measured",
+    })?;
+    let yhat = s.values(ch).ok_or_else(|| MetricsError::MissingChannel {
+        experiment: m.name.clone(),
+        channel: ch.to_string(),
+        side: "simulated",
+    })?;
+    Ok((y, yhat))
+}

@@ -1,0 +1,63 @@
+//! Helpers shared by the integration tests.
+#![allow(dead_code)]
+
+use std::path::PathBuf;
+
+use plantc_identify::{ChannelSpec, Kind};
+
+/// The rotary pendulum's channels.
+pub fn pendulum_spec() -> ChannelSpec {
+    ChannelSpec::new()
+        .angle("theta")
+        .angle("alpha")
+        .input("Vm", Kind::Voltage)
+}
+
+/// A fresh scratch directory for one test.
+pub fn scratch(test: &str) -> PathBuf {
+    let dir = std::env::temp_dir().join(format!("plantc-identify-{}-{}", std::process::id(), test));
+    let _ = std::fs::remove_dir_all(&dir);
+    std::fs::create_dir_all(&dir).expect("create scratch dir");
+    dir
+}
+
+/// Writes a file in a scratch directory and returns its path.
+pub fn write(test: &str, name: &str, text: &str) -> PathBuf {
+    let p = scratch(test).join(name);
+    std::fs::write(&p, text).expect("write test file");
+    p
+}
+
+/// A good CSV body of `n` rows at 500 Hz, header given.
+pub fn rows(n: usize, f: impl Fn(usize, f64) -> String) -> String {
+    (0..n)
+        .map(|k| {
+            let t = k as f64 * 0.002;
+            format!("{}\n", f(k, t))
+        })
+        .collect()
+}
+
+/// A good pendulum CSV with `n` rows.
+pub fn good_csv(n: usize) -> String {
+    let mut s = String::from("t,theta,alpha,Vm\n");
+    s += &rows(n, |k, t| {
+        format!(
+            "{t:.4},{:.6},{:.6},{:.3}",
+            0.01 * k as f64,
+            3.1 + 0.001 * k as f64,
+            0.5
+        )
+    });
+    s
+}
+
+/// The shared data folder, if present.
+pub fn shared_data() -> Option<PathBuf> {
+    if let Some(d) = std::env::var_os("PLANTC_DATA") {
+        return Some(PathBuf::from(d));
+    }
+    let p = PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../../shared/data");
+    let p2 = PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../shared/data");
+    [p, p2].into_iter().find(|p| p.join("clean").is_dir())
+}

@@ -1,0 +1,309 @@
+//! Reading CSV experiments: good files, unit suffixes, warnings and every bad-data case.
+
+mod common;
+
+use common::*;
+use plantc_identify::{read_experiment, read_experiments, DataError, DataWarning, ReadOptions};
+
+/// Reads a file that must fail; returns the error and its Display text.
+fn fail(test: &str, text: &str) -> (DataError, String) {
+    let p = write(test, "bad.csv", text);
+    let err = read_experiment(&p, &pendulum_spec()).expect_err("must fail");
+    let msg = err.to_string();
+    assert!(msg.contains("bad.csv"), "names the file: {msg}");
+    assert!(msg.contains("help:"), "has help: {msg}");
+    (err, msg)
+}
+
+#[test]
+fn reads_good_file() {
+    let p = write("good", "run.csv", &good_csv(20));
+    let (e, w) = read_experiment(&p, &pendulum_spec()).unwrap();
+    assert!(w.is_empty(), "{w:?}");
+    assert_eq!(e.name, "run");
+    assert_eq!(e.len(), 20);
+    assert_eq!(e.channel_names(), vec!["theta", "alpha", "Vm"]);
+    assert!((e.values("theta").unwrap()[3] - 0.03).abs() < 1e-12);
+    assert!((e.sample_time().unwrap() - 0.002).abs() < 1e-12);
+}
+
+#[test]
+fn columns_matched_by_name_and_extras_kept() {
+    let mut s = String::from("Vm,current,alpha,t,theta\n");
+    s += &rows(12, |k, t| format!("1.0,{k},3.0,{t},0.1"));
+    let p = write("byname", "x.csv", &s);
+    let (e, _) = read_experiment(&p, &pendulum_spec()).unwrap();
+    assert_eq!(e.channel_names(), vec!["theta", "alpha", "Vm", "current"]);
+    assert_eq!(e.values("current").unwrap()[5], 5.0);
+    assert_eq!(e.values("Vm").unwrap()[0], 1.0);
+}
+
+#[test]
+fn unit_suffixes_convert_to_si() {
+    let mut s = String::from("t[ms],theta[rad],alpha[deg],Vm[V],x[mm],y[cm]\n");
+    s += &rows(12, |k, _| format!("{},0.5,180,2,1500,250", 2 * k));
+    let p = write("units", "u.csv", &s);
+    let (e, w) = read_experiment(&p, &pendulum_spec()).unwrap();
+    assert!(w.is_empty(), "{w:?}");
+    assert!((e.t[1] - 0.002).abs() < 1e-15);
+    assert!((e.values("alpha").unwrap()[0] - std::f64::consts::PI).abs() < 1e-12);
+    assert_eq!(e.values("theta").unwrap()[0], 0.5);
+    assert!((e.values("x").unwrap()[0] - 1.5).abs() < 1e-12);
+    assert!((e.values("y").unwrap()[0] - 2.5).abs() < 1e-12);
+    assert_eq!(
+        e.channel("alpha").unwrap().unit_note.as_deref(),
+        Some("deg -> rad")
+    );
+    assert_eq!(
+        e.channel("theta").unwrap().unit_note.as_deref(),
+        Some("rad")
+    );
+}
+
+#[test]
+fn length_coordinates_in_mm_and_cm() {
+    let spec = plantc_identify::ChannelSpec::new()
+        .length("x")
+        .input("F", plantc_identify::Kind::Force);
+    let mut s = String::from("t,x[cm],F[N]\n");
+    s += &rows(12, |_, t| format!("{t},12.5,1"));
+    let p = write("cm", "c.csv", &s);
+    let (e, _) = read_experiment(&p, &spec).unwrap();
+    assert!((e.values("x").unwrap()[0] - 0.125).abs() < 1e-15);
+}
+
+#[test]
+fn several_files_are_several_experiments() {
+    let a = write("several_a", "a.csv", &good_csv(15));
+    let b = write("several_b", "b.csv", &good_csv(25));
+    let (es, _) = read_experiments(&[a, b], &pendulum_spec(), &ReadOptions::default()).unwrap();
+    assert_eq!(es.len(), 2);
+    assert_eq!((es[0].name.as_str(), es[0].len()), ("a", 15));
+    assert_eq!((es[1].name.as_str(), es[1].len()), ("b", 25));
+}
+
+#[test]
+fn nan_cell_names_line_and_column() {
+    let mut s = good_csv(20);
+    s = s.replacen("0.040000,", "NaN,", 1); // theta at k=4: line 6
+    let (e, msg) = fail("nan", &s);
+    assert!(msg.contains("bad.csv:6:2:"), "{msg}");
+    assert!(
+        msg.contains("non-finite") && msg.contains("`theta`"),
+        "{msg}"
+    );
+    assert_eq!((e.line(), e.column()), (Some(6), Some(2)));
+}
+
+#[test]
+fn empty_cell_names_line_and_column() {
+    let s = good_csv(20).replacen(",0.500\n", ",\n", 3); // Vm empty on lines 2..4
+    let (_, msg) = fail("empty", &s);
+    assert!(msg.contains("bad.csv:2:4:"), "{msg}");
+    assert!(msg.contains("empty cell in column `Vm`"), "{msg}");
+}
+
+#[test]
+fn short_row_is_an_empty_cell() {
+    let s = good_csv(20).replacen(",0.500\n", "\n", 1);
+    let (_, msg) = fail("shortrow", &s);
+    assert!(
+        msg.contains("bad.csv:2:4:") && msg.contains("empty cell"),
+        "{msg}"
+    );
+}
+
+#[test]
+fn unparsable_number() {
+    let s = good_csv(20).replacen("3.103000", "3,1o3", 1);
+    let (_, msg) = fail("unparsable", &s);
+    // The comma splits the cell: alpha reads `3` and Vm reads `1o3`.
+    assert!(msg.contains("bad.csv:5:4:"), "{msg}");
+    assert!(msg.contains("cannot parse `1o3`"), "{msg}");
+    let s = good_csv(20).replacen("3.103000", "3.1o3", 1);
+    let (_, msg) = fail("unparsable2", &s);
+    assert!(
+        msg.contains("bad.csv:5:3:") && msg.contains("`alpha`"),
+        "{msg}"
+    );
+}
+
+#[test]
+fn missing_column_lists_found_and_expected() {
+    let mut s = String::from("t,theta,Vm,extra\n");
+    s += &rows(12, |_, t| format!("{t},0,0,0"));
+    let (e, msg) = fail("missing", &s);
+    assert!(matches!(e, DataError::MissingColumn { .. }));
+    assert!(msg.contains("missing column `alpha`"), "{msg}");
+    assert!(msg.contains("found columns: t, theta, Vm, extra"), "{msg}");
+    assert!(msg.contains("expected: t, theta, alpha, Vm"), "{msg}");
+}
+
+#[test]
+fn missing_time_column() {
+    let mut s = String::from("time,theta,alpha,Vm\n");
+    s += &rows(12, |_, t| format!("{t},0,0,0"));
+    let (_, msg) = fail("notime", &s);
+    assert!(msg.contains("missing column `t`"), "{msg}");
+}
+
+#[test]
+fn duplicate_time() {
+    let s = good_csv(20).replacen("0.0060,", "0.0040,", 1); // line 5 repeats line 4
+    let (e, msg) = fail("duptime", &s);
+    assert!(
+        msg.contains("bad.csv:5:1:") && msg.contains("duplicate time"),
+        "{msg}"
+    );
+    assert!(matches!(e, DataError::TimeNotIncreasing { .. }));
+}
+
+#[test]
+fn decreasing_time() {
+    let s = good_csv(20).replacen("0.0060,", "0.0010,", 1);
+    let (_, msg) = fail("backtime", &s);
+    assert!(
+        msg.contains("bad.csv:5:1:") && msg.contains("time goes backwards"),
+        "{msg}"
+    );
+}
+
+#[test]
+fn too_short() {
+    let (e, msg) = fail("short", &good_csv(9));
+    assert!(
+        msg.contains("file too short: 9 samples, at least 10"),
+        "{msg}"
+    );
+    assert!(matches!(e, DataError::TooShort { samples: 9, .. }));
+    let (_, msg) = fail("headeronly", "t,theta,alpha,Vm\n");
+    assert!(msg.contains("0 samples"), "{msg}");
+}
+
+#[test]
+fn empty_file() {
+    let (e, msg) = fail("emptyfile", "");
+    assert!(matches!(e, DataError::MissingColumn { .. }), "{msg}");
+}
+
+#[test]
+fn unknown_unit_suffix() {
+    let mut s = String::from("t,theta,alpha[grad],Vm\n");
+    s += &rows(12, |_, t| format!("{t},0,0,0"));
+    let (_, msg) = fail("unit", &s);
+    assert!(msg.contains("bad.csv:1:3:"), "{msg}");
+    assert!(msg.contains("unknown unit suffix `[grad]`"), "{msg}");
+    assert!(msg.contains("deg"), "help lists known units: {msg}");
+}
+
+#[test]
+fn incompatible_unit_suffix() {
+    let mut s = String::from("t,theta[mm],alpha,Vm\n");
+    s += &rows(12, |_, t| format!("{t},0,0,0"));
+    let (_, msg) = fail("incompat", &s);
+    assert!(
+        msg.contains("bad.csv:1:2:") && msg.contains("length unit"),
+        "{msg}"
+    );
+}
+
+#[test]
+fn duplicate_column() {
+    let mut s = String::from("t,theta,alpha,theta[deg],Vm\n");
+    s += &rows(12, |_, t| format!("{t},0,0,0,0"));
+    let (_, msg) = fail("dupcol", &s);
+    assert!(
+        msg.contains("bad.csv:1:4:") && msg.contains("appears twice"),
+        "{msg}"
+    );
+}
+
+#[test]
+fn missing_file_is_an_error() {
+    let p = scratch("nofile").join("nope.csv");
+    let err = read_experiment(&p, &pendulum_spec()).unwrap_err();
+    assert!(err.to_string().contains("nope.csv"), "{err}");
+}
+
+#[test]
+fn bad_extra_column_is_dropped_with_warning() {
+    let mut s = String::from("t,theta,alpha,Vm,note\n");
+    s += &rows(12, |k, t| {
+        format!("{t},0,0,0,{}", if k == 3 { "x" } else { "1" })
+    });
+    let p = write("extra", "e.csv", &s);
+    let (e, w) = read_experiment(&p, &pendulum_spec()).unwrap();
+    assert!(e.channel("note").is_none());
+    assert!(
+        matches!(w[0], DataWarning::DroppedColumn { line: 5, .. }),
+        "{w:?}"
+    );
+}
+
+#[test]
+fn degree_range_warning() {
+    // A hanging pendulum swinging 60 deg, logged in degrees without suffix.
+    let mut s = String::from("t,theta,alpha,Vm\n");
+    s += &rows(1000, |_, t| {
+        let a = 180.0 + 60.0 * (6.0 * t).cos();
+        format!("{t:.4},0,{a:.6},0")
+    });
+    let p = write("degwarn", "d.csv", &s);
+    let (_, w) = read_experiment(&p, &pendulum_spec()).unwrap();
+    assert_eq!(w.len(), 1, "{w:?}");
+    let text = w[0].to_string();
+    assert!(
+        text.contains("`alpha`") && text.contains("degrees"),
+        "{text}"
+    );
+    assert!(text.contains("20 revolutions"), "{text}");
+}
+
+#[test]
+fn degree_quantum_warning() {
+    // Arm moving +-20 deg, 4096-count encoder, logged in degrees: small values,
+    // caught by the encoder-quantum rule.
+    let q = 360.0 / 4096.0;
+    let mut s = String::from("t,theta,alpha,Vm\n");
+    s += &rows(2000, |_, t| {
+        let th = (20.0 * (2.0 * t).sin() / q).round() * q;
+        format!("{t:.4},{th:.9},3.141592654,0")
+    });
+    let p = write("degq", "q.csv", &s);
+    let (_, w) = read_experiment(&p, &pendulum_spec()).unwrap();
+    assert_eq!(w.len(), 1, "{w:?}");
+    assert!(w[0].to_string().contains("360/4096"), "{}", w[0]);
+}
+
+#[test]
+fn radians_do_not_warn() {
+    // The same motion in radians, quantised at 2 pi/4096: no warning.
+    let q = 2.0 * std::f64::consts::PI / 4096.0;
+    let mut s = String::from("t,theta,alpha,Vm\n");
+    s += &rows(2000, |_, t| {
+        let th = (0.35 * (2.0 * t).sin() / q).round() * q;
+        let a = ((std::f64::consts::PI + 1.0 * (6.0 * t).cos()) / q).round() * q;
+        format!("{t:.4},{th:.9},{a:.9},0")
+    });
+    let p = write("radok", "r.csv", &s);
+    let (_, w) = read_experiment(&p, &pendulum_spec()).unwrap();
+    assert!(w.is_empty(), "{w:?}");
+}
+
+#[test]
+fn shared_data_files_load() {
+    let Some(dir) = shared_data() else {
+        eprintln!("skipping: shared data folder not found (set PLANTC_DATA)");
+        return;
+    };
+    for case in ["clean", "coulomb_pendulum", "spring_arm"] {
+        for f in ["free_swing_large", "free_swing_small", "driven"] {
+            let p = dir.join(case).join(format!("{f}.csv"));
+            let (e, w) = read_experiment(&p, &pendulum_spec()).unwrap();
+            // 10,001 lines: the header and 10,000 samples (t = 0 .. 19.998 s).
+            assert_eq!(e.len(), 10_000, "{}", p.display());
+            assert!(w.is_empty(), "{}: {w:?}", p.display());
+            assert!((e.sample_time().unwrap() - 0.002).abs() < 1e-9);
+        }
+    }
+}
