@@ -28,8 +28,13 @@ fn pipeline(name: &str, text: &str, set: Option<&str>) -> f64 {
 
 fn main() {
     let args: Vec<String> = std::env::args().collect();
-    let path = args.get(1).map_or("models/rotary_pendulum.plant", String::as_str);
-    let set = args.get(2).map(String::as_str).filter(|s| !s.is_empty() && *s != "-");
+    let path = args
+        .get(1)
+        .map_or("models/rotary_pendulum.plant", String::as_str);
+    let set = args
+        .get(2)
+        .map(String::as_str)
+        .filter(|s| !s.is_empty() && *s != "-");
     let repeats: usize = args.get(3).and_then(|s| s.parse().ok()).unwrap_or(200);
     let text = std::fs::read_to_string(path).expect("model file");
     let t0 = Instant::now();

@@ -21,12 +21,18 @@ pub struct CliError {
 impl CliError {
     /// Bad input from the user (exit code 2).
     pub fn input(message: impl Into<String>) -> CliError {
-        CliError { message: message.into(), code: EXIT_BAD_INPUT }
+        CliError {
+            message: message.into(),
+            code: EXIT_BAD_INPUT,
+        }
     }
 
     /// The computation failed (exit code 1).
     pub fn failure(message: impl Into<String>) -> CliError {
-        CliError { message: message.into(), code: EXIT_FAILURE }
+        CliError {
+            message: message.into(),
+            code: EXIT_FAILURE,
+        }
     }
 }
 
@@ -50,7 +56,9 @@ pub fn parse_overrides(params: &[String]) -> Result<Vec<(String, f64)>, CliError
         .iter()
         .map(|p| {
             let (name, value) = p.split_once('=').ok_or_else(|| {
-                CliError::input(format!("error: `--param {p}`: expected NAME=VALUE, e.g. `--param l2=0.1685`"))
+                CliError::input(format!(
+                    "error: `--param {p}`: expected NAME=VALUE, e.g. `--param l2=0.1685`"
+                ))
             })?;
             let v: f64 = value.trim().parse().map_err(|_| {
                 CliError::input(format!(
@@ -74,9 +82,9 @@ pub fn values(loaded: &LoadedModel, args: &ParamArgs) -> Result<ParameterValues,
 pub fn parse_assignments(text: &str, names: &[String], what: &str) -> Result<Vec<f64>, CliError> {
     let mut out = vec![0.0; names.len()];
     for item in text.split(',').map(str::trim).filter(|s| !s.is_empty()) {
-        let (name, value) = item.split_once('=').ok_or_else(|| {
-            CliError::input(format!("error: `{item}`: expected NAME=VALUE"))
-        })?;
+        let (name, value) = item
+            .split_once('=')
+            .ok_or_else(|| CliError::input(format!("error: `{item}`: expected NAME=VALUE")))?;
         let name = name.trim();
         let idx = names.iter().position(|n| n == name).ok_or_else(|| {
             CliError::input(format!(
@@ -84,8 +92,11 @@ pub fn parse_assignments(text: &str, names: &[String], what: &str) -> Result<Vec
                 names.join(", ")
             ))
         })?;
-        out[idx] = parse_quantity(value)
-            .ok_or_else(|| CliError::input(format!("error: `{value}` is not a number (e.g. 0.1, 10deg)")))?;
+        out[idx] = parse_quantity(value).ok_or_else(|| {
+            CliError::input(format!(
+                "error: `{value}` is not a number (e.g. 0.1, 10deg)"
+            ))
+        })?;
     }
     Ok(out)
 }
@@ -116,7 +127,10 @@ pub fn num(x: f64) -> String {
 /// Print a matrix with row labels.
 pub fn write_matrix(out: &mut dyn Write, name: &str, rows: &[Vec<f64>], labels: &[String]) {
     let _ = writeln!(out, "{name} =");
-    let cells: Vec<Vec<String>> = rows.iter().map(|r| r.iter().map(|x| num(*x)).collect()).collect();
+    let cells: Vec<Vec<String>> = rows
+        .iter()
+        .map(|r| r.iter().map(|x| num(*x)).collect())
+        .collect();
     let width = cells.iter().flatten().map(String::len).max().unwrap_or(1);
     let lw = labels.iter().map(String::len).max().unwrap_or(0);
     for (i, r) in cells.iter().enumerate() {

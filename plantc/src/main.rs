@@ -2,6 +2,10 @@
 //! library crates).
 
 fn main() {
-    let code = plantc::run(std::env::args_os(), &mut std::io::stdout(), &mut std::io::stderr());
+    let code = plantc::run(
+        std::env::args_os(),
+        &mut std::io::stdout(),
+        &mut std::io::stderr(),
+    );
     std::process::exit(code);
 }

@@ -42,7 +42,11 @@ impl fmt::Display for AnalysisError {
                 "input-output linearization is implemented for one input; the model has {inputs}"
             ),
             AnalysisError::UnknownOutput { name, known } => {
-                write!(f, "unknown output `{name}` (the model declares: {})", known.join(", "))
+                write!(
+                    f,
+                    "unknown output `{name}` (the model declares: {})",
+                    known.join(", ")
+                )
             }
         }
     }
@@ -126,7 +130,9 @@ fn state_factors(e: Expr, state: &[Symbol]) -> Vec<Expr> {
 /// Lie derivatives of `h` until the input appears: the relative degree.
 pub fn lie_chain(ca: &ControlAffine, h: Expr) -> Result<LieChain, AnalysisError> {
     if ca.inputs.len() != 1 {
-        return Err(AnalysisError::MultiInput { inputs: ca.inputs.len() });
+        return Err(AnalysisError::MultiInput {
+            inputs: ca.inputs.len(),
+        });
     }
     let g: Vec<Expr> = ca.g.iter().map(|row| row[0]).collect();
     let n = ca.state.len();
@@ -147,5 +153,7 @@ pub fn lie_chain(ca: &ControlAffine, h: Expr) -> Result<LieChain, AnalysisError>
         }
         lg[k] = Expr::zero();
     }
-    Err(AnalysisError::RelativeDegreeUndefined { at: "every state".into() })
+    Err(AnalysisError::RelativeDegreeUndefined {
+        at: "every state".into(),
+    })
 }

@@ -58,8 +58,15 @@ pub enum LinearizeError {
 impl fmt::Display for LinearizeError {
     fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
         match self {
-            LinearizeError::WrongSize { expected, found, what } => {
-                write!(f, "the operating point has {found} {what} values, the model has {expected}")
+            LinearizeError::WrongSize {
+                expected,
+                found,
+                what,
+            } => {
+                write!(
+                    f,
+                    "the operating point has {found} {what} values, the model has {expected}"
+                )
             }
             LinearizeError::SingularMassMatrix => {
                 write!(f, "the mass matrix is singular at the operating point")
@@ -90,7 +97,12 @@ pub struct Linearization {
     pub notes: Vec<String>,
 }
 
-fn find_nonsmooth(e: Expr, at: &HashMap<Symbol, f64>, out: &mut Vec<Expr>, seen: &mut HashSet<Expr>) {
+fn find_nonsmooth(
+    e: Expr,
+    at: &HashMap<Symbol, f64>,
+    out: &mut Vec<Expr>,
+    seen: &mut HashSet<Expr>,
+) {
     if !seen.insert(e) {
         return;
     }
@@ -115,10 +127,18 @@ pub fn linearize(
     let n = eqs.coords.len();
     let m = eqs.inputs.len();
     if op.x.len() != 2 * n {
-        return Err(LinearizeError::WrongSize { expected: 2 * n, found: op.x.len(), what: "state" });
+        return Err(LinearizeError::WrongSize {
+            expected: 2 * n,
+            found: op.x.len(),
+            what: "state",
+        });
     }
     if op.u.len() != m {
-        return Err(LinearizeError::WrongSize { expected: m, found: op.u.len(), what: "input" });
+        return Err(LinearizeError::WrongSize {
+            expected: m,
+            found: op.u.len(),
+            what: "input",
+        });
     }
     let mut at = values.symbol_map(model);
     let state = model.state_symbols();

@@ -4,5 +4,5 @@
 mod lie;
 mod linearize;
 
-pub use linearize::{linearize, Linearization, LinearizeError, OperatingPoint};
 pub use lie::{lie_chain, lie_derivative, AnalysisError, LieChain};
+pub use linearize::{linearize, Linearization, LinearizeError, OperatingPoint};

@@ -8,9 +8,13 @@
 
 use std::fmt;
 
-use crate::analysis::{lie_chain, linearize, AnalysisError, LieChain, LinearizeError, OperatingPoint};
+use crate::analysis::{
+    lie_chain, linearize, AnalysisError, LieChain, LinearizeError, OperatingPoint,
+};
 use crate::linear::{lqr, place, LinearError, Pole};
-use crate::mechanics::{control_affine, derive_equations, ControlAffine, Equations, MechanicsError};
+use crate::mechanics::{
+    control_affine, derive_equations, ControlAffine, Equations, MechanicsError,
+};
 use crate::model::{ControllerSpec, Model, ParameterValues};
 use crate::sym::{Expr, Symbol};
 
@@ -142,21 +146,34 @@ pub fn resolve(
     name: &str,
     values: &ParameterValues,
 ) -> Result<ResolvedController, ControlError> {
-    let spec = model.controller(name).ok_or_else(|| ControlError::UnknownController {
-        name: name.to_string(),
-        known: model.controllers.iter().map(|c| c.name().to_string()).collect(),
-    })?;
+    let spec = model
+        .controller(name)
+        .ok_or_else(|| ControlError::UnknownController {
+            name: name.to_string(),
+            known: model
+                .controllers
+                .iter()
+                .map(|c| c.name().to_string())
+                .collect(),
+        })?;
     let op = OperatingPoint::zero(model);
     let n = op.x.len();
-    let design = |f: &dyn Fn(&nalgebra::DMatrix<f64>, &nalgebra::DMatrix<f64>) -> Result<nalgebra::DMatrix<f64>, LinearError>| {
-        let lin = linearize(model, &derivation.equations, values, &op).map_err(ControlError::Linearize)?;
+    let design = |f: &dyn Fn(
+        &nalgebra::DMatrix<f64>,
+        &nalgebra::DMatrix<f64>,
+    ) -> Result<nalgebra::DMatrix<f64>, LinearError>| {
+        let lin = linearize(model, &derivation.equations, values, &op)
+            .map_err(ControlError::Linearize)?;
         let k = f(&lin.a, &lin.b).map_err(ControlError::Design)?;
         Ok::<_, ControlError>(crate::linear::matrix_to_rows(&k))
     };
     let k = match spec {
         ControllerSpec::Gains { k, .. } => {
             if let Some(row) = k.iter().find(|r| r.len() != n) {
-                return Err(ControlError::GainSize { expected: n, found: row.len() });
+                return Err(ControlError::GainSize {
+                    expected: n,
+                    found: row.len(),
+                });
             }
             k.clone()
         }
@@ -169,7 +186,9 @@ pub fn resolve(
             let rm = nalgebra::DMatrix::from_diagonal(&nalgebra::DVector::from_vec(r.clone()));
             design(&|a, b| lqr(a, b, &qm, &rm).map(|l| l.k))?
         }
-        ControllerSpec::FeedbackLinearization { output, gains, v, .. } => {
+        ControllerSpec::FeedbackLinearization {
+            output, gains, v, ..
+        } => {
             let h = output_expr(model, output).map_err(ControlError::Analysis)?;
             let chain = lie_chain(&derivation.affine, h).map_err(ControlError::Analysis)?;
             let law = chain.law(*v);

@@ -82,7 +82,8 @@ impl Equations {
     pub fn rhs(&self) -> Vec<Expr> {
         (0..self.coords.len())
             .map(|i| {
-                let bu: Expr = self.inputs
+                let bu: Expr = self
+                    .inputs
                     .iter()
                     .enumerate()
                     .map(|(j, u)| self.input_matrix[i][j] * Expr::symbol(*u))

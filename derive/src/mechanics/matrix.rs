@@ -75,7 +75,12 @@ mod tests {
 
     #[test]
     fn two_by_two() {
-        let (a, b, c, d) = (Expr::sym("a"), Expr::sym("b"), Expr::sym("c"), Expr::sym("d"));
+        let (a, b, c, d) = (
+            Expr::sym("a"),
+            Expr::sym("b"),
+            Expr::sym("c"),
+            Expr::sym("d"),
+        );
         let m = vec![vec![a, b], vec![c, d]];
         assert_eq!(determinant(&m), a * d - b * c);
         let adj = adjugate(&m);

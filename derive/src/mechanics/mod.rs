@@ -5,5 +5,7 @@
 mod euler_lagrange;
 mod matrix;
 
-pub use euler_lagrange::{control_affine, derive_equations, ControlAffine, Equations, MechanicsError};
+pub use euler_lagrange::{
+    control_affine, derive_equations, ControlAffine, Equations, MechanicsError,
+};
 pub use matrix::{adjugate, determinant};

@@ -5,7 +5,7 @@ use std::fmt;
 use std::path::Path;
 
 use super::{
-    Coordinate, CoordinateKind, ControllerSpec, Derived, Input, Model, Output, Parameter,
+    ControllerSpec, Coordinate, CoordinateKind, Derived, Input, Model, Output, Parameter,
     ParameterSet,
 };
 use crate::lang::ast::{self, BinOp, ExprKind};
@@ -48,9 +48,10 @@ impl LoadError {
     pub fn render(&self) -> String {
         match self {
             LoadError::Io { path, message } => format!("error: cannot read `{path}`: {message}\n"),
-            LoadError::Invalid { source, diagnostics } => {
-                crate::lang::diagnostic::render(source, diagnostics)
-            }
+            LoadError::Invalid {
+                source,
+                diagnostics,
+            } => crate::lang::diagnostic::render(source, diagnostics),
         }
     }
 }
@@ -200,9 +201,17 @@ impl<'a> Lowerer<'a> {
 /// [`crate::lang::parse_and_check`] without errors.
 pub fn lower(file: &ast::ModelFile, symbols: Option<&Symbols>) -> Model {
     let mut lw = Lowerer {
-        lets: file.lets.iter().map(|l| (l.name.name.as_str(), l)).collect(),
+        lets: file
+            .lets
+            .iter()
+            .map(|l| (l.name.name.as_str(), l))
+            .collect(),
         let_values: HashMap::new(),
-        params: file.parameters.iter().map(|p| p.name.name.clone()).collect(),
+        params: file
+            .parameters
+            .iter()
+            .map(|p| p.name.name.clone())
+            .collect(),
         derived: Vec::new(),
         derived_names: HashSet::new(),
         in_progress: HashSet::new(),
@@ -233,7 +242,10 @@ pub fn lower(file: &ast::ModelFile, symbols: Option<&Symbols>) -> Model {
                 name: i.name.name.clone(),
                 symbol: Symbol::new(&i.name.name),
                 unit: i.unit.as_ref().map(|u| u.text.clone()).unwrap_or_default(),
-                limits: i.limits.as_ref().map(|b| (b.lo.value() * s, b.hi.value() * s)),
+                limits: i
+                    .limits
+                    .as_ref()
+                    .map(|b| (b.lo.value() * s, b.hi.value() * s)),
                 description: i.doc.as_ref().map(|d| d.value.clone()),
             }
         })
@@ -249,7 +261,10 @@ pub fn lower(file: &ast::ModelFile, symbols: Option<&Symbols>) -> Model {
                 value: p.value.value() * s,
                 unit: p.unit.as_ref().map(|u| u.text.clone()).unwrap_or_default(),
                 description: p.doc.as_ref().map(|d| d.value.clone()),
-                estimate: p.estimate.as_ref().map(|b| (b.lo.value() * s, b.hi.value() * s)),
+                estimate: p
+                    .estimate
+                    .as_ref()
+                    .map(|b| (b.lo.value() * s, b.hi.value() * s)),
             }
         })
         .collect();
@@ -264,8 +279,14 @@ pub fn lower(file: &ast::ModelFile, symbols: Option<&Symbols>) -> Model {
             },
         })
         .collect();
-    let kinetic = file.kinetic.first().map_or(Expr::zero(), |k| lw.expr(&k.expr));
-    let potential = file.potential.first().map_or(Expr::zero(), |v| lw.expr(&v.expr));
+    let kinetic = file
+        .kinetic
+        .first()
+        .map_or(Expr::zero(), |k| lw.expr(&k.expr));
+    let potential = file
+        .potential
+        .first()
+        .map_or(Expr::zero(), |v| lw.expr(&v.expr));
     let forces = coordinates
         .iter()
         .map(|c| {
@@ -297,10 +318,20 @@ pub fn lower(file: &ast::ModelFile, symbols: Option<&Symbols>) -> Model {
                 .collect(),
         })
         .collect();
-    let controllers = file.controllers.iter().map(|c| lower_controller(&mut lw, c)).collect();
+    let controllers = file
+        .controllers
+        .iter()
+        .map(|c| lower_controller(&mut lw, c))
+        .collect();
     Model {
-        name: file.model.as_ref().map_or("model".to_string(), |m| m.name.name.clone()),
-        description: file.model.as_ref().and_then(|m| m.title.as_ref().map(|t| t.value.clone())),
+        name: file
+            .model
+            .as_ref()
+            .map_or("model".to_string(), |m| m.name.name.clone()),
+        description: file
+            .model
+            .as_ref()
+            .and_then(|m| m.title.as_ref().map(|t| t.value.clone())),
         coordinates,
         inputs,
         outputs,

@@ -88,7 +88,10 @@ pub(crate) fn nearest<'a>(name: &str, known: impl Iterator<Item = &'a str>) -> V
         .filter(|(d, k)| *d <= 2 || k.starts_with(name))
         .collect();
     v.sort();
-    v.into_iter().take(3).map(|(_, k)| format!("`{k}`")).collect()
+    v.into_iter()
+        .take(3)
+        .map(|(_, k)| format!("`{k}`"))
+        .collect()
 }
 
 impl ParameterValues {

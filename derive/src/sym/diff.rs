@@ -139,6 +139,9 @@ mod tests {
         let qdd = Expr::symbol(c.qdd);
         // d/dt (cos(q) q') = -sin(q) q'^2 + cos(q) q''
         let e = q.cos() * qd;
-        assert_eq!(time_derivative(e, &[c]), -q.sin() * qd.powi(2) + q.cos() * qdd);
+        assert_eq!(
+            time_derivative(e, &[c]),
+            -q.sin() * qd.powi(2) + q.cos() * qdd
+        );
     }
 }

@@ -479,7 +479,10 @@ fn contains_memo(e: Expr, sym: Symbol, seen: &mut HashMap<Expr, bool>) -> bool {
     let r = match e.node() {
         Node::Symbol(s) => *s == sym,
         Node::Rational(_) | Node::Float(_) => false,
-        _ => e.children().into_iter().any(|c| contains_memo(c, sym, seen)),
+        _ => e
+            .children()
+            .into_iter()
+            .any(|c| contains_memo(c, sym, seen)),
     };
     seen.insert(e, r);
     r
@@ -551,7 +554,9 @@ pub fn structural_cmp(a: Expr, b: Expr) -> Ordering {
         (Node::Pow(b1, e1), Node::Pow(b2, e2)) | (Node::Atan2(b1, e1), Node::Atan2(b2, e2)) => {
             structural_cmp(*b1, *b2).then_with(|| structural_cmp(*e1, *e2))
         }
-        (Node::Func(f1, x1), Node::Func(f2, x2)) => f1.cmp(f2).then_with(|| structural_cmp(*x1, *x2)),
+        (Node::Func(f1, x1), Node::Func(f2, x2)) => {
+            f1.cmp(f2).then_with(|| structural_cmp(*x1, *x2))
+        }
         _ => Ordering::Equal,
     }
 }
@@ -895,7 +900,10 @@ binop!(Sub, sub, |a, b| build_add(vec![
     build_mul(vec![Expr::int(-1), b])
 ]));
 binop!(Mul, mul, |a, b| build_mul(vec![a, b]));
-binop!(Div, div, |a, b| build_mul(vec![a, build_pow(b, Expr::int(-1))]));
+binop!(Div, div, |a, b| build_mul(vec![
+    a,
+    build_pow(b, Expr::int(-1))
+]));
 
 impl std::ops::Neg for Expr {
     type Output = Expr;

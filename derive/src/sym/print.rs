@@ -77,7 +77,8 @@ fn fmt_float(x: f64) -> String {
 fn write_plain(out: &mut String, e: Expr, outer: u8) {
     match e.node() {
         Node::Rational(r) => {
-            let needs = (r.is_negative() && outer > PREC_ADD) || (!r.is_integer() && outer > PREC_MUL);
+            let needs =
+                (r.is_negative() && outer > PREC_ADD) || (!r.is_integer() && outer > PREC_MUL);
             if needs {
                 out.push('(');
             }

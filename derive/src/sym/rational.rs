@@ -38,7 +38,11 @@ impl Rational {
             return None;
         }
         let g = gcd(num, den);
-        let (mut n, mut d) = if g > 1 { (num / g, den / g) } else { (num, den) };
+        let (mut n, mut d) = if g > 1 {
+            (num / g, den / g)
+        } else {
+            (num, den)
+        };
         if d < 0 {
             n = n.checked_neg()?;
             d = d.checked_neg()?;
@@ -236,8 +240,7 @@ impl Rational {
             p1 = p2;
             q1 = q2;
             let frac = v - a;
-            if frac.abs() < 1e-300 || (p1 as f64 / q1 as f64 - x).abs() <= f64::EPSILON * x.abs()
-            {
+            if frac.abs() < 1e-300 || (p1 as f64 / q1 as f64 - x).abs() <= f64::EPSILON * x.abs() {
                 break;
             }
             v = 1.0 / frac;
@@ -270,10 +273,7 @@ impl PartialOrd for Rational {
 
 impl Ord for Rational {
     fn cmp(&self, o: &Self) -> Ordering {
-        match (
-            self.num.checked_mul(o.den),
-            o.num.checked_mul(self.den),
-        ) {
+        match (self.num.checked_mul(o.den), o.num.checked_mul(self.den)) {
             (Some(a), Some(b)) => a.cmp(&b),
             _ => cmp_frac(self.num, self.den, o.num, o.den),
         }
@@ -340,7 +340,10 @@ mod tests {
                 .checked_pow_rational(Rational::new(1, 2).unwrap()),
             Rational::new(2, 3)
         );
-        assert_eq!(Rational::int(2).checked_pow_rational(Rational::new(1, 2).unwrap()), None);
+        assert_eq!(
+            Rational::int(2).checked_pow_rational(Rational::new(1, 2).unwrap()),
+            None
+        );
         assert_eq!(Rational::approximate(0.75, 1000), Rational::new(3, 4));
         // Ordering stays exact when the cross products overflow.
         let big = i128::MAX / 3;

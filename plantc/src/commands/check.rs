@@ -5,7 +5,12 @@ use std::path::Path;
 
 use crate::common::{load, CliError};
 
-pub fn run(path: &Path, json: bool, out: &mut dyn Write, err: &mut dyn Write) -> Result<(), CliError> {
+pub fn run(
+    path: &Path,
+    json: bool,
+    out: &mut dyn Write,
+    err: &mut dyn Write,
+) -> Result<(), CliError> {
     let loaded = load(path, err)?;
     let m = &loaded.model;
     if json {
@@ -19,7 +24,11 @@ pub fn run(path: &Path, json: bool, out: &mut dyn Write, err: &mut dyn Write) ->
             "controllers": m.controllers.iter().map(|c| c.name()).collect::<Vec<_>>(),
             "warnings": loaded.diagnostics.len(),
         });
-        let _ = writeln!(out, "{}", serde_json::to_string_pretty(&v).unwrap_or_default());
+        let _ = writeln!(
+            out,
+            "{}",
+            serde_json::to_string_pretty(&v).unwrap_or_default()
+        );
     } else {
         let _ = writeln!(
             out,

@@ -38,11 +38,19 @@ pub fn run(
             "g": ca.g.iter().map(|r| strings(r)).collect::<Vec<_>>(),
             "derived": model.derived.iter().map(|d| (d.name.clone(), d.expr.to_string())).collect::<std::collections::BTreeMap<_, _>>(),
         });
-        let _ = writeln!(out, "{}", serde_json::to_string_pretty(&v).unwrap_or_default());
+        let _ = writeln!(
+            out,
+            "{}",
+            serde_json::to_string_pretty(&v).unwrap_or_default()
+        );
         return Ok(());
     }
     let show = |e: Expr| if latex { e.to_latex() } else { e.to_string() };
-    let _ = writeln!(out, "model {}: M(q) q'' + bias(q, q') = Q0(q, q') + B(q, q') u", model.name);
+    let _ = writeln!(
+        out,
+        "model {}: M(q) q'' + bias(q, q') = Q0(q, q') + B(q, q') u",
+        model.name
+    );
     let _ = writeln!(out);
     for d in &model.derived {
         let _ = writeln!(out, "  {} = {}", d.name, show(d.expr));

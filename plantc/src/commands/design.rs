@@ -14,8 +14,9 @@ use crate::common::{num, write_matrix, CliError};
 
 fn linear_model(src: &LinearSource, err: &mut dyn Write) -> Result<LinearModel, CliError> {
     if let Some(path) = &src.linear {
-        let text = std::fs::read_to_string(path)
-            .map_err(|e| CliError::input(format!("error: cannot read `{}`: {e}", path.display())))?;
+        let text = std::fs::read_to_string(path).map_err(|e| {
+            CliError::input(format!("error: cannot read `{}`: {e}", path.display()))
+        })?;
         return LinearModel::from_json(&text)
             .map_err(|e| CliError::input(format!("error: {}: {e}", path.display())));
     }
@@ -29,7 +30,11 @@ fn linear_model(src: &LinearSource, err: &mut dyn Write) -> Result<LinearModel, 
 
 fn diag(text: &str, n: usize, what: &str) -> Result<DMatrix<f64>, CliError> {
     let v: Result<Vec<f64>, _> = text.split(',').map(|s| s.trim().parse::<f64>()).collect();
-    let v = v.map_err(|_| CliError::input(format!("error: --{what} `{text}`: expected comma-separated numbers")))?;
+    let v = v.map_err(|_| {
+        CliError::input(format!(
+            "error: --{what} `{text}`: expected comma-separated numbers"
+        ))
+    })?;
     if v.len() != n {
         return Err(CliError::input(format!(
             "error: --{what} has {} entries, the system needs {n}",
@@ -55,8 +60,10 @@ pub fn place(
     err: &mut dyn Write,
 ) -> Result<(), CliError> {
     let lm = linear_model(src, err)?;
-    let desired = parse_poles(poles).map_err(|e| CliError::input(format!("error: --poles: {e}")))?;
-    let p = solve_place(&lm.a, &lm.b, &desired).map_err(|e| CliError::failure(format!("error: {e}")))?;
+    let desired =
+        parse_poles(poles).map_err(|e| CliError::input(format!("error: --poles: {e}")))?;
+    let p = solve_place(&lm.a, &lm.b, &desired)
+        .map_err(|e| CliError::failure(format!("error: {e}")))?;
     let report = PlaceReport::from(&p);
     if json {
         let _ = writeln!(out, "{}", to_json(&report));
@@ -80,7 +87,8 @@ pub fn lqr(
     let lm = linear_model(src, err)?;
     let qm = diag(q, lm.n_states(), "q")?;
     let rm = diag(r, lm.n_inputs(), "r")?;
-    let l = solve_lqr(&lm.a, &lm.b, &qm, &rm).map_err(|e| CliError::failure(format!("error: {e}")))?;
+    let l =
+        solve_lqr(&lm.a, &lm.b, &qm, &rm).map_err(|e| CliError::failure(format!("error: {e}")))?;
     let report = LqrReport::from(&l);
     if json {
         let _ = writeln!(out, "{}", to_json(&report));
@@ -91,6 +99,10 @@ pub fn lqr(
     write_matrix(out, "P", &report.p, &lm.state);
     let cl: Vec<String> = report.closed_loop_poles.iter().map(pole_text).collect();
     let _ = writeln!(out, "closed-loop poles: {}", cl.join(", "));
-    let _ = writeln!(out, "CARE residual (relative): {:.3e}", report.care_residual);
+    let _ = writeln!(
+        out,
+        "CARE residual (relative): {:.3e}",
+        report.care_residual
+    );
     Ok(())
 }

@@ -30,7 +30,8 @@ pub fn linearize_file(
         op.u.copy_from_slice(&v[n..]);
     }
     let eqs = derive_equations(model).map_err(|e| CliError::failure(format!("error: {e}")))?;
-    let lin = linearize(model, &eqs, &vals, &op).map_err(|e| CliError::failure(format!("error: {e}")))?;
+    let lin =
+        linearize(model, &eqs, &vals, &op).map_err(|e| CliError::failure(format!("error: {e}")))?;
     for note in &lin.notes {
         let _ = writeln!(err, "note: {note}");
     }
@@ -39,8 +40,13 @@ pub fn linearize_file(
 
 /// The linear model of a linearization.
 pub fn to_linear_model(lin: &Linearization) -> Result<LinearModel, CliError> {
-    LinearModel::with_names(lin.state.clone(), lin.inputs.clone(), lin.a.clone(), lin.b.clone())
-        .map_err(|e| CliError::failure(format!("error: {e}")))
+    LinearModel::with_names(
+        lin.state.clone(),
+        lin.inputs.clone(),
+        lin.a.clone(),
+        lin.b.clone(),
+    )
+    .map_err(|e| CliError::failure(format!("error: {e}")))
 }
 
 pub fn run(
@@ -53,7 +59,8 @@ pub fn run(
 ) -> Result<(), CliError> {
     let lin = linearize_file(path, params, at, err)?;
     let p = poles(&lin.a).map_err(|e| CliError::failure(format!("error: {e}")))?;
-    let ctrb = controllability(&lin.a, &lin.b).map_err(|e| CliError::failure(format!("error: {e}")))?;
+    let ctrb =
+        controllability(&lin.a, &lin.b).map_err(|e| CliError::failure(format!("error: {e}")))?;
     if json {
         let v = serde_json::json!({
             "state": lin.state,
@@ -67,24 +74,47 @@ pub fn run(
             "singular_values": ctrb.singular_values,
             "notes": lin.notes,
         });
-        let _ = writeln!(out, "{}", serde_json::to_string_pretty(&v).unwrap_or_default());
+        let _ = writeln!(
+            out,
+            "{}",
+            serde_json::to_string_pretty(&v).unwrap_or_default()
+        );
         return Ok(());
     }
-    let _ = writeln!(out, "state x = ({}), input u = ({})", lin.state.join(", "), lin.inputs.join(", "));
+    let _ = writeln!(
+        out,
+        "state x = ({}), input u = ({})",
+        lin.state.join(", "),
+        lin.inputs.join(", ")
+    );
     write_matrix(out, "A", &matrix_to_rows(&lin.a), &lin.state);
     write_matrix(out, "B", &matrix_to_rows(&lin.b), &lin.state);
     let ps: Vec<String> = p
         .iter()
-        .map(|x| if x.im == 0.0 { num(x.re) } else { format!("{}{:+}i", num(x.re), x.im) })
+        .map(|x| {
+            if x.im == 0.0 {
+                num(x.re)
+            } else {
+                format!("{}{:+}i", num(x.re), x.im)
+            }
+        })
         .collect();
     let _ = writeln!(out, "open-loop poles: {}", ps.join(", "));
-    let sv: Vec<String> = ctrb.singular_values.iter().map(|s| format!("{s:.3e}")).collect();
+    let sv: Vec<String> = ctrb
+        .singular_values
+        .iter()
+        .map(|s| format!("{s:.3e}"))
+        .collect();
     let _ = writeln!(
         out,
         "controllability: rank {} of {} ({}; singular values {}; tolerance {:.3e})",
         ctrb.rank,
         lin.state.len(),
-        if ctrb.controllable { "controllable" } else { "NOT controllable" },
+        if ctrb.controllable {
+            "controllable"
+        } else {
+            "NOT controllable"
+        },
         sv.join(", "),
         ctrb.tolerance
     );

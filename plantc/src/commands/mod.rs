@@ -15,10 +15,17 @@ pub fn dispatch(cli: &Cli, out: &mut dyn Write, err: &mut dyn Write) -> Result<(
     match &cli.command {
         Command::Check { model, json } => check::run(model, *json, out, err),
         Command::Derive { model, json, latex } => derive::run(model, *json, *latex, out, err),
-        Command::Linearize { model, params, at, json } => {
-            linearize::run(model, params, at.as_deref(), *json, out, err)
-        }
-        Command::Place { source, poles, json } => design::place(source, poles, *json, out, err),
+        Command::Linearize {
+            model,
+            params,
+            at,
+            json,
+        } => linearize::run(model, params, at.as_deref(), *json, out, err),
+        Command::Place {
+            source,
+            poles,
+            json,
+        } => design::place(source, poles, *json, out, err),
         Command::Lqr { source, q, r, json } => design::lqr(source, q, r, *json, out, err),
     }
 }
