@@ -17,4 +17,5 @@ pub mod lang;
 pub mod linear;
 pub mod mechanics;
 pub mod model;
+pub mod simulate;
 pub mod sym;

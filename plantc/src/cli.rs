@@ -85,6 +85,48 @@ pub enum Command {
         #[arg(long)]
         json: bool,
     },
+    /// Simulate the model with one of its controllers; write a CSV trajectory.
+    Sim(SimArgs),
+}
+
+/// Arguments of `plantc sim`.
+#[derive(Debug, Args, Clone)]
+pub struct SimArgs {
+    /// The model file.
+    pub model: PathBuf,
+    #[command(flatten)]
+    pub params: ParamArgs,
+    /// The controller declared in the model file.
+    #[arg(long)]
+    pub controller: String,
+    /// Override controller gains, e.g. `--gain a=1.5,b=1.5`.
+    #[arg(long, value_name = "NAME=VALUE,...", allow_hyphen_values = true)]
+    pub gain: Vec<String>,
+    /// Initial state, e.g. `--x0 alpha=10deg` (unnamed states are 0).
+    #[arg(long, value_name = "NAME=VALUE,...", allow_hyphen_values = true)]
+    pub x0: Option<String>,
+    /// Simulated time (s).
+    #[arg(long, default_value_t = 5.0)]
+    pub duration: f64,
+    /// Output CSV file (never overwritten unless --force).
+    #[arg(short = 'o', long = "output", value_name = "FILE.csv")]
+    pub output: PathBuf,
+    /// Also draw angles and inputs against time as SVG.
+    #[arg(long, value_name = "FILE.svg")]
+    pub plot: Option<PathBuf>,
+    /// Sample the controller at this rate (Hz) and hold its output; default:
+    /// continuous time (the law evaluated inside every integrator stage).
+    #[arg(long, value_name = "HZ")]
+    pub sample_rate: Option<f64>,
+    /// Output samples per second.
+    #[arg(long, value_name = "HZ", default_value_t = 1000.0)]
+    pub output_rate: f64,
+    /// Relative integrator tolerance (default 1e-8; absolute = rtol/100).
+    #[arg(long)]
+    pub rtol: Option<f64>,
+    /// Overwrite existing output files.
+    #[arg(long)]
+    pub force: bool,
 }
 
 /// Where a linear model comes from: a model file (linearized about 0) or a

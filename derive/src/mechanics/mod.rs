@@ -4,8 +4,10 @@
 
 mod euler_lagrange;
 mod matrix;
+mod numeric;
 
 pub use euler_lagrange::{
     control_affine, derive_equations, ControlAffine, Equations, MechanicsError,
 };
 pub use matrix::{adjugate, determinant};
+pub use numeric::{NumericDynamics, NumericError, Workspace};

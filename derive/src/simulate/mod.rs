@@ -1,0 +1,496 @@
+//! Closed- and open-loop simulation of a model's equations of motion.
+//!
+//! `x' = F(x, sat(u(t, x)))` is integrated by an adaptive Dormand-Prince 5(4)
+//! method ([`rk::DormandPrince`]) that lands exactly on every output sample,
+//! controller sample and input breakpoint. The controller is either evaluated
+//! inside every integrator stage (continuous time, the default) or sampled at
+//! [`SimOptions::sample_rate`] and held (zero-order hold; the integrator
+//! restarts at every sample). Inputs are clipped to the model's limits.
+//!
+//! ```no_run
+//! # use plantc_derive::{model::*, control::*, simulate::*};
+//! # let model: Model = todo!();
+//! let values = ParameterValues::new(&model, Some("thesis"), &[]).unwrap();
+//! let derivation = Derivation::new(&model).unwrap();
+//! let ctrl = resolve(&model, &derivation, "feedback_linearization", &values).unwrap();
+//! let control = Control::Feedback(ControllerEval::new(&model, &ctrl).unwrap());
+//! let x0 = vec![0.0, 10f64.to_radians(), 0.0, 0.0];
+//! let problem = SimProblem::new(&model, &derivation.equations, &values, control, x0, 5.0).unwrap();
+//! let traj = simulate(&problem, &SimOptions::default()).unwrap();
+//! ```
+
+mod controller;
+pub mod rk;
+
+use std::fmt;
+
+pub use controller::{set_gains, ControllerEval, ControllerWorkspace, InputSignal};
+use rk::{DormandPrince, RkError, RkOptions, RkStats};
+
+use crate::mechanics::{Equations, NumericDynamics, NumericError, Workspace};
+use crate::model::{Model, ParameterValues};
+use crate::sym::{Expr, Symbol, Tape};
+
+/// Why a simulation could not be set up or failed.
+#[derive(Clone, Debug, PartialEq)]
+pub enum SimError {
+    /// Inconsistent problem (sizes, non-finite values, options).
+    Setup(String),
+    /// The equations could not be compiled.
+    Dynamics(NumericError),
+    /// The mass matrix became singular.
+    Singular {
+        /// Time (s).
+        t: f64,
+    },
+    /// The controller returned a non-finite input.
+    NonFiniteControl {
+        /// Time (s).
+        t: f64,
+        /// Input name.
+        input: String,
+    },
+    /// The integrator failed (step too small, too many steps).
+    Integrator(String),
+    /// `--gain` names a gain the controller does not have.
+    UnknownGain {
+        /// Controller name.
+        controller: String,
+        /// Gain asked for.
+        name: String,
+        /// Gains it has.
+        known: Vec<String>,
+    },
+}
+
+impl fmt::Display for SimError {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        match self {
+            SimError::Setup(s) => write!(f, "{s}"),
+            SimError::Dynamics(e) => write!(f, "{e}"),
+            SimError::Singular { t } => write!(f, "the mass matrix became singular at t = {t:.6} s"),
+            SimError::NonFiniteControl { t, input } => write!(
+                f,
+                "the controller returned a non-finite `{input}` at t = {t:.6} s (singular law or diverged state)"
+            ),
+            SimError::Integrator(s) => write!(f, "{s}"),
+            SimError::UnknownGain { controller, name, known } => {
+                write!(f, "controller `{controller}` has no gain `{name}`")?;
+                if known.is_empty() {
+                    write!(f, " (it has no named gains)")
+                } else {
+                    write!(f, " (known: {})", known.join(", "))
+                }
+            }
+        }
+    }
+}
+
+impl std::error::Error for SimError {}
+
+/// What drives the inputs.
+#[derive(Clone, Debug)]
+pub enum Control {
+    /// A feedback controller `u(x)`.
+    Feedback(ControllerEval),
+    /// An input given as a function of time.
+    OpenLoop(InputSignal),
+}
+
+/// Everything a simulation needs besides the options.
+#[derive(Clone, Debug)]
+pub struct SimProblem {
+    /// Compiled equations of motion.
+    pub dynamics: NumericDynamics,
+    /// Full parameter vector ([`ParameterValues::full`]).
+    pub params: Vec<f64>,
+    /// Initial state.
+    pub x0: Vec<f64>,
+    /// Simulated time (s).
+    pub duration: f64,
+    /// Input source.
+    pub control: Control,
+    /// Input limits (clipped to when [`SimOptions::saturate`]).
+    pub limits: Vec<Option<(f64, f64)>>,
+    /// State names (`theta`, ..., `theta_dot`, ...).
+    pub state_names: Vec<String>,
+    /// Input names.
+    pub input_names: Vec<String>,
+    /// Output names (model outputs).
+    pub output_names: Vec<String>,
+    output_tape: Tape,
+}
+
+impl SimProblem {
+    /// Compile the dynamics and the model outputs for `model`.
+    pub fn new(
+        model: &Model,
+        equations: &Equations,
+        values: &ParameterValues,
+        control: Control,
+        x0: Vec<f64>,
+        duration: f64,
+    ) -> Result<SimProblem, SimError> {
+        let dynamics = NumericDynamics::new(model, equations).map_err(SimError::Dynamics)?;
+        let mut inputs: Vec<Symbol> = model.state_symbols();
+        inputs.extend(model.input_symbols());
+        inputs.extend(model.parameter_symbols());
+        let outs: Vec<Expr> = model.outputs.iter().map(|o| o.expr).collect();
+        let output_tape = Tape::compile(&outs, &inputs)
+            .map_err(|e| SimError::Setup(format!("model outputs: {e}")))?;
+        let p = SimProblem {
+            dynamics,
+            params: values.full.clone(),
+            x0,
+            duration,
+            control,
+            limits: model.inputs.iter().map(|i| i.limits).collect(),
+            state_names: model.state_names(),
+            input_names: model.inputs.iter().map(|i| i.name.clone()).collect(),
+            output_names: model.outputs.iter().map(|o| o.name.clone()).collect(),
+            output_tape,
+        };
+        p.check()?;
+        Ok(p)
+    }
+
+    fn check(&self) -> Result<(), SimError> {
+        let d = &self.dynamics;
+        if self.x0.len() != d.n_states() || self.x0.iter().any(|v| !v.is_finite()) {
+            return Err(SimError::Setup(format!(
+                "the initial state needs {} finite values",
+                d.n_states()
+            )));
+        }
+        if self.params.len() != d.n_params() {
+            return Err(SimError::Setup(format!(
+                "{} parameter values given, the model has {}",
+                self.params.len(),
+                d.n_params()
+            )));
+        }
+        if !(self.duration.is_finite() && self.duration > 0.0) {
+            return Err(SimError::Setup(format!(
+                "duration {} must be positive",
+                self.duration
+            )));
+        }
+        if self.limits.len() != d.n_inputs() {
+            return Err(SimError::Setup("one limit entry per input".into()));
+        }
+        if let Control::OpenLoop(s) = &self.control {
+            s.check(d.n_inputs())?;
+        }
+        Ok(())
+    }
+}
+
+/// Integration and sampling options.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct SimOptions {
+    /// Relative tolerance of the integrator.
+    pub rtol: f64,
+    /// Absolute tolerance of the integrator.
+    pub atol: f64,
+    /// Largest integrator step (s).
+    pub max_step: Option<f64>,
+    /// Output samples per second (default 1000).
+    pub output_rate: f64,
+    /// Controller sample rate (Hz) with zero-order hold; `None` evaluates the
+    /// controller inside every integrator stage.
+    pub sample_rate: Option<f64>,
+    /// Clip the inputs to the model's limits (default true).
+    pub saturate: bool,
+    /// Step budget between two consecutive events.
+    pub max_steps: usize,
+}
+
+impl Default for SimOptions {
+    fn default() -> Self {
+        SimOptions {
+            rtol: 1e-8,
+            atol: 1e-10,
+            max_step: None,
+            output_rate: 1000.0,
+            sample_rate: None,
+            saturate: true,
+            max_steps: 100_000,
+        }
+    }
+}
+
+/// A simulated trajectory sampled at the output rate.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Trajectory {
+    /// Sample times (s).
+    pub t: Vec<f64>,
+    /// State at each sample.
+    pub states: Vec<Vec<f64>>,
+    /// Applied (saturated) input at each sample.
+    pub inputs: Vec<Vec<f64>>,
+    /// Model outputs at each sample.
+    pub outputs: Vec<Vec<f64>>,
+    /// Whether any input was clipped at each sample.
+    pub saturated: Vec<bool>,
+    /// State names.
+    pub state_names: Vec<String>,
+    /// Input names.
+    pub input_names: Vec<String>,
+    /// Output names.
+    pub output_names: Vec<String>,
+    /// Integrator counts.
+    pub stats: RkStats,
+}
+
+impl Trajectory {
+    /// Number of samples.
+    pub fn len(&self) -> usize {
+        self.t.len()
+    }
+
+    /// Whether there are no samples.
+    pub fn is_empty(&self) -> bool {
+        self.t.is_empty()
+    }
+
+    /// A state's time series by name.
+    pub fn state(&self, name: &str) -> Option<Vec<f64>> {
+        let i = self.state_names.iter().position(|n| n == name)?;
+        Some(self.states.iter().map(|x| x[i]).collect())
+    }
+
+    /// An input's time series by name.
+    pub fn input(&self, name: &str) -> Option<Vec<f64>> {
+        let i = self.input_names.iter().position(|n| n == name)?;
+        Some(self.inputs.iter().map(|x| x[i]).collect())
+    }
+
+    /// Index of the sample nearest to `t`.
+    pub fn index_at(&self, t: f64) -> usize {
+        match self.t.binary_search_by(|s| s.total_cmp(&t)) {
+            Ok(i) => i,
+            Err(i) if i == 0 => 0,
+            Err(i) if i >= self.t.len() => self.t.len() - 1,
+            Err(i) => {
+                if (self.t[i] - t).abs() < (t - self.t[i - 1]).abs() {
+                    i
+                } else {
+                    i - 1
+                }
+            }
+        }
+    }
+
+    /// Share of samples with a clipped input (0..1).
+    pub fn saturation_share(&self) -> f64 {
+        if self.saturated.is_empty() {
+            return 0.0;
+        }
+        self.saturated.iter().filter(|s| **s).count() as f64 / self.saturated.len() as f64
+    }
+}
+
+/// Evaluation state of the closed loop.
+struct Plant<'a> {
+    p: &'a SimProblem,
+    saturate: bool,
+    ws: Workspace,
+    cws: Option<ControllerWorkspace>,
+    u_raw: Vec<f64>,
+    u: Vec<f64>,
+    held: bool,
+}
+
+impl Plant<'_> {
+    /// Demand and applied input from the controller at `(t, x)`.
+    fn demand(&mut self, t: f64, x: &[f64]) -> Result<(), SimError> {
+        let Control::Feedback(c) = &self.p.control else {
+            return Ok(());
+        };
+        let cws = self.cws.as_mut().expect("controller workspace");
+        c.eval(x, &self.p.params, &mut self.u_raw, cws);
+        if let Some(i) = self.u_raw.iter().position(|v| !v.is_finite()) {
+            return Err(SimError::NonFiniteControl {
+                t,
+                input: self.p.input_names[i].clone(),
+            });
+        }
+        self.apply_limits();
+        Ok(())
+    }
+
+    fn apply_limits(&mut self) {
+        for (i, (u, raw)) in self.u.iter_mut().zip(&self.u_raw).enumerate() {
+            *u = match (self.saturate, self.p.limits[i]) {
+                (true, Some((lo, hi))) => raw.clamp(lo, hi),
+                _ => *raw,
+            };
+        }
+    }
+
+    fn rhs(&mut self, t: f64, x: &[f64], dx: &mut [f64]) -> Result<(), SimError> {
+        if !self.held {
+            self.demand(t, x)?;
+        }
+        self.p
+            .dynamics
+            .derivatives(x, &self.u, &self.p.params, dx, &mut self.ws)
+            .map_err(|_| SimError::Singular { t })
+    }
+}
+
+fn event_times(rate: f64, end: f64, what: &str) -> Result<Vec<f64>, SimError> {
+    if !(rate.is_finite() && rate > 0.0) {
+        return Err(SimError::Setup(format!("{what} {rate} must be positive")));
+    }
+    let count = (end * rate * (1.0 + 1e-12)).floor() as usize;
+    if count > 50_000_000 {
+        return Err(SimError::Setup(format!(
+            "{what} {rate} Hz gives too many samples"
+        )));
+    }
+    Ok((0..=count).map(|i| i as f64 / rate).collect())
+}
+
+/// Simulate `problem`.
+pub fn simulate(problem: &SimProblem, options: &SimOptions) -> Result<Trajectory, SimError> {
+    problem.check()?;
+    if !(options.rtol > 0.0 && options.atol > 0.0) {
+        return Err(SimError::Setup("tolerances must be positive".into()));
+    }
+    let d = &problem.dynamics;
+    let (n, m) = (d.n_states(), d.n_inputs());
+    let mut outs = event_times(options.output_rate, problem.duration, "output rate")?;
+    if problem.duration - outs[outs.len() - 1] > 1e-9 / options.output_rate {
+        outs.push(problem.duration);
+    }
+    let t_end = outs[outs.len() - 1];
+    let samples = match (options.sample_rate, &problem.control) {
+        (Some(r), Control::Feedback(_)) => Some(event_times(r, t_end, "sample rate")?),
+        _ => None,
+    };
+    let breakpoints: &[f64] = match &problem.control {
+        Control::OpenLoop(s) => s.breakpoints(),
+        Control::Feedback(_) => &[],
+    };
+    let mut plant = Plant {
+        p: problem,
+        saturate: options.saturate,
+        ws: d.workspace(),
+        cws: match &problem.control {
+            Control::Feedback(c) => Some(c.workspace(problem.params.len())),
+            Control::OpenLoop(_) => None,
+        },
+        u_raw: vec![0.0; m],
+        u: vec![0.0; m],
+        held: !matches!(problem.control, Control::Feedback(_)) || samples.is_some(),
+    };
+    let rk_opts = RkOptions {
+        rtol: options.rtol,
+        atol: options.atol,
+        max_step: options.max_step.unwrap_or(f64::INFINITY),
+        max_steps: options.max_steps,
+        ..RkOptions::default()
+    };
+    let mut rk = DormandPrince::new(n, rk_opts);
+    let mut traj = Trajectory {
+        t: Vec::with_capacity(outs.len()),
+        states: Vec::with_capacity(outs.len()),
+        inputs: Vec::with_capacity(outs.len()),
+        outputs: Vec::with_capacity(outs.len()),
+        saturated: Vec::with_capacity(outs.len()),
+        state_names: problem.state_names.clone(),
+        input_names: problem.input_names.clone(),
+        output_names: problem.output_names.clone(),
+        stats: RkStats::default(),
+    };
+    let n_y = problem.output_tape.n_outputs();
+    let mut y_in = vec![0.0; n + m + problem.params.len()];
+    let mut y_scratch = vec![0.0; problem.output_tape.scratch_len()];
+    let mut x = problem.x0.clone();
+    let mut t = 0.0f64;
+    let (mut i_out, mut k_samp, mut next_bp) = (0usize, 0usize, 0usize);
+    let mut segment: Option<usize> = None;
+    let mut first = true;
+    loop {
+        let tol = 1e-10 * t.abs().max(1.0);
+        // Input changes at t.
+        let mut changed = first;
+        while next_bp < breakpoints.len() && breakpoints[next_bp] <= t + tol {
+            segment = Some(next_bp);
+            next_bp += 1;
+            changed = true;
+        }
+        if let Control::OpenLoop(sig) = &problem.control {
+            if changed {
+                plant.u_raw.copy_from_slice(sig.sample(segment));
+                plant.apply_limits();
+            }
+        }
+        if let Some(st) = &samples {
+            let mut due = false;
+            while k_samp < st.len() && st[k_samp] <= t + tol {
+                k_samp += 1;
+                due = true;
+            }
+            if due {
+                plant.demand(t, &x)?;
+                changed = true;
+            }
+        }
+        if changed && !first {
+            rk.restart();
+        }
+        first = false;
+        // Output samples at t.
+        while i_out < outs.len() && outs[i_out] <= t + tol {
+            if !plant.held {
+                plant.demand(t, &x)?;
+            }
+            y_in[..n].copy_from_slice(&x);
+            y_in[n..n + m].copy_from_slice(&plant.u);
+            y_in[n + m..].copy_from_slice(&problem.params);
+            let mut y = vec![0.0; n_y];
+            problem.output_tape.eval(&y_in, &mut y, &mut y_scratch);
+            traj.t.push(outs[i_out]);
+            traj.states.push(x.clone());
+            traj.inputs.push(plant.u.clone());
+            traj.outputs.push(y);
+            traj.saturated
+                .push(plant.u.iter().zip(&plant.u_raw).any(|(a, b)| a != b));
+            i_out += 1;
+        }
+        if i_out >= outs.len() {
+            break;
+        }
+        let mut next = outs[i_out];
+        if let Some(st) = &samples {
+            if k_samp < st.len() {
+                next = next.min(st[k_samp]);
+            }
+        }
+        if next_bp < breakpoints.len() {
+            next = next.min(breakpoints[next_bp]);
+        }
+        let t0 = t;
+        rk.advance(
+            &mut |tt: f64, xx: &[f64], dx: &mut [f64]| plant.rhs(tt, xx, dx),
+            t0,
+            next,
+            &mut x,
+        )
+        .map_err(|e| match e {
+            RkError::Rhs(e) => e,
+            other @ (RkError::StepTooSmall { .. } | RkError::TooManySteps { .. }) => {
+                SimError::Integrator(format!("{}", other_display(&other)))
+            }
+        })?;
+        t = next;
+    }
+    traj.stats = rk.stats;
+    Ok(traj)
+}
+
+fn other_display(e: &RkError<SimError>) -> String {
+    e.to_string()
+}

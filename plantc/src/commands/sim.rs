@@ -1,0 +1,229 @@
+//! `plantc sim`: closed-loop simulation of a model with one of its controllers;
+//! CSV trajectory, optional SVG figure, short summary.
+
+use std::io::Write;
+use std::path::Path;
+use std::time::Instant;
+
+use plantc_derive::control::{resolve, Derivation};
+use plantc_derive::simulate::{
+    set_gains, simulate, Control, ControllerEval, SimError, SimOptions, SimProblem, Trajectory,
+};
+
+use crate::cli::SimArgs;
+use crate::common::{load, num, parse_assignments, parse_quantity, values, CliError};
+
+fn refuse_overwrite(path: &Path, force: bool, what: &str) -> Result<(), CliError> {
+    if path.exists() && !force {
+        return Err(CliError::input(format!(
+            "error: {what} `{}` already exists; pass --force to overwrite it",
+            path.display()
+        )));
+    }
+    Ok(())
+}
+
+/// `--gain a=1.5,b=1.5` (repeatable).
+fn parse_gains(items: &[String]) -> Result<Vec<(String, f64)>, CliError> {
+    let mut v = Vec::new();
+    for text in items {
+        for item in text.split(',').map(str::trim).filter(|s| !s.is_empty()) {
+            let (name, value) = item.split_once('=').ok_or_else(|| {
+                CliError::input(format!("error: `--gain {item}`: expected NAME=VALUE"))
+            })?;
+            let x = parse_quantity(value)
+                .filter(|x| x.is_finite())
+                .ok_or_else(|| {
+                    CliError::input(format!("error: `--gain {item}`: `{value}` is not a number"))
+                })?;
+            v.push((name.trim().to_string(), x));
+        }
+    }
+    Ok(v)
+}
+
+fn sim_error(e: SimError) -> CliError {
+    match e {
+        SimError::UnknownGain { .. } | SimError::Setup(_) => CliError::input(format!("error: {e}")),
+        _ => CliError::failure(format!("error: simulation failed: {e}")),
+    }
+}
+
+/// Column headers: `t`, states, inputs, outputs (`y_<name>` when the name is a state).
+fn headers(traj: &Trajectory) -> Vec<String> {
+    let mut h = vec!["t".to_string()];
+    h.extend(traj.state_names.iter().cloned());
+    h.extend(traj.input_names.iter().cloned());
+    for o in &traj.output_names {
+        if traj.state_names.contains(o) || traj.input_names.contains(o) || o == "t" {
+            h.push(format!("y_{o}"));
+        } else {
+            h.push(o.clone());
+        }
+    }
+    h
+}
+
+fn write_csv(path: &Path, traj: &Trajectory) -> Result<(), CliError> {
+    let mut text = headers(traj).join(",");
+    text.push('\n');
+    for k in 0..traj.len() {
+        let row: Vec<String> = std::iter::once(traj.t[k])
+            .chain(traj.states[k].iter().copied())
+            .chain(traj.inputs[k].iter().copied())
+            .chain(traj.outputs[k].iter().copied())
+            .map(|x| format!("{x}"))
+            .collect();
+        text.push_str(&row.join(","));
+        text.push('\n');
+    }
+    std::fs::write(path, text)
+        .map_err(|e| CliError::failure(format!("error: cannot write `{}`: {e}", path.display())))
+}
+
+fn plot(path: &Path, traj: &Trajectory, title: &str) -> Result<(), String> {
+    use plotters::prelude::*;
+    // Panels: angles in degrees (arm, pendulum, ...), then each input.
+    let n = traj.state_names.len() / 2;
+    let mut panels: Vec<(String, Vec<f64>)> = Vec::new();
+    for i in 0..n {
+        let name = &traj.state_names[i];
+        panels.push((
+            format!("{name} [deg]"),
+            traj.states.iter().map(|x| x[i].to_degrees()).collect(),
+        ));
+    }
+    for (j, name) in traj.input_names.iter().enumerate() {
+        panels.push((name.clone(), traj.inputs.iter().map(|u| u[j]).collect()));
+    }
+    let t_end = traj.t.last().copied().unwrap_or(1.0).max(1e-9);
+    let height = 240 * panels.len() as u32 + 40;
+    let root = SVGBackend::new(path, (900, height)).into_drawing_area();
+    root.fill(&WHITE).map_err(|e| e.to_string())?;
+    let root = root
+        .titled(title, ("sans-serif", 20))
+        .map_err(|e| e.to_string())?;
+    let areas = root.split_evenly((panels.len(), 1));
+    for (area, (label, data)) in areas.iter().zip(&panels) {
+        let (mut lo, mut hi) = data
+            .iter()
+            .fold((f64::INFINITY, f64::NEG_INFINITY), |(l, h), v| {
+                (l.min(*v), h.max(*v))
+            });
+        if !(lo.is_finite() && hi.is_finite()) {
+            lo = -1.0;
+            hi = 1.0;
+        }
+        let pad = ((hi - lo) * 0.05).max(1e-6 * hi.abs().max(1.0));
+        let mut chart = ChartBuilder::on(area)
+            .margin(8)
+            .x_label_area_size(35)
+            .y_label_area_size(70)
+            .build_cartesian_2d(0.0..t_end, (lo - pad)..(hi + pad))
+            .map_err(|e| e.to_string())?;
+        chart
+            .configure_mesh()
+            .x_desc("t [s]")
+            .y_desc(label.as_str())
+            .draw()
+            .map_err(|e| e.to_string())?;
+        chart
+            .draw_series(LineSeries::new(
+                traj.t.iter().copied().zip(data.iter().copied()),
+                &BLUE,
+            ))
+            .map_err(|e| e.to_string())?;
+    }
+    root.present().map_err(|e| e.to_string())?;
+    Ok(())
+}
+
+pub fn run(args: &SimArgs, out: &mut dyn Write, err: &mut dyn Write) -> Result<(), CliError> {
+    refuse_overwrite(&args.output, args.force, "output file")?;
+    if let Some(p) = &args.plot {
+        refuse_overwrite(p, args.force, "plot file")?;
+    }
+    if !(args.duration.is_finite() && args.duration > 0.0) {
+        return Err(CliError::input(format!(
+            "error: --duration {} must be positive",
+            args.duration
+        )));
+    }
+    let loaded = load(&args.model, err)?;
+    let model = &loaded.model;
+    let vals = values(&loaded, &args.params)?;
+    let x0 = match &args.x0 {
+        Some(text) => parse_assignments(text, &model.state_names(), "state")?,
+        None => vec![0.0; model.state_symbols().len()],
+    };
+    let gains = parse_gains(&args.gain)?;
+    let derivation =
+        Derivation::new(model).map_err(|e| CliError::failure(format!("error: {e}")))?;
+    let mut ctrl = resolve(model, &derivation, &args.controller, &vals).map_err(|e| match e {
+        plantc_derive::control::ControlError::UnknownController { .. } => {
+            CliError::input(format!("error: {e}"))
+        }
+        _ => CliError::failure(format!("error: {e}")),
+    })?;
+    set_gains(&mut ctrl, &gains).map_err(sim_error)?;
+    let control = Control::Feedback(ControllerEval::new(model, &ctrl).map_err(sim_error)?);
+    let problem = SimProblem::new(
+        model,
+        &derivation.equations,
+        &vals,
+        control,
+        x0,
+        args.duration,
+    )
+    .map_err(sim_error)?;
+    let mut options = SimOptions {
+        output_rate: args.output_rate,
+        sample_rate: args.sample_rate,
+        ..SimOptions::default()
+    };
+    if let Some(r) = args.rtol {
+        options.rtol = r;
+        options.atol = r * 1e-2;
+    }
+    let started = Instant::now();
+    let traj = simulate(&problem, &options).map_err(sim_error)?;
+    let elapsed = started.elapsed();
+    write_csv(&args.output, &traj)?;
+    let mode = match args.sample_rate {
+        Some(r) => format!("sampled at {} Hz, zero-order hold", num(r)),
+        None => "continuous time".to_string(),
+    };
+    let _ = writeln!(
+        out,
+        "simulated {} s of `{}` ({mode}) in {:.1} ms: {} samples -> {}",
+        num(args.duration),
+        args.controller,
+        elapsed.as_secs_f64() * 1e3,
+        traj.len(),
+        args.output.display()
+    );
+    let last = traj.states.last().cloned().unwrap_or_default();
+    let fin: Vec<String> = traj
+        .state_names
+        .iter()
+        .zip(&last)
+        .map(|(n, v)| format!("{n} = {}", num(*v)))
+        .collect();
+    let _ = writeln!(out, "final state: {}", fin.join(", "));
+    for (j, name) in traj.input_names.iter().enumerate() {
+        let max = traj.inputs.iter().fold(0.0f64, |m, u| m.max(u[j].abs()));
+        let _ = writeln!(out, "max |{name}| = {}", num(max));
+    }
+    let _ = writeln!(
+        out,
+        "input saturated {:.1} % of the time",
+        100.0 * traj.saturation_share()
+    );
+    if let Some(p) = &args.plot {
+        let title = format!("{}: {} ({mode})", model.name, args.controller);
+        plot(p, &traj, &title)
+            .map_err(|e| CliError::failure(format!("error: cannot draw `{}`: {e}", p.display())))?;
+        let _ = writeln!(out, "figure -> {}", p.display());
+    }
+    Ok(())
+}

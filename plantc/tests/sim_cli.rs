@@ -1,0 +1,200 @@
+//! End-to-end tests of `plantc sim` through `plantc::run`.
+
+use std::path::PathBuf;
+
+fn model() -> String {
+    PathBuf::from(env!("CARGO_MANIFEST_DIR"))
+        .join("../models/rotary_pendulum.plant")
+        .display()
+        .to_string()
+}
+
+fn tmp(name: &str) -> PathBuf {
+    let dir = std::env::temp_dir().join(format!("plantc-sim-{}-{name}", std::process::id()));
+    let _ = std::fs::remove_dir_all(&dir);
+    std::fs::create_dir_all(&dir).unwrap();
+    dir
+}
+
+fn plantc(args: &[&str]) -> (i32, String, String) {
+    let mut out = Vec::new();
+    let mut err = Vec::new();
+    let mut all = vec!["plantc"];
+    all.extend_from_slice(args);
+    let code = plantc::run(all, &mut out, &mut err);
+    (
+        code,
+        String::from_utf8(out).unwrap(),
+        String::from_utf8(err).unwrap(),
+    )
+}
+
+#[test]
+fn feedback_linearization_csv_plot_and_summary() {
+    let dir = tmp("fl");
+    let csv = dir.join("out.csv");
+    let svg = dir.join("out.svg");
+    let (code, out, err) = plantc(&[
+        "sim",
+        &model(),
+        "--set",
+        "thesis",
+        "--controller",
+        "feedback_linearization",
+        "--x0",
+        "alpha=10deg",
+        "--duration",
+        "5",
+        "-o",
+        csv.to_str().unwrap(),
+        "--plot",
+        svg.to_str().unwrap(),
+    ]);
+    assert_eq!(code, 0, "{out}{err}");
+    assert!(out.contains("final state: theta = "), "{out}");
+    assert!(out.contains("max |Vm| = "), "{out}");
+    assert!(out.contains("saturated 0.0 %"), "{out}");
+    let text = std::fs::read_to_string(&csv).unwrap();
+    let mut lines = text.lines();
+    assert_eq!(
+        lines.next().unwrap(),
+        "t,theta,alpha,theta_dot,alpha_dot,Vm,y_alpha"
+    );
+    let rows: Vec<Vec<f64>> = lines
+        .map(|l| l.split(',').map(|c| c.parse().unwrap()).collect())
+        .collect();
+    assert_eq!(rows.len(), 5001);
+    let r = &rows[726];
+    assert!((r[0] - 0.726).abs() < 1e-12);
+    assert!(
+        r[2].abs().to_degrees() <= 0.5,
+        "alpha(0.726) = {} deg",
+        r[2].to_degrees()
+    );
+    let last = rows.last().unwrap();
+    assert!((last[3] + 3.1).abs() < 0.15, "steady rate {}", last[3]);
+    assert_eq!(last[6], last[2]);
+    let svg_text = std::fs::read_to_string(&svg).unwrap();
+    assert!(svg_text.starts_with("<svg") && svg_text.contains("alpha [deg]"));
+
+    // Refuses to overwrite, then overwrites with --force.
+    let (code, _, err) = plantc(&[
+        "sim",
+        &model(),
+        "--set",
+        "thesis",
+        "--controller",
+        "feedback_linearization",
+        "--x0",
+        "alpha=10deg",
+        "--duration",
+        "0.1",
+        "-o",
+        csv.to_str().unwrap(),
+    ]);
+    assert_eq!(code, 2);
+    assert!(
+        err.contains("already exists") && err.contains("--force"),
+        "{err}"
+    );
+    assert_eq!(std::fs::read_to_string(&csv).unwrap(), text);
+    let (code, out, err) = plantc(&[
+        "sim",
+        &model(),
+        "--set",
+        "thesis",
+        "--controller",
+        "feedback_linearization",
+        "--x0",
+        "alpha=10deg",
+        "--duration",
+        "0.1",
+        "-o",
+        csv.to_str().unwrap(),
+        "--force",
+        "--sample-rate",
+        "1000",
+        "--output-rate",
+        "100",
+    ]);
+    assert_eq!(code, 0, "{out}{err}");
+    assert!(out.contains("zero-order hold"), "{out}");
+    assert_eq!(std::fs::read_to_string(&csv).unwrap().lines().count(), 12);
+    let _ = std::fs::remove_dir_all(&dir);
+}
+
+#[test]
+fn bad_x0_name_lists_known_states() {
+    let dir = tmp("x0");
+    let csv = dir.join("out.csv");
+    let (code, _, err) = plantc(&[
+        "sim",
+        &model(),
+        "--controller",
+        "feedback_linearization",
+        "--x0",
+        "beta=10deg",
+        "-o",
+        csv.to_str().unwrap(),
+    ]);
+    assert_eq!(code, 2, "{err}");
+    assert!(
+        err.contains("`beta`") && err.contains("theta, alpha, theta_dot, alpha_dot"),
+        "{err}"
+    );
+    assert!(!csv.exists());
+    let _ = std::fs::remove_dir_all(&dir);
+}
+
+#[test]
+fn gains_override_and_errors() {
+    let dir = tmp("gain");
+    let csv = dir.join("out.csv");
+    let (code, _, err) = plantc(&[
+        "sim",
+        &model(),
+        "--set",
+        "thesis",
+        "--controller",
+        "fl_arm",
+        "--gain",
+        "c=1",
+        "--x0",
+        "alpha=10deg",
+        "-o",
+        csv.to_str().unwrap(),
+    ]);
+    assert_eq!(code, 2, "{err}");
+    assert!(
+        err.contains("no gain `c`") && err.contains("known: wn, zeta, a, b"),
+        "{err}"
+    );
+    let (code, out, err) = plantc(&[
+        "sim",
+        &model(),
+        "--set",
+        "thesis",
+        "--controller",
+        "fl_arm",
+        "--gain",
+        "a=0.5,b=0.5",
+        "--x0",
+        "alpha=10deg",
+        "--duration",
+        "2",
+        "-o",
+        csv.to_str().unwrap(),
+    ]);
+    assert_eq!(code, 0, "{out}{err}");
+    let (code, _, err) = plantc(&[
+        "sim",
+        &model(),
+        "--controller",
+        "nope",
+        "-o",
+        dir.join("x.csv").to_str().unwrap(),
+    ]);
+    assert_eq!(code, 2, "{err}");
+    assert!(err.contains("unknown controller `nope`"), "{err}");
+    let _ = std::fs::remove_dir_all(&dir);
+}
