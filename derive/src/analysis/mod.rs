@@ -1,8 +1,15 @@
-//! Analysis of derived equations: linearization about an equilibrium (and, in
-//! later layers, Lie derivatives, normal forms and zero dynamics).
+//! Analysis of derived equations: linearization about an equilibrium, Lie
+//! derivatives and relative degree, normal form, zero dynamics and exact
+//! stability intervals of feedback-linearizing controllers.
 
 mod lie;
 mod linearize;
+mod normal_form;
+mod stability_interval;
+mod zero_dynamics;
 
 pub use lie::{lie_chain, lie_derivative, AnalysisError, LieChain};
 pub use linearize::{linearize, Linearization, LinearizeError, OperatingPoint};
+pub use normal_form::{candidates, normal_form, NormalForm, NormalFormError};
+pub use stability_interval::{stability_interval, KPoly, StabilityError, StabilityInterval, METHOD as STABILITY_METHOD};
+pub use zero_dynamics::{classify, zero_dynamics, ZeroDynamics, ZeroDynamicsClass, ZeroDynamicsError};
