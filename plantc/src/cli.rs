@@ -87,6 +87,73 @@ pub enum Command {
     },
     /// Simulate the model with one of its controllers; write a CSV trajectory.
     Sim(SimArgs),
+    /// Run a controller in the real-time loop on the simulator or a Quanser
+    /// Q2-USB board, with the safety supervisor and a CSV log.
+    Run(RunArgs),
+}
+
+/// Which hardware the loop drives.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, clap::ValueEnum)]
+pub enum BackendKind {
+    /// The model simulated (encoder quantisation, zero-order hold, saturation).
+    Sim,
+    /// A Quanser Q2-USB through the HIL C API (hil.dll / libhil.so).
+    Q2usb,
+}
+
+/// Arguments of `plantc run`.
+#[derive(Debug, Args, Clone)]
+pub struct RunArgs {
+    /// The model file.
+    pub model: PathBuf,
+    #[command(flatten)]
+    pub params: ParamArgs,
+    /// The controller declared in the model file.
+    #[arg(long)]
+    pub controller: String,
+    /// Override controller gains, e.g. `--gain a=0.5,b=0.5`.
+    #[arg(long, value_name = "NAME=VALUE,...", allow_hyphen_values = true)]
+    pub gain: Vec<String>,
+    /// Backend.
+    #[arg(long, value_enum, default_value_t = BackendKind::Sim)]
+    pub backend: BackendKind,
+    /// Initial state of the simulator, e.g. `--x0 alpha=5deg`.
+    #[arg(long, value_name = "NAME=VALUE,...", allow_hyphen_values = true)]
+    pub x0: Option<String>,
+    /// Path of the HIL library (default: hil.dll on Windows, libhil.so elsewhere).
+    #[arg(long, value_name = "PATH")]
+    pub hil_lib: Option<PathBuf>,
+    /// Board identifier for hil_open.
+    #[arg(long, value_name = "ID", default_value = "0")]
+    pub board: String,
+    /// Drive the motor even if the board refuses the hardware watchdog.
+    #[arg(long)]
+    pub allow_no_watchdog: bool,
+    /// Loop rate (Hz, at most 2000).
+    #[arg(long, value_name = "HZ", default_value_t = 1000.0)]
+    pub rate: f64,
+    /// Run length (s).
+    #[arg(long, value_name = "S", default_value_t = 10.0)]
+    pub duration: f64,
+    /// Fault once |theta| (the first coordinate) exceeds this, e.g. `180deg`
+    /// (the SRV02 arm has no hard stop; cables limit it).
+    #[arg(long, value_name = "ANGLE", default_value = "180deg")]
+    pub arm_limit: String,
+    /// Fault once the pendulum is this far from upright after engaging.
+    #[arg(long, value_name = "ANGLE", default_value = "30deg")]
+    pub fall_angle: String,
+    /// Bandwidth of the filtered derivative that estimates velocities (rad/s).
+    #[arg(long, value_name = "RAD_PER_S", default_value_t = 50.0)]
+    pub velocity_bandwidth: f64,
+    /// Run the simulator in real time (default: as fast as possible).
+    #[arg(long)]
+    pub realtime: bool,
+    /// CSV log of every sample (never overwritten unless --force).
+    #[arg(long, value_name = "FILE.csv")]
+    pub log: Option<PathBuf>,
+    /// Overwrite an existing log.
+    #[arg(long)]
+    pub force: bool,
 }
 
 /// Arguments of `plantc sim`.

@@ -4,6 +4,7 @@ mod check;
 mod derive;
 mod design;
 mod linearize;
+mod run;
 mod sim;
 
 use std::io::Write;
@@ -28,6 +29,7 @@ pub fn dispatch(cli: &Cli, out: &mut dyn Write, err: &mut dyn Write) -> Result<(
             json,
         } => design::place(source, poles, *json, out, err),
         Command::Lqr { source, q, r, json } => design::lqr(source, q, r, *json, out, err),
+        Command::Run(args) => run::run(args, out, err),
         Command::Sim(args) => sim::run(args, out, err),
     }
 }

@@ -13,7 +13,7 @@ use plantc_derive::simulate::{
 use crate::cli::SimArgs;
 use crate::common::{load, num, parse_assignments, parse_quantity, values, CliError};
 
-fn refuse_overwrite(path: &Path, force: bool, what: &str) -> Result<(), CliError> {
+pub(crate) fn refuse_overwrite(path: &Path, force: bool, what: &str) -> Result<(), CliError> {
     if path.exists() && !force {
         return Err(CliError::input(format!(
             "error: {what} `{}` already exists; pass --force to overwrite it",
@@ -24,7 +24,7 @@ fn refuse_overwrite(path: &Path, force: bool, what: &str) -> Result<(), CliError
 }
 
 /// `--gain a=1.5,b=1.5` (repeatable).
-fn parse_gains(items: &[String]) -> Result<Vec<(String, f64)>, CliError> {
+pub(crate) fn parse_gains(items: &[String]) -> Result<Vec<(String, f64)>, CliError> {
     let mut v = Vec::new();
     for text in items {
         for item in text.split(',').map(str::trim).filter(|s| !s.is_empty()) {

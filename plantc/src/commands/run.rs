@@ -1,0 +1,116 @@
+//! `plantc run`: the real-time loop on the simulator or a Q2-USB board.
+
+use std::io::Write;
+
+use plantc_derive::control::{resolve, Derivation};
+use plantc_derive::mechanics::NumericDynamics;
+use plantc_runtime::{
+    run_with_events, Backend, LogWriter, ModelController, ModelPlant, Q2Usb, Q2UsbConfig,
+    RunConfig, SimBackend, SimConfig,
+};
+
+use super::sim::{parse_gains, refuse_overwrite};
+use crate::cli::{BackendKind, RunArgs};
+use crate::common::{load, parse_assignments, parse_quantity, values, CliError};
+
+pub fn run(args: &RunArgs, out: &mut dyn Write, err: &mut dyn Write) -> Result<(), CliError> {
+    let loaded = load(&args.model, err)?;
+    let model = &loaded.model;
+    let vals = values(&loaded, &args.params)?;
+    let fail = |e: &dyn std::fmt::Display| CliError::failure(format!("error: {e}"));
+    let derivation = Derivation::new(model).map_err(|e| fail(&e))?;
+    let resolved = resolve(model, &derivation, &args.controller, &vals).map_err(|e| fail(&e))?;
+    let mut controller = ModelController::new(model, &resolved, &vals).map_err(|e| fail(&e))?;
+    for (name, value) in parse_gains(&args.gain)? {
+        controller
+            .set_gain(&name, value)
+            .map_err(|e| CliError::input(format!("error: {e}")))?;
+    }
+    let dynamics = NumericDynamics::new(model, &derivation.equations).map_err(|e| fail(&e))?;
+    let plant = ModelPlant::new(model, dynamics, &vals);
+    let mut config = RunConfig::for_plant(&plant);
+    config.rate_hz = args.rate;
+    config.duration_s = Some(args.duration);
+    let angle = |text: &str, what: &str| {
+        parse_quantity(text)
+            .filter(|x| x.is_finite() && *x > 0.0)
+            .ok_or_else(|| {
+                CliError::input(format!(
+                    "error: --{what} `{text}`: expected a positive angle, e.g. 180deg"
+                ))
+            })
+    };
+    config.velocity_bandwidth = args.velocity_bandwidth;
+    config.supervisor.arm_limit_rad = angle(&args.arm_limit, "arm-limit")?;
+    config.supervisor.fall_angle_rad = angle(&args.fall_angle, "fall-angle")?;
+    let mut backend: Box<dyn Backend> = match args.backend {
+        BackendKind::Sim => {
+            let x0 = match &args.x0 {
+                Some(text) => parse_assignments(text, &model.state_names(), "state")?,
+                None => vec![0.0; model.state_names().len()],
+            };
+            let sim = SimConfig {
+                real_time: args.realtime,
+                ..SimConfig::default()
+            };
+            Box::new(SimBackend::new(Box::new(plant), x0, sim).map_err(|e| fail(&e))?)
+        }
+        BackendKind::Q2usb => {
+            if args.x0.is_some() {
+                let _ = writeln!(
+                    err,
+                    "note: --x0 is ignored on hardware (the state comes from the encoders)"
+                );
+            }
+            let cfg = Q2UsbConfig {
+                library_path: args.hil_lib.clone(),
+                card_identifier: args.board.clone(),
+                allow_no_watchdog: args.allow_no_watchdog,
+                ..Q2UsbConfig::default()
+            };
+            let board = Q2Usb::open(cfg).map_err(|e| fail(&e))?;
+            for note in board.notes() {
+                let _ = writeln!(err, "note: {note}");
+            }
+            Box::new(board)
+        }
+    };
+    let mut log = match &args.log {
+        Some(path) => {
+            refuse_overwrite(path, args.force, "log")?;
+            Some(LogWriter::create(path).map_err(|e| fail(&e))?)
+        }
+        None => None,
+    };
+    let _ = writeln!(
+        out,
+        "running `{}` on {:?} at {} Hz for {} s",
+        args.controller, args.backend, args.rate, args.duration
+    );
+    let report = run_with_events(
+        &config,
+        backend.as_mut(),
+        &mut controller,
+        log.as_mut(),
+        &mut |t| {
+            let _ = writeln!(err, "supervisor: {t}");
+        },
+    )
+    .map_err(|e| fail(&e))?;
+    let _ = writeln!(out, "{report}");
+    if report.fault_detail.is_some()
+        || matches!(
+            report.final_state,
+            plantc_runtime::SupervisorState::Fault(_)
+        )
+    {
+        // A fault that ends the run (other than the planned end) is a failure.
+        if !report.final_state.to_string().contains("duration") {
+            return Err(CliError::failure(format!(
+                "run ended in {}",
+                report.final_state
+            )));
+        }
+    }
+    Ok(())
+}
