@@ -60,6 +60,37 @@ pub enum Command {
         #[arg(long)]
         json: bool,
     },
+    /// Lie derivatives, relative degree, linearizing law, normal form and zero
+    /// dynamics of an output.
+    Analyze {
+        /// The model file.
+        model: PathBuf,
+        /// The output to analyse (default: the model's first output).
+        #[arg(long)]
+        output: Option<String>,
+        #[command(flatten)]
+        params: ParamArgs,
+        /// Print JSON.
+        #[arg(long)]
+        json: bool,
+    },
+    /// Exact interval of gains (varied together, `a = b = k`) for which a
+    /// feedback-linearizing controller stabilises the origin.
+    Stability {
+        /// The model file.
+        model: PathBuf,
+        /// The controller (a `linearize output` controller of the model).
+        #[arg(long)]
+        controller: String,
+        /// Gains varied together, e.g. `a,b`.
+        #[arg(long, value_name = "GAIN,...")]
+        vary: String,
+        #[command(flatten)]
+        params: ParamArgs,
+        /// Print JSON.
+        #[arg(long)]
+        json: bool,
+    },
     /// Pole placement `u = -K x` for a single-input system.
     Place {
         #[command(flatten)]

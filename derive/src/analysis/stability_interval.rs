@@ -140,10 +140,22 @@ impl KPoly {
     }
     /// Real roots, refined to about 1e-12.
     pub fn real_roots(&self) -> Vec<f64> {
-        let c = self.trimmed();
-        let deg = c.len() - 1;
-        if deg == 0 || c.iter().all(|x| *x == 0.0) {
+        let mut c = self.trimmed();
+        if c.iter().all(|x| *x == 0.0) {
             return Vec::new();
+        }
+        // Roots at k = 0 (constant terms that are rounding noise, e.g. det A_cl
+        // at a gain where the zero dynamics' eigenvalues sit at 0) are deflated
+        // exactly.
+        let max = c.iter().fold(0.0_f64, |m, x| m.max(x.abs()));
+        let mut zero_root = false;
+        while c.len() > 1 && c[0].abs() <= 1e-13 * max {
+            c.remove(0);
+            zero_root = true;
+        }
+        let deg = c.len() - 1;
+        if deg == 0 {
+            return if zero_root { vec![0.0] } else { Vec::new() };
         }
         let lead = c[deg];
         let comp = DMatrix::from_fn(deg, deg, |i, j| {
@@ -199,6 +211,9 @@ impl KPoly {
                 x = 0.5 * (lo + hi);
             }
             roots.push(x);
+        }
+        if zero_root {
+            roots.push(0.0);
         }
         roots.sort_by(f64::total_cmp);
         roots.dedup_by(|a, b| (*a - *b).abs() <= 1e-12 * (1.0 + a.abs()));

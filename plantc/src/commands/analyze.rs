@@ -1,0 +1,121 @@
+//! `plantc analyze`: Lie derivatives, relative degree, linearizing law, normal
+//! form and zero dynamics of an output.
+
+use std::io::Write;
+use std::path::Path;
+
+use plantc_derive::analysis::{lie_chain, normal_form, zero_dynamics, LieChain, NormalForm, ZeroDynamics};
+use plantc_derive::control::{output_expr, Derivation};
+use plantc_derive::sym::Expr;
+
+use crate::cli::ParamArgs;
+use crate::common::{load, num, values, CliError};
+
+fn lf_name(k: usize) -> String {
+    match k {
+        0 => "h".into(),
+        1 => "L_f h".into(),
+        _ => format!("L_f^{k} h"),
+    }
+}
+
+fn lg_name(k: usize) -> String {
+    match k {
+        0 => "L_g h".into(),
+        _ => format!("L_g {}", lf_name(k)),
+    }
+}
+
+fn named_lie(chain: &LieChain) -> Vec<(String, String)> {
+    let r = chain.relative_degree;
+    let mut v: Vec<(String, String)> = (0..=r).map(|k| (lf_name(k), chain.lf[k].to_string())).collect();
+    v.extend((0..r).map(|k| (lg_name(k), chain.lg[k].to_string())));
+    v
+}
+
+fn eig_text(zd: &ZeroDynamics) -> String {
+    zd.eigenvalues
+        .iter()
+        .map(|p| if p.im == 0.0 { num(p.re) } else { format!("{}{:+}i", num(p.re), p.im) })
+        .collect::<Vec<_>>()
+        .join(", ")
+}
+
+pub fn run(
+    path: &Path,
+    output: Option<&str>,
+    params: &ParamArgs,
+    json: bool,
+    out: &mut dyn Write,
+    err: &mut dyn Write,
+) -> Result<(), CliError> {
+    let loaded = load(path, err)?;
+    let model = &loaded.model;
+    let vals = values(&loaded, params)?;
+    let name = match output {
+        Some(o) => o.to_string(),
+        None => model
+            .outputs
+            .first()
+            .map(|o| o.name.clone())
+            .ok_or_else(|| CliError::input("error: the model declares no output; pass --output NAME"))?,
+    };
+    let h = output_expr(model, &name).map_err(|e| CliError::input(format!("error: {e}")))?;
+    let d = Derivation::new(model).map_err(|e| CliError::failure(format!("error: {e}")))?;
+    let chain = lie_chain(&d.affine, h).map_err(|e| CliError::failure(format!("error: {e}")))?;
+    let law = chain.law(Expr::sym("v"));
+    let nf: NormalForm = normal_form(model, &d, &chain, &vals, None)
+        .map_err(|e| CliError::failure(format!("error: {e}")))?;
+    let zd = zero_dynamics(model, &nf, &vals).map_err(|e| CliError::failure(format!("error: {e}")))?;
+    let lie = named_lie(&chain);
+    if json {
+        let lie_map: serde_json::Map<String, serde_json::Value> =
+            lie.iter().map(|(k, v)| (k.clone(), serde_json::Value::String(v.clone()))).collect();
+        let v = serde_json::json!({
+            "output": name,
+            "relative_degree": chain.relative_degree,
+            "lie_derivatives": lie_map,
+            "control_law": format!("u = {law}"),
+            "singular_set": chain.singular_set(),
+            "normal_form": {
+                "xi": nf.xi.iter().map(|e| e.to_string()).collect::<Vec<_>>(),
+                "eta": nf.eta.iter().map(|e| e.to_string()).collect::<Vec<_>>(),
+                "eta_origin": nf.eta_origin,
+            },
+            "zero_dynamics": {
+                "equations": zd.equations(),
+                "eigenvalues": zd.eigenvalues.iter().map(|p| serde_json::json!({"re": p.re, "im": p.im})).collect::<Vec<_>>(),
+                "asymptotically_stable": zd.asymptotically_stable(),
+                "minimum_phase": zd.minimum_phase(),
+                "classification": zd.class.describe(),
+                "equilibrium_residual": zd.equilibrium_residual,
+            },
+        });
+        let _ = writeln!(out, "{}", serde_json::to_string_pretty(&v).unwrap_or_default());
+        return Ok(());
+    }
+    let _ = writeln!(out, "output y = {name}, relative degree {}", chain.relative_degree);
+    let width = lie.iter().map(|(k, _)| k.len()).max().unwrap_or(0);
+    for (k, v) in &lie {
+        let _ = writeln!(out, "  {k:<width$} = {v}");
+    }
+    let _ = writeln!(out, "linearizing law: u = {law}");
+    let _ = writeln!(out, "singular set: {}", chain.singular_set());
+    let _ = writeln!(out, "normal form:");
+    for (i, x) in nf.xi.iter().enumerate() {
+        let _ = writeln!(out, "  xi{} = {x}", i + 1);
+    }
+    for (i, (e, o)) in nf.eta.iter().zip(&nf.eta_origin).enumerate() {
+        let _ = writeln!(out, "  eta{} = {e}    ({o})", i + 1);
+    }
+    let _ = writeln!(out, "zero dynamics (xi = 0):");
+    for e in zd.equations() {
+        let _ = writeln!(out, "  {e}");
+    }
+    let _ = writeln!(out, "  eigenvalues at eta = 0: {}", eig_text(&zd));
+    let _ = writeln!(out, "  {}", zd.class.describe());
+    if zd.equilibrium_residual > 1e-9 {
+        let _ = writeln!(out, "  note: eta = 0 is not an equilibrium (residual {:.3e})", zd.equilibrium_residual);
+    }
+    Ok(())
+}
