@@ -269,7 +269,7 @@ impl Trajectory {
     pub fn index_at(&self, t: f64) -> usize {
         match self.t.binary_search_by(|s| s.total_cmp(&t)) {
             Ok(i) => i,
-            Err(i) if i == 0 => 0,
+            Err(0) => 0,
             Err(i) if i >= self.t.len() => self.t.len() - 1,
             Err(i) => {
                 if (self.t[i] - t).abs() < (t - self.t[i - 1]).abs() {
@@ -481,16 +481,10 @@ pub fn simulate(problem: &SimProblem, options: &SimOptions) -> Result<Trajectory
         )
         .map_err(|e| match e {
             RkError::Rhs(e) => e,
-            other @ (RkError::StepTooSmall { .. } | RkError::TooManySteps { .. }) => {
-                SimError::Integrator(format!("{}", other_display(&other)))
-            }
+            other => SimError::Integrator(other.to_string()),
         })?;
         t = next;
     }
     traj.stats = rk.stats;
     Ok(traj)
-}
-
-fn other_display(e: &RkError<SimError>) -> String {
-    e.to_string()
 }
