@@ -7,16 +7,21 @@
 //! [`SimOptions::sample_rate`] and held (zero-order hold; the integrator
 //! restarts at every sample). Inputs are clipped to the model's limits.
 //!
-//! ```no_run
-//! # use plantc_derive::{model::*, control::*, simulate::*};
-//! # let model: Model = todo!();
+//! ```
+//! use plantc_derive::control::{resolve, Derivation};
+//! use plantc_derive::model::{load_model, ParameterValues};
+//! use plantc_derive::simulate::{simulate, Control, ControllerEval, SimOptions, SimProblem};
+//!
+//! let model = load_model("../models/rotary_pendulum.plant".as_ref()).unwrap().model;
 //! let values = ParameterValues::new(&model, Some("thesis"), &[]).unwrap();
 //! let derivation = Derivation::new(&model).unwrap();
 //! let ctrl = resolve(&model, &derivation, "feedback_linearization", &values).unwrap();
 //! let control = Control::Feedback(ControllerEval::new(&model, &ctrl).unwrap());
 //! let x0 = vec![0.0, 10f64.to_radians(), 0.0, 0.0];
-//! let problem = SimProblem::new(&model, &derivation.equations, &values, control, x0, 5.0).unwrap();
+//! let problem = SimProblem::new(&model, &derivation.equations, &values, control, x0, 1.0).unwrap();
 //! let traj = simulate(&problem, &SimOptions::default()).unwrap();
+//! let alpha = traj.state("alpha").unwrap();
+//! assert!(alpha[traj.index_at(0.726)].abs() < 0.5f64.to_radians());
 //! ```
 
 mod controller;
@@ -269,7 +274,7 @@ impl Trajectory {
     pub fn index_at(&self, t: f64) -> usize {
         match self.t.binary_search_by(|s| s.total_cmp(&t)) {
             Ok(i) => i,
-            Err(i) if i == 0 => 0,
+            Err(0) => 0,
             Err(i) if i >= self.t.len() => self.t.len() - 1,
             Err(i) => {
                 if (self.t[i] - t).abs() < (t - self.t[i - 1]).abs() {
@@ -481,16 +486,10 @@ pub fn simulate(problem: &SimProblem, options: &SimOptions) -> Result<Trajectory
         )
         .map_err(|e| match e {
             RkError::Rhs(e) => e,
-            other @ (RkError::StepTooSmall { .. } | RkError::TooManySteps { .. }) => {
-                SimError::Integrator(format!("{}", other_display(&other)))
-            }
+            other => SimError::Integrator(other.to_string()),
         })?;
         t = next;
     }
     traj.stats = rk.stats;
     Ok(traj)
-}
-
-fn other_display(e: &RkError<SimError>) -> String {
-    e.to_string()
 }

@@ -178,6 +178,7 @@ impl DormandPrince {
     }
 
     /// Integrate `x' = f(t, x)` from `t0` to exactly `t1` (`x` updated in place).
+    #[allow(clippy::needless_range_loop)] // stage sums read clearer indexed
     pub fn advance<E, F>(
         &mut self,
         f: &mut F,

@@ -81,7 +81,7 @@ fn write_csv(path: &Path, traj: &Trajectory) -> Result<(), CliError> {
         .map_err(|e| CliError::failure(format!("error: cannot write `{}`: {e}", path.display())))
 }
 
-fn plot(path: &Path, traj: &Trajectory, title: &str) -> Result<(), String> {
+fn plot(path: &Path, traj: &Trajectory, units: &[String], title: &str) -> Result<(), String> {
     use plotters::prelude::*;
     // Panels: angles in degrees (arm, pendulum, ...), then each input.
     let n = traj.state_names.len() / 2;
@@ -94,7 +94,11 @@ fn plot(path: &Path, traj: &Trajectory, title: &str) -> Result<(), String> {
         ));
     }
     for (j, name) in traj.input_names.iter().enumerate() {
-        panels.push((name.clone(), traj.inputs.iter().map(|u| u[j]).collect()));
+        let label = match units.get(j).map(String::as_str) {
+            Some("") | None => name.clone(),
+            Some(u) => format!("{name} [{u}]"),
+        };
+        panels.push((label, traj.inputs.iter().map(|u| u[j]).collect()));
     }
     let t_end = traj.t.last().copied().unwrap_or(1.0).max(1e-9);
     let height = 240 * panels.len() as u32 + 40;
@@ -221,7 +225,8 @@ pub fn run(args: &SimArgs, out: &mut dyn Write, err: &mut dyn Write) -> Result<(
     );
     if let Some(p) = &args.plot {
         let title = format!("{}: {} ({mode})", model.name, args.controller);
-        plot(p, &traj, &title)
+        let units: Vec<String> = model.inputs.iter().map(|i| i.unit.clone()).collect();
+        plot(p, &traj, &units, &title)
             .map_err(|e| CliError::failure(format!("error: cannot draw `{}`: {e}", p.display())))?;
         let _ = writeln!(out, "figure -> {}", p.display());
     }
