@@ -6,6 +6,8 @@
 //! - [`compare`] computes fit % and RMSE per channel ([`FitReport`]).
 //! - [`where_it_fails()`] and [`residual_summary`] locate where a model misses.
 //! - [`plot_comparison`] draws measured vs simulated and residuals to SVG.
+//! - [`Simulator`] simulates a model over a measured experiment (ZOH input,
+//!   fixed-step RK4, one compiled tape).
 
 mod csv_reader;
 pub mod data;
@@ -21,10 +23,12 @@ pub use data::{
 pub use error::{CellProblem, DataError, DataWarning};
 pub use units::Kind;
 
+pub mod experiment_sim;
 pub mod metrics;
 pub mod plot;
 pub mod where_it_fails;
 
+pub use experiment_sim::{InitialVelocity, Signals, SimError, SimOptions, Simulator, Trajectory};
 pub use metrics::{compare, fit_percent, rmse, ChannelFit, ExperimentFit, FitReport, MetricsError};
 pub use plot::{plot_comparison, render_comparison, PlotError};
 pub use where_it_fails::{
