@@ -92,6 +92,11 @@ pub enum SimError {
         /// Given length.
         found: usize,
     },
+    /// A parameter named as free does not exist in the model.
+    UnknownParameter {
+        /// The name given.
+        name: String,
+    },
     /// An option is out of range.
     BadOption(String),
     /// The state became non-finite or the mass matrix singular.
@@ -123,6 +128,9 @@ impl fmt::Display for SimError {
                 f,
                 "expected {expected} parameter values (base then derived), got {found}"
             ),
+            SimError::UnknownParameter { name } => {
+                write!(f, "the model has no parameter `{name}`")
+            }
             SimError::BadOption(m) => write!(f, "bad simulation option: {m}"),
             SimError::Diverged { experiment, time } => write!(
                 f,

@@ -7,7 +7,8 @@
 //! - [`where_it_fails()`] and [`residual_summary`] locate where a model misses.
 //! - [`plot_comparison`] draws measured vs simulated and residuals to SVG.
 //! - [`Simulator`] simulates a model over a measured experiment (ZOH input,
-//!   fixed-step RK4, one compiled tape).
+//!   fixed-step RK4, one compiled tape); [`SensitivitySimulator`] adds exact
+//!   forward sensitivities to the free parameters.
 
 mod csv_reader;
 pub mod data;
@@ -26,11 +27,13 @@ pub use units::Kind;
 pub mod experiment_sim;
 pub mod metrics;
 pub mod plot;
+pub mod sensitivity;
 pub mod where_it_fails;
 
 pub use experiment_sim::{InitialVelocity, Signals, SimError, SimOptions, Simulator, Trajectory};
 pub use metrics::{compare, fit_percent, rmse, ChannelFit, ExperimentFit, FitReport, MetricsError};
 pub use plot::{plot_comparison, render_comparison, PlotError};
+pub use sensitivity::{estimated_parameters, SensitivitySimulator, SensitivityTrajectory};
 pub use where_it_fails::{
     residual_summary, where_it_fails, ChannelDiagnosis, FailOptions, Finding, FindingKind,
     GroupStats, ResidualSummary,
