@@ -9,6 +9,8 @@
 //! - [`Simulator`] simulates a model over a measured experiment (ZOH input,
 //!   fixed-step RK4, one compiled tape); [`SensitivitySimulator`] adds exact
 //!   forward sensitivities to the free parameters.
+//! - [`fit()`] estimates bounded parameters by Levenberg-Marquardt on the
+//!   simulation error, with standard errors and correlated pairs.
 
 mod csv_reader;
 pub mod data;
@@ -25,12 +27,14 @@ pub use error::{CellProblem, DataError, DataWarning};
 pub use units::Kind;
 
 pub mod experiment_sim;
+pub mod fit;
 pub mod metrics;
 pub mod plot;
 pub mod sensitivity;
 pub mod where_it_fails;
 
 pub use experiment_sim::{InitialVelocity, Signals, SimError, SimOptions, Simulator, Trajectory};
+pub use fit::{fit, Estimate, FitError, FitOptions, FitResult};
 pub use metrics::{compare, fit_percent, rmse, ChannelFit, ExperimentFit, FitReport, MetricsError};
 pub use plot::{plot_comparison, render_comparison, PlotError};
 pub use sensitivity::{estimated_parameters, SensitivitySimulator, SensitivityTrajectory};

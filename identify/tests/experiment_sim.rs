@@ -91,13 +91,13 @@ fn zero_order_hold_matches_closed_form() {
     let p = ParameterValues::from_base(&model, vec![2.0, 0.0]);
     let tr = sim.simulate(&sig, &p.full, 50).expect("simulates");
     let (mut x, mut v) = (0.3, 0.0);
-    for k in 0..50 {
+    for (k, fk) in f.iter().enumerate() {
         assert!(
             (tr.q[0][k] - x).abs() < 1e-12,
             "k={k}: {} vs {x}",
             tr.q[0][k]
         );
-        let a = f[k] / 2.0;
+        let a = fk / 2.0;
         let dt = 0.01;
         x += v * dt + 0.5 * a * dt * dt;
         v += a * dt;
