@@ -11,6 +11,8 @@
 //!   forward sensitivities to the free parameters.
 //! - [`fit()`] estimates bounded parameters by Levenberg-Marquardt on the
 //!   simulation error, with standard errors and correlated pairs.
+//! - [`diagnose()`] (skeleton) refits the model with each candidate effect
+//!   added and ranks them.
 
 mod csv_reader;
 pub mod data;
@@ -26,6 +28,7 @@ pub use data::{
 pub use error::{CellProblem, DataError, DataWarning};
 pub use units::Kind;
 
+pub mod diagnose;
 pub mod experiment_sim;
 pub mod fit;
 pub mod metrics;
@@ -33,6 +36,7 @@ pub mod plot;
 pub mod sensitivity;
 pub mod where_it_fails;
 
+pub use diagnose::{candidates, diagnose, Candidate, DiagnoseError, Diagnosis, Ranked};
 pub use experiment_sim::{InitialVelocity, Signals, SimError, SimOptions, Simulator, Trajectory};
 pub use fit::{fit, Estimate, FitError, FitOptions, FitResult};
 pub use metrics::{compare, fit_percent, rmse, ChannelFit, ExperimentFit, FitReport, MetricsError};
