@@ -6,6 +6,13 @@
 //! - [`compare`] computes fit % and RMSE per channel ([`FitReport`]).
 //! - [`where_it_fails()`] and [`residual_summary`] locate where a model misses.
 //! - [`plot_comparison`] draws measured vs simulated and residuals to SVG.
+//! - [`Simulator`] simulates a model over a measured experiment (ZOH input,
+//!   fixed-step RK4, one compiled tape); [`SensitivitySimulator`] adds exact
+//!   forward sensitivities to the free parameters.
+//! - [`fit()`] estimates bounded parameters by Levenberg-Marquardt on the
+//!   simulation error, with standard errors and correlated pairs.
+//! - [`diagnose()`] (skeleton) refits the model with each candidate effect
+//!   added and ranks them.
 
 mod csv_reader;
 pub mod data;
@@ -21,12 +28,20 @@ pub use data::{
 pub use error::{CellProblem, DataError, DataWarning};
 pub use units::Kind;
 
+pub mod diagnose;
+pub mod experiment_sim;
+pub mod fit;
 pub mod metrics;
 pub mod plot;
+pub mod sensitivity;
 pub mod where_it_fails;
 
+pub use diagnose::{candidates, diagnose, Candidate, DiagnoseError, Diagnosis, Ranked};
+pub use experiment_sim::{InitialVelocity, Signals, SimError, SimOptions, Simulator, Trajectory};
+pub use fit::{fit, Estimate, FitError, FitOptions, FitResult};
 pub use metrics::{compare, fit_percent, rmse, ChannelFit, ExperimentFit, FitReport, MetricsError};
 pub use plot::{plot_comparison, render_comparison, PlotError};
+pub use sensitivity::{estimated_parameters, SensitivitySimulator, SensitivityTrajectory};
 pub use where_it_fails::{
     residual_summary, where_it_fails, ChannelDiagnosis, FailOptions, Finding, FindingKind,
     GroupStats, ResidualSummary,

@@ -1,0 +1,540 @@
+//! Simulation of a model over a measured experiment (single shooting).
+//!
+//! The initial state comes from the data (coordinates at `t0`, velocities zero
+//! or estimated), the measured input is applied with a zero-order hold
+//! (`u[k]` acts over `[t_k, t_{k+1})`, which is how the rig's DAC works; using
+//! `u` at the sample instant instead shows up as a false ~1 ms delay), and a
+//! fixed-step RK4 with substeps aligned to the samples produces the
+//! coordinates at the sample instants.
+//!
+//! The dynamics are one compiled [`Tape`] producing `[M (n*n), r0 (n), B (n*m)]`
+//! over `(state, inputs, full parameters)`, with `r0 = Q0 - bias` the
+//! right-hand side without input; `M a = r0 + B u` is solved by a small LU
+//! with partial pivoting in preallocated buffers (no allocation per step).
+//!
+//! Dry friction `sign(q')` is replaced by `tanh(q'/w)` (default `w = 1e-3`
+//! rad/s, see [`SimOptions::dry_friction_width`]): RK4 cannot integrate a
+//! discontinuous force, and the identification notes measured that a softer
+//! width (1e-2) makes a stuck arm creep (20x worse fit). The smooth law is
+//! stiff: it needs a step of about 1 ms, hence the default substep.
+
+use std::collections::HashMap;
+use std::fmt;
+
+use plantc_derive::mechanics::{derive_equations, Equations};
+use plantc_derive::model::Model;
+use plantc_derive::sym::{substitute, Expr, Func, Node, Symbol, Tape};
+
+use crate::data::Experiment;
+
+/// How the initial velocities are chosen.
+#[derive(Copy, Clone, Debug, PartialEq)]
+pub enum InitialVelocity {
+    /// All velocities zero (the experiments start at rest).
+    Zero,
+    /// Slope of a least-squares line through the first `samples` samples of
+    /// each coordinate (at least 2).
+    Estimate {
+        /// Number of samples used.
+        samples: usize,
+    },
+}
+
+/// Options of the experiment simulation.
+#[derive(Copy, Clone, Debug, PartialEq)]
+pub struct SimOptions {
+    /// Largest RK4 substep in s; `None` means `min(1 ms, T/2)` with `T` the
+    /// experiment's median sample time. Each sample interval is split into
+    /// `ceil(dt/h)` equal substeps, so steps are aligned with the samples.
+    pub substep: Option<f64>,
+    /// `sign(v)` is replaced by `tanh(v/w)` with this `w`; `None` keeps the
+    /// discontinuous `sign` (not recommended with RK4).
+    pub dry_friction_width: Option<f64>,
+    /// Initial velocities.
+    pub initial_velocity: InitialVelocity,
+}
+
+impl Default for SimOptions {
+    fn default() -> Self {
+        SimOptions {
+            substep: None,
+            dry_friction_width: Some(1e-3),
+            initial_velocity: InitialVelocity::Zero,
+        }
+    }
+}
+
+/// Why a simulation could not be set up or run.
+#[derive(Clone, Debug, PartialEq)]
+pub enum SimError {
+    /// The equations of motion could not be formed.
+    Mechanics(String),
+    /// A compiled tape could not be built (a symbol without a value).
+    Tape(String),
+    /// The experiment lacks a channel the model needs.
+    MissingChannel {
+        /// Experiment name.
+        experiment: String,
+        /// Channel name (a coordinate or an input of the model).
+        channel: String,
+    },
+    /// The experiment has too few samples.
+    TooFewSamples {
+        /// Experiment name.
+        experiment: String,
+        /// Samples found.
+        samples: usize,
+    },
+    /// The parameter vector has the wrong length.
+    ParameterCount {
+        /// Expected length.
+        expected: usize,
+        /// Given length.
+        found: usize,
+    },
+    /// A parameter named as free does not exist in the model.
+    UnknownParameter {
+        /// The name given.
+        name: String,
+    },
+    /// An option is out of range.
+    BadOption(String),
+    /// The state became non-finite or the mass matrix singular.
+    Diverged {
+        /// Experiment name.
+        experiment: String,
+        /// Time in s where it happened.
+        time: f64,
+    },
+}
+
+impl fmt::Display for SimError {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        match self {
+            SimError::Mechanics(m) => write!(f, "equations of motion: {m}"),
+            SimError::Tape(m) => write!(f, "compiling the dynamics: {m}"),
+            SimError::MissingChannel {
+                experiment,
+                channel,
+            } => write!(f, "experiment `{experiment}` has no channel `{channel}`"),
+            SimError::TooFewSamples {
+                experiment,
+                samples,
+            } => write!(
+                f,
+                "experiment `{experiment}` has {samples} sample(s); at least 2 are needed"
+            ),
+            SimError::ParameterCount { expected, found } => write!(
+                f,
+                "expected {expected} parameter values (base then derived), got {found}"
+            ),
+            SimError::UnknownParameter { name } => {
+                write!(f, "the model has no parameter `{name}`")
+            }
+            SimError::BadOption(m) => write!(f, "bad simulation option: {m}"),
+            SimError::Diverged { experiment, time } => write!(
+                f,
+                "simulation of `{experiment}` diverged (non-finite state or singular mass matrix) at t = {time} s"
+            ),
+        }
+    }
+}
+
+impl std::error::Error for SimError {}
+
+/// The signals of one experiment in model order, ready for simulation.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Signals {
+    /// Experiment name.
+    pub name: String,
+    /// Sample instants in s.
+    pub t: Vec<f64>,
+    /// Measured coordinates, one vector per model coordinate.
+    pub q: Vec<Vec<f64>>,
+    /// Inputs, one vector per model input.
+    pub u: Vec<Vec<f64>>,
+}
+
+impl Signals {
+    /// Pick the model's coordinates and inputs out of an experiment by name.
+    pub fn from_experiment(model: &Model, exp: &Experiment) -> Result<Signals, SimError> {
+        let get = |name: &str| {
+            exp.values(name)
+                .map(<[f64]>::to_vec)
+                .ok_or_else(|| SimError::MissingChannel {
+                    experiment: exp.name.clone(),
+                    channel: name.to_string(),
+                })
+        };
+        let q = model
+            .coordinates
+            .iter()
+            .map(|c| get(&c.name))
+            .collect::<Result<Vec<_>, _>>()?;
+        let u = model
+            .inputs
+            .iter()
+            .map(|i| get(&i.name))
+            .collect::<Result<Vec<_>, _>>()?;
+        if exp.t.len() < 2 {
+            return Err(SimError::TooFewSamples {
+                experiment: exp.name.clone(),
+                samples: exp.t.len(),
+            });
+        }
+        Ok(Signals {
+            name: exp.name.clone(),
+            t: exp.t.clone(),
+            q,
+            u,
+        })
+    }
+
+    /// Number of samples.
+    pub fn len(&self) -> usize {
+        self.t.len()
+    }
+
+    /// True without samples (never for signals built by [`Signals::from_experiment`]).
+    pub fn is_empty(&self) -> bool {
+        self.t.is_empty()
+    }
+
+    /// Number of samples with `t <= t0 + horizon` (all for an infinite horizon).
+    pub fn samples_within(&self, horizon: f64) -> usize {
+        let Some(&t0) = self.t.first() else { return 0 };
+        self.t.partition_point(|&t| t <= t0 + horizon)
+    }
+
+    /// Median sample interval.
+    fn sample_time(&self) -> f64 {
+        let mut d: Vec<f64> = self.t.windows(2).map(|w| w[1] - w[0]).collect();
+        d.sort_by(f64::total_cmp);
+        d.get(d.len() / 2).copied().unwrap_or(1e-3)
+    }
+}
+
+/// Simulated coordinates at the sample instants.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Trajectory {
+    /// One vector per model coordinate, `n_samples` long.
+    pub q: Vec<Vec<f64>>,
+}
+
+/// Replace every `sign(u)` by `tanh(u/w)`.
+pub(crate) fn smooth_sign(exprs: &[Expr], width: Option<f64>) -> Vec<Expr> {
+    let Some(w) = width else {
+        return exprs.to_vec();
+    };
+    let mut map: HashMap<Expr, Expr> = HashMap::new();
+    let mut seen = std::collections::HashSet::new();
+    let mut stack: Vec<Expr> = exprs.to_vec();
+    while let Some(e) = stack.pop() {
+        if !seen.insert(e) {
+            continue;
+        }
+        if let Node::Func(Func::Sign, u) = e.node() {
+            map.insert(e, (*u * Expr::float(1.0 / w)).tanh());
+        }
+        stack.extend(e.children());
+    }
+    if map.is_empty() {
+        return exprs.to_vec();
+    }
+    exprs.iter().map(|e| substitute(*e, &map)).collect()
+}
+
+/// The equations as flat vectors `[M (row-major), r0, B (row-major)]`, with
+/// dry friction smoothed.
+pub(crate) fn dynamics_outputs(
+    model: &Model,
+    width: Option<f64>,
+) -> Result<(Equations, Vec<Expr>), SimError> {
+    let eqs = derive_equations(model).map_err(|e| SimError::Mechanics(e.to_string()))?;
+    let n = eqs.coords.len();
+    let mut outs = Vec::new();
+    for row in &eqs.mass_matrix {
+        outs.extend(row.iter().copied());
+    }
+    for i in 0..n {
+        outs.push(eqs.forces[i] - eqs.bias[i]);
+    }
+    for row in &eqs.input_matrix {
+        outs.extend(row.iter().copied());
+    }
+    Ok((eqs, smooth_sign(&outs, width)))
+}
+
+/// Tape input symbols: state, inputs, full parameters.
+pub(crate) fn tape_inputs(model: &Model) -> Vec<Symbol> {
+    let mut v = model.state_symbols();
+    v.extend(model.input_symbols());
+    v.extend(model.parameter_symbols());
+    v
+}
+
+/// In-place LU with partial pivoting of the `n x n` row-major `a`; `piv`
+/// receives the row permutation. Returns false if singular or non-finite.
+pub(crate) fn lu_factor(a: &mut [f64], n: usize, piv: &mut [usize]) -> bool {
+    for (i, p) in piv.iter_mut().enumerate().take(n) {
+        *p = i;
+    }
+    for k in 0..n {
+        let mut p = k;
+        let mut best = a[k * n + k].abs();
+        for i in k + 1..n {
+            let v = a[i * n + k].abs();
+            if v > best {
+                best = v;
+                p = i;
+            }
+        }
+        if best <= f64::MIN_POSITIVE || !best.is_finite() {
+            return false;
+        }
+        if p != k {
+            for j in 0..n {
+                a.swap(k * n + j, p * n + j);
+            }
+            piv.swap(k, p);
+        }
+        let d = a[k * n + k];
+        for i in k + 1..n {
+            let l = a[i * n + k] / d;
+            a[i * n + k] = l;
+            for j in k + 1..n {
+                a[i * n + j] -= l * a[k * n + j];
+            }
+        }
+    }
+    true
+}
+
+/// Solve `A x = b` with the factors of [`lu_factor`]; `b` is overwritten by
+/// `x`, `tmp` (length `n`) is scratch.
+pub(crate) fn lu_solve(lu: &[f64], n: usize, piv: &[usize], b: &mut [f64], tmp: &mut [f64]) {
+    for i in 0..n {
+        tmp[i] = b[piv[i]];
+    }
+    for i in 0..n {
+        let mut s = tmp[i];
+        for j in 0..i {
+            s -= lu[i * n + j] * tmp[j];
+        }
+        tmp[i] = s;
+    }
+    for i in (0..n).rev() {
+        let mut s = tmp[i];
+        for j in i + 1..n {
+            s -= lu[i * n + j] * tmp[j];
+        }
+        tmp[i] = s / lu[i * n + i];
+    }
+    b[..n].copy_from_slice(&tmp[..n]);
+}
+
+/// Initial state `(q(t0), q'(t0))` from the data.
+pub(crate) fn initial_state(sig: &Signals, how: InitialVelocity) -> Vec<f64> {
+    let n = sig.q.len();
+    let mut x = vec![0.0; 2 * n];
+    for i in 0..n {
+        x[i] = sig.q[i][0];
+        if let InitialVelocity::Estimate { samples } = how {
+            let k = samples.clamp(2, sig.len());
+            let t0 = sig.t[0];
+            let (mut st, mut sq, mut stt, mut stq) = (0.0, 0.0, 0.0, 0.0);
+            for j in 0..k {
+                let t = sig.t[j] - t0;
+                st += t;
+                sq += sig.q[i][j];
+                stt += t * t;
+                stq += t * sig.q[i][j];
+            }
+            let kf = k as f64;
+            let den = kf * stt - st * st;
+            if den > 0.0 {
+                x[n + i] = (kf * stq - st * sq) / den;
+            }
+        }
+    }
+    x
+}
+
+/// RK4 over the sample intervals with zero-order-hold input. `rhs(z, u, dz)`
+/// returns false when the dynamics cannot be evaluated (singular mass matrix).
+/// `record(k, z)` is called at every sample instant `k < n_samples`.
+pub(crate) fn integrate(
+    sig: &Signals,
+    n_samples: usize,
+    substep: f64,
+    z: &mut [f64],
+    mut rhs: impl FnMut(&[f64], &[f64], &mut [f64]) -> bool,
+    mut record: impl FnMut(usize, &[f64]),
+) -> Result<(), SimError> {
+    let dim = z.len();
+    let m = sig.u.len();
+    let mut u = vec![0.0; m];
+    let mut k1 = vec![0.0; dim];
+    let mut k2 = vec![0.0; dim];
+    let mut k3 = vec![0.0; dim];
+    let mut k4 = vec![0.0; dim];
+    let mut tmp = vec![0.0; dim];
+    let n_samples = n_samples.min(sig.len());
+    for k in 0..n_samples {
+        record(k, z);
+        if k + 1 == n_samples {
+            break;
+        }
+        for (j, uj) in u.iter_mut().enumerate() {
+            *uj = sig.u[j][k];
+        }
+        let dt = sig.t[k + 1] - sig.t[k];
+        let steps = ((dt / substep) - 1e-9).ceil().max(1.0) as usize;
+        let h = dt / steps as f64;
+        let diverged = || SimError::Diverged {
+            experiment: sig.name.clone(),
+            time: sig.t[k],
+        };
+        for _ in 0..steps {
+            if !rhs(z, &u, &mut k1) {
+                return Err(diverged());
+            }
+            for i in 0..dim {
+                tmp[i] = z[i] + 0.5 * h * k1[i];
+            }
+            if !rhs(&tmp, &u, &mut k2) {
+                return Err(diverged());
+            }
+            for i in 0..dim {
+                tmp[i] = z[i] + 0.5 * h * k2[i];
+            }
+            if !rhs(&tmp, &u, &mut k3) {
+                return Err(diverged());
+            }
+            for i in 0..dim {
+                tmp[i] = z[i] + h * k3[i];
+            }
+            if !rhs(&tmp, &u, &mut k4) {
+                return Err(diverged());
+            }
+            for i in 0..dim {
+                z[i] += h / 6.0 * (k1[i] + 2.0 * k2[i] + 2.0 * k3[i] + k4[i]);
+            }
+        }
+        if z.iter().any(|v| !v.is_finite()) {
+            return Err(diverged());
+        }
+    }
+    Ok(())
+}
+
+/// The substep for an experiment under `opts`.
+pub(crate) fn substep_for(sig: &Signals, opts: &SimOptions) -> Result<f64, SimError> {
+    match opts.substep {
+        Some(h) if h > 0.0 && h.is_finite() => Ok(h),
+        Some(h) => Err(SimError::BadOption(format!(
+            "substep must be positive, got {h}"
+        ))),
+        None => Ok((sig.sample_time() / 2.0).min(1e-3)),
+    }
+}
+
+/// A compiled simulator of one model.
+#[derive(Clone, Debug)]
+pub struct Simulator {
+    n: usize,
+    m: usize,
+    n_params: usize,
+    tape: Tape,
+    opts: SimOptions,
+}
+
+impl Simulator {
+    /// Derive and compile the dynamics of `model`.
+    pub fn new(model: &Model, opts: SimOptions) -> Result<Simulator, SimError> {
+        if let Some(w) = opts.dry_friction_width {
+            if !(w > 0.0 && w.is_finite()) {
+                return Err(SimError::BadOption(format!(
+                    "dry friction width must be positive, got {w}"
+                )));
+            }
+        }
+        let (_, outs) = dynamics_outputs(model, opts.dry_friction_width)?;
+        let tape =
+            Tape::compile(&outs, &tape_inputs(model)).map_err(|e| SimError::Tape(e.to_string()))?;
+        Ok(Simulator {
+            n: model.coordinates.len(),
+            m: model.inputs.len(),
+            n_params: model.parameter_symbols().len(),
+            tape,
+            opts,
+        })
+    }
+
+    /// The options in use.
+    pub fn options(&self) -> &SimOptions {
+        &self.opts
+    }
+
+    /// Simulate the first `n_samples` samples (clamped to the experiment's
+    /// length) with parameter values `params` (the `full` vector of
+    /// [`plantc_derive::model::ParameterValues`]: base then derived).
+    pub fn simulate(
+        &self,
+        sig: &Signals,
+        params: &[f64],
+        n_samples: usize,
+    ) -> Result<Trajectory, SimError> {
+        if params.len() != self.n_params {
+            return Err(SimError::ParameterCount {
+                expected: self.n_params,
+                found: params.len(),
+            });
+        }
+        if sig.q.len() != self.n || sig.u.len() != self.m {
+            return Err(SimError::BadOption(format!(
+                "signals of `{}` do not match the model's coordinates and inputs",
+                sig.name
+            )));
+        }
+        let h = substep_for(sig, &self.opts)?;
+        let (n, m) = (self.n, self.m);
+        let n_samples = n_samples.min(sig.len());
+        let mut tin = vec![0.0; 2 * n + m + self.n_params];
+        tin[2 * n + m..].copy_from_slice(params);
+        let mut out = vec![0.0; self.tape.n_outputs()];
+        let mut scratch = vec![0.0; self.tape.scratch_len()];
+        let mut piv = vec![0; n];
+        let mut acc = vec![0.0; n];
+        let mut tmp = vec![0.0; n];
+        let rhs = |x: &[f64], u: &[f64], dx: &mut [f64]| {
+            tin[..2 * n].copy_from_slice(x);
+            tin[2 * n..2 * n + m].copy_from_slice(u);
+            self.tape.eval(&tin, &mut out, &mut scratch);
+            let (mm, rest) = out.split_at_mut(n * n);
+            let (r0, b) = rest.split_at(n);
+            for i in 0..n {
+                let mut s = r0[i];
+                for j in 0..m {
+                    s += b[i * m + j] * u[j];
+                }
+                acc[i] = s;
+            }
+            if !lu_factor(mm, n, &mut piv) {
+                return false;
+            }
+            lu_solve(mm, n, &piv, &mut acc, &mut tmp);
+            dx[..n].copy_from_slice(&x[n..2 * n]);
+            dx[n..2 * n].copy_from_slice(&acc);
+            true
+        };
+        let mut q = vec![vec![0.0; n_samples]; n];
+        let mut z = initial_state(sig, self.opts.initial_velocity);
+        integrate(sig, n_samples, h, &mut z, rhs, |k, z| {
+            for (i, qi) in q.iter_mut().enumerate() {
+                qi[k] = z[i];
+            }
+        })?;
+        Ok(Trajectory { q })
+    }
+}

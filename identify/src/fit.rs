@@ -1,0 +1,500 @@
+//! Bounded simulation-error fit (single shooting, Levenberg-Marquardt).
+//!
+//! The residuals are simulated minus measured coordinates at every sample of
+//! every experiment (all coordinates in their SI units, unweighted). Each free
+//! parameter `p` in its `estimate [lo, hi]` box is written as
+//! `p = lo + (hi - lo) * s(z)` with the logistic `s`, so every LM step stays
+//! inside the box and the unknowns `z` are dimensionless (this also scales
+//! them: near a zero lower bound `dp/dz ~ p`, like a log). The Jacobian comes
+//! from the exact forward sensitivities ([`SensitivitySimulator`]), not from
+//! finite differences.
+//!
+//! The horizon grows (3 s, 8 s, everything by default): single shooting from
+//! table values can stall in a local minimum over the whole record
+//! (identification notes, trap 7), while a short horizon is nearly linear in
+//! the parameters.
+//!
+//! Standard errors come from `sigma^2 (J'J)^-1` with `sigma^2 = SSR/(N - p)`
+//! in physical units. Simulation residuals are strongly correlated in time, so
+//! these are lower bounds on the true uncertainty; the correlations between
+//! estimates are more telling (e.g. `l2` against `J2`, trap 9).
+
+use std::fmt;
+
+use plantc_derive::model::{Model, ParameterValues};
+use serde::Serialize;
+
+use crate::data::Experiment;
+use crate::experiment_sim::{Signals, SimError, SimOptions, Simulator};
+use crate::sensitivity::{estimated_parameters, SensitivitySimulator};
+
+/// Options of [`fit`].
+#[derive(Clone, Debug, PartialEq)]
+pub struct FitOptions {
+    /// Free parameters; `None` means those marked `estimate` in the model.
+    pub free: Option<Vec<String>>,
+    /// Starting base values (model order); `None` means the nominal values.
+    pub start: Option<Vec<f64>>,
+    /// Growing fit horizons in s from each experiment's start; the last stage
+    /// should be `f64::INFINITY` (everything).
+    pub horizons: Vec<f64>,
+    /// Most LM iterations per horizon stage.
+    pub max_iterations: usize,
+    /// Simulation options.
+    pub sim: SimOptions,
+    /// Pairs of estimates with `|corr|` above this are reported.
+    pub correlation_threshold: f64,
+}
+
+impl Default for FitOptions {
+    fn default() -> Self {
+        FitOptions {
+            free: None,
+            start: None,
+            horizons: vec![3.0, 8.0, f64::INFINITY],
+            max_iterations: 30,
+            sim: SimOptions::default(),
+            correlation_threshold: 0.95,
+        }
+    }
+}
+
+/// Why a fit could not be done.
+#[derive(Clone, Debug, PartialEq)]
+pub enum FitError {
+    /// Setting up or running the simulation failed (at the start values).
+    Sim(SimError),
+    /// No experiments were given.
+    NoExperiments,
+    /// No free parameters.
+    NoFreeParameters,
+    /// A free parameter has no `estimate [lo, hi]` bounds (or they are empty).
+    NoBounds {
+        /// Parameter name.
+        name: String,
+    },
+    /// The start vector has the wrong length or a non-finite value.
+    BadStart {
+        /// Expected length.
+        expected: usize,
+    },
+    /// Fewer residuals than free parameters.
+    NotEnoughData {
+        /// Number of residuals.
+        residuals: usize,
+        /// Number of free parameters.
+        parameters: usize,
+    },
+}
+
+impl fmt::Display for FitError {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        match self {
+            FitError::Sim(e) => write!(f, "{e}"),
+            FitError::NoExperiments => write!(f, "no experiments to fit"),
+            FitError::NoFreeParameters => write!(
+                f,
+                "no free parameters (mark some `estimate [lo, hi]` or name them)"
+            ),
+            FitError::NoBounds { name } => write!(
+                f,
+                "parameter `{name}` has no usable `estimate [lo, hi]` bounds"
+            ),
+            FitError::BadStart { expected } => write!(
+                f,
+                "start values must be {expected} finite numbers (one per parameter)"
+            ),
+            FitError::NotEnoughData {
+                residuals,
+                parameters,
+            } => write!(
+                f,
+                "{residuals} residuals cannot determine {parameters} parameters"
+            ),
+        }
+    }
+}
+
+impl std::error::Error for FitError {}
+
+impl From<SimError> for FitError {
+    fn from(e: SimError) -> Self {
+        FitError::Sim(e)
+    }
+}
+
+/// One estimated parameter.
+#[derive(Clone, Debug, PartialEq, Serialize)]
+pub struct Estimate {
+    /// Parameter name.
+    pub name: String,
+    /// Estimated value (SI).
+    pub value: f64,
+    /// Standard error from `sigma^2 (J'J)^-1` (NaN when `J'J` is singular).
+    pub std_error: f64,
+    /// Starting value.
+    pub start: f64,
+    /// True when the estimate sits within 0.1 % of the box width of a bound.
+    pub at_bound: bool,
+}
+
+/// The result of [`fit`].
+#[derive(Clone, Debug, PartialEq)]
+pub struct FitResult {
+    /// Estimates of the free parameters, in the order they were given.
+    pub parameters: Vec<Estimate>,
+    /// All base parameter values after the fit (model order).
+    pub base: Vec<f64>,
+    /// RMSE over all coordinates and experiments at the start values.
+    pub before_rmse: f64,
+    /// RMSE after the fit.
+    pub after_rmse: f64,
+    /// Pairs of estimates with `|corr|` above the threshold: `(a, b, corr)`.
+    pub correlations: Vec<(String, String, f64)>,
+    /// LM iterations over all stages (each one sensitivity simulation).
+    pub iterations: usize,
+    /// Simulations without sensitivities (trial steps and RMSE evaluations).
+    pub simulations: usize,
+}
+
+impl FitResult {
+    /// The JSON form: `{"parameters": {"l2": {"value": .., "std_error": ..}},
+    /// "before": {"rmse": ..}, "after": {"rmse": ..}, "correlations": [..],
+    /// "iterations": ..}`. Non-finite numbers become `null`.
+    pub fn to_json(&self) -> serde_json::Value {
+        let mut params = serde_json::Map::new();
+        for e in &self.parameters {
+            params.insert(
+                e.name.clone(),
+                serde_json::json!({
+                    "value": e.value,
+                    "std_error": e.std_error,
+                    "start": e.start,
+                    "at_bound": e.at_bound,
+                }),
+            );
+        }
+        let corr: Vec<serde_json::Value> = self
+            .correlations
+            .iter()
+            .map(|(a, b, c)| serde_json::json!({"a": a, "b": b, "corr": c}))
+            .collect();
+        serde_json::json!({
+            "parameters": params,
+            "before": {"rmse": self.before_rmse},
+            "after": {"rmse": self.after_rmse},
+            "correlations": corr,
+            "iterations": self.iterations,
+            "simulations": self.simulations,
+        })
+    }
+}
+
+impl Serialize for FitResult {
+    fn serialize<S: serde::Serializer>(&self, s: S) -> Result<S::Ok, S::Error> {
+        self.to_json().serialize(s)
+    }
+}
+
+fn logistic(z: f64) -> f64 {
+    1.0 / (1.0 + (-z).exp())
+}
+
+/// The problem: model, simulators, data, box.
+struct Problem<'a> {
+    model: &'a Model,
+    sim: Simulator,
+    sens: SensitivitySimulator,
+    sigs: Vec<Signals>,
+    free: Vec<usize>,
+    bounds: Vec<(f64, f64)>,
+    base: Vec<f64>,
+}
+
+impl Problem<'_> {
+    fn theta(&self, z: &[f64]) -> Vec<f64> {
+        let mut b = self.base.clone();
+        for (j, &i) in self.free.iter().enumerate() {
+            let (lo, hi) = self.bounds[j];
+            b[i] = lo + (hi - lo) * logistic(z[j]);
+        }
+        b
+    }
+
+    fn dtheta_dz(&self, z: &[f64]) -> Vec<f64> {
+        z.iter()
+            .zip(&self.bounds)
+            .map(|(z, (lo, hi))| {
+                let s = logistic(*z);
+                (hi - lo) * s * (1.0 - s)
+            })
+            .collect()
+    }
+
+    fn samples(&self, horizon: f64) -> Vec<usize> {
+        self.sigs
+            .iter()
+            .map(|s| s.samples_within(horizon))
+            .collect()
+    }
+
+    /// Sum of squared residuals and their count; Err on divergence.
+    fn ssr(&self, base: Vec<f64>, horizon: f64) -> Result<(f64, usize), SimError> {
+        let p = ParameterValues::from_base(self.model, base);
+        let mut ssr = 0.0;
+        let mut count = 0;
+        for (sig, n) in self.sigs.iter().zip(self.samples(horizon)) {
+            let tr = self.sim.simulate(sig, &p.full, n)?;
+            for (q, qs) in sig.q.iter().zip(&tr.q) {
+                for k in 0..n {
+                    ssr += (qs[k] - q[k]).powi(2);
+                }
+                count += n;
+            }
+        }
+        Ok((ssr, count))
+    }
+
+    /// Normal equations in physical units: `(J'J, J'r, SSR, count)`.
+    fn normal(
+        &self,
+        base: Vec<f64>,
+        horizon: f64,
+    ) -> Result<(Vec<f64>, Vec<f64>, f64, usize), SimError> {
+        let np = self.free.len();
+        let p = ParameterValues::from_base(self.model, base);
+        let mut a = vec![0.0; np * np];
+        let mut g = vec![0.0; np];
+        let mut ssr = 0.0;
+        let mut count = 0;
+        for (sig, n) in self.sigs.iter().zip(self.samples(horizon)) {
+            let tr = self.sens.simulate(sig, &p.full, n)?;
+            for (i, q) in sig.q.iter().enumerate() {
+                for (k, qk) in q.iter().enumerate().take(n) {
+                    let r = tr.q[i][k] - qk;
+                    ssr += r * r;
+                    for j in 0..np {
+                        let sj = tr.dq[i][j][k];
+                        g[j] += sj * r;
+                        for l in j..np {
+                            a[j * np + l] += sj * tr.dq[i][l][k];
+                        }
+                    }
+                }
+                count += n;
+            }
+        }
+        for j in 0..np {
+            for l in 0..j {
+                a[j * np + l] = a[l * np + j];
+            }
+        }
+        Ok((a, g, ssr, count))
+    }
+}
+
+/// Cholesky solve of the SPD `a x = b` (`n x n`); None if not positive definite.
+fn cholesky_solve(a: &[f64], n: usize, b: &[f64]) -> Option<Vec<f64>> {
+    let mut l = vec![0.0; n * n];
+    for i in 0..n {
+        for j in 0..=i {
+            let mut s = a[i * n + j];
+            for k in 0..j {
+                s -= l[i * n + k] * l[j * n + k];
+            }
+            if i == j {
+                if s.is_nan() || s <= 0.0 || s.is_infinite() {
+                    return None;
+                }
+                l[i * n + i] = s.sqrt();
+            } else {
+                l[i * n + j] = s / l[j * n + j];
+            }
+        }
+    }
+    let mut y = b.to_vec();
+    for i in 0..n {
+        for k in 0..i {
+            y[i] -= l[i * n + k] * y[k];
+        }
+        y[i] /= l[i * n + i];
+    }
+    for i in (0..n).rev() {
+        for k in i + 1..n {
+            y[i] -= l[k * n + i] * y[k];
+        }
+        y[i] /= l[i * n + i];
+    }
+    Some(y)
+}
+
+/// Fit the free parameters of `model` to `experiments` (see the module docs).
+pub fn fit(
+    model: &Model,
+    experiments: &[Experiment],
+    opts: &FitOptions,
+) -> Result<FitResult, FitError> {
+    if experiments.is_empty() {
+        return Err(FitError::NoExperiments);
+    }
+    let free_names = opts
+        .free
+        .clone()
+        .unwrap_or_else(|| estimated_parameters(model));
+    if free_names.is_empty() {
+        return Err(FitError::NoFreeParameters);
+    }
+    let n_base = model.parameters.len();
+    let base = match &opts.start {
+        Some(s) if s.len() == n_base && s.iter().all(|v| v.is_finite()) => s.clone(),
+        Some(_) => return Err(FitError::BadStart { expected: n_base }),
+        None => model.parameters.iter().map(|p| p.value).collect(),
+    };
+    let sens = SensitivitySimulator::new(model, &free_names, opts.sim)?;
+    let free = sens.free_indices().to_vec();
+    let mut bounds = Vec::with_capacity(free.len());
+    for (&i, name) in free.iter().zip(&free_names) {
+        match model.parameters[i].estimate {
+            Some((lo, hi)) if lo < hi && lo.is_finite() && hi.is_finite() => bounds.push((lo, hi)),
+            _ => return Err(FitError::NoBounds { name: name.clone() }),
+        }
+    }
+    let sigs = experiments
+        .iter()
+        .map(|e| Signals::from_experiment(model, e))
+        .collect::<Result<Vec<_>, _>>()?;
+    let pb = Problem {
+        model,
+        sim: Simulator::new(model, opts.sim)?,
+        sens,
+        sigs,
+        free,
+        bounds,
+        base: base.clone(),
+    };
+    let np = pb.free.len();
+    // z from the start values, kept a little inside the box
+    let mut z: Vec<f64> = pb
+        .free
+        .iter()
+        .zip(&pb.bounds)
+        .map(|(&i, &(lo, hi))| {
+            let s = ((base[i] - lo) / (hi - lo)).clamp(1e-6, 1.0 - 1e-6);
+            (s / (1.0 - s)).ln()
+        })
+        .collect();
+    let (ssr0, count) = pb.ssr(pb.theta(&z), f64::INFINITY)?;
+    if count < np {
+        return Err(FitError::NotEnoughData {
+            residuals: count,
+            parameters: np,
+        });
+    }
+    let before_rmse = (ssr0 / count as f64).sqrt();
+    let mut iterations = 0;
+    let mut simulations = 1;
+    for &horizon in &opts.horizons {
+        let mut lambda = 1e-3;
+        for _ in 0..opts.max_iterations {
+            let Ok((a, g, ssr, _)) = pb.normal(pb.theta(&z), horizon) else {
+                break;
+            };
+            iterations += 1;
+            // chain rule to z: J_z = J_theta * diag(dtheta/dz)
+            let d = pb.dtheta_dz(&z);
+            let mut az = vec![0.0; np * np];
+            let mut gz = vec![0.0; np];
+            for j in 0..np {
+                gz[j] = g[j] * d[j];
+                for l in 0..np {
+                    az[j * np + l] = a[j * np + l] * d[j] * d[l];
+                }
+            }
+            let mut accepted = false;
+            let mut small_step = false;
+            while lambda < 1e12 {
+                let mut m = az.clone();
+                for j in 0..np {
+                    m[j * np + j] += lambda * az[j * np + j].max(1e-12);
+                }
+                let neg: Vec<f64> = gz.iter().map(|v| -v).collect();
+                let Some(step) = cholesky_solve(&m, np, &neg) else {
+                    lambda *= 10.0;
+                    continue;
+                };
+                let zt: Vec<f64> = z.iter().zip(&step).map(|(a, b)| a + b).collect();
+                simulations += 1;
+                match pb.ssr(pb.theta(&zt), horizon) {
+                    Ok((s, _)) if s < ssr => {
+                        small_step = step.iter().all(|v| v.abs() < 1e-6) || (ssr - s) < 1e-9 * ssr;
+                        z = zt;
+                        lambda = (lambda / 3.0).max(1e-9);
+                        accepted = true;
+                        break;
+                    }
+                    _ => lambda *= 4.0,
+                }
+            }
+            if !accepted || small_step {
+                break;
+            }
+        }
+    }
+    // Final statistics over everything, in physical units.
+    let theta = pb.theta(&z);
+    let (a, _, ssr, count) = pb.normal(theta.clone(), f64::INFINITY)?;
+    let after_rmse = (ssr / count as f64).sqrt();
+    let dof = count.saturating_sub(np).max(1) as f64;
+    let sigma2 = ssr / dof;
+    // covariance via the column-scaled inverse (conditioning)
+    let sc: Vec<f64> = (0..np)
+        .map(|j| a[j * np + j].sqrt().max(f64::MIN_POSITIVE))
+        .collect();
+    let scaled: Vec<f64> = (0..np * np)
+        .map(|k| a[k] / (sc[k / np] * sc[k % np]))
+        .collect();
+    let mut cov = vec![f64::NAN; np * np];
+    for j in 0..np {
+        let mut e = vec![0.0; np];
+        e[j] = 1.0;
+        if let Some(col) = cholesky_solve(&scaled, np, &e) {
+            for l in 0..np {
+                cov[l * np + j] = sigma2 * col[l] / (sc[l] * sc[j]);
+            }
+        }
+    }
+    let parameters: Vec<Estimate> = pb
+        .free
+        .iter()
+        .enumerate()
+        .map(|(j, &i)| {
+            let (lo, hi) = pb.bounds[j];
+            let v = theta[i];
+            Estimate {
+                name: free_names[j].clone(),
+                value: v,
+                std_error: cov[j * np + j].sqrt(),
+                start: base[i],
+                at_bound: (v - lo).min(hi - v) < 1e-3 * (hi - lo),
+            }
+        })
+        .collect();
+    let mut correlations = Vec::new();
+    for j in 0..np {
+        for l in j + 1..np {
+            let c = cov[j * np + l] / (cov[j * np + j] * cov[l * np + l]).sqrt();
+            if c.abs() > opts.correlation_threshold {
+                correlations.push((free_names[j].clone(), free_names[l].clone(), c));
+            }
+        }
+    }
+    Ok(FitResult {
+        parameters,
+        base: theta,
+        before_rmse,
+        after_rmse,
+        correlations,
+        iterations,
+        simulations,
+    })
+}

@@ -1,0 +1,223 @@
+//! Exact forward sensitivities `dx/dtheta` of an experiment simulation with
+//! respect to free base parameters `theta`.
+//!
+//! With `M(q, p) a = r0(x, p) + B(x, p) u` and `z` standing for a state
+//! component or a free parameter,
+//!
+//! ```text
+//! da/dz = M^-1 (dr0/dz + dB/dz u - dM/dz a)
+//! ```
+//!
+//! and the variational equations `S' = (df/dx) S + df/dtheta`, `S(0) = 0`
+//! (the initial state is measured, so it does not depend on `theta`) are
+//! integrated alongside the state with the same RK4 and zero-order hold as
+//! [`crate::experiment_sim::Simulator`], so the sensitivities are the exact
+//! derivatives of the discrete simulation up to rounding.
+//!
+//! The partial derivatives are symbolic: derived quantities (`let`) are
+//! expanded into base parameters before differentiating with respect to a
+//! parameter, and everything (`M`, `r0`, `B` and their derivatives along
+//! every state component and free parameter) goes into one compiled tape.
+
+use plantc_derive::model::Model;
+use plantc_derive::sym::{diff, Expr, Tape};
+
+use crate::experiment_sim::{
+    dynamics_outputs, initial_state, integrate, lu_factor, lu_solve, substep_for, tape_inputs,
+    Signals, SimError, SimOptions,
+};
+
+/// Simulated coordinates and their sensitivities at the sample instants.
+#[derive(Clone, Debug, PartialEq)]
+pub struct SensitivityTrajectory {
+    /// One vector per model coordinate.
+    pub q: Vec<Vec<f64>>,
+    /// `dq[i][j][k]`: derivative of coordinate `i` at sample `k` with respect
+    /// to free parameter `j`.
+    pub dq: Vec<Vec<Vec<f64>>>,
+}
+
+/// A compiled simulator with forward sensitivities.
+#[derive(Clone, Debug)]
+pub struct SensitivitySimulator {
+    n: usize,
+    m: usize,
+    n_params: usize,
+    free: Vec<usize>,
+    names: Vec<String>,
+    tape: Tape,
+    opts: SimOptions,
+}
+
+/// The parameters a model marks `estimate`, in declaration order.
+pub fn estimated_parameters(model: &Model) -> Vec<String> {
+    model
+        .parameters
+        .iter()
+        .filter(|p| p.estimate.is_some())
+        .map(|p| p.name.clone())
+        .collect()
+}
+
+impl SensitivitySimulator {
+    /// Compile the dynamics of `model` with sensitivities for the base
+    /// parameters named in `free`.
+    pub fn new(
+        model: &Model,
+        free: &[String],
+        opts: SimOptions,
+    ) -> Result<SensitivitySimulator, SimError> {
+        if let Some(w) = opts.dry_friction_width {
+            if !(w > 0.0 && w.is_finite()) {
+                return Err(SimError::BadOption(format!(
+                    "dry friction width must be positive, got {w}"
+                )));
+            }
+        }
+        let mut idx = Vec::with_capacity(free.len());
+        for name in free {
+            let Some(i) = model.parameters.iter().position(|p| &p.name == name) else {
+                return Err(SimError::UnknownParameter { name: name.clone() });
+            };
+            if idx.contains(&i) {
+                return Err(SimError::BadOption(format!(
+                    "parameter `{name}` is listed twice"
+                )));
+            }
+            idx.push(i);
+        }
+        let (_, base) = dynamics_outputs(model, opts.dry_friction_width)?;
+        let expanded: Vec<Expr> = base.iter().map(|e| model.expand_derived(*e)).collect();
+        let mut outs = base.clone();
+        for x in model.state_symbols() {
+            outs.extend(base.iter().map(|e| diff(*e, x)));
+        }
+        for &i in &idx {
+            let p = model.parameters[i].symbol;
+            outs.extend(expanded.iter().map(|e| diff(*e, p)));
+        }
+        let tape =
+            Tape::compile(&outs, &tape_inputs(model)).map_err(|e| SimError::Tape(e.to_string()))?;
+        Ok(SensitivitySimulator {
+            n: model.coordinates.len(),
+            m: model.inputs.len(),
+            n_params: model.parameter_symbols().len(),
+            free: idx,
+            names: free.to_vec(),
+            tape,
+            opts,
+        })
+    }
+
+    /// Names of the free parameters, in sensitivity order.
+    pub fn free_names(&self) -> &[String] {
+        &self.names
+    }
+
+    /// Indices of the free parameters in the model's base parameter vector.
+    pub fn free_indices(&self) -> &[usize] {
+        &self.free
+    }
+
+    /// Simulate the first `n_samples` samples with sensitivities; `params` is
+    /// the full parameter vector (base then derived).
+    pub fn simulate(
+        &self,
+        sig: &Signals,
+        params: &[f64],
+        n_samples: usize,
+    ) -> Result<SensitivityTrajectory, SimError> {
+        if params.len() != self.n_params {
+            return Err(SimError::ParameterCount {
+                expected: self.n_params,
+                found: params.len(),
+            });
+        }
+        if sig.q.len() != self.n || sig.u.len() != self.m {
+            return Err(SimError::BadOption(format!(
+                "signals of `{}` do not match the model's coordinates and inputs",
+                sig.name
+            )));
+        }
+        let h = substep_for(sig, &self.opts)?;
+        let (n, m, p) = (self.n, self.m, self.free.len());
+        let nx = 2 * n;
+        let bs = n * n + n + n * m;
+        let n_samples = n_samples.min(sig.len());
+        let mut tin = vec![0.0; nx + m + self.n_params];
+        tin[nx + m..].copy_from_slice(params);
+        let mut out = vec![0.0; self.tape.n_outputs()];
+        let mut scratch = vec![0.0; self.tape.scratch_len()];
+        let mut lu = vec![0.0; n * n];
+        let mut piv = vec![0; n];
+        let mut acc = vec![0.0; n];
+        let mut w = vec![0.0; n];
+        let mut tmp = vec![0.0; n];
+        // jd[d * n + i] = d a_i / d z_d, z = (state, free parameters)
+        let mut jd = vec![0.0; (nx + p) * n];
+        let rhs = |z: &[f64], u: &[f64], dz: &mut [f64]| {
+            tin[..nx].copy_from_slice(&z[..nx]);
+            tin[nx..nx + m].copy_from_slice(u);
+            self.tape.eval(&tin, &mut out, &mut scratch);
+            lu.copy_from_slice(&out[..n * n]);
+            let r0 = &out[n * n..n * n + n];
+            let b = &out[n * n + n..bs];
+            for i in 0..n {
+                acc[i] = r0[i] + (0..m).map(|j| b[i * m + j] * u[j]).sum::<f64>();
+            }
+            if !lu_factor(&mut lu, n, &mut piv) {
+                return false;
+            }
+            lu_solve(&lu, n, &piv, &mut acc, &mut tmp);
+            for d in 0..nx + p {
+                let blk = &out[bs * (d + 1)..bs * (d + 2)];
+                let (dm, rest) = blk.split_at(n * n);
+                let (dr, db) = rest.split_at(n);
+                for i in 0..n {
+                    let mut s = dr[i];
+                    for j in 0..m {
+                        s += db[i * m + j] * u[j];
+                    }
+                    for k in 0..n {
+                        s -= dm[i * n + k] * acc[k];
+                    }
+                    w[i] = s;
+                }
+                lu_solve(&lu, n, &piv, &mut w, &mut tmp);
+                jd[d * n..d * n + n].copy_from_slice(&w);
+            }
+            dz[..n].copy_from_slice(&z[n..nx]);
+            dz[n..nx].copy_from_slice(&acc);
+            let s = &z[nx..];
+            let ds = &mut dz[nx..];
+            for i in 0..n {
+                for j in 0..p {
+                    ds[i * p + j] = s[(n + i) * p + j];
+                }
+            }
+            for i in 0..n {
+                for j in 0..p {
+                    let mut v = jd[(nx + j) * n + i];
+                    for k in 0..nx {
+                        v += jd[k * n + i] * s[k * p + j];
+                    }
+                    ds[(n + i) * p + j] = v;
+                }
+            }
+            true
+        };
+        let mut z = initial_state(sig, self.opts.initial_velocity);
+        z.resize(nx + nx * p, 0.0);
+        let mut q = vec![vec![0.0; n_samples]; n];
+        let mut dq = vec![vec![vec![0.0; n_samples]; p]; n];
+        integrate(sig, n_samples, h, &mut z, rhs, |k, z| {
+            for i in 0..n {
+                q[i][k] = z[i];
+                for j in 0..p {
+                    dq[i][j][k] = z[nx + i * p + j];
+                }
+            }
+        })?;
+        Ok(SensitivityTrajectory { q, dq })
+    }
+}

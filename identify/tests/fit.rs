@@ -1,0 +1,78 @@
+//! Simulation-error fit on the shared `clean` case; reference values are
+//! `true_parameters` of its `truth.json`.
+
+mod common;
+
+use std::path::{Path, PathBuf};
+use std::time::Instant;
+
+use plantc_derive::model::{load_model, Model};
+use plantc_identify::{fit, read_experiments, FitError, FitOptions, ReadOptions};
+
+fn repo() -> PathBuf {
+    Path::new(env!("CARGO_MANIFEST_DIR")).join("..")
+}
+
+fn pendulum() -> Model {
+    load_model(&repo().join("models/rotary_pendulum.plant"))
+        .expect("pendulum model loads")
+        .model
+}
+
+#[test]
+fn no_experiments_is_an_error() {
+    let model = pendulum();
+    assert_eq!(
+        fit(&model, &[], &FitOptions::default()),
+        Err(FitError::NoExperiments)
+    );
+}
+
+#[test]
+fn clean_case_recovers_j1_and_l2() {
+    let dir = repo().join("../shared/data/clean");
+    if !dir.is_dir() {
+        eprintln!("skipping: {} not present", dir.display());
+        return;
+    }
+    let files: Vec<PathBuf> = ["free_swing_large", "free_swing_small", "driven"]
+        .iter()
+        .map(|n| dir.join(format!("{n}.csv")))
+        .collect();
+    let (exps, _) =
+        read_experiments(&files, &common::pendulum_spec(), &ReadOptions::default()).expect("reads");
+    let truth: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(dir.join("truth.json")).expect("truth"))
+            .expect("parses");
+    let model = pendulum();
+    let opts = FitOptions {
+        free: Some(["J1", "l2", "b1", "b2", "Fg1"].map(String::from).to_vec()),
+        ..FitOptions::default()
+    };
+    let start = Instant::now();
+    let r = fit(&model, &exps, &opts).expect("fits");
+    let elapsed = start.elapsed();
+    eprintln!("{}", serde_json::to_string_pretty(&r).expect("json"));
+    eprintln!("fit time {elapsed:?}");
+    for e in &r.parameters {
+        let t = truth["true_parameters"][&e.name]
+            .as_f64()
+            .expect("true value");
+        eprintln!(
+            "{:4} {:.5e} +- {:.1e} (true {t:.5e}, {:+.2} %)",
+            e.name,
+            e.value,
+            e.std_error,
+            100.0 * (e.value / t - 1.0)
+        );
+        if e.name == "J1" || e.name == "l2" {
+            assert!((e.value / t - 1.0).abs() < 0.05, "{}", e.name);
+        }
+    }
+    assert!(r.after_rmse < r.before_rmse / 10.0);
+    // quantisation floor q/sqrt(12) = 4.35e-4 rad (identification notes, trap 10)
+    assert!(r.after_rmse < 6e-4, "{}", r.after_rmse);
+    let json = r.to_json();
+    assert!(json["parameters"]["l2"]["value"].is_f64());
+    assert!(json["before"]["rmse"].is_f64() && json["after"]["rmse"].is_f64());
+}
