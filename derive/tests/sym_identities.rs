@@ -157,3 +157,43 @@ fn overflow_falls_back_gracefully() {
         Err(CanonError::DivisionByZero)
     );
 }
+
+#[test]
+fn nested_root_with_denominator_is_self_consistent() {
+    // Found by `canonical_is_self_consistent`: a root whose radicand has a
+    // denominator is an opaque atom; its argument must be the same atom whether
+    // it is built from `e` or from the canonical form of `e`.
+    let x = s("x");
+    let e = ((1 / x.powi(2) + 1).sqrt() - x).powi(2);
+    let e = (e + 1).sqrt();
+    let c = canonical(e);
+    assert!(is_zero(c - e), "e = {e}\ncanonical = {c}");
+    assert_eq!(canonical(c), c, "not idempotent: e = {e}");
+    // Its square is its radicand again, and other roots with denominators are
+    // self-consistent too (odd multiplicities go through an `abs` atom).
+    let y = s("y");
+    assert!(is_zero(
+        e.powi(2) - ((1 / x.powi(2) + 1).sqrt() - x).powi(2) - 1
+    ));
+    assert!(is_zero((1 / x).sqrt() - x.sqrt() / x.abs()));
+    for e in [
+        (1 / x).sqrt() + (y / x.powi(3) + 1).sqrt(),
+        ((x + 1) / (x.powi(2) * (y - 1))).pow(Expr::frac(1, 3)),
+        ((x + 1) / (y - 1)).pow(Expr::frac(3, 2)) - x,
+    ] {
+        let c = canonical(e);
+        assert!(is_zero(c - e), "e = {e}\ncanonical = {c}");
+        assert_eq!(canonical(c), c, "not idempotent: e = {e}");
+        // Same values wherever `e` is real (the rewrite must not flip signs).
+        for (xv, yv) in [(0.7, 0.4), (-1.3, 2.5), (-0.6, -1.7), (1.9, -0.3)] {
+            let mut at = |sy: Symbol| if sy.name() == "x" { xv } else { yv };
+            let (ve, vc) = (e.eval_with(&mut at), c.eval_with(&mut at));
+            if ve.is_finite() {
+                assert!(
+                    (ve - vc).abs() <= 1e-12 * (1.0 + ve.abs()),
+                    "{e} at {xv},{yv}: {ve} vs {vc} = {c}"
+                );
+            }
+        }
+    }
+}

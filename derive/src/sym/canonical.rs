@@ -43,9 +43,11 @@
 //! * Angles with more than [`MAX_ANGLE_TERMS`] terms or with a denominator are
 //!   single bases (sign-normalised, so `sin(-u) = -sin(u)` still holds).
 //! * `exp(a)*exp(b)` vs `exp(a+b)`, `ln` rules, `x^y*x^z` vs `x^(y+z)`,
-//!   `sqrt(x)*sqrt(y)` vs `sqrt(x*y)`, `x^(1/2)*x^(1/3)` vs `x^(5/6)`, roots of
-//!   rational functions with a denominator (opaque, not reduced), `abs`/`sign`
-//!   identities, `sqrt(x^2)` vs `abs(x)`.
+//!   `sqrt(x)*sqrt(y)` vs `sqrt(x*y)`, `x^(1/2)*x^(1/3)` vs `x^(5/6)`, `abs`/`sign`
+//!   identities, `sqrt(x^2)` vs `abs(x)`. A root of a rational function with a
+//!   denominator is rewritten `(N/D)^(1/q) = (N*D*|D|^(q-2))^(1/q) / |D|` (exact
+//!   wherever the left side is real), with `|f^k| = f^k` for even `k` and an
+//!   opaque `abs(f)` atom for odd `k`, so its radicand is a polynomial.
 //! * Numerator/denominator GCDs beyond "a denominator factor divides the
 //!   numerator": two equal expressions may have different canonical forms if a
 //!   common factor hides inside a product. [`is_zero`] and [`equivalent`] are
@@ -351,15 +353,36 @@ impl Ctx {
                 return self.powi(&base, r.numer());
             }
             let (p, q) = (r.numer(), r.denom());
-            if !base.den.is_empty() {
+            // `(N/D)^(1/q) = (N * D * |D|^(q-2))^(1/q) / |D|`: the root atom always
+            // has a polynomial radicand (with its relation `atom^q = radicand`), so
+            // the atom is the same however the rational function was written.
+            let (radicand, inv_abs) = if base.den.is_empty() {
+                (base.num.clone(), None)
+            } else if let Some((abs_d, inv)) = self.abs_den(&base.den)? {
+                let qm2 = u32::try_from(q - 2).map_err(|_| CanonError::TooLarge)?;
+                let rad = base
+                    .num
+                    .mul(&self.expand_den(&base.den)?, &self.rules)?
+                    .mul(&abs_d.pow(qm2, &self.rules)?, &self.rules)?;
+                (rad, Some(inv))
+            } else {
                 let be = self.to_expr(&base);
                 let built = be.pow(cx);
                 return self.rebuilt(built, matches!(built.node(), Node::Pow(bb, _) if *bb == be));
-            }
+            };
             let k = p.div_euclid(q);
             let rem = p.rem_euclid(q);
             let whole = self.powi(&base, k)?;
-            let root = self.root(&base.num, q)?;
+            let mut root = self.root(&radicand, q)?;
+            if let Some(inv) = inv_abs {
+                root = self.mul(
+                    &root,
+                    &RatFn {
+                        num: Poly::constant(Rational::ONE),
+                        den: inv,
+                    },
+                )?;
+            }
             let part = self.powi(&root, rem)?;
             return self.mul(&whole, &part);
         }
@@ -369,6 +392,38 @@ impl Ctx {
             built,
             matches!(built.node(), Node::Pow(bb, xx) if *bb == cb && *xx == cx),
         )
+    }
+
+    /// `|D|` of a factored denominator, as a polynomial and as the factored
+    /// denominator of `1/|D|`: even powers are their own absolute value, an odd
+    /// power `f^k` becomes `f^(k-1) * abs(f)`. `None` if `abs(f)` does not convert
+    /// to a polynomial with unit content.
+    fn abs_den(&mut self, den: &Den) -> CResult<Option<(Poly, Den)>> {
+        let mut abs_d = Poly::constant(Rational::ONE);
+        let mut inv = Den::new();
+        for (f, k) in den {
+            let mut even = *k;
+            if k % 2 == 1 {
+                even -= 1;
+                let a = self.convert(Expr::apply(Func::Abs, f.to_expr()))?;
+                if !a.den.is_empty() {
+                    return Ok(None);
+                }
+                let (c, fs) = factorize(&a.num)?;
+                if c != Rational::ONE {
+                    return Ok(None);
+                }
+                for (g, j) in fs {
+                    *inv.entry(g).or_insert(0) += j;
+                }
+                abs_d = abs_d.mul(&a.num, &self.rules)?;
+            }
+            if even > 0 {
+                *inv.entry(f.clone()).or_insert(0) += even;
+                abs_d = abs_d.mul(&f.pow(even, &self.rules)?, &self.rules)?;
+            }
+        }
+        Ok(Some((abs_d, inv)))
     }
 
     /// `B^(1/q)` as an atom with the relation `atom^q = B`.
