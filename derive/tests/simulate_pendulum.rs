@@ -389,3 +389,43 @@ fn inputs_are_clipped_to_the_model_limits() {
         assert_eq!(free.saturation_share(), 0.0);
     }
 }
+
+#[test]
+fn dry_friction_needs_smoothing_and_then_holds_the_arm() {
+    // Nominal model (Fg1 = 0.01 N m), free swing at 0 V from 2.5 rad.
+    let model = model();
+    let values = ParameterValues::new(&model, None, &[]).unwrap();
+    let derivation = Derivation::new(&model).unwrap();
+    let zero = || Control::OpenLoop(InputSignal::Constant(vec![0.0]));
+    let x0 = vec![0.0, 2.5, 0.0, 0.0];
+    let options = SimOptions {
+        max_steps: 20_000,
+        ..SimOptions::default()
+    };
+    let exact = SimProblem::new(
+        &model,
+        &derivation.equations,
+        &values,
+        zero(),
+        x0.clone(),
+        10.0,
+    )
+    .unwrap();
+    let err = simulate(&exact, &options).unwrap_err();
+    assert!(err.to_string().contains("smooth_signs"), "{err}");
+    let smooth = plantc_derive::mechanics::smooth_signs(&derivation.equations, 1e-3);
+    assert!(!plantc_derive::mechanics::has_sign(&smooth));
+    let problem = SimProblem::new(&model, &smooth, &values, zero(), x0, 10.0).unwrap();
+    let started = std::time::Instant::now();
+    let traj = simulate(&problem, &options).unwrap();
+    let theta = traj.state("theta").unwrap();
+    let max_theta = theta.iter().fold(0.0f64, |m, v| m.max(v.abs()));
+    eprintln!(
+        "free swing with tanh(v/1e-3) friction: max |theta| = {max_theta:.4} rad, final {:?}, {:?}, {:?}",
+        traj.states.last().unwrap(),
+        traj.stats,
+        started.elapsed()
+    );
+    // The gearbox friction holds the arm nearly still while the pendulum swings.
+    assert!(max_theta < 0.2, "{max_theta}");
+}

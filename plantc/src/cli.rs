@@ -219,6 +219,11 @@ pub struct SimArgs {
     /// Output samples per second.
     #[arg(long, value_name = "HZ", default_value_t = 1000.0)]
     pub output_rate: f64,
+    /// Replace every `sign(v)` of the equations (dry friction) by
+    /// `tanh(v / WIDTH)`, e.g. `--smooth-sign 1e-3` (rad/s): exact dry friction
+    /// makes a sticking joint chatter and the integrator stall.
+    #[arg(long, value_name = "WIDTH")]
+    pub smooth_sign: Option<f64>,
     /// Relative integrator tolerance (default 1e-8; absolute = rtol/100).
     #[arg(long)]
     pub rtol: Option<f64>,

@@ -196,5 +196,21 @@ fn gains_override_and_errors() {
     ]);
     assert_eq!(code, 2, "{err}");
     assert!(err.contains("unknown controller `nope`"), "{err}");
+    // Nominal model (gear friction Fg1 = 0.01 N m) with regularised friction.
+    let (code, out, err) = plantc(&[
+        "sim",
+        &model(),
+        "--controller",
+        "pole_placement",
+        "--smooth-sign",
+        "1e-3",
+        "--x0",
+        "alpha=5deg",
+        "--duration",
+        "2",
+        "-o",
+        dir.join("friction.csv").to_str().unwrap(),
+    ]);
+    assert_eq!(code, 0, "{out}{err}");
     let _ = std::fs::remove_dir_all(&dir);
 }

@@ -10,4 +10,4 @@ pub use euler_lagrange::{
     control_affine, derive_equations, ControlAffine, Equations, MechanicsError,
 };
 pub use matrix::{adjugate, determinant};
-pub use numeric::{NumericDynamics, NumericError, Workspace};
+pub use numeric::{has_sign, smooth_signs, NumericDynamics, NumericError, Workspace};

@@ -11,7 +11,9 @@ use std::fmt;
 
 use super::Equations;
 use crate::model::Model;
-use crate::sym::{Expr, Symbol, Tape, TapeError};
+use std::collections::HashMap;
+
+use crate::sym::{Expr, Func, Node, Symbol, Tape, TapeError};
 
 /// Why numeric dynamics could not be built or evaluated.
 #[derive(Clone, Debug, PartialEq)]
@@ -189,6 +191,66 @@ impl NumericDynamics {
         dx[..n].copy_from_slice(&x[n..]);
         dx[n..].copy_from_slice(&ws.rhs);
         Ok(())
+    }
+}
+
+/// Whether any entry of the equations contains `sign(..)` (dry friction).
+pub fn has_sign(eqs: &Equations) -> bool {
+    let mut found = false;
+    visit_signs(eqs, &mut |_| found = true);
+    found
+}
+
+fn visit_signs(eqs: &Equations, f: &mut dyn FnMut(Expr)) {
+    let mut seen = std::collections::HashSet::new();
+    let mut stack: Vec<Expr> = eqs
+        .mass_matrix
+        .iter()
+        .chain(&eqs.input_matrix)
+        .flatten()
+        .chain(&eqs.bias)
+        .chain(&eqs.forces)
+        .copied()
+        .collect();
+    while let Some(e) = stack.pop() {
+        if !seen.insert(e) {
+            continue;
+        }
+        if let Node::Func(Func::Sign, _) = e.node() {
+            f(e);
+        }
+        stack.extend(e.children());
+    }
+}
+
+/// The equations with every `sign(v)` replaced by `tanh(v / width)`: a
+/// regularised dry friction that an explicit integrator can step through
+/// (exact `sign` makes a sticking joint chatter and the step collapse). The
+/// sticking velocity band is about `width`; a joint under a load below the
+/// friction level creeps at roughly `width * atanh(load / friction)`.
+pub fn smooth_signs(eqs: &Equations, width: f64) -> Equations {
+    let mut map: HashMap<Expr, Expr> = HashMap::new();
+    visit_signs(eqs, &mut |e| {
+        if let Node::Func(Func::Sign, v) = e.node() {
+            map.insert(e, (*v * Expr::float(1.0 / width)).tanh());
+        }
+    });
+    let s = |e: &Expr| crate::sym::substitute(*e, &map);
+    Equations {
+        coords: eqs.coords.clone(),
+        inputs: eqs.inputs.clone(),
+        mass_matrix: eqs
+            .mass_matrix
+            .iter()
+            .map(|r| r.iter().map(s).collect())
+            .collect(),
+        bias: eqs.bias.iter().map(s).collect(),
+        forces: eqs.forces.iter().map(s).collect(),
+        input_matrix: eqs
+            .input_matrix
+            .iter()
+            .map(|r| r.iter().map(s).collect())
+            .collect(),
     }
 }
 

@@ -32,7 +32,7 @@ use std::fmt;
 pub use controller::{set_gains, ControllerEval, ControllerWorkspace, InputSignal};
 use rk::{DormandPrince, RkError, RkOptions, RkStats};
 
-use crate::mechanics::{Equations, NumericDynamics, NumericError, Workspace};
+use crate::mechanics::{has_sign, Equations, NumericDynamics, NumericError, Workspace};
 use crate::model::{Model, ParameterValues};
 use crate::sym::{Expr, Symbol, Tape};
 
@@ -124,6 +124,7 @@ pub struct SimProblem {
     /// Output names (model outputs).
     pub output_names: Vec<String>,
     output_tape: Tape,
+    has_sign: bool,
 }
 
 impl SimProblem {
@@ -154,6 +155,7 @@ impl SimProblem {
             input_names: model.inputs.iter().map(|i| i.name.clone()).collect(),
             output_names: model.outputs.iter().map(|o| o.name.clone()).collect(),
             output_tape,
+            has_sign: has_sign(equations),
         };
         p.check()?;
         Ok(p)
@@ -486,6 +488,11 @@ pub fn simulate(problem: &SimProblem, options: &SimOptions) -> Result<Trajectory
         )
         .map_err(|e| match e {
             RkError::Rhs(e) => e,
+            other if problem.has_sign => SimError::Integrator(format!(
+                "{other}; the equations contain sign() (dry friction), whose switching at a \
+                 sticking joint collapses the step: simulate with regularised friction \
+                 (`mechanics::smooth_signs`, `plantc sim --smooth-sign WIDTH`)"
+            )),
             other => SimError::Integrator(other.to_string()),
         })?;
         t = next;

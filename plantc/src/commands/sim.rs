@@ -6,6 +6,7 @@ use std::path::Path;
 use std::time::Instant;
 
 use plantc_derive::control::{resolve, Derivation};
+use plantc_derive::mechanics::smooth_signs;
 use plantc_derive::simulate::{
     set_gains, simulate, Control, ControllerEval, SimError, SimOptions, SimProblem, Trajectory,
 };
@@ -171,15 +172,17 @@ pub fn run(args: &SimArgs, out: &mut dyn Write, err: &mut dyn Write) -> Result<(
     })?;
     set_gains(&mut ctrl, &gains).map_err(sim_error)?;
     let control = Control::Feedback(ControllerEval::new(model, &ctrl).map_err(sim_error)?);
-    let problem = SimProblem::new(
-        model,
-        &derivation.equations,
-        &vals,
-        control,
-        x0,
-        args.duration,
-    )
-    .map_err(sim_error)?;
+    let equations = match args.smooth_sign {
+        Some(w) if w.is_finite() && w > 0.0 => smooth_signs(&derivation.equations, w),
+        Some(w) => {
+            return Err(CliError::input(format!(
+                "error: --smooth-sign {w} must be a positive width"
+            )))
+        }
+        None => derivation.equations.clone(),
+    };
+    let problem =
+        SimProblem::new(model, &equations, &vals, control, x0, args.duration).map_err(sim_error)?;
     let mut options = SimOptions {
         output_rate: args.output_rate,
         sample_rate: args.sample_rate,
