@@ -35,7 +35,14 @@ fn pipeline(name: &str, text: &str, output: &str, set: Option<&str>, full: bool)
     (chain.relative_degree, m)
 }
 
-fn time(path: &str, text: &str, output: &str, set: Option<&str>, full: bool, repeats: usize) -> (f64, f64) {
+fn time(
+    path: &str,
+    text: &str,
+    output: &str,
+    set: Option<&str>,
+    full: bool,
+    repeats: usize,
+) -> (f64, f64) {
     let t0 = Instant::now();
     std::hint::black_box(pipeline(path, text, output, set, full));
     let cold = t0.elapsed().as_secs_f64();
@@ -51,9 +58,14 @@ fn time(path: &str, text: &str, output: &str, set: Option<&str>, full: bool, rep
 
 fn main() {
     let args: Vec<String> = std::env::args().collect();
-    let path = args.get(1).map_or("models/rotary_pendulum.plant", String::as_str);
+    let path = args
+        .get(1)
+        .map_or("models/rotary_pendulum.plant", String::as_str);
     let output = args.get(2).map_or("alpha", String::as_str);
-    let set = args.get(3).map(String::as_str).filter(|s| !s.is_empty() && *s != "-");
+    let set = args
+        .get(3)
+        .map(String::as_str)
+        .filter(|s| !s.is_empty() && *s != "-");
     let repeats: usize = args.get(4).and_then(|s| s.parse().ok()).unwrap_or(200);
     let text = std::fs::read_to_string(path).expect("model file");
     // The full pipeline first, so that its cold time is a genuinely cold run.

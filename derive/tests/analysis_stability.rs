@@ -22,7 +22,13 @@ fn sweep(controller: &str, vary: &[&str], set: Option<&str>) -> StabilityInterva
 #[test]
 fn fl_arm_a_equals_b_interval() {
     let s = sweep("fl_arm", &["a", "b"], Some("thesis"));
-    assert_eq!(s.intervals.len(), 1, "{:?} (boundaries {:?})", s.intervals, s.boundaries);
+    assert_eq!(
+        s.intervals.len(),
+        1,
+        "{:?} (boundaries {:?})",
+        s.intervals,
+        s.boundaries
+    );
     let (lo, hi) = s.intervals[0];
     let (lo, hi) = (lo.expect("bounded below"), hi.expect("bounded above"));
     // At k = 0 the law is plain feedback linearization and the zero dynamics

@@ -10,7 +10,9 @@ use plantc_derive::model::{load_model, LoadedModel, ParameterValues};
 use plantc_derive::sym::{is_zero, Expr};
 
 fn load(name: &str) -> LoadedModel {
-    let path = Path::new(env!("CARGO_MANIFEST_DIR")).join("../models").join(name);
+    let path = Path::new(env!("CARGO_MANIFEST_DIR"))
+        .join("../models")
+        .join(name);
     load_model(&path).unwrap_or_else(|e| panic!("{name}: {}", e.render()))
 }
 
@@ -31,7 +33,13 @@ fn analyse(file: &str, output: &str, set: Option<&str>) -> Analysed {
     let chain = lie_chain(&d.affine, h).expect("chain");
     let nf = normal_form(model, &d, &chain, &values, None).expect("normal form");
     let zd = zero_dynamics(model, &nf, &values).expect("zero dynamics");
-    Analysed { xi: nf.xi, eta: nf.eta, zd, relative_degree: chain.relative_degree, lg: chain.lg }
+    Analysed {
+        xi: nf.xi,
+        eta: nf.eta,
+        zd,
+        relative_degree: chain.relative_degree,
+        lg: chain.lg,
+    }
 }
 
 fn s(name: &str) -> Expr {
@@ -42,7 +50,9 @@ fn s(name: &str) -> Expr {
 /// `is_zero(e * k - reference)` for `k` found from the ratio).
 fn proportional(e: Expr, reference: Expr) -> bool {
     let ratio = plantc_derive::sym::simplify(reference / e);
-    let constant = ratio.symbols().iter().all(|v| !v.name().contains('\'') && !["theta", "alpha", "x", "th", "q1", "q2"].contains(&v.name()));
+    let constant = ratio.symbols().iter().all(|v| {
+        !v.name().contains('\'') && !["theta", "alpha", "x", "th", "q1", "q2"].contains(&v.name())
+    });
     constant && !is_zero(ratio) && is_zero(e * ratio - reference)
 }
 
@@ -60,7 +70,11 @@ fn rotary_pendulum_normal_form_and_double_integrator() {
     let reference = s("J2h") * s("alpha'") - s("c") * s("alpha").cos() * s("theta'");
     assert!(proportional(a.eta[1], reference), "eta2 = {}", a.eta[1]);
     // Zero dynamics: eta1' = -eta2/c, eta2' = 0 (double integrator).
-    assert!(is_zero(a.zd.rhs[0] + s("eta2") / s("c")), "eta1' = {}", a.zd.rhs[0]);
+    assert!(
+        is_zero(a.zd.rhs[0] + s("eta2") / s("c")),
+        "eta1' = {}",
+        a.zd.rhs[0]
+    );
     assert!(is_zero(a.zd.rhs[1]), "eta2' = {}", a.zd.rhs[1]);
     for p in &a.zd.eigenvalues {
         assert!(p.re.abs() < 1e-9 && p.im.abs() < 1e-9, "eigenvalue {p:?}");
@@ -90,7 +104,8 @@ fn cart_pole_zero_dynamics_double_integrator() {
     let a = analyse("cart_pole.plant", "th", None);
     assert_eq!(a.relative_degree, 2);
     assert_eq!(a.eta[0], s("x"));
-    let reference = s("mp") * s("l") * s("th").cos() * s("x'") + (s("mp") * s("l").powi(2) + s("Jp")) * s("th'");
+    let reference = s("mp") * s("l") * s("th").cos() * s("x'")
+        + (s("mp") * s("l").powi(2) + s("Jp")) * s("th'");
     assert!(proportional(a.eta[1], reference), "eta2 = {}", a.eta[1]);
     assert!(is_zero(a.zd.rhs[1]), "eta2' = {}", a.zd.rhs[1]);
     for p in &a.zd.eigenvalues {
@@ -113,6 +128,13 @@ fn pendubot_zero_dynamics_unstable() {
     let inertia = m2 * lc2 * lc2 + i2;
     let (bb, cc) = (b2 / inertia, -m2 * g * lc2 / inertia);
     let positive = (-bb + (bb * bb - 4.0 * cc).sqrt()) / 2.0;
-    let max_re = a.zd.eigenvalues.iter().map(|p| p.re).fold(f64::MIN, f64::max);
-    assert!((max_re - positive).abs() < 1e-9 * positive.max(1.0), "{max_re} vs {positive}");
+    let max_re =
+        a.zd.eigenvalues
+            .iter()
+            .map(|p| p.re)
+            .fold(f64::MIN, f64::max);
+    assert!(
+        (max_re - positive).abs() < 1e-9 * positive.max(1.0),
+        "{max_re} vs {positive}"
+    );
 }

@@ -8,8 +8,12 @@ mod normal_form;
 mod stability_interval;
 mod zero_dynamics;
 
-pub use linearize::{linearize, Linearization, LinearizeError, OperatingPoint};
 pub use lie::{lie_chain, lie_derivative, AnalysisError, LieChain};
+pub use linearize::{linearize, Linearization, LinearizeError, OperatingPoint};
 pub use normal_form::{candidates, normal_form, NormalForm, NormalFormError};
-pub use stability_interval::{stability_interval, KPoly, StabilityError, StabilityInterval, METHOD as STABILITY_METHOD};
-pub use zero_dynamics::{classify, zero_dynamics, ZeroDynamics, ZeroDynamicsClass, ZeroDynamicsError};
+pub use stability_interval::{
+    stability_interval, KPoly, StabilityError, StabilityInterval, METHOD as STABILITY_METHOD,
+};
+pub use zero_dynamics::{
+    classify, zero_dynamics, ZeroDynamics, ZeroDynamicsClass, ZeroDynamicsError,
+};

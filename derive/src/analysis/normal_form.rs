@@ -117,12 +117,20 @@ fn numeric_rank(rows: &[Vec<f64>]) -> (usize, Vec<f64>) {
     let m = DMatrix::from_fn(rows.len(), rows[0].len(), |i, j| rows[i][j]);
     let sv: Vec<f64> = m.singular_values().iter().copied().collect();
     let max = sv.iter().copied().fold(0.0_f64, f64::max);
-    let rank = sv.iter().filter(|s| **s > RANK_TOL * max.max(1e-300)).count();
+    let rank = sv
+        .iter()
+        .filter(|s| **s > RANK_TOL * max.max(1e-300))
+        .count();
     (rank, sv)
 }
 
 /// The numeric gradient of `e` at `at`.
-fn gradient(e: Expr, state: &[Symbol], at: &HashMap<Symbol, f64>, what: &str) -> Result<Vec<f64>, NormalFormError> {
+fn gradient(
+    e: Expr,
+    state: &[Symbol],
+    at: &HashMap<Symbol, f64>,
+    what: &str,
+) -> Result<Vec<f64>, NormalFormError> {
     state
         .iter()
         .map(|s| {
@@ -130,7 +138,9 @@ fn gradient(e: Expr, state: &[Symbol], at: &HashMap<Symbol, f64>, what: &str) ->
             if v.is_finite() {
                 Ok(v)
             } else {
-                Err(NormalFormError::NotFinite { entry: format!("d({what})/d{}", s.name()) })
+                Err(NormalFormError::NotFinite {
+                    entry: format!("d({what})/d{}", s.name()),
+                })
             }
         })
         .collect()
@@ -150,12 +160,17 @@ pub fn candidates(derivation: &Derivation, chain: &LieChain) -> Vec<(Expr, Strin
         }
     }
     for j in 0..n {
-        let unactuated = eqs.input_matrix[j].iter().all(|b| b.is_zero() || is_zero(*b));
+        let unactuated = eqs.input_matrix[j]
+            .iter()
+            .all(|b| b.is_zero() || is_zero(*b));
         if unactuated {
             let p: Expr = (0..n)
                 .map(|k| eqs.mass_matrix[j][k] * Expr::symbol(eqs.coords[k].qd))
                 .sum();
-            out.push((simplify(p), format!("momentum conjugate to {}", eqs.coords[j].q.name())));
+            out.push((
+                simplify(p),
+                format!("momentum conjugate to {}", eqs.coords[j].q.name()),
+            ));
         }
     }
     for c in &eqs.coords {
@@ -181,7 +196,12 @@ pub fn normal_form(
     let state = ca.state.clone();
     let nx = state.len();
     let x0: Vec<f64> = match at {
-        Some(x) if x.len() != nx => return Err(NormalFormError::WrongSize { expected: nx, found: x.len() }),
+        Some(x) if x.len() != nx => {
+            return Err(NormalFormError::WrongSize {
+                expected: nx,
+                found: x.len(),
+            })
+        }
         Some(x) => x.to_vec(),
         None => vec![0.0; nx],
     };
@@ -198,7 +218,10 @@ pub fn normal_form(
     }
     let (rank, _) = numeric_rank(&rows);
     if rank < r {
-        return Err(NormalFormError::DependentOutputChain { rank, relative_degree: r });
+        return Err(NormalFormError::DependentOutputChain {
+            rank,
+            relative_degree: r,
+        });
     }
     let needed = nx - r;
     let mut eta = Vec::new();
@@ -218,17 +241,26 @@ pub fn normal_form(
         let (rk, _) = numeric_rank(&rows);
         if rk < rows.len() {
             rows.pop();
-            rejected.push(format!("{what} (dependent on the others at the operating point)"));
+            rejected.push(format!(
+                "{what} (dependent on the others at the operating point)"
+            ));
             continue;
         }
         eta.push(cand);
         origin.push(what);
     }
     if eta.len() < needed {
-        return Err(NormalFormError::NoComplement { needed, found: origin, rejected });
+        return Err(NormalFormError::NoComplement {
+            needed,
+            found: origin,
+            rejected,
+        });
     }
     let (_, sv) = numeric_rank(&rows);
-    let eta_dot = eta.iter().map(|e| lie_derivative(*e, &ca.f, &state)).collect();
+    let eta_dot = eta
+        .iter()
+        .map(|e| lie_derivative(*e, &ca.f, &state))
+        .collect();
     Ok(NormalForm {
         state,
         xi,

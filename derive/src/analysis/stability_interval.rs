@@ -94,7 +94,11 @@ impl KPoly {
     }
     fn add(&self, o: &KPoly) -> KPoly {
         let n = self.0.len().max(o.0.len());
-        KPoly((0..n).map(|i| self.0.get(i).unwrap_or(&0.0) + o.0.get(i).unwrap_or(&0.0)).collect())
+        KPoly(
+            (0..n)
+                .map(|i| self.0.get(i).unwrap_or(&0.0) + o.0.get(i).unwrap_or(&0.0))
+                .collect(),
+        )
     }
     fn scale(&self, c: f64) -> KPoly {
         KPoly(self.0.iter().map(|x| x * c).collect())
@@ -116,7 +120,14 @@ impl KPoly {
         if self.0.len() <= 1 {
             return KPoly::zero();
         }
-        KPoly(self.0.iter().enumerate().skip(1).map(|(i, c)| c * i as f64).collect())
+        KPoly(
+            self.0
+                .iter()
+                .enumerate()
+                .skip(1)
+                .map(|(i, c)| c * i as f64)
+                .collect(),
+        )
     }
     /// Coefficients with negligible leading terms removed (relative 1e-13).
     fn trimmed(&self) -> Vec<f64> {
@@ -156,7 +167,9 @@ impl KPoly {
                 0.0
             }
         });
-        let Ok(eig) = poles(&comp) else { return Vec::new() };
+        let Ok(eig) = poles(&comp) else {
+            return Vec::new();
+        };
         let p = KPoly(c.clone());
         let dp = p.deriv();
         let mut roots: Vec<f64> = Vec::new();
@@ -232,7 +245,8 @@ pub struct StabilityInterval {
 }
 
 /// Method description printed by the CLI.
-pub const METHOD: &str = "closed-loop Jacobian at x = 0 as a polynomial matrix in k (symbolic Taylor \
+pub const METHOD: &str =
+    "closed-loop Jacobian at x = 0 as a polynomial matrix in k (symbolic Taylor \
 coefficients), characteristic polynomial by Faddeev-LeVerrier over R[k], Routh-Hurwitz conditions \
 (coefficients and Hurwitz minors > 0) as polynomials in k, real roots by companion matrix + \
 Newton/bisection (1e-12), each piece checked at an interior point and against the eigenvalues";
@@ -247,12 +261,21 @@ fn degree_in(e: Expr, k: Symbol, memo: &mut HashMap<Expr, Option<u32>>) -> Optio
     }
     let d = match e.node() {
         Node::Symbol(_) => Some(1),
-        Node::Add(ts) => ts.iter().try_fold(0, |m, t| degree_in(*t, k, memo).map(|d| m.max(d))),
-        Node::Mul(fs) => fs.iter().try_fold(0, |m, f| degree_in(*f, k, memo).map(|d| m + d)),
-        Node::Pow(b, x) => match x.as_rational().and_then(|r| if r.is_integer() { r.to_i64() } else { None }) {
-            Some(n) if n >= 0 => degree_in(*b, k, memo).map(|d| d * n as u32),
-            _ => None,
-        },
+        Node::Add(ts) => ts
+            .iter()
+            .try_fold(0, |m, t| degree_in(*t, k, memo).map(|d| m.max(d))),
+        Node::Mul(fs) => fs
+            .iter()
+            .try_fold(0, |m, f| degree_in(*f, k, memo).map(|d| m + d)),
+        Node::Pow(b, x) => {
+            match x
+                .as_rational()
+                .and_then(|r| if r.is_integer() { r.to_i64() } else { None })
+            {
+                Some(n) if n >= 0 => degree_in(*b, k, memo).map(|d| d * n as u32),
+                _ => None,
+            }
+        }
         _ => None,
     };
     memo.insert(e, d);
@@ -274,7 +297,13 @@ fn det(m: &[Vec<KPoly>]) -> KPoly {
         }
         let minor: Vec<Vec<KPoly>> = m[1..]
             .iter()
-            .map(|row| row.iter().enumerate().filter(|(c, _)| *c != j).map(|(_, p)| p.clone()).collect())
+            .map(|row| {
+                row.iter()
+                    .enumerate()
+                    .filter(|(c, _)| *c != j)
+                    .map(|(_, p)| p.clone())
+                    .collect()
+            })
             .collect();
         let term = m[0][j].mul(&det(&minor));
         acc = acc.add(&if j % 2 == 0 { term } else { term.scale(-1.0) });
@@ -315,7 +344,9 @@ fn char_poly(a: &[Vec<KPoly>]) -> Vec<KPoly> {
 fn max_real_eig(a: &[Vec<KPoly>], k: f64) -> f64 {
     let n = a.len();
     let m = DMatrix::from_fn(n, n, |i, j| a[i][j].eval(k));
-    poles(&m).map_or(f64::NAN, |p| p.iter().map(|z| z.re).fold(f64::MIN, f64::max))
+    poles(&m).map_or(f64::NAN, |p| {
+        p.iter().map(|z| z.re).fold(f64::MIN, f64::max)
+    })
 }
 
 /// The intervals of `k` (with every gain in `vary` equal to `k`, the other
@@ -329,7 +360,9 @@ pub fn stability_interval(
     values: &ParameterValues,
 ) -> Result<StabilityInterval, StabilityError> {
     let ResolvedController::FeedbackLinearization { law, gains, .. } = controller else {
-        return Err(StabilityError::NotFeedbackLinearization { controller: controller.name().to_string() });
+        return Err(StabilityError::NotFeedbackLinearization {
+            controller: controller.name().to_string(),
+        });
     };
     if vary.is_empty() {
         return Err(StabilityError::NoGain);
@@ -350,7 +383,11 @@ pub fn stability_interval(
     let k = Symbol::new("k\u{2032}sweep");
     let mut gain_map: HashMap<Symbol, Expr> = HashMap::new();
     for (g, val) in gains {
-        let e = if vary.contains(&g.name()) { Expr::symbol(k) } else { Expr::float(*val) };
+        let e = if vary.contains(&g.name()) {
+            Expr::symbol(k)
+        } else {
+            Expr::float(*val)
+        };
         gain_map.insert(*g, e);
     }
     let u = substitute_symbols(*law, &gain_map);
@@ -365,11 +402,12 @@ pub fn stability_interval(
     }
     let mut memo = HashMap::new();
     let mut a_cl = vec![vec![KPoly::zero(); n]; n];
-    for i in 0..n {
+    for (i, row) in a_cl.iter_mut().enumerate() {
         let fi = ca.f[i] + ca.g[i][0] * u;
-        for j in 0..n {
+        for (j, entry) in row.iter_mut().enumerate() {
             let e = substitute_symbols(diff(fi, ca.state[j]), &zero_state);
-            let deg = degree_in(e, k, &mut memo).ok_or(StabilityError::NotPolynomial { entry: (i, j) })?;
+            let deg = degree_in(e, k, &mut memo)
+                .ok_or(StabilityError::NotPolynomial { entry: (i, j) })?;
             let mut coeffs = Vec::with_capacity(deg as usize + 1);
             let mut dm = e;
             let mut fact = 1.0;
@@ -380,11 +418,13 @@ pub fn stability_interval(
                 }
                 let v = dm.eval_map(&point) / fact;
                 if !v.is_finite() {
-                    return Err(StabilityError::NotFinite { what: format!("A_cl[{i}][{j}]") });
+                    return Err(StabilityError::NotFinite {
+                        what: format!("A_cl[{i}][{j}]"),
+                    });
                 }
                 coeffs.push(v);
             }
-            a_cl[i][j] = KPoly(coeffs);
+            *entry = KPoly(coeffs);
         }
     }
     let cp = char_poly(&a_cl);
@@ -398,14 +438,18 @@ pub fn stability_interval(
             cp[n - i as usize].clone()
         }
     };
-    let mut conditions: Vec<(String, KPoly)> = (1..=n).map(|i| (format!("a{i}"), coef(i as i64))).collect();
+    let mut conditions: Vec<(String, KPoly)> =
+        (1..=n).map(|i| (format!("a{i}"), coef(i as i64))).collect();
     for size in 2..n {
         let h: Vec<Vec<KPoly>> = (1..=size)
             .map(|r| (1..=size).map(|c| coef(2 * c as i64 - r as i64)).collect())
             .collect();
         conditions.push((format!("Hurwitz minor {size}"), det(&h)));
     }
-    let mut boundaries: Vec<f64> = conditions.iter().flat_map(|(_, p)| p.real_roots()).collect();
+    let mut boundaries: Vec<f64> = conditions
+        .iter()
+        .flat_map(|(_, p)| p.real_roots())
+        .collect();
     boundaries.sort_by(f64::total_cmp);
     boundaries.dedup_by(|a, b| (*a - *b).abs() <= 1e-12 * (1.0 + a.abs()));
     let holds = |x: f64| conditions.iter().all(|(_, p)| p.eval(x) > 0.0);

@@ -50,7 +50,10 @@ impl fmt::Display for ZeroDynamicsError {
                 "cannot solve xi = 0 for the state: `{xi}` is not a multiple of one state variable"
             ),
             ZeroDynamicsError::CannotSolveEta { reason } => {
-                write!(f, "cannot express the state in eta coordinates on xi = 0: {reason}")
+                write!(
+                    f,
+                    "cannot express the state in eta coordinates on xi = 0: {reason}"
+                )
             }
             ZeroDynamicsError::NotFinite { entry } => write!(f, "{entry} is not finite at eta = 0"),
             ZeroDynamicsError::Eigen(e) => write!(f, "eigenvalues of the zero dynamics: {e}"),
@@ -169,11 +172,17 @@ fn eta_names(model: &Model, count: usize) -> Vec<Symbol> {
     while (1..=count).any(|i| taken.contains(&format!("{prefix}{i}"))) {
         prefix.push('_');
     }
-    (1..=count).map(|i| Symbol::new(&format!("{prefix}{i}"))).collect()
+    (1..=count)
+        .map(|i| Symbol::new(&format!("{prefix}{i}")))
+        .collect()
 }
 
 /// The zero dynamics of `nf`, linearized at `eta = 0` with parameter `values`.
-pub fn zero_dynamics(model: &Model, nf: &NormalForm, values: &ParameterValues) -> Result<ZeroDynamics, ZeroDynamicsError> {
+pub fn zero_dynamics(
+    model: &Model,
+    nf: &NormalForm,
+    values: &ParameterValues,
+) -> Result<ZeroDynamics, ZeroDynamicsError> {
     let state = &nf.state;
     let mut map: HashMap<Symbol, Expr> = HashMap::new();
     let mut free: Vec<Symbol> = state.clone();
@@ -283,7 +292,9 @@ pub fn zero_dynamics(model: &Model, nf: &NormalForm, values: &ParameterValues) -
 /// Eigenvalues of a square matrix and their classification. The tolerance for
 /// "on the imaginary axis" is `1e-6 * max(1, |J|)`: a Jordan block of size 2
 /// moves its eigenvalues by about `sqrt(eps |J|)` in floating point.
-pub fn classify(jac: &[Vec<f64>]) -> Result<(Vec<Pole>, f64, ZeroDynamicsClass), ZeroDynamicsError> {
+pub fn classify(
+    jac: &[Vec<f64>],
+) -> Result<(Vec<Pole>, f64, ZeroDynamicsClass), ZeroDynamicsError> {
     let m = jac.len();
     if m == 0 {
         return Ok((Vec::new(), 0.0, ZeroDynamicsClass::AsymptoticallyStable));
