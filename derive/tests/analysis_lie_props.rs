@@ -20,7 +20,9 @@ struct Case {
 }
 
 fn case(file: &str, output: &str) -> Case {
-    let path = Path::new(env!("CARGO_MANIFEST_DIR")).join("../models").join(file);
+    let path = Path::new(env!("CARGO_MANIFEST_DIR"))
+        .join("../models")
+        .join(file);
     let loaded = load_model(&path).unwrap_or_else(|e| panic!("{}", e.render()));
     let model = &loaded.model;
     let values = ParameterValues::new(model, None, &[]).expect("values");
@@ -59,7 +61,10 @@ fn check(c: &Case, x: &[f64]) -> Result<(), TestCaseError> {
             };
             let fd = (shifted(1.0) - shifted(-1.0)) / (2.0 * eps);
             let tol = 1e-5 * (1.0 + symbolic.abs());
-            prop_assert!((symbolic - fd).abs() <= tol, "h = {h}: symbolic {symbolic} vs fd {fd} at {x:?}");
+            prop_assert!(
+                (symbolic - fd).abs() <= tol,
+                "h = {h}: symbolic {symbolic} vs fd {fd} at {x:?}"
+            );
         }
     }
     Ok(())

@@ -10,13 +10,19 @@ fn run(args: &[&str]) -> (i32, String, String) {
     let mut full = vec!["plantc"];
     full.extend_from_slice(args);
     let code = plantc::run(full, &mut out, &mut err);
-    (code, String::from_utf8_lossy(&out).into_owned(), String::from_utf8_lossy(&err).into_owned())
+    (
+        code,
+        String::from_utf8_lossy(&out).into_owned(),
+        String::from_utf8_lossy(&err).into_owned(),
+    )
 }
 
 #[test]
 fn analyze_json_shape() {
     let m = model("rotary_pendulum.plant");
-    let (code, out, err) = run(&["analyze", &m, "--output", "alpha", "--set", "thesis", "--json"]);
+    let (code, out, err) = run(&[
+        "analyze", &m, "--output", "alpha", "--set", "thesis", "--json",
+    ]);
     assert_eq!(code, 0, "{err}");
     let v: serde_json::Value = serde_json::from_str(&out).expect("json");
     assert_eq!(v["relative_degree"], 2);
@@ -26,7 +32,10 @@ fn analyze_json_shape() {
     assert_eq!(v["lie_derivatives"]["L_g h"], "0");
     assert!(v["control_law"].as_str().unwrap().starts_with("u = "));
     assert_eq!(v["singular_set"], "cos(alpha) = 0");
-    assert_eq!(v["normal_form"]["xi"], serde_json::json!(["alpha", "alpha'"]));
+    assert_eq!(
+        v["normal_form"]["xi"],
+        serde_json::json!(["alpha", "alpha'"])
+    );
     assert_eq!(v["normal_form"]["eta"].as_array().unwrap().len(), 2);
     let zd = &v["zero_dynamics"];
     assert_eq!(zd["equations"].as_array().unwrap().len(), 2);
@@ -37,7 +46,10 @@ fn analyze_json_shape() {
     }
     assert_eq!(zd["asymptotically_stable"], false);
     assert_eq!(zd["minimum_phase"], false);
-    assert!(zd["classification"].as_str().unwrap().starts_with("not asymptotically stable"));
+    assert!(zd["classification"]
+        .as_str()
+        .unwrap()
+        .starts_with("not asymptotically stable"));
 }
 
 #[test]
@@ -50,7 +62,12 @@ fn analyze_text_and_pendubot() {
 
 #[test]
 fn analyze_unknown_output_is_bad_input() {
-    let (code, _, err) = run(&["analyze", &model("rotary_pendulum.plant"), "--output", "nope"]);
+    let (code, _, err) = run(&[
+        "analyze",
+        &model("rotary_pendulum.plant"),
+        "--output",
+        "nope",
+    ]);
     assert_eq!(code, 2);
     assert!(err.contains("unknown output"), "{err}");
 }
@@ -58,8 +75,17 @@ fn analyze_unknown_output_is_bad_input() {
 #[test]
 fn stability_json_interval() {
     let m = model("rotary_pendulum.plant");
-    let (code, out, err) =
-        run(&["stability", &m, "--controller", "fl_arm", "--vary", "a,b", "--set", "thesis", "--json"]);
+    let (code, out, err) = run(&[
+        "stability",
+        &m,
+        "--controller",
+        "fl_arm",
+        "--vary",
+        "a,b",
+        "--set",
+        "thesis",
+        "--json",
+    ]);
     assert_eq!(code, 0, "{err}");
     let v: serde_json::Value = serde_json::from_str(&out).expect("json");
     let iv = v["intervals"].as_array().unwrap();
@@ -73,10 +99,26 @@ fn stability_json_interval() {
 #[test]
 fn stability_text_and_unbounded_null() {
     let m = model("rotary_pendulum.plant");
-    let (code, out, err) = run(&["stability", &m, "--controller", "fl_arm", "--vary", "a,b", "--set", "thesis"]);
+    let (code, out, err) = run(&[
+        "stability",
+        &m,
+        "--controller",
+        "fl_arm",
+        "--vary",
+        "a,b",
+        "--set",
+        "thesis",
+    ]);
     assert_eq!(code, 0, "{err}");
     assert!(out.contains("0 < k < 1.00"), "{out}");
     assert!(out.contains("method:"), "{out}");
-    let (code, _, err) = run(&["stability", &m, "--controller", "pole_placement", "--vary", "a"]);
+    let (code, _, err) = run(&[
+        "stability",
+        &m,
+        "--controller",
+        "pole_placement",
+        "--vary",
+        "a",
+    ]);
     assert_eq!(code, 2, "{err}");
 }

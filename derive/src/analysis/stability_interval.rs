@@ -402,9 +402,9 @@ pub fn stability_interval(
     }
     let mut memo = HashMap::new();
     let mut a_cl = vec![vec![KPoly::zero(); n]; n];
-    for i in 0..n {
+    for (i, row) in a_cl.iter_mut().enumerate() {
         let fi = ca.f[i] + ca.g[i][0] * u;
-        for j in 0..n {
+        for (j, entry) in row.iter_mut().enumerate() {
             let e = substitute_symbols(diff(fi, ca.state[j]), &zero_state);
             let deg = degree_in(e, k, &mut memo)
                 .ok_or(StabilityError::NotPolynomial { entry: (i, j) })?;
@@ -424,7 +424,7 @@ pub fn stability_interval(
                 }
                 coeffs.push(v);
             }
-            a_cl[i][j] = KPoly(coeffs);
+            *entry = KPoly(coeffs);
         }
     }
     let cp = char_poly(&a_cl);

@@ -4,7 +4,9 @@
 use std::io::Write;
 use std::path::Path;
 
-use plantc_derive::analysis::{lie_chain, normal_form, zero_dynamics, LieChain, NormalForm, ZeroDynamics};
+use plantc_derive::analysis::{
+    lie_chain, normal_form, zero_dynamics, LieChain, NormalForm, ZeroDynamics,
+};
 use plantc_derive::control::{output_expr, Derivation};
 use plantc_derive::sym::Expr;
 
@@ -28,7 +30,9 @@ fn lg_name(k: usize) -> String {
 
 fn named_lie(chain: &LieChain) -> Vec<(String, String)> {
     let r = chain.relative_degree;
-    let mut v: Vec<(String, String)> = (0..=r).map(|k| (lf_name(k), chain.lf[k].to_string())).collect();
+    let mut v: Vec<(String, String)> = (0..=r)
+        .map(|k| (lf_name(k), chain.lf[k].to_string()))
+        .collect();
     v.extend((0..r).map(|k| (lg_name(k), chain.lg[k].to_string())));
     v
 }
@@ -36,7 +40,13 @@ fn named_lie(chain: &LieChain) -> Vec<(String, String)> {
 fn eig_text(zd: &ZeroDynamics) -> String {
     zd.eigenvalues
         .iter()
-        .map(|p| if p.im == 0.0 { num(p.re) } else { format!("{}{:+}i", num(p.re), p.im) })
+        .map(|p| {
+            if p.im == 0.0 {
+                num(p.re)
+            } else {
+                format!("{}{:+}i", num(p.re), p.im)
+            }
+        })
         .collect::<Vec<_>>()
         .join(", ")
 }
@@ -58,7 +68,9 @@ pub fn run(
             .outputs
             .first()
             .map(|o| o.name.clone())
-            .ok_or_else(|| CliError::input("error: the model declares no output; pass --output NAME"))?,
+            .ok_or_else(|| {
+                CliError::input("error: the model declares no output; pass --output NAME")
+            })?,
     };
     let h = output_expr(model, &name).map_err(|e| CliError::input(format!("error: {e}")))?;
     let d = Derivation::new(model).map_err(|e| CliError::failure(format!("error: {e}")))?;
@@ -66,11 +78,14 @@ pub fn run(
     let law = chain.law(Expr::sym("v"));
     let nf: NormalForm = normal_form(model, &d, &chain, &vals, None)
         .map_err(|e| CliError::failure(format!("error: {e}")))?;
-    let zd = zero_dynamics(model, &nf, &vals).map_err(|e| CliError::failure(format!("error: {e}")))?;
+    let zd =
+        zero_dynamics(model, &nf, &vals).map_err(|e| CliError::failure(format!("error: {e}")))?;
     let lie = named_lie(&chain);
     if json {
-        let lie_map: serde_json::Map<String, serde_json::Value> =
-            lie.iter().map(|(k, v)| (k.clone(), serde_json::Value::String(v.clone()))).collect();
+        let lie_map: serde_json::Map<String, serde_json::Value> = lie
+            .iter()
+            .map(|(k, v)| (k.clone(), serde_json::Value::String(v.clone())))
+            .collect();
         let v = serde_json::json!({
             "output": name,
             "relative_degree": chain.relative_degree,
@@ -91,10 +106,18 @@ pub fn run(
                 "equilibrium_residual": zd.equilibrium_residual,
             },
         });
-        let _ = writeln!(out, "{}", serde_json::to_string_pretty(&v).unwrap_or_default());
+        let _ = writeln!(
+            out,
+            "{}",
+            serde_json::to_string_pretty(&v).unwrap_or_default()
+        );
         return Ok(());
     }
-    let _ = writeln!(out, "output y = {name}, relative degree {}", chain.relative_degree);
+    let _ = writeln!(
+        out,
+        "output y = {name}, relative degree {}",
+        chain.relative_degree
+    );
     let width = lie.iter().map(|(k, _)| k.len()).max().unwrap_or(0);
     for (k, v) in &lie {
         let _ = writeln!(out, "  {k:<width$} = {v}");
@@ -115,7 +138,11 @@ pub fn run(
     let _ = writeln!(out, "  eigenvalues at eta = 0: {}", eig_text(&zd));
     let _ = writeln!(out, "  {}", zd.class.describe());
     if zd.equilibrium_residual > 1e-9 {
-        let _ = writeln!(out, "  note: eta = 0 is not an equilibrium (residual {:.3e})", zd.equilibrium_residual);
+        let _ = writeln!(
+            out,
+            "  note: eta = 0 is not an equilibrium (residual {:.3e})",
+            zd.equilibrium_residual
+        );
     }
     Ok(())
 }

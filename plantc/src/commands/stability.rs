@@ -26,13 +26,21 @@ pub fn run(
     let loaded = load(path, err)?;
     let model = &loaded.model;
     let vals = values(&loaded, params)?;
-    let gains: Vec<&str> = vary.split(',').map(str::trim).filter(|s| !s.is_empty()).collect();
+    let gains: Vec<&str> = vary
+        .split(',')
+        .map(str::trim)
+        .filter(|s| !s.is_empty())
+        .collect();
     if gains.is_empty() {
-        return Err(CliError::input("error: --vary needs at least one gain, e.g. `--vary a,b`"));
+        return Err(CliError::input(
+            "error: --vary needs at least one gain, e.g. `--vary a,b`",
+        ));
     }
     let d = Derivation::new(model).map_err(|e| CliError::failure(format!("error: {e}")))?;
-    let c = resolve(model, &d, controller, &vals).map_err(|e| CliError::input(format!("error: {e}")))?;
-    let s = stability_interval(model, &d, &c, &gains, &vals).map_err(|e| CliError::input(format!("error: {e}")))?;
+    let c = resolve(model, &d, controller, &vals)
+        .map_err(|e| CliError::input(format!("error: {e}")))?;
+    let s = stability_interval(model, &d, &c, &gains, &vals)
+        .map_err(|e| CliError::input(format!("error: {e}")))?;
     for x in &s.disagreements {
         let _ = writeln!(
             err,
@@ -49,19 +57,35 @@ pub fn run(
             "conditions": s.conditions.iter().map(|(n, p)| serde_json::json!({"name": n, "coefficients": p.0})).collect::<Vec<_>>(),
             "method": s.method,
         });
-        let _ = writeln!(out, "{}", serde_json::to_string_pretty(&v).unwrap_or_default());
+        let _ = writeln!(
+            out,
+            "{}",
+            serde_json::to_string_pretty(&v).unwrap_or_default()
+        );
         return Ok(());
     }
     let k = s.gains.join(" = ");
-    let _ = writeln!(out, "controller {controller}, {k} = k: closed-loop linearization about the origin");
+    let _ = writeln!(
+        out,
+        "controller {controller}, {k} = k: closed-loop linearization about the origin"
+    );
     if s.intervals.is_empty() {
         let _ = writeln!(out, "  asymptotically stable for no k");
     }
     for (lo, hi) in &s.intervals {
-        let _ = writeln!(out, "  asymptotically stable for {} < k < {}", end(*lo, "-inf"), end(*hi, "+inf"));
+        let _ = writeln!(
+            out,
+            "  asymptotically stable for {} < k < {}",
+            end(*lo, "-inf"),
+            end(*hi, "+inf")
+        );
     }
     let b: Vec<String> = s.boundaries.iter().map(|x| format!("{x:.6}")).collect();
-    let _ = writeln!(out, "  candidate boundaries (real roots of the conditions): {}", b.join(", "));
+    let _ = writeln!(
+        out,
+        "  candidate boundaries (real roots of the conditions): {}",
+        b.join(", ")
+    );
     let _ = writeln!(out, "method: {}", s.method);
     Ok(())
 }
