@@ -26,7 +26,7 @@ pub(crate) fn lit(x: f64) -> Result<TokenStream, Error> {
         .parse()
         .map_err(|_| Error::Generate(format!("cannot form a literal from {mag}")))?;
     Ok(if x.is_sign_negative() && x != 0.0 {
-        quote!((-#l))
+        quote!(-#l)
     } else {
         quote!(#l)
     })
@@ -187,7 +187,7 @@ pub(crate) fn ldl_solve(
         }
     }
     for (b, name) in rhs.iter().zip(sol_names) {
-        let z = |i: usize| format_ident!("{}_z{}", name, i);
+        let z = |i: usize| format_ident!("{}z{}", name, i);
         let y = |i: usize| format_ident!("{}{}", name, i);
         for i in 0..n {
             let mut v = match &b[i] {

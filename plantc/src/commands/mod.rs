@@ -3,6 +3,7 @@
 mod check;
 mod derive;
 mod design;
+mod gen;
 mod linearize;
 
 use std::io::Write;
@@ -20,5 +21,8 @@ pub fn dispatch(cli: &Cli, out: &mut dyn Write, err: &mut dyn Write) -> Result<(
         }
         Command::Place { source, poles, json } => design::place(source, poles, *json, out, err),
         Command::Lqr { source, q, r, json } => design::lqr(source, q, r, *json, out, err),
+        Command::Gen { model, controllers, params, out: dir, force } => {
+            gen::run(model, controllers, params, dir, *force, out, err)
+        }
     }
 }
