@@ -17,7 +17,8 @@
 //!         .model("../models/rotary_pendulum.plant")
 //!         .controller("feedback_linearization")
 //!         .parameter_set("thesis")
-//!         .compile()
+//!         .compile()?;
+//!     Ok(())
 //! }
 //! ```
 //!
@@ -32,6 +33,9 @@
 //! the raw model text: editing a comment of the model changes neither the body
 //! nor the hash, so [`Builder::compile`] leaves the output file (and its mtime)
 //! untouched and nothing downstream rebuilds.
+
+// Matrix emission indexes rows and columns explicitly; iterators would obscure it.
+#![allow(clippy::needless_range_loop)]
 
 mod emit;
 mod krate;
@@ -202,9 +206,13 @@ impl Builder {
         let (name, code) = self.emit()?;
         let dir = match &self.out_dir {
             Some(d) => d.clone(),
-            None => std::env::var_os("OUT_DIR").map(PathBuf::from).ok_or_else(|| {
-                Error::Generate("OUT_DIR is not set (not in a build script?): use Builder::out_dir".into())
-            })?,
+            None => std::env::var_os("OUT_DIR")
+                .map(PathBuf::from)
+                .ok_or_else(|| {
+                    Error::Generate(
+                        "OUT_DIR is not set (not in a build script?): use Builder::out_dir".into(),
+                    )
+                })?,
         };
         let file = dir.join(format!("{name}.rs"));
         write_if_changed(&file, &code)?;

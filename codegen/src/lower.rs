@@ -36,7 +36,13 @@ pub(crate) fn lit(x: f64) -> Result<TokenStream, Error> {
 pub(crate) fn ident(name: &str) -> Ident {
     let clean: String = name
         .chars()
-        .map(|c| if c.is_ascii_alphanumeric() || c == '_' { c } else { '_' })
+        .map(|c| {
+            if c.is_ascii_alphanumeric() || c == '_' {
+                c
+            } else {
+                '_'
+            }
+        })
         .collect();
     if syn::parse_str::<Ident>(&clean).is_ok() {
         Ident::new(&clean, Span::call_site())
@@ -74,8 +80,14 @@ pub(crate) fn lower(
     for ins in tape.instructions() {
         match *ins {
             Instr::Const { dst, value } => slot[dst as usize] = Some(lit(value)?),
-            Instr::Input { dst, index } => slot[dst as usize] = Some(inputs[index as usize].1.clone()),
-            Instr::SinCos { sin_dst, cos_dst, a } => {
+            Instr::Input { dst, index } => {
+                slot[dst as usize] = Some(inputs[index as usize].1.clone())
+            }
+            Instr::SinCos {
+                sin_dst,
+                cos_dst,
+                a,
+            } => {
                 let a = get(&slot, a);
                 let s = fresh();
                 let c = fresh();
@@ -130,11 +142,7 @@ pub(crate) fn lower(
             }
         }
     }
-    let outputs = tape
-        .output_slots()
-        .iter()
-        .map(|s| get(&slot, *s))
-        .collect();
+    let outputs = tape.output_slots().iter().map(|s| get(&slot, *s)).collect();
     Ok(Lowered { stmts, outputs })
 }
 
