@@ -116,6 +116,22 @@ pub enum Command {
         #[arg(long)]
         json: bool,
     },
+    /// Generate a standalone, allocation-free Rust crate (plant + controllers).
+    Gen {
+        /// The model file.
+        model: PathBuf,
+        /// Emit this controller of the model (repeatable).
+        #[arg(long = "controller", value_name = "NAME")]
+        controllers: Vec<String>,
+        #[command(flatten)]
+        params: ParamArgs,
+        /// Output directory of the crate.
+        #[arg(short = 'o', long = "out", value_name = "DIR")]
+        out: PathBuf,
+        /// Overwrite a non-empty directory that plantc did not generate.
+        #[arg(long)]
+        force: bool,
+    },
     /// Simulate the model with one of its controllers; write a CSV trajectory.
     Sim(SimArgs),
     /// Run a controller in the real-time loop on the simulator or a Quanser

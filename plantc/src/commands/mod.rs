@@ -4,6 +4,7 @@ mod analyze;
 mod check;
 mod derive;
 mod design;
+mod gen;
 mod linearize;
 mod run;
 mod sim;
@@ -19,18 +20,39 @@ pub fn dispatch(cli: &Cli, out: &mut dyn Write, err: &mut dyn Write) -> Result<(
     match &cli.command {
         Command::Check { model, json } => check::run(model, *json, out, err),
         Command::Derive { model, json, latex } => derive::run(model, *json, *latex, out, err),
-        Command::Linearize { model, params, at, json } => {
-            linearize::run(model, params, at.as_deref(), *json, out, err)
-        }
-        Command::Analyze { model, output, params, json } => {
-            analyze::run(model, output.as_deref(), params, *json, out, err)
-        }
-        Command::Stability { model, controller, vary, params, json } => {
-            stability::run(model, controller, vary, params, *json, out, err)
-        }
-        Command::Place { source, poles, json } => design::place(source, poles, *json, out, err),
+        Command::Linearize {
+            model,
+            params,
+            at,
+            json,
+        } => linearize::run(model, params, at.as_deref(), *json, out, err),
+        Command::Analyze {
+            model,
+            output,
+            params,
+            json,
+        } => analyze::run(model, output.as_deref(), params, *json, out, err),
+        Command::Stability {
+            model,
+            controller,
+            vary,
+            params,
+            json,
+        } => stability::run(model, controller, vary, params, *json, out, err),
+        Command::Place {
+            source,
+            poles,
+            json,
+        } => design::place(source, poles, *json, out, err),
         Command::Lqr { source, q, r, json } => design::lqr(source, q, r, *json, out, err),
         Command::Run(args) => run::run(args, out, err),
         Command::Sim(args) => sim::run(args, out, err),
+        Command::Gen {
+            model,
+            controllers,
+            params,
+            out: dir,
+            force,
+        } => gen::run(model, controllers, params, dir, *force, out, err),
     }
 }

@@ -1,0 +1,133 @@
+//! ns per call: CasADi-generated C (loaded from a shared library) vs the
+//! plantc-generated Rust, interleaved in one run. Run through
+//! `bench/codegen_vs_casadi.sh` (release, `-C target-cpu=native`).
+
+use std::hint::black_box;
+use std::time::Instant;
+
+use rotpen_controller::rotary_pendulum::*;
+
+type Dyn = unsafe extern "C" fn(*const f64, *const f64, *mut f64);
+type Law = unsafe extern "C" fn(*const f64, *mut f64);
+
+const NS: usize = 256;
+const REPS: usize = 20_000;
+
+fn states() -> Vec<[f64; 4]> {
+    let mut s = 0x2545_f491_4f6c_dd1du64;
+    let mut r = move || {
+        s ^= s << 13;
+        s ^= s >> 7;
+        s ^= s << 17;
+        (s >> 11) as f64 / (1u64 << 53) as f64 * 2.0 - 1.0
+    };
+    (0..NS)
+        .map(|_| [r(), 0.5 * r(), 3.0 * r(), 3.0 * r()])
+        .collect()
+}
+
+fn time(mut f: impl FnMut(&[f64; 4]) -> f64, xs: &[[f64; 4]]) -> f64 {
+    let t = Instant::now();
+    let mut acc = 0.0;
+    for _ in 0..REPS / NS {
+        for x in xs {
+            acc += f(black_box(x));
+        }
+    }
+    black_box(acc);
+    t.elapsed().as_nanos() as f64 / ((REPS / NS) * NS) as f64
+}
+
+#[inline(never)]
+fn p_dyn(x: &[f64; 4], u: &[f64; 1], p: &Params) -> [f64; 4] {
+    dynamics(x, u, p)
+}
+#[inline(never)]
+fn p_law(c: &FeedbackLinearization, x: &[f64; 4]) -> [f64; 1] {
+    c.law(x)
+}
+#[inline(never)]
+fn p_step(x: &[f64; 4], u: &[f64; 1], p: &Params) -> [f64; 4] {
+    rk4_step(x, u, p, 1e-3)
+}
+
+fn median(mut v: Vec<f64>) -> f64 {
+    v.sort_by(|a, b| a.partial_cmp(b).unwrap());
+    v[v.len() / 2]
+}
+
+fn main() {
+    let path = std::env::args()
+        .nth(1)
+        .expect("usage: bench_casadi LIBCAS.so");
+    let lib = unsafe { libloading::Library::new(&path) }.expect("load the CasADi library");
+    let c_dyn: libloading::Symbol<Dyn> = unsafe { lib.get(b"cas_dyn") }.unwrap();
+    let c_law: libloading::Symbol<Law> = unsafe { lib.get(b"cas_law") }.unwrap();
+    let c_step: libloading::Symbol<Dyn> = unsafe { lib.get(b"cas_step") }.unwrap();
+    let (c_dyn, c_law, c_step) = (*c_dyn, *c_law, *c_step);
+    let p = Params::default();
+    let ctrl = FeedbackLinearization::default();
+    let xs = states();
+    let u = [0.7];
+
+    // agreement first
+    let mut worst: f64 = 0.0;
+    for x in &xs {
+        let mut o = [0.0; 4];
+        unsafe { c_dyn(x.as_ptr(), u.as_ptr(), o.as_mut_ptr()) };
+        let d = dynamics(x, &u, &p);
+        let mut l = [0.0];
+        unsafe { c_law(x.as_ptr(), l.as_mut_ptr()) };
+        let mut s = [0.0; 4];
+        unsafe { c_step(x.as_ptr(), u.as_ptr(), s.as_mut_ptr()) };
+        let st = rk4_step(x, &u, &p, 1e-3);
+        for i in 0..4 {
+            worst = worst.max((o[i] - d[i]).abs() / (1.0 + d[i].abs()));
+            worst = worst.max((s[i] - st[i]).abs() / (1.0 + st[i].abs()));
+        }
+        let pl = ctrl.law(x)[0];
+        worst = worst.max((l[0] - pl).abs() / (1.0 + pl.abs()));
+    }
+    println!("max relative difference CasADi vs plantc: {worst:.2e}");
+
+    let rounds = 41;
+    let mut t = vec![Vec::new(); 6];
+    for _ in 0..rounds {
+        t[0].push(time(
+            |x| {
+                let mut o = [0.0; 4];
+                unsafe { c_dyn(x.as_ptr(), u.as_ptr(), o.as_mut_ptr()) };
+                o[3]
+            },
+            &xs,
+        ));
+        t[1].push(time(|x| p_dyn(x, &u, &p)[3], &xs));
+        t[2].push(time(
+            |x| {
+                let mut o = [0.0];
+                unsafe { c_law(x.as_ptr(), o.as_mut_ptr()) };
+                o[0]
+            },
+            &xs,
+        ));
+        t[3].push(time(|x| p_law(&ctrl, x)[0], &xs));
+        t[4].push(time(
+            |x| {
+                let mut o = [0.0; 4];
+                unsafe { c_step(x.as_ptr(), u.as_ptr(), o.as_mut_ptr()) };
+                o[3]
+            },
+            &xs,
+        ));
+        t[5].push(time(|x| p_step(x, &u, &p)[3], &xs));
+    }
+    let m: Vec<f64> = t.into_iter().map(median).collect();
+    println!(
+        "{:<14} {:>10} {:>10} {:>16}",
+        "ns/call", "CasADi", "plantc", "plantc/CasADi"
+    );
+    for (i, name) in ["dynamics", "FL law", "RK4 step"].iter().enumerate() {
+        let (c, r) = (m[2 * i], m[2 * i + 1]);
+        println!("{name:<14} {c:>10.1} {r:>10.1} {:>16.2}", r / c);
+    }
+}
