@@ -11,26 +11,12 @@ import json
 import time
 
 import sympy as sp
-from sympy.physics.mechanics import LagrangesMethod, ReferenceFrame, dynamicsymbols
+
+from sympy_rotary import build
 
 t0 = time.perf_counter()
-th, al = dynamicsymbols("theta alpha")
-thd, ald = dynamicsymbols("theta alpha", 1)
-Vm = dynamicsymbols("Vm")
-m1, L1, l1, J1, b1, m2, L2, l2, J2, b2, g = sp.symbols("m1 L1 l1 J1 b1 m2 L2 l2 J2 b2 g")
-Kg, kt, km, eta_m, eta_g, Rm, Fg1 = sp.symbols("Kg kt km eta_m eta_g Rm Fg1")
-J0h = J1 + m1 * l1**2 + m2 * L1**2
-J2h = J2 + m2 * l2**2
-c = m2 * L1 * l2
-T = sp.Rational(1, 2) * (J0h + J2h * sp.sin(al) ** 2) * thd**2 - c * sp.cos(al) * thd * ald + sp.Rational(1, 2) * J2h * ald**2
-V = m2 * g * l2 * sp.cos(al)
-tau = eta_g * Kg * eta_m * kt * (Vm - Kg * km * thd) / Rm
-N = ReferenceFrame("N")
-A = N.orientnew("A", "Axis", [th, N.z])
-B = A.orientnew("B", "Axis", [al, A.x])
-forces = [(A, (tau - b1 * thd - Fg1 * sp.sign(thd)) * N.z), (B, -b2 * ald * A.x)]
-lm = LagrangesMethod(T - V, [th, al], forcelist=forces, frame=N)
-lm.form_lagranges_equations()
+r = build()
+th, al, thd, ald, Vm, lm = r.th, r.al, r.thd, r.ald, r.Vm, r.lm
 t_eom = time.perf_counter()
 # Accelerations: M qdd = forcing.
 acc = lm.mass_matrix.LUsolve(lm.forcing)

@@ -6,11 +6,7 @@
 #   bash bench/eom_vs_sympy.sh
 set -euo pipefail
 cd "$(dirname "$0")/.."
-VENV="${PLANTC_BENCH_VENV:-${XDG_CACHE_HOME:-$HOME/.cache}/plantc-bench/venv}"
-if [ ! -x "$VENV/bin/python" ]; then
-  python3 -m venv "$VENV"
-  "$VENV/bin/pip" install --quiet sympy
-fi
+. bench/sympy_venv.sh
 cargo build --quiet --release -p plantc-derive --example pipeline_timing
 PLANTC=$(./target/release/examples/pipeline_timing models/rotary_pendulum.plant quanser_manual 200)
 SYMPY=$("$VENV/bin/python" bench/eom_sympy.py)

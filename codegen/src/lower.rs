@@ -10,7 +10,7 @@
 use proc_macro2::{Ident, Literal, Span, TokenStream};
 use quote::{format_ident, quote};
 
-use plantc_derive::sym::{Expr, Func, Instr, Symbol, Tape};
+use plantc_derive::sym::{Expr, Instr, Symbol, Tape};
 
 use crate::Error;
 
@@ -131,7 +131,7 @@ pub(crate) fn lower(
                     }
                     Instr::Func { dst, f, a } => {
                         let a = get(&slot, a);
-                        let name = format_ident!("{}", func_name(f));
+                        let name = format_ident!("{}", f.name());
                         (dst, quote!(math::#name(#a)))
                     }
                     _ => unreachable!(),
@@ -144,19 +144,6 @@ pub(crate) fn lower(
     }
     let outputs = tape.output_slots().iter().map(|s| get(&slot, *s)).collect();
     Ok(Lowered { stmts, outputs })
-}
-
-fn func_name(f: Func) -> &'static str {
-    match f {
-        Func::Sin => "sin",
-        Func::Cos => "cos",
-        Func::Tan => "tan",
-        Func::Exp => "exp",
-        Func::Ln => "ln",
-        Func::Abs => "abs",
-        Func::Sign => "sign",
-        Func::Tanh => "tanh",
-    }
 }
 
 /// Statements solving `M y = b` for several right-hand sides with an unrolled

@@ -18,12 +18,11 @@
 //! width (1e-2) makes a stuck arm creep (20x worse fit). The smooth law is
 //! stiff: it needs a step of about 1 ms, hence the default substep.
 
-use std::collections::HashMap;
 use std::fmt;
 
-use plantc_derive::mechanics::{derive_equations, Equations};
+use plantc_derive::mechanics::{derive_equations, flat_outputs, small_lu, smooth_signs, Equations};
 use plantc_derive::model::Model;
-use plantc_derive::sym::{substitute, Expr, Func, Node, Symbol, Tape};
+use plantc_derive::sym::{Expr, Symbol, Tape};
 
 use crate::data::Experiment;
 
@@ -221,48 +220,18 @@ pub struct Trajectory {
     pub q: Vec<Vec<f64>>,
 }
 
-/// Replace every `sign(u)` by `tanh(u/w)`.
-pub(crate) fn smooth_sign(exprs: &[Expr], width: Option<f64>) -> Vec<Expr> {
-    let Some(w) = width else {
-        return exprs.to_vec();
-    };
-    let mut map: HashMap<Expr, Expr> = HashMap::new();
-    let mut seen = std::collections::HashSet::new();
-    let mut stack: Vec<Expr> = exprs.to_vec();
-    while let Some(e) = stack.pop() {
-        if !seen.insert(e) {
-            continue;
-        }
-        if let Node::Func(Func::Sign, u) = e.node() {
-            map.insert(e, (*u * Expr::float(1.0 / w)).tanh());
-        }
-        stack.extend(e.children());
-    }
-    if map.is_empty() {
-        return exprs.to_vec();
-    }
-    exprs.iter().map(|e| substitute(*e, &map)).collect()
-}
-
 /// The equations as flat vectors `[M (row-major), r0, B (row-major)]`, with
 /// dry friction smoothed.
 pub(crate) fn dynamics_outputs(
     model: &Model,
     width: Option<f64>,
 ) -> Result<(Equations, Vec<Expr>), SimError> {
-    let eqs = derive_equations(model).map_err(|e| SimError::Mechanics(e.to_string()))?;
-    let n = eqs.coords.len();
-    let mut outs = Vec::new();
-    for row in &eqs.mass_matrix {
-        outs.extend(row.iter().copied());
+    let mut eqs = derive_equations(model).map_err(|e| SimError::Mechanics(e.to_string()))?;
+    if let Some(w) = width {
+        eqs = smooth_signs(&eqs, w);
     }
-    for i in 0..n {
-        outs.push(eqs.forces[i] - eqs.bias[i]);
-    }
-    for row in &eqs.input_matrix {
-        outs.extend(row.iter().copied());
-    }
-    Ok((eqs, smooth_sign(&outs, width)))
+    let outs = flat_outputs(&eqs);
+    Ok((eqs, outs))
 }
 
 /// Tape input symbols: state, inputs, full parameters.
@@ -273,65 +242,13 @@ pub(crate) fn tape_inputs(model: &Model) -> Vec<Symbol> {
     v
 }
 
-/// In-place LU with partial pivoting of the `n x n` row-major `a`; `piv`
-/// receives the row permutation. Returns false if singular or non-finite.
+/// LU factorisation for the mass matrix (shared with derive's numeric
+/// dynamics); a pivot that is zero or subnormal counts as singular.
 pub(crate) fn lu_factor(a: &mut [f64], n: usize, piv: &mut [usize]) -> bool {
-    for (i, p) in piv.iter_mut().enumerate().take(n) {
-        *p = i;
-    }
-    for k in 0..n {
-        let mut p = k;
-        let mut best = a[k * n + k].abs();
-        for i in k + 1..n {
-            let v = a[i * n + k].abs();
-            if v > best {
-                best = v;
-                p = i;
-            }
-        }
-        if best <= f64::MIN_POSITIVE || !best.is_finite() {
-            return false;
-        }
-        if p != k {
-            for j in 0..n {
-                a.swap(k * n + j, p * n + j);
-            }
-            piv.swap(k, p);
-        }
-        let d = a[k * n + k];
-        for i in k + 1..n {
-            let l = a[i * n + k] / d;
-            a[i * n + k] = l;
-            for j in k + 1..n {
-                a[i * n + j] -= l * a[k * n + j];
-            }
-        }
-    }
-    true
+    small_lu::lu_factor(a, n, piv, f64::MIN_POSITIVE)
 }
 
-/// Solve `A x = b` with the factors of [`lu_factor`]; `b` is overwritten by
-/// `x`, `tmp` (length `n`) is scratch.
-pub(crate) fn lu_solve(lu: &[f64], n: usize, piv: &[usize], b: &mut [f64], tmp: &mut [f64]) {
-    for i in 0..n {
-        tmp[i] = b[piv[i]];
-    }
-    for i in 0..n {
-        let mut s = tmp[i];
-        for j in 0..i {
-            s -= lu[i * n + j] * tmp[j];
-        }
-        tmp[i] = s;
-    }
-    for i in (0..n).rev() {
-        let mut s = tmp[i];
-        for j in i + 1..n {
-            s -= lu[i * n + j] * tmp[j];
-        }
-        tmp[i] = s / lu[i * n + i];
-    }
-    b[..n].copy_from_slice(&tmp[..n]);
-}
+pub(crate) use small_lu::lu_solve;
 
 /// Initial state `(q(t0), q'(t0))` from the data.
 pub(crate) fn initial_state(sig: &Signals, how: InitialVelocity) -> Vec<f64> {

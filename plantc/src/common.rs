@@ -145,3 +145,21 @@ pub fn write_matrix(out: &mut dyn Write, name: &str, rows: &[Vec<f64>], labels: 
         let _ = writeln!(out, "]");
     }
 }
+
+/// A complex number as `re` or `re+imi`, compactly.
+pub fn complex_text(re: f64, im: f64) -> String {
+    if im == 0.0 {
+        num(re)
+    } else {
+        format!("{}{:+}i", num(re), im)
+    }
+}
+
+/// Pretty JSON of a command's result, on its own line.
+pub fn write_json(out: &mut dyn Write, v: &serde_json::Value) {
+    let _ = writeln!(
+        out,
+        "{}",
+        serde_json::to_string_pretty(v).unwrap_or_default()
+    );
+}

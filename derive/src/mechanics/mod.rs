@@ -5,9 +5,10 @@
 mod euler_lagrange;
 mod matrix;
 mod numeric;
+pub mod small_lu;
 
 pub use euler_lagrange::{
     control_affine, derive_equations, ControlAffine, Equations, MechanicsError,
 };
 pub use matrix::{adjugate, determinant};
-pub use numeric::{has_sign, smooth_signs, NumericDynamics, NumericError, Workspace};
+pub use numeric::{flat_outputs, has_sign, smooth_signs, NumericDynamics, NumericError, Workspace};

@@ -9,6 +9,7 @@
 
 use std::fmt;
 
+use super::small_lu::{lu_factor, lu_solve};
 use super::Equations;
 use crate::model::Model;
 use std::collections::HashMap;
@@ -73,6 +74,8 @@ pub struct Workspace {
     scratch: Vec<f64>,
     lu: Vec<f64>,
     rhs: Vec<f64>,
+    piv: Vec<usize>,
+    tmp: Vec<f64>,
 }
 
 impl NumericDynamics {
@@ -98,16 +101,7 @@ impl NumericDynamics {
         {
             return Err(NumericError::Shape("matrix sizes".into()));
         }
-        let mut outputs: Vec<Expr> = Vec::with_capacity(n * n + n + n * m);
-        for row in &eqs.mass_matrix {
-            outputs.extend(row.iter().copied());
-        }
-        for i in 0..n {
-            outputs.push(eqs.forces[i] - eqs.bias[i]);
-        }
-        for row in &eqs.input_matrix {
-            outputs.extend(row.iter().copied());
-        }
+        let outputs = flat_outputs(eqs);
         let mut inputs: Vec<Symbol> = model.state_symbols();
         let params = model.parameter_symbols();
         inputs.extend(params.iter().copied());
@@ -155,6 +149,8 @@ impl NumericDynamics {
             scratch: vec![0.0; self.tape.scratch_len()],
             lu: vec![0.0; self.n * self.n],
             rhs: vec![0.0; self.n],
+            piv: vec![0; self.n],
+            tmp: vec![0.0; self.n],
         }
     }
 
@@ -187,11 +183,26 @@ impl NumericDynamics {
             }
             ws.rhs[i] = acc;
         }
-        lu_solve_in_place(&mut ws.lu, &mut ws.rhs, n)?;
+        lu_solve_in_place(&mut ws.lu, &mut ws.rhs, n, &mut ws.piv, &mut ws.tmp)?;
         dx[..n].copy_from_slice(&x[n..]);
         dx[n..].copy_from_slice(&ws.rhs);
         Ok(())
     }
+}
+
+/// The equations as one flat vector `[M (row-major, n*n), r0 = Q0 - bias (n),
+/// B (row-major, n*m)]`: the outputs of the dynamics tape.
+pub fn flat_outputs(eqs: &Equations) -> Vec<Expr> {
+    let n = eqs.coords.len();
+    let mut out: Vec<Expr> = Vec::with_capacity(n * n + n + n * eqs.inputs.len());
+    for row in &eqs.mass_matrix {
+        out.extend(row.iter().copied());
+    }
+    out.extend((0..n).map(|i| eqs.forces[i] - eqs.bias[i]));
+    for row in &eqs.input_matrix {
+        out.extend(row.iter().copied());
+    }
+    out
 }
 
 /// Whether any entry of the equations contains `sign(..)` (dry friction).
@@ -254,52 +265,20 @@ pub fn smooth_signs(eqs: &Equations, width: f64) -> Equations {
     }
 }
 
-/// Solve `A z = b` in place (`a` row-major `n*n`, overwritten by its LU
-/// factors; `b` overwritten by `z`). Partial pivoting; a pivot below
-/// `1e-14 * max|A|` counts as singular.
-fn lu_solve_in_place(a: &mut [f64], b: &mut [f64], n: usize) -> Result<(), NumericError> {
+/// Solve `A z = b` (`a` row-major `n*n`, overwritten by its LU factors; `b`
+/// overwritten by `z`). A pivot below `1e-14 * max|A|` counts as singular.
+fn lu_solve_in_place(
+    a: &mut [f64],
+    b: &mut [f64],
+    n: usize,
+    piv: &mut [usize],
+    tmp: &mut [f64],
+) -> Result<(), NumericError> {
     let scale = a.iter().fold(0.0f64, |s, v| s.max(v.abs()));
-    if !scale.is_finite() || scale == 0.0 {
+    if !scale.is_finite() || scale == 0.0 || !lu_factor(a, n, piv, 1e-14 * scale) {
         return Err(NumericError::SingularMass);
     }
-    let tiny = 1e-14 * scale;
-    for k in 0..n {
-        let mut p = k;
-        let mut best = a[k * n + k].abs();
-        for i in k + 1..n {
-            let v = a[i * n + k].abs();
-            if v > best {
-                best = v;
-                p = i;
-            }
-        }
-        if best <= tiny || best.is_nan() {
-            return Err(NumericError::SingularMass);
-        }
-        if p != k {
-            for j in 0..n {
-                a.swap(k * n + j, p * n + j);
-            }
-            b.swap(k, p);
-        }
-        let piv = a[k * n + k];
-        for i in k + 1..n {
-            let f = a[i * n + k] / piv;
-            if f != 0.0 {
-                for j in k + 1..n {
-                    a[i * n + j] -= f * a[k * n + j];
-                }
-                b[i] -= f * b[k];
-            }
-        }
-    }
-    for k in (0..n).rev() {
-        let mut s = b[k];
-        for j in k + 1..n {
-            s -= a[k * n + j] * b[j];
-        }
-        b[k] = s / a[k * n + k];
-    }
+    lu_solve(a, n, piv, b, tmp);
     Ok(())
 }
 
@@ -315,14 +294,14 @@ mod tests {
         let mut b: Vec<f64> = (0..3)
             .map(|i| (0..3).map(|j| orig[i * 3 + j] * x[j]).sum())
             .collect();
-        lu_solve_in_place(&mut a, &mut b, 3).unwrap();
+        lu_solve_in_place(&mut a, &mut b, 3, &mut [0; 3], &mut [0.0; 3]).unwrap();
         for i in 0..3 {
             assert!((b[i] - x[i]).abs() < 1e-14, "{b:?}");
         }
         let mut s = vec![1.0, 2.0, 2.0, 4.0];
         let mut r = vec![1.0, 1.0];
         assert_eq!(
-            lu_solve_in_place(&mut s, &mut r, 2),
+            lu_solve_in_place(&mut s, &mut r, 2, &mut [0; 2], &mut [0.0; 2]),
             Err(NumericError::SingularMass)
         );
     }

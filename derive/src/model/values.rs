@@ -5,6 +5,7 @@ use std::collections::HashMap;
 use std::fmt;
 
 use super::Model;
+use crate::lang::check::edit_distance;
 use crate::sym::Symbol;
 
 /// Why a parameter selection failed.
@@ -64,21 +65,6 @@ pub struct ParameterValues {
     /// `base` followed by the values of [`Model::derived`]: the order of
     /// [`Model::parameter_symbols`].
     pub full: Vec<f64>,
-}
-
-fn edit_distance(a: &str, b: &str) -> usize {
-    let a: Vec<char> = a.chars().collect();
-    let b: Vec<char> = b.chars().collect();
-    let mut prev: Vec<usize> = (0..=b.len()).collect();
-    for i in 1..=a.len() {
-        let mut cur = vec![i; b.len() + 1];
-        for j in 1..=b.len() {
-            let cost = usize::from(a[i - 1] != b[j - 1]);
-            cur[j] = (prev[j] + 1).min(cur[j - 1] + 1).min(prev[j - 1] + cost);
-        }
-        prev = cur;
-    }
-    prev[b.len()]
 }
 
 /// Up to three names close to `name` (edit distance at most 2, or a prefix).

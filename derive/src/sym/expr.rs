@@ -651,6 +651,36 @@ fn build_add(terms: Vec<Expr>) -> Expr {
     }
 }
 
+/// The constant factor of a product: exact while the rational arithmetic
+/// fits, with an inexact float part for what overflowed or was a float.
+struct ProductCoefficient {
+    exact: Rational,
+    float: f64,
+    inexact: bool,
+}
+
+impl ProductCoefficient {
+    fn new() -> Self {
+        ProductCoefficient {
+            exact: Rational::ONE,
+            float: 1.0,
+            inexact: false,
+        }
+    }
+
+    fn mul_rational(&mut self, r: Rational) {
+        match self.exact.checked_mul(r) {
+            Some(c) => self.exact = c,
+            None => self.mul_float(r.to_f64()),
+        }
+    }
+
+    fn mul_float(&mut self, x: f64) {
+        self.inexact = true;
+        self.float *= x;
+    }
+}
+
 fn build_mul(factors: Vec<Expr>) -> Expr {
     let mut flat: Vec<Expr> = Vec::with_capacity(factors.len());
     for f in factors {
@@ -659,9 +689,7 @@ fn build_mul(factors: Vec<Expr>) -> Expr {
             _ => flat.push(f),
         }
     }
-    let mut coeff = Rational::ONE;
-    let mut float_coeff = 1.0f64;
-    let mut has_float = false;
+    let mut k = ProductCoefficient::new();
     let mut order: Vec<Expr> = Vec::new();
     let mut exps: HashMap<Expr, Vec<Expr>> = HashMap::new();
     for f in flat {
@@ -670,18 +698,9 @@ fn build_mul(factors: Vec<Expr>) -> Expr {
                 if r.is_zero() {
                     return Expr::zero();
                 }
-                match coeff.checked_mul(*r) {
-                    Some(c) => coeff = c,
-                    None => {
-                        has_float = true;
-                        float_coeff *= r.to_f64();
-                    }
-                }
+                k.mul_rational(*r);
             }
-            Node::Float(b) => {
-                has_float = true;
-                float_coeff *= b.value();
-            }
+            Node::Float(b) => k.mul_float(b.value()),
             _ => {
                 let (base, e) = f.base_and_exp();
                 match exps.get_mut(&base) {
@@ -704,28 +723,13 @@ fn build_mul(factors: Vec<Expr>) -> Expr {
         };
         let p = build_pow(base, e);
         match p.node() {
-            Node::Rational(r) => match coeff.checked_mul(*r) {
-                Some(c) => coeff = c,
-                None => {
-                    has_float = true;
-                    float_coeff *= r.to_f64();
-                }
-            },
-            Node::Float(b) => {
-                has_float = true;
-                float_coeff *= b.value();
-            }
+            Node::Rational(r) => k.mul_rational(*r),
+            Node::Float(b) => k.mul_float(b.value()),
             Node::Mul(xs) => {
                 // e.g. (a*b)^n distributed by build_pow: merge its factors.
                 for x in xs.iter() {
                     match x.node() {
-                        Node::Rational(r) => match coeff.checked_mul(*r) {
-                            Some(c) => coeff = c,
-                            None => {
-                                has_float = true;
-                                float_coeff *= r.to_f64();
-                            }
-                        },
+                        Node::Rational(r) => k.mul_rational(*r),
                         _ => out.push(*x),
                     }
                 }
@@ -733,6 +737,11 @@ fn build_mul(factors: Vec<Expr>) -> Expr {
             _ => out.push(p),
         }
     }
+    let ProductCoefficient {
+        exact: coeff,
+        float: float_coeff,
+        inexact: has_float,
+    } = k;
     if coeff.is_zero() {
         return Expr::zero();
     }

@@ -11,7 +11,7 @@ use plantc_derive::control::{output_expr, Derivation};
 use plantc_derive::sym::Expr;
 
 use crate::cli::ParamArgs;
-use crate::common::{load, num, values, CliError};
+use crate::common::{complex_text, load, values, write_json, CliError};
 
 fn lf_name(k: usize) -> String {
     match k {
@@ -40,13 +40,7 @@ fn named_lie(chain: &LieChain) -> Vec<(String, String)> {
 fn eig_text(zd: &ZeroDynamics) -> String {
     zd.eigenvalues
         .iter()
-        .map(|p| {
-            if p.im == 0.0 {
-                num(p.re)
-            } else {
-                format!("{}{:+}i", num(p.re), p.im)
-            }
-        })
+        .map(|p| complex_text(p.re, p.im))
         .collect::<Vec<_>>()
         .join(", ")
 }
@@ -106,11 +100,7 @@ pub fn run(
                 "equilibrium_residual": zd.equilibrium_residual,
             },
         });
-        let _ = writeln!(
-            out,
-            "{}",
-            serde_json::to_string_pretty(&v).unwrap_or_default()
-        );
+        write_json(out, &v);
         return Ok(());
     }
     let _ = writeln!(

@@ -3,7 +3,7 @@
 use std::io::Write;
 use std::path::Path;
 
-use crate::common::{load, CliError};
+use crate::common::{load, write_json, CliError};
 
 pub fn run(
     path: &Path,
@@ -24,11 +24,7 @@ pub fn run(
             "controllers": m.controllers.iter().map(|c| c.name()).collect::<Vec<_>>(),
             "warnings": loaded.diagnostics.len(),
         });
-        let _ = writeln!(
-            out,
-            "{}",
-            serde_json::to_string_pretty(&v).unwrap_or_default()
-        );
+        write_json(out, &v);
     } else {
         let _ = writeln!(
             out,

@@ -6,7 +6,7 @@ use std::path::Path;
 use plantc_derive::mechanics::{control_affine, derive_equations};
 use plantc_derive::sym::Expr;
 
-use crate::common::{load, CliError};
+use crate::common::{load, write_json, CliError};
 
 fn strings(v: &[Expr]) -> Vec<String> {
     v.iter().map(|e| e.to_string()).collect()
@@ -38,11 +38,7 @@ pub fn run(
             "g": ca.g.iter().map(|r| strings(r)).collect::<Vec<_>>(),
             "derived": model.derived.iter().map(|d| (d.name.clone(), d.expr.to_string())).collect::<std::collections::BTreeMap<_, _>>(),
         });
-        let _ = writeln!(
-            out,
-            "{}",
-            serde_json::to_string_pretty(&v).unwrap_or_default()
-        );
+        write_json(out, &v);
         return Ok(());
     }
     let show = |e: Expr| if latex { e.to_latex() } else { e.to_string() };

@@ -10,7 +10,7 @@ use plantc_derive::linear::{
 
 use super::linearize::{linearize_file, to_linear_model};
 use crate::cli::LinearSource;
-use crate::common::{num, write_matrix, CliError};
+use crate::common::{complex_text, write_matrix, CliError};
 
 fn linear_model(src: &LinearSource, err: &mut dyn Write) -> Result<LinearModel, CliError> {
     if let Some(path) = &src.linear {
@@ -44,14 +44,6 @@ fn diag(text: &str, n: usize, what: &str) -> Result<DMatrix<f64>, CliError> {
     Ok(DMatrix::from_diagonal(&nalgebra::DVector::from_vec(v)))
 }
 
-fn pole_text(p: &plantc_derive::linear::Pole) -> String {
-    if p.im == 0.0 {
-        num(p.re)
-    } else {
-        format!("{}{:+}i", num(p.re), p.im)
-    }
-}
-
 pub fn place(
     src: &LinearSource,
     poles: &str,
@@ -71,7 +63,11 @@ pub fn place(
     }
     write_matrix(out, "K (u = -K x)", &report.k, &lm.inputs);
     let _ = writeln!(out, "  columns: {}", lm.state.join(", "));
-    let cl: Vec<String> = report.closed_loop_poles.iter().map(pole_text).collect();
+    let cl: Vec<String> = report
+        .closed_loop_poles
+        .iter()
+        .map(|p| complex_text(p.re, p.im))
+        .collect();
     let _ = writeln!(out, "closed-loop poles: {}", cl.join(", "));
     Ok(())
 }
@@ -97,7 +93,11 @@ pub fn lqr(
     write_matrix(out, "K (u = -K x)", &report.k, &lm.inputs);
     let _ = writeln!(out, "  columns: {}", lm.state.join(", "));
     write_matrix(out, "P", &report.p, &lm.state);
-    let cl: Vec<String> = report.closed_loop_poles.iter().map(pole_text).collect();
+    let cl: Vec<String> = report
+        .closed_loop_poles
+        .iter()
+        .map(|p| complex_text(p.re, p.im))
+        .collect();
     let _ = writeln!(out, "closed-loop poles: {}", cl.join(", "));
     let _ = writeln!(
         out,

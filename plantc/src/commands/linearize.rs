@@ -8,7 +8,9 @@ use plantc_derive::linear::{controllability, matrix_to_rows, poles, LinearModel}
 use plantc_derive::mechanics::derive_equations;
 
 use crate::cli::ParamArgs;
-use crate::common::{load, num, parse_assignments, values, write_matrix, CliError};
+use crate::common::{
+    complex_text, load, parse_assignments, values, write_json, write_matrix, CliError,
+};
 
 /// Linearize a model file about `at` (all zeros when `None`).
 pub fn linearize_file(
@@ -74,11 +76,7 @@ pub fn run(
             "singular_values": ctrb.singular_values,
             "notes": lin.notes,
         });
-        let _ = writeln!(
-            out,
-            "{}",
-            serde_json::to_string_pretty(&v).unwrap_or_default()
-        );
+        write_json(out, &v);
         return Ok(());
     }
     let _ = writeln!(
@@ -89,16 +87,7 @@ pub fn run(
     );
     write_matrix(out, "A", &matrix_to_rows(&lin.a), &lin.state);
     write_matrix(out, "B", &matrix_to_rows(&lin.b), &lin.state);
-    let ps: Vec<String> = p
-        .iter()
-        .map(|x| {
-            if x.im == 0.0 {
-                num(x.re)
-            } else {
-                format!("{}{:+}i", num(x.re), x.im)
-            }
-        })
-        .collect();
+    let ps: Vec<String> = p.iter().map(|x| complex_text(x.re, x.im)).collect();
     let _ = writeln!(out, "open-loop poles: {}", ps.join(", "));
     let sv: Vec<String> = ctrb
         .singular_values

@@ -8,7 +8,7 @@ use plantc_derive::analysis::stability_interval;
 use plantc_derive::control::{resolve, Derivation};
 
 use crate::cli::ParamArgs;
-use crate::common::{load, num, values, CliError};
+use crate::common::{load, num, values, write_json, CliError};
 
 fn end(x: Option<f64>, inf: &str) -> String {
     x.map_or(inf.to_string(), num)
@@ -57,11 +57,7 @@ pub fn run(
             "conditions": s.conditions.iter().map(|(n, p)| serde_json::json!({"name": n, "coefficients": p.0})).collect::<Vec<_>>(),
             "method": s.method,
         });
-        let _ = writeln!(
-            out,
-            "{}",
-            serde_json::to_string_pretty(&v).unwrap_or_default()
-        );
+        write_json(out, &v);
         return Ok(());
     }
     let k = s.gains.join(" = ");
