@@ -555,7 +555,7 @@ pub(crate) fn generate_body(spec: &Spec) -> Result<String, Error> {
             /// Clamp to `[lo, hi]`; NaN (a singular control law) gives 0.
             #[inline(always)]
             pub fn saturate(x: f64, lo: f64, hi: f64) -> f64 {
-                if x > hi { hi } else if x < lo { lo } else if x == x { x } else { 0.0 }
+                if x > hi { hi } else if x < lo { lo } else if x.is_nan() { 0.0 } else { x }
             }
         }
     };
