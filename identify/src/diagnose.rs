@@ -18,10 +18,11 @@
 
 use std::fmt;
 
-use plantc_derive::lang::{edit, parse_and_check};
-use plantc_derive::model::{lower, CoordinateKind, Model};
+use plantc_derive::lang::parse_and_check;
+use plantc_derive::model::{lower, Model};
 
 use crate::data::Experiment;
+use crate::effect_edit::{all_candidates, EffectEditError, EffectInstance};
 use crate::fit::{fit, FitError, FitOptions, FitResult};
 
 /// Smallest RMSE ratio (baseline / candidate) that counts as a found effect.
@@ -42,7 +43,7 @@ pub enum DiagnoseError {
         /// The candidate's label.
         which: String,
         /// The edit error.
-        message: String,
+        error: EffectEditError,
     },
     /// The baseline fit failed.
     Fit(FitError),
@@ -54,8 +55,8 @@ impl fmt::Display for DiagnoseError {
             DiagnoseError::InvalidModel { which, messages } => {
                 write!(f, "model `{which}` is invalid: {}", messages.join("; "))
             }
-            DiagnoseError::Edit { which, message } => {
-                write!(f, "cannot add `{which}` to the model: {message}")
+            DiagnoseError::Edit { which, error } => {
+                write!(f, "cannot add `{which}` to the model: {error}")
             }
             DiagnoseError::Fit(e) => write!(f, "baseline fit: {e}"),
         }
@@ -64,103 +65,12 @@ impl fmt::Display for DiagnoseError {
 
 impl std::error::Error for DiagnoseError {}
 
-/// One new parameter of a candidate: name suffix, unit, start, bounds.
-struct NewParam {
-    base: &'static str,
-    unit: &'static str,
-    start: f64,
-    lo: f64,
-    hi: f64,
-}
+/// A candidate: an effect on one target, parameters free.
+pub type Candidate = EffectInstance;
 
-/// A candidate effect on one coordinate.
-#[derive(Clone, Debug, PartialEq, Eq)]
-pub struct Candidate {
-    /// Effect name from the effect table (`coulomb_friction`, ...).
-    pub effect: &'static str,
-    /// Coordinate it acts on.
-    pub coordinate: String,
-    /// Kind of that coordinate (sets the units of the new parameters).
-    pub kind: CoordinateKind,
-}
-
-/// The force-term effects tried, in table order.
-pub const FORCE_EFFECTS: &[&str] = &[
-    "coulomb_friction",
-    "viscous_friction",
-    "quadratic_drag",
-    "stribeck_friction",
-    "spring",
-];
-
-/// Every force-term candidate on every coordinate.
+/// Every candidate effect on every target (see [`all_candidates`]).
 pub fn candidates(model: &Model) -> Vec<Candidate> {
-    let mut v = Vec::new();
-    for c in &model.coordinates {
-        for e in FORCE_EFFECTS {
-            v.push(Candidate {
-                effect: e,
-                coordinate: c.name.clone(),
-                kind: c.kind,
-            });
-        }
-    }
-    v
-}
-
-impl Candidate {
-    /// `effect@coordinate`.
-    pub fn label(&self) -> String {
-        format!("{}@{}", self.effect, self.coordinate)
-    }
-
-    fn params(&self) -> Vec<NewParam> {
-        let angle = self.kind == CoordinateKind::Angle;
-        let p = |base, ua, ul, start, hi| NewParam {
-            base,
-            unit: if angle { ua } else { ul },
-            start,
-            lo: 0.0,
-            hi,
-        };
-        match self.effect {
-            "coulomb_friction" => vec![p("Fc", "N*m", "N", 1e-4, 0.1)],
-            "viscous_friction" => vec![p("bx", "N*m*s/rad", "N*s/m", 1e-4, 0.1)],
-            "quadratic_drag" => vec![p("cd", "N*m*s^2/rad^2", "N*s^2/m^2", 1e-5, 0.1)],
-            "stribeck_friction" => vec![
-                p("Fc", "N*m", "N", 1e-4, 0.1),
-                p("Fs", "N*m", "N", 2e-4, 0.2),
-                p("vs", "rad/s", "m/s", 0.1, 10.0),
-            ],
-            _ => vec![p("k", "N*m/rad", "N/m", 1e-3, 1.0)],
-        }
-    }
-
-    /// The model text with this effect added (new parameters named
-    /// `<base>_<coordinate>`, e.g. `Fc_alpha`, marked `estimate`).
-    pub fn apply(&self, text: &str) -> Result<String, DiagnoseError> {
-        let err = |e: edit::EditError| DiagnoseError::Edit {
-            which: self.label(),
-            message: format!("{e:?}"),
-        };
-        let mut t = text.to_string();
-        let mut args = Vec::new();
-        for np in self.params() {
-            let name = format!("{}_{}", np.base, self.coordinate);
-            let decl = format!(
-                "parameter {name} = {} [{}] \"candidate {}\" estimate [{}, {}]",
-                edit::number_text(np.start),
-                np.unit,
-                self.label(),
-                edit::number_text(np.lo),
-                edit::number_text(np.hi)
-            );
-            t = edit::add_parameter(&t, &decl).map_err(err)?;
-            args.push(name);
-        }
-        let term = format!("{}({})", self.effect, args.join(", "));
-        edit::add_force_term(&t, &self.coordinate, &term).map_err(err)
-    }
+    all_candidates(model)
 }
 
 /// Check and lower model text.
@@ -215,7 +125,10 @@ pub fn diagnose(
     let baseline = fit(&model, experiments, opts).map_err(DiagnoseError::Fit)?;
     let mut ranking = Vec::new();
     for c in candidates(&model) {
-        let edited = c.apply(text)?;
+        let edited = c.apply(text).map_err(|error| DiagnoseError::Edit {
+            which: c.label(),
+            error,
+        })?;
         let m = model_from_text(&c.label(), &edited)?;
         // start from the baseline estimates, the new parameters at their start
         let mut start: Vec<f64> = m.parameters.iter().map(|p| p.value).collect();

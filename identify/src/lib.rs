@@ -29,6 +29,7 @@ pub use error::{CellProblem, DataError, DataWarning};
 pub use units::Kind;
 
 pub mod diagnose;
+pub mod effect_edit;
 pub mod experiment_sim;
 pub mod fit;
 pub mod metrics;
@@ -37,6 +38,7 @@ pub mod sensitivity;
 pub mod where_it_fails;
 
 pub use diagnose::{candidates, diagnose, Candidate, DiagnoseError, Diagnosis, Ranked};
+pub use effect_edit::{EffectEditError, EffectInstance, EffectKind};
 pub use experiment_sim::{InitialVelocity, Signals, SimError, SimOptions, Simulator, Trajectory};
 pub use fit::{fit, Estimate, FitError, FitOptions, FitResult};
 pub use metrics::{compare, fit_percent, rmse, ChannelFit, ExperimentFit, FitReport, MetricsError};

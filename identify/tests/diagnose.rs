@@ -31,7 +31,7 @@ fn every_candidate_edit_gives_a_valid_model() {
     }
     let coulomb = cs
         .iter()
-        .find(|c| c.effect == "coulomb_friction" && c.coordinate == "alpha")
+        .find(|c| c.effect == "coulomb_friction" && c.target == "alpha")
         .expect("candidate exists");
     let edited = coulomb.apply(&text).expect("applies");
     assert!(edited.contains("coulomb_friction(Fc_alpha)"));
@@ -66,7 +66,7 @@ fn coulomb_on_alpha_ranks_first() {
     }
     let top = &d.ranking[0].candidate;
     assert_eq!(
-        (top.effect, top.coordinate.as_str()),
+        (top.effect.as_str(), top.target.as_str()),
         ("coulomb_friction", "alpha")
     );
     assert!(d.verdict.is_some());
