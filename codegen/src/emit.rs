@@ -7,9 +7,10 @@ use quote::{format_ident, quote};
 use plantc_derive::analysis::{linearize, OperatingPoint};
 use plantc_derive::control::{resolve, Derivation, ResolvedController};
 use plantc_derive::model::{CoordinateKind, Model, ParameterValues};
-use plantc_derive::sym::{diff, Expr, Symbol};
+use plantc_derive::sym::{Expr, Symbol};
 
-use crate::lower::{ident, ldl_solve, lit, lower};
+use crate::ir::{Graph, Level};
+use crate::lower::{ident, lit, lower};
 use crate::Error;
 
 /// What to generate.
@@ -42,31 +43,6 @@ fn doc(text: &str) -> TokenStream {
     quote!(#(#[doc = #lines])*)
 }
 
-/// Tape inputs shared by every function: state `x`, inputs `u`, parameters
-/// `p`, derived quantities `d`.
-fn bindings(model: &Model, with_inputs: bool) -> Vec<(Symbol, TokenStream)> {
-    let mut v = Vec::new();
-    for (i, s) in model.state_symbols().into_iter().enumerate() {
-        let i = idx(i);
-        v.push((s, quote!(x[#i])));
-    }
-    if with_inputs {
-        for (i, s) in model.input_symbols().into_iter().enumerate() {
-            let i = idx(i);
-            v.push((s, quote!(u[#i])));
-        }
-    }
-    for par in &model.parameters {
-        let f = ident(&par.name);
-        v.push((par.symbol, quote!(p.#f)));
-    }
-    for d in &model.derived {
-        let f = ident(&d.name);
-        v.push((d.symbol, quote!(d.#f)));
-    }
-    v
-}
-
 fn state_unit(kind: CoordinateKind, dot: bool) -> &'static str {
     match (kind, dot) {
         (CoordinateKind::Angle, false) => "rad",
@@ -74,31 +50,6 @@ fn state_unit(kind: CoordinateKind, dot: bool) -> &'static str {
         (CoordinateKind::Length, false) => "m",
         (CoordinateKind::Length, true) => "m/s",
     }
-}
-
-/// The lower triangle of M (`j <= i`) as a flat list, with its index map.
-fn lower_triangle(m: &[Vec<Expr>]) -> Vec<(usize, usize, Expr)> {
-    let n = m.len();
-    let mut v = Vec::new();
-    for i in 0..n {
-        for j in 0..=i {
-            v.push((i, j, m[i][j]));
-        }
-    }
-    v
-}
-
-fn matrix_tokens(
-    flat: &[TokenStream],
-    tri: &[(usize, usize, Expr)],
-    n: usize,
-) -> Vec<Vec<TokenStream>> {
-    let mut m = vec![vec![quote!(0.0); n]; n];
-    for (t, (i, j, _)) in flat.iter().zip(tri) {
-        m[*i][*j] = t.clone();
-        m[*j][*i] = t.clone();
-    }
-    m
 }
 
 pub(crate) fn generate_body(spec: &Spec) -> Result<String, Error> {
@@ -110,7 +61,6 @@ pub(crate) fn generate_body(spec: &Spec) -> Result<String, Error> {
     let nx = 2 * n;
     let nu = eqs.inputs.len();
     let (nx_l, nu_l) = (idx(nx), idx(nu));
-    let state = model.state_symbols();
     let names = model.state_names();
 
     // ---- module documentation (as a const carrying the docs) ----
@@ -196,184 +146,8 @@ pub(crate) fn generate_body(spec: &Spec) -> Result<String, Error> {
         quote!(#f: #o,)
     });
 
-    // ---- dynamics ----
-    let rhs = eqs.rhs();
-    let tri = lower_triangle(&eqs.mass_matrix);
-    let mut outs: Vec<Expr> = tri.iter().map(|t| t.2).collect();
-    outs.extend(&rhs);
-    let bind = bindings(model, true);
-    let dyn_l = lower(&outs, &bind, "t")?;
-    let nt = tri.len();
-    let mtok = matrix_tokens(&dyn_l.outputs[..nt], &tri, n);
-    let rtok: Vec<Option<TokenStream>> = dyn_l.outputs[nt..].iter().cloned().map(Some).collect();
-    let solve = ldl_solve(&mtok, &[rtok], &["a".to_string()]);
-    let dyn_stmts = &dyn_l.stmts;
-    let xdot_q = (n..nx).map(|i| {
-        let i = idx(i);
-        quote!(x[#i])
-    });
-    let xdot_a = (0..n).map(|i| format_ident!("a{}", i));
-    let dynamics_fn = quote! {
-        #[inline(always)]
-        fn dynamics_inline(x: &[f64; N_STATES], u: &[f64; N_INPUTS], p: &Params) -> [f64; N_STATES] {
-            let d = p.derived();
-            let _ = &d;
-            #(#dyn_stmts)*
-            #(#solve)*
-            [#(#xdot_q,)* #(#xdot_a,)*]
-        }
-    };
-
-    // ---- jacobian_x ----
-    // outputs: M lower triangle, r, dr_i/dx_k (row-major), dM_ij/dx_k (lower triangle per k)
-    let mut jouts: Vec<Expr> = outs.clone();
-    let mut drdx_idx = vec![vec![None; nx]; n];
-    for i in 0..n {
-        for (k, s) in state.iter().enumerate() {
-            let e = diff(rhs[i], *s);
-            if !e.is_zero() {
-                drdx_idx[i][k] = Some(jouts.len());
-                jouts.push(e);
-            }
-        }
-    }
-    let mut dm_idx = vec![Vec::new(); nx]; // per k: (i, j, index)
-    for (k, s) in state.iter().enumerate() {
-        for (i, j, m) in &tri {
-            let e = diff(*m, *s);
-            if !e.is_zero() {
-                dm_idx[k].push((*i, *j, jouts.len()));
-                jouts.push(e);
-            }
-        }
-    }
-    let jl = lower(&jouts, &bind, "t")?;
-    let jm = matrix_tokens(&jl.outputs[..nt], &tri, n);
-    let jr: Vec<Option<TokenStream>> = jl.outputs[nt..nt + n].iter().cloned().map(Some).collect();
-    let mut jrhs = vec![jr];
-    let mut jnames = vec!["a".to_string()];
-    let mut col_stmts = Vec::new();
-    for k in 0..nx {
-        let mut col = Vec::new();
-        for i in 0..n {
-            let mut terms: Option<TokenStream> = drdx_idx[i][k].map(|ix| jl.outputs[ix].clone());
-            for (ii, jj, ix) in &dm_idx[k] {
-                // symmetric: entry (ii, jj) and (jj, ii)
-                let mut push = |row: usize, colj: usize| {
-                    if row == i {
-                        let dm = &jl.outputs[*ix];
-                        let aj = format_ident!("a{}", colj);
-                        terms = Some(match terms.take() {
-                            Some(t) => quote!(#t - #dm * #aj),
-                            None => quote!(-(#dm * #aj)),
-                        });
-                    }
-                };
-                push(*ii, *jj);
-                if ii != jj {
-                    push(*jj, *ii);
-                }
-            }
-            match terms {
-                Some(t) => {
-                    let c = format_ident!("c{}_{}", k, i);
-                    col_stmts.push(quote!(let #c = #t;));
-                    col.push(Some(quote!(#c)));
-                }
-                None => col.push(None),
-            }
-        }
-        jrhs.push(col);
-        jnames.push(format!("da{k}_"));
-    }
-    // solve a first, then the columns (they use a)
-    let jsolve_a = ldl_solve(&jm, &jrhs[..1], &jnames[..1]);
-    let jsolve_cols = ldl_solve(&jm, &jrhs[1..], &jnames[1..]);
-    // the second call re-emits the factorisation; drop its duplicate prefix
-    let fact_len = jsolve_a.len() - (2 * n); // factorisation statements
-    let jsolve_cols = &jsolve_cols[fact_len..];
-    let jstmts = &jl.stmts;
-    let mut jrows = Vec::new();
-    for r in 0..nx {
-        let row = (0..nx).map(|k| {
-            if r < n {
-                if k == n + r {
-                    quote!(1.0)
-                } else {
-                    quote!(0.0)
-                }
-            } else {
-                let y = format_ident!("da{}_{}", k, r - n);
-                quote!(#y)
-            }
-        });
-        jrows.push(quote!([#(#row),*]));
-    }
-    let jacobian_x_fn = quote! {
-        /// `A(x, u) = d f / d x` of the state equations `x' = f(x, u)`, from
-        /// `da/dx = M^-1 (dr/dx - sum_k dM/dx_k a)` (symbolic `dr/dx`, `dM/dx`;
-        /// `M` factorised numerically, never inverted).
-        #[inline]
-        pub fn jacobian_x(x: &[f64; N_STATES], u: &[f64; N_INPUTS], p: &Params) -> [[f64; N_STATES]; N_STATES] {
-            let d = p.derived();
-            let _ = &d;
-            #(#jstmts)*
-            #(#jsolve_a)*
-            #(#col_stmts)*
-            #(#jsolve_cols)*
-            [#(#jrows),*]
-        }
-    };
-
-    // ---- jacobian_u ----
-    let mut uouts: Vec<Expr> = tri.iter().map(|t| t.2).collect();
-    let mut drdu_idx = vec![vec![None; nu]; n];
-    for i in 0..n {
-        for (k, s) in eqs.inputs.iter().enumerate() {
-            let e = diff(rhs[i], *s);
-            if !e.is_zero() {
-                drdu_idx[i][k] = Some(uouts.len());
-                uouts.push(e);
-            }
-        }
-    }
-    let ul = lower(&uouts, &bind, "t")?;
-    let um = matrix_tokens(&ul.outputs[..nt], &tri, n);
-    let ucols: Vec<Vec<Option<TokenStream>>> = (0..nu)
-        .map(|k| {
-            (0..n)
-                .map(|i| drdu_idx[i][k].map(|ix| ul.outputs[ix].clone()))
-                .collect()
-        })
-        .collect();
-    let unames: Vec<String> = (0..nu).map(|k| format!("db{k}_")).collect();
-    let usolve = ldl_solve(&um, &ucols, &unames);
-    let ustmts = &ul.stmts;
-    let mut urows = Vec::new();
-    for r in 0..nx {
-        let row = (0..nu).map(|k| {
-            if r < n {
-                quote!(0.0)
-            } else {
-                let y = format_ident!("db{}_{}", k, r - n);
-                quote!(#y)
-            }
-        });
-        urows.push(quote!([#(#row),*]));
-    }
-    let jacobian_u_fn = quote! {
-        /// `B(x, u) = d f / d u` of the state equations (`M^-1 dr/du` below the
-        /// kinematic rows).
-        #[inline]
-        pub fn jacobian_u(x: &[f64; N_STATES], u: &[f64; N_INPUTS], p: &Params) -> [[f64; N_INPUTS]; N_STATES] {
-            let _ = u;
-            let d = p.derived();
-            let _ = &d;
-            #(#ustmts)*
-            #(#usolve)*
-            [#(#urows),*]
-        }
-    };
+    // ---- plant functions ----
+    let plant = crate::plant::plant_items(model, eqs)?;
 
     // ---- linear model about 0 ----
     let op = OperatingPoint::zero(model);
@@ -464,45 +238,7 @@ pub(crate) fn generate_body(spec: &Spec) -> Result<String, Error> {
             }
         }
 
-        #dynamics_fn
-
-        /// State derivative `x' = f(x, u)`: evaluates `M(q)` and
-        /// `r = Q0 - bias + B u` and solves `M q'' = r` with an unrolled LDL^T
-        /// factorisation.
-        #[inline]
-        pub fn dynamics(x: &[f64; N_STATES], u: &[f64; N_INPUTS], p: &Params) -> [f64; N_STATES] {
-            dynamics_inline(x, u, p)
-        }
-
-        #jacobian_x_fn
-
-        #jacobian_u_fn
-
-        /// One classical Runge-Kutta step of length `h` [s] with `u` held
-        /// constant (the four stages inlined into one function).
-        #[inline]
-        pub fn rk4_step(x: &[f64; N_STATES], u: &[f64; N_INPUTS], p: &Params, h: f64) -> [f64; N_STATES] {
-            let hh = 0.5 * h;
-            let k1 = dynamics_inline(x, u, p);
-            let mut y = [0.0; N_STATES];
-            let mut i = 0;
-            while i < N_STATES { y[i] = x[i] + hh * k1[i]; i += 1; }
-            let k2 = dynamics_inline(&y, u, p);
-            let mut i = 0;
-            while i < N_STATES { y[i] = x[i] + hh * k2[i]; i += 1; }
-            let k3 = dynamics_inline(&y, u, p);
-            let mut i = 0;
-            while i < N_STATES { y[i] = x[i] + h * k3[i]; i += 1; }
-            let k4 = dynamics_inline(&y, u, p);
-            let h6 = h / 6.0;
-            let mut out = [0.0; N_STATES];
-            let mut i = 0;
-            while i < N_STATES {
-                out[i] = x[i] + h6 * (k1[i] + 2.0 * (k2[i] + k3[i]) + k4[i]);
-                i += 1;
-            }
-            out
-        }
+        #plant
 
         #lin_doc
         pub const A: [[f64; N_STATES]; N_STATES] = [#(#arows),*];
@@ -664,62 +400,135 @@ fn controller(model: &Model, rc: &ResolvedController) -> Result<TokenStream, Err
             gains,
             chain,
         } => {
-            let mut bind = bindings(model, false);
-            for (g, _) in gains {
-                let f = ident(g.name());
-                bind.push((*g, quote!(self.#f)));
-            }
-            let l = lower(&[*law], &bind, "t")?;
-            let stmts = &l.stmts;
-            let outs = l.outputs.clone();
-            let sat_u = sat(vec![quote!(u[0])])?;
-            let gfields = gains.iter().map(|(g, _)| {
-                let f = ident(g.name());
-                let d = doc(&format!("outer-law gain `{}`", g.name()));
-                quote!(#d pub #f: f64,)
-            });
+            let nx = 2 * model.coordinates.len();
+            let mut g = Graph::new();
+            let xs: Vec<_> = (0..nx)
+                .map(|i| {
+                    let i = idx(i);
+                    g.input(quote!(x[#i]), Level::Call)
+                })
+                .collect();
+            let ps = crate::plant::param_inputs(&mut g, model, &quote!(self.params));
+            let mut env = crate::plant::env(&mut g, model, &xs, &[], &ps)?;
+            // gain accessors: `wn()` / `set_wn()`, prefixed `gain_` where a
+            // name would clash with the controller's own methods
+            let reserved = ["new", "params", "set_params", "law", "control", "coeffs", "k"];
+            let mut gfields = Vec::new();
+            let mut gparams = Vec::new();
             let mut ginit = Vec::new();
-            for (g, v) in gains {
-                let f = ident(g.name());
-                let v = lit(*v)?;
-                ginit.push(quote!(#f: #v,));
+            let mut gacc = Vec::new();
+            let mut gdefault = Vec::new();
+            for (sym, val) in gains {
+                let gname = sym.name();
+                let field = if reserved.contains(&gname) {
+                    ident(&format!("gain_{gname}"))
+                } else {
+                    ident(gname)
+                };
+                let setter = format_ident!("set_{}", field.to_string().trim_start_matches("r#"));
+                let v = g.input(quote!(self.#field), Level::Param);
+                env.bind(*sym, v);
+                let d = doc(&format!("outer-law gain `{gname}`"));
+                gfields.push(quote!(#field: f64,));
+                gparams.push(quote!(#field: f64));
+                ginit.push(quote!(#field,));
+                let dv = lit(*val)?;
+                gdefault.push(dv);
+                let dset = doc(&format!(
+                    "Set the outer-law gain `{gname}` (recomputes the coefficients)."
+                ));
+                gacc.push(quote! {
+                    #d
+                    #[inline]
+                    pub fn #field(&self) -> f64 { self.#field }
+                    #dset
+                    #[inline]
+                    pub fn #setter(&mut self, value: f64) {
+                        self.#field = value;
+                        self.k = self.coeffs();
+                    }
+                });
             }
+            let lv = g.expr(&mut env, *law)?;
+            let plan = g.plan(&[lv])?;
+            let f = g.function(&[lv], &plan, &quote!(self.k))?;
+            let stmts = &f.stmts;
+            let outs = &f.outputs;
+            let cstmts = &plan.stmts;
+            let cvals = &plan.values;
+            let nk = idx(plan.len());
+            let sat_u = sat(vec![quote!(u[0])])?;
             let v = match model.controller(name) {
                 Some(plantc_derive::model::ControllerSpec::FeedbackLinearization { v, .. }) => {
                     v.to_string()
                 }
                 _ => String::new(),
             };
+            let gain_list = gains
+                .iter()
+                .map(|(s, _)| format!("`{}`", s.name()))
+                .collect::<Vec<_>>()
+                .join(", ");
             let d = doc(&format!(
                 "Controller `{name}` of the model: input-output feedback linearization of \
                  `{output}` (relative degree {}), `u = (v - L_f^r h) / (L_g L_f^(r-1) h)` with \
                  the outer law `v = {v}`. Singular where {}. Saturates at {limits_doc} \
-                 (a NaN law gives 0).",
+                 (a NaN law gives 0).\n\n\
+                 Parameter-only and gain-only subexpressions of the law are computed once \
+                 (when the parameters or a gain change), so the parameters and gains \
+                 ({gain_list}) are set through methods, never directly.",
                 chain.relative_degree,
                 chain.singular_set()
+            ));
+            let new_doc = doc(&format!(
+                "A controller for the plant parameters `params` with the gains {gain_list} (in this order)."
             ));
             Ok(quote! {
                 #d
                 #[derive(Clone, Copy, Debug, PartialEq)]
                 pub struct #sname {
+                    params: Params,
                     #(#gfields)*
-                    /// Plant parameters used by the law.
-                    pub params: Params,
+                    k: [f64; #nk],
                 }
 
                 impl Default for #sname {
                     fn default() -> Self {
-                        #sname { #(#ginit)* params: Params::DEFAULT }
+                        #sname::new(Params::DEFAULT, #(#gdefault),*)
                     }
                 }
 
                 impl #sname {
+                    #new_doc
+                    pub fn new(params: Params, #(#gparams),*) -> Self {
+                        let mut c = #sname { params, #(#ginit)* k: [0.0; #nk] };
+                        c.k = c.coeffs();
+                        c
+                    }
+
+                    /// The plant parameters used by the law.
+                    #[inline]
+                    pub fn params(&self) -> &Params {
+                        &self.params
+                    }
+
+                    /// Change the plant parameters used by the law (recomputes the coefficients).
+                    #[inline]
+                    pub fn set_params(&mut self, params: Params) {
+                        self.params = params;
+                        self.k = self.coeffs();
+                    }
+
+                    #(#gacc)*
+
+                    fn coeffs(&self) -> [f64; #nk] {
+                        #(#cstmts)*
+                        [#(#cvals),*]
+                    }
+
                     /// The unsaturated law.
                     #[inline]
                     pub fn law(&self, x: &[f64; N_STATES]) -> [f64; N_INPUTS] {
-                        let p = &self.params;
-                        let d = p.derived();
-                        let _ = &d;
                         #(#stmts)*
                         [#(#outs),*]
                     }

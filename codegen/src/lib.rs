@@ -38,8 +38,10 @@
 #![allow(clippy::needless_range_loop)]
 
 mod emit;
+mod ir;
 mod krate;
 mod lower;
+mod plant;
 
 use std::fmt;
 use std::path::{Path, PathBuf};

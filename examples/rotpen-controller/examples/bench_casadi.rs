@@ -1,6 +1,12 @@
 //! ns per call: CasADi-generated C (loaded from a shared library) vs the
 //! plantc-generated Rust, interleaved in one run. Run through
 //! `bench/codegen_vs_casadi.sh` (release, `-C target-cpu=native`).
+//!
+//! CasADi's functions have the parameter values compiled in as constants.
+//! The `plantc` column uses the generated `Plant` and controller, which hold
+//! their parameter-only coefficients (computed once from `Params`); the
+//! `free fn` column calls `dynamics(x, u, &p)` / `rk4_step(x, u, &p, h)`,
+//! which recompute the coefficients they need on every call.
 
 use std::hint::black_box;
 use std::time::Instant;
@@ -39,7 +45,11 @@ fn time(mut f: impl FnMut(&[f64; 4]) -> f64, xs: &[[f64; 4]]) -> f64 {
 }
 
 #[inline(never)]
-fn p_dyn(x: &[f64; 4], u: &[f64; 1], p: &Params) -> [f64; 4] {
+fn p_dyn(x: &[f64; 4], u: &[f64; 1], plant: &Plant) -> [f64; 4] {
+    plant.dynamics(x, u)
+}
+#[inline(never)]
+fn p_dyn_free(x: &[f64; 4], u: &[f64; 1], p: &Params) -> [f64; 4] {
     dynamics(x, u, p)
 }
 #[inline(never)]
@@ -47,7 +57,11 @@ fn p_law(c: &FeedbackLinearization, x: &[f64; 4]) -> [f64; 1] {
     c.law(x)
 }
 #[inline(never)]
-fn p_step(x: &[f64; 4], u: &[f64; 1], p: &Params) -> [f64; 4] {
+fn p_step(x: &[f64; 4], u: &[f64; 1], plant: &Plant) -> [f64; 4] {
+    plant.rk4_step(x, u, 1e-3)
+}
+#[inline(never)]
+fn p_step_free(x: &[f64; 4], u: &[f64; 1], p: &Params) -> [f64; 4] {
     rk4_step(x, u, p, 1e-3)
 }
 
@@ -66,6 +80,7 @@ fn main() {
     let c_step: libloading::Symbol<Dyn> = unsafe { lib.get(b"cas_step") }.unwrap();
     let (c_dyn, c_law, c_step) = (*c_dyn, *c_law, *c_step);
     let p = Params::default();
+    let plant = Plant::new(p);
     let ctrl = FeedbackLinearization::default();
     let xs = states();
     let u = [0.7];
@@ -81,7 +96,10 @@ fn main() {
         let mut s = [0.0; 4];
         unsafe { c_step(x.as_ptr(), u.as_ptr(), s.as_mut_ptr()) };
         let st = rk4_step(x, &u, &p, 1e-3);
+        let (d2, st2) = (plant.dynamics(x, &u), plant.rk4_step(x, &u, 1e-3));
         for i in 0..4 {
+            worst = worst.max((d2[i] - d[i]).abs() / (1.0 + d[i].abs()));
+            worst = worst.max((st2[i] - st[i]).abs() / (1.0 + st[i].abs()));
             worst = worst.max((o[i] - d[i]).abs() / (1.0 + d[i].abs()));
             worst = worst.max((s[i] - st[i]).abs() / (1.0 + st[i].abs()));
         }
@@ -91,7 +109,7 @@ fn main() {
     println!("max relative difference CasADi vs plantc: {worst:.2e}");
 
     let rounds = 41;
-    let mut t = vec![Vec::new(); 6];
+    let mut t = vec![Vec::new(); 8];
     for _ in 0..rounds {
         t[0].push(time(
             |x| {
@@ -101,7 +119,8 @@ fn main() {
             },
             &xs,
         ));
-        t[1].push(time(|x| p_dyn(x, &u, &p)[3], &xs));
+        t[1].push(time(|x| p_dyn(x, &u, &plant)[3], &xs));
+        t[6].push(time(|x| p_dyn_free(x, &u, &p)[3], &xs));
         t[2].push(time(
             |x| {
                 let mut o = [0.0];
@@ -119,15 +138,21 @@ fn main() {
             },
             &xs,
         ));
-        t[5].push(time(|x| p_step(x, &u, &p)[3], &xs));
+        t[5].push(time(|x| p_step(x, &u, &plant)[3], &xs));
+        t[7].push(time(|x| p_step_free(x, &u, &p)[3], &xs));
     }
     let m: Vec<f64> = t.into_iter().map(median).collect();
     println!(
-        "{:<14} {:>10} {:>10} {:>16}",
-        "ns/call", "CasADi", "plantc", "plantc/CasADi"
+        "{:<14} {:>10} {:>10} {:>16} {:>10} {:>14}",
+        "ns/call", "CasADi", "plantc", "plantc/CasADi", "free fn", "free/CasADi"
     );
     for (i, name) in ["dynamics", "FL law", "RK4 step"].iter().enumerate() {
         let (c, r) = (m[2 * i], m[2 * i + 1]);
-        println!("{name:<14} {c:>10.1} {r:>10.1} {:>16.2}", r / c);
+        let free = match i {
+            0 => format!("{:>10.1} {:>14.2}", m[6], m[6] / c),
+            2 => format!("{:>10.1} {:>14.2}", m[7], m[7] / c),
+            _ => format!("{:>10} {:>14}", "-", "-"),
+        };
+        println!("{name:<14} {c:>10.1} {r:>10.1} {:>16.2} {free}", r / c);
     }
 }

@@ -1,0 +1,823 @@
+//! A value-numbered straight-line graph between symbolic expressions and the
+//! emitted Rust.
+//!
+//! Every value is created through [`Graph`], which
+//!
+//! * **numbers values globally**: an operation on the same operands is created
+//!   once, across all outputs of all functions built in one graph (operands of
+//!   `+` and `*` are ordered, so `a*b` and `b*a` are one value);
+//! * **folds constants and structural zeros**: `0*x = 0`, `x + 0 = x`,
+//!   `1*x = x`, `-(-x) = x`, `a + (-b) = a - b`; a product or sum of
+//!   constants is one literal (so a zero entry of `M` or of a right-hand side
+//!   costs nothing);
+//! * **tracks how often a value changes** ([`Level`]): constants, values that
+//!   depend only on parameters (and controller gains), and values that change
+//!   on every call. Products and sums are regrouped so that their
+//!   parameter-only part is one value, which the emitter computes once per
+//!   parameter change (a coefficient) instead of once per call.
+//!
+//! Lowering an [`Expr`] ([`Graph::expr`]) turns integer powers into
+//! multiplication chains, negative powers into one division per product,
+//! `x^(1/2)` into `sqrt`; `sin` and `cos` of one argument are fused into one
+//! `sin_cos` when the function is emitted. [`Graph::solve_sym`] solves
+//! `M y = b` for a symmetric `M` in closed form (Cramer, one division) for up
+//! to three coordinates and by an unrolled LDL^T factorisation beyond.
+
+use std::collections::{HashMap, HashSet};
+
+use proc_macro2::{Ident, TokenStream};
+use quote::{format_ident, quote};
+
+use plantc_derive::sym::{Expr, Func, Node, Rational, Symbol};
+
+use crate::lower::lit;
+use crate::Error;
+
+/// A value of the graph.
+pub(crate) type V = u32;
+
+/// How often a value changes.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, PartialOrd, Ord, Hash)]
+pub(crate) enum Level {
+    /// A literal.
+    Const,
+    /// Depends on parameters (and gains) only: computed once per parameter change.
+    Param,
+    /// Depends on the state, the input or the step: computed on every call.
+    Call,
+}
+
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
+enum Op {
+    Const(u64),
+    Input(u32),
+    Add(V, V),
+    Sub(V, V),
+    Mul(V, V),
+    Div(V, V),
+    Neg(V),
+    Sqrt(V),
+    Powf(V, V),
+    Atan2(V, V),
+    Sin(V),
+    Cos(V),
+    Func(Func, V),
+}
+
+/// Symbol bindings and the memo of lowered expressions for one evaluation
+/// context (e.g. one Runge-Kutta stage).
+#[derive(Default)]
+pub(crate) struct Env {
+    map: HashMap<Symbol, V>,
+    memo: HashMap<Expr, V>,
+}
+
+impl Env {
+    /// Bind a symbol to a value.
+    pub fn bind(&mut self, s: Symbol, v: V) {
+        self.map.insert(s, v);
+    }
+}
+
+/// The value-numbered graph. Inputs carry the Rust place expression they read.
+pub(crate) struct Graph {
+    ops: Vec<Op>,
+    level: Vec<Level>,
+    index: HashMap<Op, V>,
+    inputs: Vec<(TokenStream, Level)>,
+}
+
+/// Which parameter-only values are stored as coefficients, and how to compute them.
+pub(crate) struct CoeffPlan {
+    slot: HashMap<V, usize>,
+    /// Statements computing the coefficients (locals `c{i}`).
+    pub stmts: Vec<TokenStream>,
+    /// One expression per coefficient slot, in slot order.
+    pub values: Vec<TokenStream>,
+}
+
+impl CoeffPlan {
+    /// Number of coefficients.
+    pub fn len(&self) -> usize {
+        self.values.len()
+    }
+}
+
+/// Statements of one emitted function and one expression per output.
+pub(crate) struct Function {
+    pub stmts: Vec<TokenStream>,
+    pub outputs: Vec<TokenStream>,
+}
+
+impl Graph {
+    pub fn new() -> Graph {
+        Graph {
+            ops: Vec::new(),
+            level: Vec::new(),
+            index: HashMap::new(),
+            inputs: Vec::new(),
+        }
+    }
+
+    fn op(&mut self, op: Op) -> V {
+        if let Some(&v) = self.index.get(&op) {
+            return v;
+        }
+        let level = match op {
+            Op::Const(_) => Level::Const,
+            Op::Input(i) => self.inputs[i as usize].1,
+            Op::Add(a, b)
+            | Op::Sub(a, b)
+            | Op::Mul(a, b)
+            | Op::Div(a, b)
+            | Op::Powf(a, b)
+            | Op::Atan2(a, b) => self.lv(a).max(self.lv(b)),
+            Op::Neg(a) | Op::Sqrt(a) | Op::Sin(a) | Op::Cos(a) | Op::Func(_, a) => self.lv(a),
+        };
+        let v = self.ops.len() as V;
+        self.ops.push(op);
+        self.level.push(level);
+        self.index.insert(op, v);
+        v
+    }
+
+    /// The level of a value.
+    pub fn lv(&self, v: V) -> Level {
+        self.level[v as usize]
+    }
+
+    fn as_const(&self, v: V) -> Option<f64> {
+        match self.ops[v as usize] {
+            Op::Const(b) => Some(f64::from_bits(b)),
+            _ => None,
+        }
+    }
+
+    /// An input read from `place` (e.g. `x[1]`, `p.m1`) at `level`.
+    pub fn input(&mut self, place: TokenStream, level: Level) -> V {
+        let i = self.inputs.len() as u32;
+        self.inputs.push((place, level));
+        self.op(Op::Input(i))
+    }
+
+    /// A literal.
+    pub fn konst(&mut self, x: f64) -> V {
+        // one zero (no -0.0 literal)
+        let x = if x == 0.0 { 0.0 } else { x };
+        self.op(Op::Const(x.to_bits()))
+    }
+
+    fn is(&self, v: V, x: f64) -> bool {
+        self.as_const(v) == Some(x)
+    }
+
+    pub fn add(&mut self, a: V, b: V) -> V {
+        if let (Some(x), Some(y)) = (self.as_const(a), self.as_const(b)) {
+            return self.konst(x + y);
+        }
+        if self.is(a, 0.0) {
+            return b;
+        }
+        if self.is(b, 0.0) {
+            return a;
+        }
+        if let Op::Neg(b1) = self.ops[b as usize] {
+            return self.sub(a, b1);
+        }
+        if let Op::Neg(a1) = self.ops[a as usize] {
+            return self.sub(b, a1);
+        }
+        let (a, b) = if a <= b { (a, b) } else { (b, a) };
+        self.op(Op::Add(a, b))
+    }
+
+    pub fn sub(&mut self, a: V, b: V) -> V {
+        if let (Some(x), Some(y)) = (self.as_const(a), self.as_const(b)) {
+            return self.konst(x - y);
+        }
+        if self.is(b, 0.0) {
+            return a;
+        }
+        if self.is(a, 0.0) {
+            return self.neg(b);
+        }
+        if a == b {
+            // exact for finite values (a structural cancellation)
+            return self.konst(0.0);
+        }
+        if let Op::Neg(b1) = self.ops[b as usize] {
+            return self.add(a, b1);
+        }
+        self.op(Op::Sub(a, b))
+    }
+
+    pub fn neg(&mut self, a: V) -> V {
+        if let Some(x) = self.as_const(a) {
+            return self.konst(-x);
+        }
+        match self.ops[a as usize] {
+            Op::Neg(a1) => a1,
+            Op::Sub(x, y) => self.sub(y, x),
+            _ => self.op(Op::Neg(a)),
+        }
+    }
+
+    pub fn mul(&mut self, a: V, b: V) -> V {
+        if let (Some(x), Some(y)) = (self.as_const(a), self.as_const(b)) {
+            return self.konst(x * y);
+        }
+        if self.is(a, 0.0) || self.is(b, 0.0) {
+            return self.konst(0.0);
+        }
+        if self.is(a, 1.0) {
+            return b;
+        }
+        if self.is(b, 1.0) {
+            return a;
+        }
+        if self.is(a, -1.0) {
+            return self.neg(b);
+        }
+        if self.is(b, -1.0) {
+            return self.neg(a);
+        }
+        if let Op::Neg(a1) = self.ops[a as usize] {
+            let m = self.mul(a1, b);
+            return self.neg(m);
+        }
+        if let Op::Neg(b1) = self.ops[b as usize] {
+            let m = self.mul(a, b1);
+            return self.neg(m);
+        }
+        let (a, b) = if a <= b { (a, b) } else { (b, a) };
+        self.op(Op::Mul(a, b))
+    }
+
+    pub fn div(&mut self, a: V, b: V) -> V {
+        if let (Some(x), Some(y)) = (self.as_const(a), self.as_const(b)) {
+            return self.konst(x / y);
+        }
+        if self.is(a, 0.0) {
+            return self.konst(0.0);
+        }
+        if self.is(b, 1.0) {
+            return a;
+        }
+        if self.is(b, -1.0) {
+            return self.neg(a);
+        }
+        if let Op::Neg(a1) = self.ops[a as usize] {
+            let d = self.div(a1, b);
+            return self.neg(d);
+        }
+        self.op(Op::Div(a, b))
+    }
+
+    fn unary(&mut self, f: Func, a: V) -> V {
+        if let Some(x) = self.as_const(a) {
+            return self.konst(f.eval(x));
+        }
+        match f {
+            Func::Sin => self.op(Op::Sin(a)),
+            Func::Cos => self.op(Op::Cos(a)),
+            _ => self.op(Op::Func(f, a)),
+        }
+    }
+
+    fn sqrt(&mut self, a: V) -> V {
+        if let Some(x) = self.as_const(a) {
+            return self.konst(x.sqrt());
+        }
+        self.op(Op::Sqrt(a))
+    }
+
+    /// `a^n`, `n >= 1`, by squaring.
+    fn pow_int(&mut self, a: V, n: u64) -> V {
+        if n == 1 {
+            a
+        } else if n % 2 == 0 {
+            let h = self.pow_int(a, n / 2);
+            self.mul(h, h)
+        } else {
+            let h = self.pow_int(a, n - 1);
+            self.mul(h, a)
+        }
+    }
+
+    /// Product of `vs`, sorted by value number (so equal factor sets share prefixes).
+    fn product_of(&mut self, mut vs: Vec<V>, start: Option<V>) -> Option<V> {
+        vs.sort_unstable();
+        let mut acc = start;
+        for v in vs {
+            acc = Some(match acc {
+                None => v,
+                Some(a) => self.mul(a, v),
+            });
+        }
+        acc
+    }
+
+    /// Lower an expression in `env`.
+    pub fn expr(&mut self, env: &mut Env, e: Expr) -> Result<V, Error> {
+        if let Some(&v) = env.memo.get(&e) {
+            return Ok(v);
+        }
+        let v = match e.node() {
+            Node::Rational(r) => self.konst(r.to_f64()),
+            Node::Float(b) => self.konst(b.value()),
+            Node::Symbol(s) => *env.map.get(s).ok_or_else(|| {
+                Error::Generate(format!(
+                    "symbol `{s}` has no value in the generated function"
+                ))
+            })?,
+            Node::Add(terms) => self.sum(env, terms)?,
+            Node::Mul(_) | Node::Pow(..) => {
+                let (c, rest) = e.coeff_and_rest();
+                self.product(env, c, rest)?
+            }
+            Node::Func(f, a) => {
+                let a = self.expr(env, *a)?;
+                self.unary(*f, a)
+            }
+            Node::Atan2(y, x) => {
+                let (y, x) = (self.expr(env, *y)?, self.expr(env, *x)?);
+                match (self.as_const(y), self.as_const(x)) {
+                    (Some(a), Some(b)) => self.konst(a.atan2(b)),
+                    _ => self.op(Op::Atan2(y, x)),
+                }
+            }
+        };
+        env.memo.insert(e, v);
+        Ok(v)
+    }
+
+    /// Flatten nested sums `c * (a + b + ...)` into `(coefficient, term)`
+    /// pairs (exact rational coefficients; a product whose coefficient
+    /// overflows stays unexpanded).
+    fn flatten_sum(terms: &[Expr], coef: Rational, out: &mut Vec<(Rational, Expr)>) {
+        for t in terms {
+            let (c, rest) = t.coeff_and_rest();
+            let c2 = coef.checked_mul(c);
+            match (rest.node(), c2) {
+                (Node::Add(inner), Some(c2)) => Self::flatten_sum(inner, c2, out),
+                (_, Some(c2)) => out.push((c2, rest)),
+                (_, None) => out.push((coef, *t)),
+            }
+        }
+    }
+
+    /// `sum(terms)`: nested sums are flattened, terms with the same per-call
+    /// part are collected (`x*b1 + x*c = x*(b1 + c)`, with the parameter sum
+    /// one coefficient; exactly cancelling terms vanish), constant and
+    /// parameter-only terms come first, negative coefficients become
+    /// subtractions.
+    fn sum(&mut self, env: &mut Env, terms: &[Expr]) -> Result<V, Error> {
+        let mut flat = Vec::with_capacity(terms.len());
+        Self::flatten_sum(terms, Rational::ONE, &mut flat);
+        // group by per-call part, in order of first appearance
+        let mut groups: Vec<((Option<V>, Option<V>), Option<(V, bool)>)> = Vec::new();
+        let mut at: HashMap<(Option<V>, Option<V>), usize> = HashMap::new();
+        for (c, rest) in flat {
+            let (p, n, d) = self.product_parts(env, c.abs(), rest)?;
+            let key = (n, d);
+            let gi = *at.entry(key).or_insert_with(|| {
+                groups.push((key, None));
+                groups.len() - 1
+            });
+            let acc = groups[gi].1;
+            groups[gi].1 = Some(self.accumulate(acc, p, c.is_negative()));
+        }
+        let mut lowered = Vec::with_capacity(groups.len());
+        for ((n, d), acc) in groups {
+            let Some((p, neg)) = acc else { continue };
+            if self.is(p, 0.0) {
+                continue;
+            }
+            lowered.push((self.combine(p, n, d), neg));
+        }
+        // stable: parameter-level terms first, then per-call terms, each in term order
+        lowered.sort_by_key(|(v, _)| self.lv(*v) == Level::Call);
+        let mut acc: Option<(V, bool)> = None;
+        for (v, neg) in lowered {
+            acc = Some(self.accumulate(acc, v, neg));
+        }
+        Ok(match acc {
+            None => self.konst(0.0),
+            Some((v, false)) => v,
+            Some((v, true)) => self.neg(v),
+        })
+    }
+
+    /// `acc + v` or `acc - v`, keeping a pending overall sign so that sums
+    /// of negative terms need no negation until the end.
+    fn accumulate(&mut self, acc: Option<(V, bool)>, v: V, neg: bool) -> (V, bool) {
+        match acc {
+            None => (v, neg),
+            Some((a, false)) => (if neg { self.sub(a, v) } else { self.add(a, v) }, false),
+            Some((a, true)) => {
+                if neg {
+                    (self.add(a, v), true)
+                } else {
+                    (self.sub(v, a), false)
+                }
+            }
+        }
+    }
+
+    /// `p * n / d` (each part optional but `p`).
+    fn combine(&mut self, p: V, n: Option<V>, d: Option<V>) -> V {
+        match (n, d) {
+            (None, None) => p,
+            (Some(n), None) => self.mul(p, n),
+            (None, Some(d)) => self.div(p, d),
+            (Some(n), Some(d)) => {
+                let pn = self.mul(p, n);
+                self.div(pn, d)
+            }
+        }
+    }
+
+    /// `c * rest` with `rest` a product of powers: parameter-only factors
+    /// (with `c`) become one value, the per-call numerator and denominator
+    /// one product each, so a product costs at most one division.
+    fn product(&mut self, env: &mut Env, c: Rational, rest: Expr) -> Result<V, Error> {
+        let (p, n, d) = self.product_parts(env, c, rest)?;
+        Ok(self.combine(p, n, d))
+    }
+
+    /// The parts of [`Graph::product`]: parameter-level factor, per-call
+    /// numerator, per-call denominator.
+    fn product_parts(
+        &mut self,
+        env: &mut Env,
+        c: Rational,
+        rest: Expr,
+    ) -> Result<(V, Option<V>, Option<V>), Error> {
+        let factors: Vec<Expr> = match rest.node() {
+            Node::Mul(fs) => fs.to_vec(),
+            _ if rest.is_one() => Vec::new(),
+            _ => vec![rest],
+        };
+        let (mut pn, mut pd, mut vn, mut vd) = (Vec::new(), Vec::new(), Vec::new(), Vec::new());
+        let half = Rational::new(1, 2).expect("1/2");
+        for f in factors {
+            let (b, x) = f.base_and_exp();
+            let (v, den) = match x.as_rational() {
+                Some(r) if r.is_integer() && r.numer() != 0 && r.numer().abs() <= 64 => {
+                    let base = self.expr(env, b)?;
+                    (self.pow_int(base, r.numer().unsigned_abs() as u64), r.is_negative())
+                }
+                Some(r) if r.abs() == half => {
+                    let base = self.expr(env, b)?;
+                    (self.sqrt(base), r.is_negative())
+                }
+                _ if x.is_one() => (self.expr(env, b)?, false),
+                _ => {
+                    let (base, ex) = (self.expr(env, b)?, self.expr(env, x)?);
+                    let v = match (self.as_const(base), self.as_const(ex)) {
+                        (Some(a), Some(e)) => self.konst(a.powf(e)),
+                        _ => self.op(Op::Powf(base, ex)),
+                    };
+                    (v, false)
+                }
+            };
+            let call = self.lv(v) == Level::Call;
+            match (call, den) {
+                (false, false) => pn.push(v),
+                (false, true) => pd.push(v),
+                (true, false) => vn.push(v),
+                (true, true) => vd.push(v),
+            }
+        }
+        let k = self.konst(c.to_f64());
+        let mut p = self.product_of(pn, Some(k)).expect("starts with c");
+        if let Some(d) = self.product_of(pd, None) {
+            p = self.div(p, d);
+        }
+        let n = self.product_of(vn, None);
+        let d = self.product_of(vd, None);
+        Ok((p, n, d))
+    }
+
+    /// Solve `M y = b` for each right-hand side in `rhs` (symmetric `M`, all
+    /// entries given). Closed form (adjugate / determinant, one division
+    /// shared by all right-hand sides) for `n <= 3`, unrolled LDL^T beyond.
+    pub fn solve_sym(&mut self, m: &[Vec<V>], rhs: &[Vec<V>]) -> Vec<Vec<V>> {
+        let n = m.len();
+        if n <= 3 {
+            let adj = self.adjugate_sym(m);
+            let det = match n {
+                0 => self.konst(1.0),
+                _ => {
+                    let mut d = self.konst(0.0);
+                    for j in 0..n {
+                        let t = self.mul(m[0][j], adj[j][0]);
+                        d = self.add(d, t);
+                    }
+                    d
+                }
+            };
+            let one = self.konst(1.0);
+            let inv = self.div(one, det);
+            rhs.iter()
+                .map(|b| {
+                    (0..n)
+                        .map(|i| {
+                            let mut acc = self.konst(0.0);
+                            for j in 0..n {
+                                let t = self.mul(adj[i][j], b[j]);
+                                acc = self.add(acc, t);
+                            }
+                            self.mul(acc, inv)
+                        })
+                        .collect()
+                })
+                .collect()
+        } else {
+            self.ldl_solve(m, rhs)
+        }
+    }
+
+    /// Adjugate of a symmetric matrix of size 1 to 3.
+    fn adjugate_sym(&mut self, m: &[Vec<V>]) -> Vec<Vec<V>> {
+        let n = m.len();
+        match n {
+            0 => Vec::new(),
+            1 => vec![vec![self.konst(1.0)]],
+            2 => {
+                let off = self.neg(m[0][1]);
+                vec![vec![m[1][1], off], vec![off, m[0][0]]]
+            }
+            _ => {
+                let cof = |s: &mut Graph, a: (usize, usize), b: (usize, usize), c: (usize, usize), d: (usize, usize)| {
+                    let x = s.mul(m[a.0][a.1], m[b.0][b.1]);
+                    let y = s.mul(m[c.0][c.1], m[d.0][d.1]);
+                    s.sub(x, y)
+                };
+                let a00 = cof(self, (1, 1), (2, 2), (1, 2), (1, 2));
+                let a01 = cof(self, (0, 2), (1, 2), (0, 1), (2, 2));
+                let a02 = cof(self, (0, 1), (1, 2), (1, 1), (0, 2));
+                let a11 = cof(self, (0, 0), (2, 2), (0, 2), (0, 2));
+                let a12 = cof(self, (0, 1), (0, 2), (0, 0), (1, 2));
+                let a22 = cof(self, (0, 0), (1, 1), (0, 1), (0, 1));
+                vec![vec![a00, a01, a02], vec![a01, a11, a12], vec![a02, a12, a22]]
+            }
+        }
+    }
+
+    /// Unrolled LDL^T solve (no square roots, one division per pivot).
+    fn ldl_solve(&mut self, m: &[Vec<V>], rhs: &[Vec<V>]) -> Vec<Vec<V>> {
+        let n = m.len();
+        let zero = self.konst(0.0);
+        let one = self.konst(1.0);
+        let mut l = vec![vec![zero; n]; n];
+        let mut e = vec![vec![zero; n]; n]; // e_jk = L_jk d_k
+        let mut dinv = vec![zero; n];
+        for j in 0..n {
+            let mut dj = m[j][j];
+            for k in 0..j {
+                let t = self.mul(l[j][k], e[j][k]);
+                dj = self.sub(dj, t);
+            }
+            dinv[j] = self.div(one, dj);
+            for i in j + 1..n {
+                let mut v = m[i][j];
+                for k in 0..j {
+                    let t = self.mul(l[i][k], e[j][k]);
+                    v = self.sub(v, t);
+                }
+                e[i][j] = v;
+                l[i][j] = self.mul(v, dinv[j]);
+            }
+        }
+        rhs.iter()
+            .map(|b| {
+                let mut z = vec![zero; n];
+                for i in 0..n {
+                    let mut v = b[i];
+                    for k in 0..i {
+                        let t = self.mul(l[i][k], z[k]);
+                        v = self.sub(v, t);
+                    }
+                    z[i] = v;
+                }
+                let mut y = vec![zero; n];
+                for i in (0..n).rev() {
+                    let mut v = self.mul(z[i], dinv[i]);
+                    for k in i + 1..n {
+                        let t = self.mul(l[k][i], y[k]);
+                        v = self.sub(v, t);
+                    }
+                    y[i] = v;
+                }
+                y
+            })
+            .collect()
+    }
+
+    /// Values reachable from `roots` (including them).
+    fn reach(&self, roots: &[V], stop_at_param: bool) -> HashSet<V> {
+        let mut seen = HashSet::new();
+        let mut stack: Vec<V> = roots.to_vec();
+        while let Some(v) = stack.pop() {
+            if !seen.insert(v) {
+                continue;
+            }
+            if stop_at_param && self.lv(v) != Level::Call {
+                continue;
+            }
+            stack.extend(self.operands(v));
+        }
+        seen
+    }
+
+    fn operands(&self, v: V) -> Vec<V> {
+        match self.ops[v as usize] {
+            Op::Const(_) | Op::Input(_) => Vec::new(),
+            Op::Add(a, b)
+            | Op::Sub(a, b)
+            | Op::Mul(a, b)
+            | Op::Div(a, b)
+            | Op::Powf(a, b)
+            | Op::Atan2(a, b) => vec![a, b],
+            Op::Neg(a) | Op::Sqrt(a) | Op::Sin(a) | Op::Cos(a) | Op::Func(_, a) => vec![a],
+        }
+    }
+
+    /// Choose the coefficient slots for functions with outputs `roots`: every
+    /// parameter-level value (parameters themselves included) that a per-call
+    /// value or an output uses directly, so the functions read coefficients only.
+    pub fn plan(&self, roots: &[V]) -> Result<CoeffPlan, Error> {
+        let needed = self.reach(roots, true);
+        let mut slots: Vec<V> = needed
+            .iter()
+            .copied()
+            .filter(|&v| self.lv(v) == Level::Param)
+            .collect();
+        slots.sort_unstable();
+        let slot: HashMap<V, usize> = slots.iter().enumerate().map(|(i, v)| (*v, i)).collect();
+        // compute them: all parameter-level values below the slots
+        let below = self.reach(&slots, false);
+        let mut order: Vec<V> = below
+            .into_iter()
+            .filter(|&v| self.lv(v) == Level::Param)
+            .collect();
+        order.sort_unstable();
+        let name = |v: V| format_ident!("c{}", v);
+        let mut bound: HashMap<V, TokenStream> = HashMap::new();
+        let mut stmts = Vec::new();
+        for v in order {
+            if let Op::Input(i) = self.ops[v as usize] {
+                bound.insert(v, self.inputs[i as usize].0.clone());
+                continue;
+            }
+            let ops = self.operands(v);
+            for o in &ops {
+                if self.lv(*o) == Level::Const {
+                    bound.insert(*o, lit(self.as_const(*o).expect("const"))?);
+                }
+            }
+            let rhs = self.rhs(v, &|o| bound[&o].clone());
+            let id = name(v);
+            stmts.push(quote!(let #id = #rhs;));
+            bound.insert(v, quote!(#id));
+        }
+        let values = slots.iter().map(|v| bound[v].clone()).collect();
+        Ok(CoeffPlan {
+            slot,
+            stmts,
+            values,
+        })
+    }
+
+    /// The right-hand side of `v` from its operands' expressions (`sin_cos`
+    /// pairs are fused by [`Graph::function`]).
+    fn rhs(&self, v: V, get: &dyn Fn(V) -> TokenStream) -> TokenStream {
+        match self.ops[v as usize] {
+            Op::Const(_) | Op::Input(_) => unreachable!("leaves are bound, not computed"),
+            Op::Add(a, b) => {
+                let (a, b) = (get(a), get(b));
+                quote!(#a + #b)
+            }
+            Op::Sub(a, b) => {
+                let (a, b) = (get(a), get(b));
+                quote!(#a - #b)
+            }
+            Op::Mul(a, b) => {
+                let (a, b) = (get(a), get(b));
+                quote!(#a * #b)
+            }
+            Op::Div(a, b) => {
+                let (a, b) = (get(a), get(b));
+                quote!(#a / #b)
+            }
+            Op::Neg(a) => {
+                let a = get(a);
+                quote!(-#a)
+            }
+            Op::Sqrt(a) => {
+                let a = get(a);
+                quote!(math::sqrt(#a))
+            }
+            Op::Powf(a, b) => {
+                let (a, b) = (get(a), get(b));
+                quote!(math::powf(#a, #b))
+            }
+            Op::Atan2(y, x) => {
+                let (y, x) = (get(y), get(x));
+                quote!(math::atan2(#y, #x))
+            }
+            Op::Sin(a) => {
+                let a = get(a);
+                quote!(math::sin(#a))
+            }
+            Op::Cos(a) => {
+                let a = get(a);
+                quote!(math::cos(#a))
+            }
+            Op::Func(f, a) => {
+                let a = get(a);
+                let name = format_ident!("{}", f.name());
+                quote!(math::#name(#a))
+            }
+        }
+    }
+
+    /// Emit the per-call statements computing `outputs`; parameter-level
+    /// values are read as `#coeffs[slot]` (from `plan`), per-call locals are
+    /// `t{k}` numbered in order of appearance.
+    pub fn function(&self, outputs: &[V], plan: &CoeffPlan, coeffs: &TokenStream) -> Result<Function, Error> {
+        let needed = self.reach(outputs, true);
+        let mut order: Vec<V> = needed.iter().copied().collect();
+        order.sort_unstable();
+        let mut bound: HashMap<V, TokenStream> = HashMap::new();
+        let mut stmts = Vec::new();
+        let mut counter = 0usize;
+        let mut fresh = || {
+            let id: Ident = format_ident!("t{}", counter);
+            counter += 1;
+            id
+        };
+        for v in order {
+            if bound.contains_key(&v) {
+                continue;
+            }
+            match self.lv(v) {
+                Level::Const => {
+                    bound.insert(v, lit(self.as_const(v).expect("const"))?);
+                    continue;
+                }
+                Level::Param => {
+                    let s = plan.slot.get(&v).copied().ok_or_else(|| {
+                        Error::Generate("internal: coefficient without a slot".into())
+                    })?;
+                    let s = proc_macro2::Literal::usize_unsuffixed(s);
+                    bound.insert(v, quote!(#coeffs[#s]));
+                    continue;
+                }
+                Level::Call => {}
+            }
+            match self.ops[v as usize] {
+                Op::Input(i) => {
+                    bound.insert(v, self.inputs[i as usize].0.clone());
+                }
+                Op::Sin(a) | Op::Cos(a) => {
+                    let partner = match self.ops[v as usize] {
+                        Op::Sin(_) => self.index.get(&Op::Cos(a)),
+                        _ => self.index.get(&Op::Sin(a)),
+                    }
+                    .copied()
+                    .filter(|p| needed.contains(p));
+                    let arg = bound[&a].clone();
+                    match partner {
+                        Some(p) => {
+                            let (s, c) = (fresh(), fresh());
+                            stmts.push(quote!(let (#s, #c) = math::sin_cos(#arg);));
+                            let (sv, cv) = if matches!(self.ops[v as usize], Op::Sin(_)) {
+                                (v, p)
+                            } else {
+                                (p, v)
+                            };
+                            bound.insert(sv, quote!(#s));
+                            bound.insert(cv, quote!(#c));
+                        }
+                        None => {
+                            let rhs = self.rhs(v, &|o| bound[&o].clone());
+                            let t = fresh();
+                            stmts.push(quote!(let #t = #rhs;));
+                            bound.insert(v, quote!(#t));
+                        }
+                    }
+                }
+                _ => {
+                    let rhs = self.rhs(v, &|o| bound[&o].clone());
+                    let t = fresh();
+                    stmts.push(quote!(let #t = #rhs;));
+                    bound.insert(v, quote!(#t));
+                }
+            }
+        }
+        let outputs = outputs.iter().map(|v| bound[v].clone()).collect();
+        Ok(Function { stmts, outputs })
+    }
+}

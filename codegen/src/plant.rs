@@ -1,0 +1,444 @@
+//! Emission of the plant functions: `PlantCoeffs`, `Plant` and the free
+//! functions `dynamics`, `jacobian_x`, `jacobian_u`, `rk4_step`.
+//!
+//! All four are built in one value-numbered [`Graph`], so a parameter-only
+//! subexpression is one coefficient shared by every function (and by the four
+//! Runge-Kutta stages), computed once by `PlantCoeffs::new` when the
+//! parameters are set ([`Plant::set_params`]); the free functions compute the
+//! coefficients they need on every call.
+
+use proc_macro2::TokenStream;
+use quote::quote;
+
+use plantc_derive::mechanics::Equations;
+use plantc_derive::model::Model;
+use plantc_derive::sym::{diff, Expr};
+
+use crate::emit::idx;
+use crate::ir::{Env, Graph, Level, V};
+use crate::lower::ident;
+use crate::Error;
+
+/// Parameter inputs `p.<name>` of a graph, in model order.
+pub(crate) fn param_inputs(g: &mut Graph, model: &Model, base: &TokenStream) -> Vec<V> {
+    model
+        .parameters
+        .iter()
+        .map(|p| {
+            let f = ident(&p.name);
+            g.input(quote!(#base.#f), Level::Param)
+        })
+        .collect()
+}
+
+/// An environment binding states to `xs`, inputs to `us`, parameters to
+/// `ps` and derived quantities to their (parameter-only) definitions.
+pub(crate) fn env(
+    g: &mut Graph,
+    model: &Model,
+    xs: &[V],
+    us: &[V],
+    ps: &[V],
+) -> Result<Env, Error> {
+    let mut env = Env::default();
+    for (s, v) in model.state_symbols().into_iter().zip(xs) {
+        env.bind(s, *v);
+    }
+    for (s, v) in model.input_symbols().into_iter().zip(us) {
+        env.bind(s, *v);
+    }
+    for (p, v) in model.parameters.iter().zip(ps) {
+        env.bind(p.symbol, *v);
+    }
+    for d in &model.derived {
+        let v = g.expr(&mut env, model.expand_derived(d.expr))?;
+        env.bind(d.symbol, v);
+    }
+    Ok(env)
+}
+
+/// `M` (symmetric, from its lower triangle) and `r` lowered in `env`.
+fn mass_and_rhs(
+    g: &mut Graph,
+    env: &mut Env,
+    eqs: &Equations,
+    rhs: &[Expr],
+) -> Result<(Vec<Vec<V>>, Vec<V>), Error> {
+    let n = rhs.len();
+    let zero = g.konst(0.0);
+    let mut m = vec![vec![zero; n]; n];
+    for i in 0..n {
+        for j in 0..=i {
+            let v = g.expr(env, eqs.mass_matrix[i][j])?;
+            m[i][j] = v;
+            m[j][i] = v;
+        }
+    }
+    let r = rhs
+        .iter()
+        .map(|e| g.expr(env, *e))
+        .collect::<Result<Vec<_>, _>>()?;
+    Ok((m, r))
+}
+
+/// `x' = (q', M^-1 r)` at the state values `xs`.
+fn state_derivative(
+    g: &mut Graph,
+    model: &Model,
+    eqs: &Equations,
+    rhs: &[Expr],
+    xs: &[V],
+    us: &[V],
+    ps: &[V],
+) -> Result<Vec<V>, Error> {
+    let n = rhs.len();
+    let mut e = env(g, model, xs, us, ps)?;
+    let (m, r) = mass_and_rhs(g, &mut e, eqs, rhs)?;
+    let a = g.solve_sym(&m, &[r]).remove(0);
+    let mut out: Vec<V> = xs[n..].to_vec();
+    out.extend(a);
+    Ok(out)
+}
+
+/// The generated plant items.
+pub(crate) fn plant_items(model: &Model, eqs: &Equations) -> Result<TokenStream, Error> {
+    let n = eqs.coords.len();
+    let nx = 2 * n;
+    let nu = eqs.inputs.len();
+    let rhs = eqs.rhs();
+    let state = model.state_symbols();
+
+    let mut g = Graph::new();
+    let xs: Vec<V> = (0..nx)
+        .map(|i| {
+            let i = idx(i);
+            g.input(quote!(x[#i]), Level::Call)
+        })
+        .collect();
+    let us: Vec<V> = (0..nu)
+        .map(|i| {
+            let i = idx(i);
+            g.input(quote!(u[#i]), Level::Call)
+        })
+        .collect();
+    let ps = param_inputs(&mut g, model, &quote!(p));
+
+    // dynamics
+    let dyn_out = state_derivative(&mut g, model, eqs, &rhs, &xs, &us, &ps)?;
+
+    // Jacobians: da/dx_k = M^-1 (dr/dx_k - dM/dx_k a), da/du_k = M^-1 dr/du_k
+    let mut e = env(&mut g, model, &xs, &us, &ps)?;
+    let (m, _) = mass_and_rhs(&mut g, &mut e, eqs, &rhs)?;
+    let a: Vec<V> = dyn_out[n..].to_vec();
+    let mut cols = Vec::new();
+    for s in &state {
+        let mut col = Vec::new();
+        for i in 0..n {
+            let mut c = g.expr(&mut e, diff(rhs[i], *s))?;
+            for j in 0..n {
+                let dm = g.expr(&mut e, diff(eqs.mass_matrix[i][j], *s))?;
+                let t = g.mul(dm, a[j]);
+                c = g.sub(c, t);
+            }
+            col.push(c);
+        }
+        cols.push(col);
+    }
+    let da = g.solve_sym(&m, &cols);
+    let (zero, one) = (g.konst(0.0), g.konst(1.0));
+    let mut jx = Vec::new(); // row-major
+    for r in 0..nx {
+        for k in 0..nx {
+            jx.push(if r < n {
+                if k == n + r {
+                    one
+                } else {
+                    zero
+                }
+            } else {
+                da[k][r - n]
+            });
+        }
+    }
+    let mut ucols = Vec::new();
+    for s in &eqs.inputs {
+        let col = (0..n)
+            .map(|i| g.expr(&mut e, diff(rhs[i], *s)))
+            .collect::<Result<Vec<_>, _>>()?;
+        ucols.push(col);
+    }
+    let db = g.solve_sym(&m, &ucols);
+    let mut ju = Vec::new();
+    for r in 0..nx {
+        for k in 0..nu {
+            ju.push(if r < n { zero } else { db[k][r - n] });
+        }
+    }
+
+    // RK4 with u held: the stages share every coefficient
+    let h = g.input(quote!(h), Level::Call);
+    let half = g.konst(0.5);
+    let hh = g.mul(half, h);
+    let six = g.konst(6.0);
+    let h6 = g.div(h, six);
+    let two = g.konst(2.0);
+    let k1 = dyn_out.clone();
+    let stage = |g: &mut Graph, k: &[V], w: V| -> Vec<V> {
+        xs.iter()
+            .zip(k)
+            .map(|(x, k)| {
+                let t = g.mul(w, *k);
+                g.add(*x, t)
+            })
+            .collect()
+    };
+    let y2 = stage(&mut g, &k1, hh);
+    let k2 = state_derivative(&mut g, model, eqs, &rhs, &y2, &us, &ps)?;
+    let y3 = stage(&mut g, &k2, hh);
+    let k3 = state_derivative(&mut g, model, eqs, &rhs, &y3, &us, &ps)?;
+    let y4 = stage(&mut g, &k3, h);
+    let k4 = state_derivative(&mut g, model, eqs, &rhs, &y4, &us, &ps)?;
+    let mut rk = Vec::new();
+    for i in 0..nx {
+        let s23 = g.add(k2[i], k3[i]);
+        let s23 = g.mul(two, s23);
+        let s = g.add(k1[i], s23);
+        let s = g.add(s, k4[i]);
+        let t = g.mul(h6, s);
+        rk.push(g.add(xs[i], t));
+    }
+
+    let mut roots = dyn_out.clone();
+    roots.extend(&jx);
+    roots.extend(&ju);
+    roots.extend(&rk);
+    let plan = g.plan(&roots)?;
+    let kref = quote!(k.0);
+    let fd = g.function(&dyn_out, &plan, &kref)?;
+    let fjx = g.function(&jx, &plan, &kref)?;
+    let fju = g.function(&ju, &plan, &kref)?;
+    let frk = g.function(&rk, &plan, &kref)?;
+
+    let nk = idx(plan.len());
+    let cstmts = &plan.stmts;
+    let cvals = &plan.values;
+    let (ds, dout) = (&fd.stmts, &fd.outputs);
+    let (jxs, jxo) = (&fjx.stmts, rows(&fjx.outputs, nx));
+    let (jus, juo) = (&fju.stmts, rows(&fju.outputs, nu));
+    let (rks, rko) = (&frk.stmts, &frk.outputs);
+    let uses = |f: &crate::ir::Function, name: &str| {
+        f.stmts
+            .iter()
+            .chain(&f.outputs)
+            .any(|t| format!(" {t}").contains(name))
+    };
+    let silence = |f: &crate::ir::Function| {
+        let mut t = TokenStream::new();
+        if !uses(f, " u [") {
+            t.extend(quote!(let _ = u;));
+        }
+        if !uses(f, " k . 0") {
+            t.extend(quote!(let _ = k;));
+        }
+        t
+    };
+    let (sd, sjx, sju, srk) = (silence(&fd), silence(&fjx), silence(&fju), silence(&frk));
+    let rk_x = if uses(&frk, " x [") {
+        quote!()
+    } else {
+        quote!(let _ = x;)
+    };
+    let p_unused = if cstmts.is_empty() && cvals.is_empty() {
+        quote!(let _ = p;)
+    } else {
+        quote!()
+    };
+
+    Ok(quote! {
+        /// Parameter-only subexpressions of the plant functions (products of
+        /// parameters, derived quantities, ...), computed once from [`Params`]
+        /// so that [`Plant`]'s functions only do the work that depends on the
+        /// state. Build with [`PlantCoeffs::new`]; recompute whenever the
+        /// parameters change ([`Plant::set_params`] does).
+        #[derive(Clone, Copy, Debug, PartialEq)]
+        pub struct PlantCoeffs(pub [f64; #nk]);
+
+        impl PlantCoeffs {
+            /// The coefficients for the parameters `p`.
+            #[inline(always)]
+            pub fn new(p: &Params) -> PlantCoeffs {
+                #p_unused
+                #(#cstmts)*
+                PlantCoeffs([#(#cvals),*])
+            }
+        }
+
+        #[inline(always)]
+        fn dynamics_k(x: &[f64; N_STATES], u: &[f64; N_INPUTS], k: &PlantCoeffs) -> [f64; N_STATES] {
+            #sd
+            #(#ds)*
+            [#(#dout),*]
+        }
+
+        #[inline(always)]
+        fn jacobian_x_k(x: &[f64; N_STATES], u: &[f64; N_INPUTS], k: &PlantCoeffs) -> [[f64; N_STATES]; N_STATES] {
+            #sjx
+            #(#jxs)*
+            [#(#jxo),*]
+        }
+
+        #[inline(always)]
+        fn jacobian_u_k(x: &[f64; N_STATES], u: &[f64; N_INPUTS], k: &PlantCoeffs) -> [[f64; N_INPUTS]; N_STATES] {
+            let _ = x;
+            #sju
+            #(#jus)*
+            [#(#juo),*]
+        }
+
+        #[inline(always)]
+        fn rk4_step_k(x: &[f64; N_STATES], u: &[f64; N_INPUTS], k: &PlantCoeffs, h: f64) -> [f64; N_STATES] {
+            #rk_x
+            #srk
+            #(#rks)*
+            [#(#rko),*]
+        }
+
+        /// The plant with its parameters and their precomputed coefficients
+        /// ([`PlantCoeffs`]): the fast way to call the model repeatedly.
+        /// The parameters are private so the coefficients cannot go stale;
+        /// change them with [`Plant::set_params`].
+        #[derive(Clone, Copy, Debug, PartialEq)]
+        pub struct Plant {
+            params: Params,
+            k: PlantCoeffs,
+        }
+
+        impl Default for Plant {
+            fn default() -> Self {
+                Plant::new(Params::DEFAULT)
+            }
+        }
+
+        impl Plant {
+            /// The plant with parameters `params`.
+            #[inline]
+            pub fn new(params: Params) -> Plant {
+                Plant { params, k: PlantCoeffs::new(&params) }
+            }
+
+            /// The parameters.
+            #[inline]
+            pub fn params(&self) -> &Params {
+                &self.params
+            }
+
+            /// Change the parameters (recomputes the coefficients).
+            #[inline]
+            pub fn set_params(&mut self, params: Params) {
+                *self = Plant::new(params);
+            }
+
+            /// The coefficients in use.
+            #[inline]
+            pub fn coeffs(&self) -> &PlantCoeffs {
+                &self.k
+            }
+
+            /// State derivative `x' = f(x, u)` (see [`dynamics`]).
+            #[inline]
+            pub fn dynamics(&self, x: &[f64; N_STATES], u: &[f64; N_INPUTS]) -> [f64; N_STATES] {
+                dynamics_k(x, u, &self.k)
+            }
+
+            /// `d f / d x` (see [`jacobian_x`]).
+            #[inline]
+            pub fn jacobian_x(&self, x: &[f64; N_STATES], u: &[f64; N_INPUTS]) -> [[f64; N_STATES]; N_STATES] {
+                jacobian_x_k(x, u, &self.k)
+            }
+
+            /// `d f / d u` (see [`jacobian_u`]).
+            #[inline]
+            pub fn jacobian_u(&self, x: &[f64; N_STATES], u: &[f64; N_INPUTS]) -> [[f64; N_INPUTS]; N_STATES] {
+                jacobian_u_k(x, u, &self.k)
+            }
+
+            /// One classical Runge-Kutta step of length `h` [s] with `u` held
+            /// (see [`rk4_step`]).
+            #[inline]
+            pub fn rk4_step(&self, x: &[f64; N_STATES], u: &[f64; N_INPUTS], h: f64) -> [f64; N_STATES] {
+                rk4_step_k(x, u, &self.k, h)
+            }
+
+            /// One classical Runge-Kutta step of length `h` [s] of the closed
+            /// loop `x' = f(x, control(x))`: the controller is evaluated at
+            /// every stage (a continuous-time controller, as in a
+            /// continuous-time simulation), not held over the step. Returns
+            /// the new state and the input at the start of the step.
+            #[inline]
+            pub fn closed_loop_rk4_step(
+                &self,
+                x: &[f64; N_STATES],
+                h: f64,
+                mut control: impl FnMut(&[f64; N_STATES]) -> [f64; N_INPUTS],
+            ) -> ([f64; N_STATES], [f64; N_INPUTS]) {
+                let u0 = control(x);
+                let k1 = dynamics_k(x, &u0, &self.k);
+                let mut y = [0.0; N_STATES];
+                let mut i = 0;
+                while i < N_STATES { y[i] = x[i] + 0.5 * h * k1[i]; i += 1; }
+                let k2 = dynamics_k(&y, &control(&y), &self.k);
+                let mut i = 0;
+                while i < N_STATES { y[i] = x[i] + 0.5 * h * k2[i]; i += 1; }
+                let k3 = dynamics_k(&y, &control(&y), &self.k);
+                let mut i = 0;
+                while i < N_STATES { y[i] = x[i] + h * k3[i]; i += 1; }
+                let k4 = dynamics_k(&y, &control(&y), &self.k);
+                let mut out = [0.0; N_STATES];
+                let mut i = 0;
+                while i < N_STATES {
+                    out[i] = x[i] + h / 6.0 * (k1[i] + 2.0 * (k2[i] + k3[i]) + k4[i]);
+                    i += 1;
+                }
+                (out, u0)
+            }
+        }
+
+        /// State derivative `x' = f(x, u)`: `M(q)` and `r = Q0 - bias + B u`
+        /// evaluated with shared subexpressions and `M q'' = r` solved in
+        /// closed form (never inverting `M` numerically by formula for more
+        /// than three coordinates). Computes the parameter coefficients on
+        /// every call; [`Plant::dynamics`] reuses them.
+        #[inline]
+        pub fn dynamics(x: &[f64; N_STATES], u: &[f64; N_INPUTS], p: &Params) -> [f64; N_STATES] {
+            dynamics_k(x, u, &PlantCoeffs::new(p))
+        }
+
+        /// `A(x, u) = d f / d x` of the state equations `x' = f(x, u)`, from
+        /// `da/dx = M^-1 (dr/dx - sum_k dM/dx_k a)` (symbolic `dr/dx`, `dM/dx`).
+        #[inline]
+        pub fn jacobian_x(x: &[f64; N_STATES], u: &[f64; N_INPUTS], p: &Params) -> [[f64; N_STATES]; N_STATES] {
+            jacobian_x_k(x, u, &PlantCoeffs::new(p))
+        }
+
+        /// `B(x, u) = d f / d u` of the state equations (`M^-1 dr/du` below the
+        /// kinematic rows).
+        #[inline]
+        pub fn jacobian_u(x: &[f64; N_STATES], u: &[f64; N_INPUTS], p: &Params) -> [[f64; N_INPUTS]; N_STATES] {
+            jacobian_u_k(x, u, &PlantCoeffs::new(p))
+        }
+
+        /// One classical Runge-Kutta step of length `h` [s] with `u` held
+        /// constant (the four stages inlined into one function; parameter
+        /// coefficients computed once for the four).
+        #[inline]
+        pub fn rk4_step(x: &[f64; N_STATES], u: &[f64; N_INPUTS], p: &Params, h: f64) -> [f64; N_STATES] {
+            rk4_step_k(x, u, &PlantCoeffs::new(p), h)
+        }
+    })
+}
+
+fn rows(flat: &[TokenStream], cols: usize) -> Vec<TokenStream> {
+    flat.chunks(cols.max(1))
+        .map(|r| quote!([#(#r),*]))
+        .collect()
+}
