@@ -412,7 +412,15 @@ fn controller(model: &Model, rc: &ResolvedController) -> Result<TokenStream, Err
             let mut env = crate::plant::env(&mut g, model, &xs, &[], &ps)?;
             // gain accessors: `wn()` / `set_wn()`, prefixed `gain_` where a
             // name would clash with the controller's own methods
-            let reserved = ["new", "params", "set_params", "law", "control", "coeffs", "k"];
+            let reserved = [
+                "new",
+                "params",
+                "set_params",
+                "law",
+                "control",
+                "coeffs",
+                "k",
+            ];
             let mut gfields = Vec::new();
             let mut gparams = Vec::new();
             let mut ginit = Vec::new();

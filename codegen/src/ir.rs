@@ -36,6 +36,10 @@ use crate::Error;
 /// A value of the graph.
 pub(crate) type V = u32;
 
+/// The per-call numerator and denominator of a product (the key terms are
+/// collected by).
+type PerCall = (Option<V>, Option<V>);
+
 /// How often a value changes.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, PartialOrd, Ord, Hash)]
 pub(crate) enum Level {
@@ -295,7 +299,7 @@ impl Graph {
     fn pow_int(&mut self, a: V, n: u64) -> V {
         if n == 1 {
             a
-        } else if n % 2 == 0 {
+        } else if n.is_multiple_of(2) {
             let h = self.pow_int(a, n / 2);
             self.mul(h, h)
         } else {
@@ -375,8 +379,8 @@ impl Graph {
         let mut flat = Vec::with_capacity(terms.len());
         Self::flatten_sum(terms, Rational::ONE, &mut flat);
         // group by per-call part, in order of first appearance
-        let mut groups: Vec<((Option<V>, Option<V>), Option<(V, bool)>)> = Vec::new();
-        let mut at: HashMap<(Option<V>, Option<V>), usize> = HashMap::new();
+        let mut groups: Vec<(PerCall, Option<(V, bool)>)> = Vec::new();
+        let mut at: HashMap<PerCall, usize> = HashMap::new();
         for (c, rest) in flat {
             let (p, n, d) = self.product_parts(env, c.abs(), rest)?;
             let key = (n, d);
@@ -465,7 +469,10 @@ impl Graph {
             let (v, den) = match x.as_rational() {
                 Some(r) if r.is_integer() && r.numer() != 0 && r.numer().abs() <= 64 => {
                     let base = self.expr(env, b)?;
-                    (self.pow_int(base, r.numer().unsigned_abs() as u64), r.is_negative())
+                    (
+                        self.pow_int(base, r.numer().unsigned_abs() as u64),
+                        r.is_negative(),
+                    )
                 }
                 Some(r) if r.abs() == half => {
                     let base = self.expr(env, b)?;
@@ -549,7 +556,11 @@ impl Graph {
                 vec![vec![m[1][1], off], vec![off, m[0][0]]]
             }
             _ => {
-                let cof = |s: &mut Graph, a: (usize, usize), b: (usize, usize), c: (usize, usize), d: (usize, usize)| {
+                let cof = |s: &mut Graph,
+                           a: (usize, usize),
+                           b: (usize, usize),
+                           c: (usize, usize),
+                           d: (usize, usize)| {
                     let x = s.mul(m[a.0][a.1], m[b.0][b.1]);
                     let y = s.mul(m[c.0][c.1], m[d.0][d.1]);
                     s.sub(x, y)
@@ -560,7 +571,11 @@ impl Graph {
                 let a11 = cof(self, (0, 0), (2, 2), (0, 2), (0, 2));
                 let a12 = cof(self, (0, 1), (0, 2), (0, 0), (1, 2));
                 let a22 = cof(self, (0, 0), (1, 1), (0, 1), (0, 1));
-                vec![vec![a00, a01, a02], vec![a01, a11, a12], vec![a02, a12, a22]]
+                vec![
+                    vec![a00, a01, a02],
+                    vec![a01, a11, a12],
+                    vec![a02, a12, a22],
+                ]
             }
         }
     }
@@ -746,7 +761,12 @@ impl Graph {
     /// Emit the per-call statements computing `outputs`; parameter-level
     /// values are read as `#coeffs[slot]` (from `plan`), per-call locals are
     /// `t{k}` numbered in order of appearance.
-    pub fn function(&self, outputs: &[V], plan: &CoeffPlan, coeffs: &TokenStream) -> Result<Function, Error> {
+    pub fn function(
+        &self,
+        outputs: &[V],
+        plan: &CoeffPlan,
+        coeffs: &TokenStream,
+    ) -> Result<Function, Error> {
         let needed = self.reach(outputs, true);
         let mut order: Vec<V> = needed.iter().copied().collect();
         order.sort_unstable();

@@ -107,20 +107,21 @@ pub fn write_crate(opts: &CrateOptions) -> Result<Vec<PathBuf>, Error> {
             let ty = camel(c);
             format!(
                 "{HEADER_PREFIX} from {shown}. Do not edit.\n\
-                 //! Closed-loop simulation of `{c}` with the generated plant (RK4, h = 1e-4 s).\n\n\
+                 //! Closed-loop simulation of `{c}` with the generated plant: RK4, h = 1e-4 s,\n\
+                 //! the controller evaluated at every stage (continuous time).\n\n\
                  use {krate}::*;\n\n\
                  fn main() {{\n\
-                 \x20   let p = Params::default();\n\
+                 \x20   let plant = Plant::default();\n\
                  \x20   let mut ctrl = {ty}::default();\n\
                  \x20   let mut x = [0.0; N_STATES];\n\
                  \x20   x[N_STATES / 2 - 1] = 10f64.to_radians();\n\
                  \x20   let h = 1e-4;\n\
                  \x20   for k in 0..=50_000 {{\n\
-                 \x20       let u = ctrl.control(&x);\n\
                  \x20       if k % 2_500 == 0 {{\n\
+                 \x20           let u = ctrl.control(&x);\n\
                  \x20           println!(\"t = {{:5.2}} s  x = {{:?}}  u = {{:?}}\", k as f64 * h, x, u);\n\
                  \x20       }}\n\
-                 \x20       x = rk4_step(&x, &u, &p, h);\n\
+                 \x20       x = plant.closed_loop_rk4_step(&x, h, |y| ctrl.control(y)).0;\n\
                  \x20   }}\n\
                  }}\n"
             )
@@ -130,13 +131,13 @@ pub fn write_crate(opts: &CrateOptions) -> Result<Vec<PathBuf>, Error> {
              //! Open-loop simulation with the generated plant (RK4, h = 1e-4 s).\n\n\
              use {krate}::*;\n\n\
              fn main() {{\n\
-             \x20   let p = Params::default();\n\
+             \x20   let plant = Plant::default();\n\
              \x20   let mut x = [0.0; N_STATES];\n\
              \x20   x[N_STATES / 2 - 1] = 10f64.to_radians();\n\
              \x20   let u = [0.0; N_INPUTS];\n\
              \x20   for k in 0..=10_000 {{\n\
              \x20       if k % 1_000 == 0 {{ println!(\"t = {{:5.2}} s  x = {{:?}}\", k as f64 * 1e-4, x); }}\n\
-             \x20       x = rk4_step(&x, &u, &p, 1e-4);\n\
+             \x20       x = plant.rk4_step(&x, &u, 1e-4);\n\
              \x20   }}\n\
              }}\n"
         ),

@@ -145,4 +145,3 @@ pub(crate) fn lower(
     let outputs = tape.output_slots().iter().map(|s| get(&slot, *s)).collect();
     Ok(Lowered { stmts, outputs })
 }
-

@@ -99,7 +99,10 @@ fn held_law_is_what_rk4_step_gives() {
     let c = rk4_step(&x, &u, plant.params(), 1e-3);
     assert_eq!(u0, u);
     for i in 0..4 {
-        assert!((a[i] - b[i]).abs() <= 1e-15 * (1.0 + b[i].abs()), "{a:?} vs {b:?}");
+        assert!(
+            (a[i] - b[i]).abs() <= 1e-15 * (1.0 + b[i].abs()),
+            "{a:?} vs {b:?}"
+        );
         assert_eq!(b[i], c[i]);
     }
 }

@@ -7,6 +7,9 @@
 //! generated `M^-1 (dr/dx - dM/dx a)` route), plus derive's numeric
 //! linearization (`analysis::linearize`) at a few points.
 
+// Matrix entries are compared by explicit row and column.
+#![allow(clippy::needless_range_loop)]
+
 use std::collections::HashMap;
 use std::path::Path;
 
@@ -137,7 +140,10 @@ fn jacobians_match_symbolic_derivatives_at_10000_states() {
     for i in 0..nx {
         let mut fi = aff.f[i];
         for j in 0..nu {
-            fi = Expr::add_all([fi, Expr::mul_all([aff.g[i][j], Expr::symbol(aff.inputs[j])])]);
+            fi = Expr::add_all([
+                fi,
+                Expr::mul_all([aff.g[i][j], Expr::symbol(aff.inputs[j])]),
+            ]);
         }
         for s in &aff.state {
             outs.push(diff(fi, *s));
@@ -167,7 +173,12 @@ fn jacobians_match_symbolic_derivatives_at_10000_states() {
         let sb = v[16..].iter().fold(0.0f64, |m, e| m.max(e.abs()));
         for i in 0..4 {
             for j in 0..4 {
-                close(a[i][j], v[4 * i + j], sa, &format!("A[{i}][{j}] at state {k}"));
+                close(
+                    a[i][j],
+                    v[4 * i + j],
+                    sa,
+                    &format!("A[{i}][{j}] at state {k}"),
+                );
             }
             close(b[i][0], v[16 + i], sb, &format!("B[{i}] at state {k}"));
         }
