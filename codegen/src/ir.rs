@@ -399,10 +399,27 @@ impl Graph {
             }
             lowered.push((self.combine(p, n, d), neg));
         }
-        // stable: parameter-level terms first, then per-call terms, each in term order
-        lowered.sort_by_key(|(v, _)| self.lv(*v) == Level::Call);
+        // parameter-level terms summed in order (one coefficient), per-call
+        // terms as a balanced tree (short dependency chains)
+        let (params, mut calls): (Vec<_>, Vec<_>) = lowered
+            .into_iter()
+            .partition(|(v, _)| self.lv(*v) != Level::Call);
         let mut acc: Option<(V, bool)> = None;
-        for (v, neg) in lowered {
+        for (v, neg) in params {
+            acc = Some(self.accumulate(acc, v, neg));
+        }
+        while calls.len() > 1 {
+            let mut next = Vec::with_capacity(calls.len().div_ceil(2));
+            for pair in calls.chunks(2) {
+                next.push(match pair {
+                    [(a, na), (b, nb)] => self.accumulate(Some((*a, *na)), *b, *nb),
+                    [one] => *one,
+                    _ => unreachable!(),
+                });
+            }
+            calls = next;
+        }
+        if let Some((v, neg)) = calls.pop() {
             acc = Some(self.accumulate(acc, v, neg));
         }
         Ok(match acc {
@@ -457,11 +474,12 @@ impl Graph {
         c: Rational,
         rest: Expr,
     ) -> Result<(V, Option<V>, Option<V>), Error> {
-        let factors: Vec<Expr> = match rest.node() {
+        let mut factors: Vec<Expr> = match rest.node() {
             Node::Mul(fs) => fs.to_vec(),
             _ if rest.is_one() => Vec::new(),
             _ => vec![rest],
         };
+        cancel_into_sums(&mut factors);
         let (mut pn, mut pd, mut vn, mut vd) = (Vec::new(), Vec::new(), Vec::new(), Vec::new());
         let half = Rational::new(1, 2).expect("1/2");
         for f in factors {
@@ -839,5 +857,37 @@ impl Graph {
         }
         let outputs = outputs.iter().map(|v| bound[v].clone()).collect();
         Ok(Function { stmts, outputs })
+    }
+}
+
+/// `D * (a/D + b)` -> `a + b*D`: a factor `D` (power 1) of a product is
+/// multiplied into a sum factor one of whose terms divides by `D`, saving the
+/// division (the symbolic core cancels `D * D^-1`). Repeats while it applies.
+fn cancel_into_sums(factors: &mut Vec<Expr>) {
+    let minus_one = Expr::int(-1);
+    loop {
+        let mut hit = None;
+        'search: for (i, s) in factors.iter().enumerate() {
+            let Node::Add(terms) = s.node() else { continue };
+            for (j, d) in factors.iter().enumerate() {
+                if i == j || d.node() == s.node() && i > j {
+                    continue;
+                }
+                let divides = |t: &Expr| match t.node() {
+                    Node::Mul(fs) => fs.iter().any(|f| f.base_and_exp() == (*d, minus_one)),
+                    _ => t.base_and_exp() == (*d, minus_one),
+                };
+                if terms.iter().any(divides) {
+                    hit = Some((i, j));
+                    break 'search;
+                }
+            }
+        }
+        let Some((i, j)) = hit else { return };
+        let (s, d) = (factors[i], factors[j]);
+        let Node::Add(terms) = s.node() else { return };
+        let distributed = Expr::add_all(terms.iter().map(|t| Expr::mul_all([*t, d])));
+        factors[i] = distributed;
+        factors.remove(j);
     }
 }
