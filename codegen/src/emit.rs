@@ -282,6 +282,21 @@ pub(crate) fn generate_body(spec: &Spec) -> Result<String, Error> {
             #[inline(always)]
             pub fn abs(x: f64) -> f64 { f64::from_bits(x.to_bits() & !(1u64 << 63)) }
 
+            /// `(sin d, cos d)` for a Runge-Kutta stage increment `d`: for
+            /// `|d| <= 1/16` Taylor polynomials through `d^9` and `d^10`
+            /// (truncation below 2e-21, i.e. rounding-level), else [`sin_cos`].
+            #[inline(always)]
+            pub fn sin_cos_step(d: f64) -> (f64, f64) {
+                if abs(d) <= 0.0625 {
+                    let d2 = d * d;
+                    let s = d + d * d2 * (-1.0 / 6.0 + d2 * (1.0 / 120.0 + d2 * (-1.0 / 5040.0 + d2 * (1.0 / 362880.0))));
+                    let c = 1.0 + d2 * (-0.5 + d2 * (1.0 / 24.0 + d2 * (-1.0 / 720.0 + d2 * (1.0 / 40320.0 + d2 * (-1.0 / 3628800.0)))));
+                    (s, c)
+                } else {
+                    sin_cos(d)
+                }
+            }
+
             /// `sign(x)` in {-1, 0, 1} (0 for 0 and NaN).
             #[inline(always)]
             pub fn sign(x: f64) -> f64 {

@@ -65,6 +65,10 @@ enum Op {
     Atan2(V, V),
     Sin(V),
     Cos(V),
+    /// `sin d` of a Runge-Kutta stage increment (`math::sin_cos_step`).
+    SinStep(V),
+    /// `cos d` of a Runge-Kutta stage increment.
+    CosStep(V),
     Func(Func, V),
 }
 
@@ -80,6 +84,11 @@ impl Env {
     /// Bind a symbol to a value.
     pub fn bind(&mut self, s: Symbol, v: V) {
         self.map.insert(s, v);
+    }
+
+    /// Use `v` for the expression `e` (instead of lowering it).
+    pub fn preset(&mut self, e: Expr, v: V) {
+        self.memo.insert(e, v);
     }
 }
 
@@ -136,7 +145,13 @@ impl Graph {
             | Op::Div(a, b)
             | Op::Powf(a, b)
             | Op::Atan2(a, b) => self.lv(a).max(self.lv(b)),
-            Op::Neg(a) | Op::Sqrt(a) | Op::Sin(a) | Op::Cos(a) | Op::Func(_, a) => self.lv(a),
+            Op::Neg(a)
+            | Op::Sqrt(a)
+            | Op::Sin(a)
+            | Op::Cos(a)
+            | Op::SinStep(a)
+            | Op::CosStep(a)
+            | Op::Func(_, a) => self.lv(a),
         };
         let v = self.ops.len() as V;
         self.ops.push(op);
@@ -306,6 +321,27 @@ impl Graph {
             let h = self.pow_int(a, n - 1);
             self.mul(h, a)
         }
+    }
+
+    /// Whether `sin(a)` or `cos(a)` has been created.
+    pub fn has_trig(&self, a: V) -> bool {
+        self.index.contains_key(&Op::Sin(a)) || self.index.contains_key(&Op::Cos(a))
+    }
+
+    /// `(sin(a + d), cos(a + d))` by the addition formulas from `sin a`,
+    /// `cos a` and `sin_cos_step(d)` (a polynomial for a small stage
+    /// increment `d`, so a Runge-Kutta stage needs no full `sin_cos`).
+    pub fn sin_cos_shifted(&mut self, a: V, d: V) -> (V, V) {
+        let (sa, ca) = (self.op(Op::Sin(a)), self.op(Op::Cos(a)));
+        if self.is(d, 0.0) {
+            return (sa, ca);
+        }
+        let (sd, cd) = (self.op(Op::SinStep(d)), self.op(Op::CosStep(d)));
+        let (t1, t2) = (self.mul(sa, cd), self.mul(ca, sd));
+        let s = self.add(t1, t2);
+        let (t3, t4) = (self.mul(ca, cd), self.mul(sa, sd));
+        let c = self.sub(t3, t4);
+        (s, c)
     }
 
     /// Product of `vs`, sorted by value number (so equal factor sets share prefixes).
@@ -673,7 +709,13 @@ impl Graph {
             | Op::Div(a, b)
             | Op::Powf(a, b)
             | Op::Atan2(a, b) => vec![a, b],
-            Op::Neg(a) | Op::Sqrt(a) | Op::Sin(a) | Op::Cos(a) | Op::Func(_, a) => vec![a],
+            Op::Neg(a)
+            | Op::Sqrt(a)
+            | Op::Sin(a)
+            | Op::Cos(a)
+            | Op::SinStep(a)
+            | Op::CosStep(a)
+            | Op::Func(_, a) => vec![a],
         }
     }
 
@@ -768,6 +810,14 @@ impl Graph {
                 let a = get(a);
                 quote!(math::cos(#a))
             }
+            Op::SinStep(a) => {
+                let a = get(a);
+                quote!(math::sin_cos_step(#a).0)
+            }
+            Op::CosStep(a) => {
+                let a = get(a);
+                quote!(math::sin_cos_step(#a).1)
+            }
             Op::Func(f, a) => {
                 let a = get(a);
                 let name = format_ident!("{}", f.name());
@@ -819,23 +869,23 @@ impl Graph {
                 Op::Input(i) => {
                     bound.insert(v, self.inputs[i as usize].0.clone());
                 }
-                Op::Sin(a) | Op::Cos(a) => {
-                    let partner = match self.ops[v as usize] {
-                        Op::Sin(_) => self.index.get(&Op::Cos(a)),
-                        _ => self.index.get(&Op::Sin(a)),
-                    }
-                    .copied()
-                    .filter(|p| needed.contains(p));
+                Op::Sin(a) | Op::Cos(a) | Op::SinStep(a) | Op::CosStep(a) => {
+                    let (sin_op, cos_op, fun) = match self.ops[v as usize] {
+                        Op::Sin(_) | Op::Cos(_) => (Op::Sin(a), Op::Cos(a), quote!(math::sin_cos)),
+                        _ => (Op::SinStep(a), Op::CosStep(a), quote!(math::sin_cos_step)),
+                    };
+                    let is_sin = self.ops[v as usize] == sin_op;
+                    let partner = self
+                        .index
+                        .get(if is_sin { &cos_op } else { &sin_op })
+                        .copied()
+                        .filter(|p| needed.contains(p));
                     let arg = bound[&a].clone();
                     match partner {
                         Some(p) => {
                             let (s, c) = (fresh(), fresh());
-                            stmts.push(quote!(let (#s, #c) = math::sin_cos(#arg);));
-                            let (sv, cv) = if matches!(self.ops[v as usize], Op::Sin(_)) {
-                                (v, p)
-                            } else {
-                                (p, v)
-                            };
+                            stmts.push(quote!(let (#s, #c) = #fun(#arg);));
+                            let (sv, cv) = if is_sin { (v, p) } else { (p, v) };
                             bound.insert(sv, quote!(#s));
                             bound.insert(cv, quote!(#c));
                         }

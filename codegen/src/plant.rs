@@ -81,7 +81,11 @@ fn mass_and_rhs(
     Ok((m, r))
 }
 
-/// `x' = (q', M^-1 r)` at the state values `xs`.
+#[allow(clippy::too_many_arguments)]
+/// `x' = (q', M^-1 r)` at the state values `xs`. With `shift = (x0, d)`
+/// (a Runge-Kutta stage `xs = x0 + d`), `sin(q)` and `cos(q)` of a coordinate
+/// whose sine or cosine was needed at `x0` are formed by the addition
+/// formulas from those at `x0` and `sin_cos_step(d)`.
 fn state_derivative(
     g: &mut Graph,
     model: &Model,
@@ -90,9 +94,20 @@ fn state_derivative(
     xs: &[V],
     us: &[V],
     ps: &[V],
+    shift: Option<(&[V], &[V])>,
 ) -> Result<Vec<V>, Error> {
     let n = rhs.len();
     let mut e = env(g, model, xs, us, ps)?;
+    if let Some((x0, d)) = shift {
+        for (i, q) in model.state_symbols().into_iter().take(n).enumerate() {
+            if g.has_trig(x0[i]) {
+                let (s, c) = g.sin_cos_shifted(x0[i], d[i]);
+                let q = Expr::symbol(q);
+                e.preset(q.sin(), s);
+                e.preset(q.cos(), c);
+            }
+        }
+    }
     let (m, r) = mass_and_rhs(g, &mut e, eqs, rhs)?;
     let a = g.solve_sym(&m, &[r]).remove(0);
     let mut out: Vec<V> = xs[n..].to_vec();
@@ -124,7 +139,7 @@ pub(crate) fn plant_items(model: &Model, eqs: &Equations) -> Result<TokenStream,
     let ps = param_inputs(&mut g, model, &quote!(p));
 
     // dynamics
-    let dyn_out = state_derivative(&mut g, model, eqs, &rhs, &xs, &us, &ps)?;
+    let dyn_out = state_derivative(&mut g, model, eqs, &rhs, &xs, &us, &ps, None)?;
 
     // Jacobians: da/dx_k = M^-1 (dr/dx_k - dM/dx_k a), da/du_k = M^-1 dr/du_k
     let mut e = env(&mut g, model, &xs, &us, &ps)?;
@@ -183,21 +198,18 @@ pub(crate) fn plant_items(model: &Model, eqs: &Equations) -> Result<TokenStream,
     let h6 = g.div(h, six);
     let two = g.konst(2.0);
     let k1 = dyn_out.clone();
-    let stage = |g: &mut Graph, k: &[V], w: V| -> Vec<V> {
-        xs.iter()
-            .zip(k)
-            .map(|(x, k)| {
-                let t = g.mul(w, *k);
-                g.add(*x, t)
-            })
-            .collect()
+    // stage increments d = w k and states x + d
+    let stage = |g: &mut Graph, k: &[V], w: V| -> (Vec<V>, Vec<V>) {
+        let d: Vec<V> = k.iter().map(|k| g.mul(w, *k)).collect();
+        let y = xs.iter().zip(&d).map(|(x, d)| g.add(*x, *d)).collect();
+        (y, d)
     };
-    let y2 = stage(&mut g, &k1, hh);
-    let k2 = state_derivative(&mut g, model, eqs, &rhs, &y2, &us, &ps)?;
-    let y3 = stage(&mut g, &k2, hh);
-    let k3 = state_derivative(&mut g, model, eqs, &rhs, &y3, &us, &ps)?;
-    let y4 = stage(&mut g, &k3, h);
-    let k4 = state_derivative(&mut g, model, eqs, &rhs, &y4, &us, &ps)?;
+    let (y2, d2) = stage(&mut g, &k1, hh);
+    let k2 = state_derivative(&mut g, model, eqs, &rhs, &y2, &us, &ps, Some((&xs, &d2)))?;
+    let (y3, d3) = stage(&mut g, &k2, hh);
+    let k3 = state_derivative(&mut g, model, eqs, &rhs, &y3, &us, &ps, Some((&xs, &d3)))?;
+    let (y4, d4) = stage(&mut g, &k3, h);
+    let k4 = state_derivative(&mut g, model, eqs, &rhs, &y4, &us, &ps, Some((&xs, &d4)))?;
     let mut rk = Vec::new();
     for i in 0..nx {
         let s23 = g.add(k2[i], k3[i]);
@@ -429,7 +441,9 @@ pub(crate) fn plant_items(model: &Model, eqs: &Equations) -> Result<TokenStream,
 
         /// One classical Runge-Kutta step of length `h` [s] with `u` held
         /// constant (the four stages inlined into one function; parameter
-        /// coefficients computed once for the four).
+        /// coefficients computed once for the four). The sines and cosines
+        /// of the coordinates at stages 2 to 4 come from those at `x` by the
+        /// addition formulas with `math::sin_cos_step` of the stage increment.
         #[inline]
         pub fn rk4_step(x: &[f64; N_STATES], u: &[f64; N_INPUTS], p: &Params, h: f64) -> [f64; N_STATES] {
             rk4_step_k(x, u, &PlantCoeffs::new(p), h)
