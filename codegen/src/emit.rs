@@ -282,6 +282,17 @@ pub(crate) fn generate_body(spec: &Spec) -> Result<String, Error> {
             #[inline(always)]
             pub fn abs(x: f64) -> f64 { f64::from_bits(x.to_bits() & !(1u64 << 63)) }
 
+            /// `a * b + c`: fused (one rounding) where the target has FMA
+            /// instructions and `std` math is used, else a multiply and an add
+            /// (never a software FMA).
+            #[inline(always)]
+            pub fn fma(a: f64, b: f64, c: f64) -> f64 {
+                #[cfg(all(target_feature = "fma", not(feature = "libm")))]
+                { a.mul_add(b, c) }
+                #[cfg(not(all(target_feature = "fma", not(feature = "libm"))))]
+                { a * b + c }
+            }
+
             /// `(sin d, cos d)` for a Runge-Kutta stage increment `d`: for
             /// `|d| <= 1/16` Taylor polynomials through `d^9` and `d^10`
             /// (truncation below 2e-21, i.e. rounding-level), else [`sin_cos`].

@@ -116,6 +116,15 @@ impl CoeffPlan {
     }
 }
 
+/// Products fused into the sums that use them.
+#[derive(Default)]
+struct Fused {
+    /// sum or difference -> the product fused into it
+    into: HashMap<V, V>,
+    /// the fused products (not emitted on their own)
+    skipped: HashSet<V>,
+}
+
 /// Statements of one emitted function and one expression per output.
 pub(crate) struct Function {
     pub stmts: Vec<TokenStream>,
@@ -826,6 +835,67 @@ impl Graph {
         }
     }
 
+    /// Per-call products used once, by a sum or difference: emitted fused
+    /// into it as `math::fma` (one rounding where the target has FMA).
+    fn fused_products(&self, order: &[V], outputs: &[V]) -> Fused {
+        let mut uses: HashMap<V, usize> = HashMap::new();
+        for &v in order {
+            if self.lv(v) == Level::Call {
+                for o in self.operands(v) {
+                    *uses.entry(o).or_default() += 1;
+                }
+            }
+        }
+        for o in outputs {
+            *uses.entry(*o).or_default() += 1;
+        }
+        let mut f = Fused::default();
+        for &v in order {
+            if self.lv(v) != Level::Call {
+                continue;
+            }
+            let (Op::Add(a, b) | Op::Sub(a, b)) = self.ops[v as usize] else {
+                continue;
+            };
+            let single = |m: V| {
+                self.lv(m) == Level::Call
+                    && matches!(self.ops[m as usize], Op::Mul(..))
+                    && uses.get(&m) == Some(&1)
+            };
+            let pick = [b, a]
+                .into_iter()
+                .find(|m| single(*m) && !f.skipped.contains(m));
+            if let Some(m) = pick {
+                f.skipped.insert(m);
+                f.into.insert(v, m);
+            }
+        }
+        f
+    }
+
+    /// `v = a ± b` with the product `m` (one of `a`, `b`) fused.
+    fn fma_rhs(&self, v: V, m: V, get: &dyn Fn(V) -> TokenStream) -> TokenStream {
+        let Op::Mul(x, y) = self.ops[m as usize] else {
+            unreachable!("fused value is a product")
+        };
+        let (x, y) = (get(x), get(y));
+        match self.ops[v as usize] {
+            Op::Add(a, b) => {
+                let c = get(if a == m { b } else { a });
+                quote!(math::fma(#x, #y, #c))
+            }
+            Op::Sub(a, b) if a == m => {
+                let c = get(b);
+                quote!(math::fma(#x, #y, -#c))
+            }
+            Op::Sub(a, _) => {
+                let c = get(a);
+                quote!(math::fma(-#x, #y, #c))
+            }
+            _ => unreachable!("fused into a sum or difference"),
+        }
+    }
+
     /// Emit the per-call statements computing `outputs`; parameter-level
     /// values are read as `#coeffs[slot]` (from `plan`), per-call locals are
     /// `t{k}` numbered in order of appearance.
@@ -838,6 +908,7 @@ impl Graph {
         let needed = self.reach(outputs, true);
         let mut order: Vec<V> = needed.iter().copied().collect();
         order.sort_unstable();
+        let fused = self.fused_products(&order, outputs);
         let mut bound: HashMap<V, TokenStream> = HashMap::new();
         let mut stmts = Vec::new();
         let mut counter = 0usize;
@@ -847,7 +918,7 @@ impl Graph {
             id
         };
         for v in order {
-            if bound.contains_key(&v) {
+            if bound.contains_key(&v) || fused.skipped.contains(&v) {
                 continue;
             }
             match self.lv(v) {
@@ -898,7 +969,10 @@ impl Graph {
                     }
                 }
                 _ => {
-                    let rhs = self.rhs(v, &|o| bound[&o].clone());
+                    let rhs = match fused.into.get(&v) {
+                        Some(&m) => self.fma_rhs(v, m, &|o| bound[&o].clone()),
+                        None => self.rhs(v, &|o| bound[&o].clone()),
+                    };
                     let t = fresh();
                     stmts.push(quote!(let #t = #rhs;));
                     bound.insert(v, quote!(#t));
