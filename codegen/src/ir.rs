@@ -994,7 +994,7 @@ fn cancel_into_sums(factors: &mut Vec<Expr>) {
         'search: for (i, s) in factors.iter().enumerate() {
             let Node::Add(terms) = s.node() else { continue };
             for (j, d) in factors.iter().enumerate() {
-                if i == j || d.node() == s.node() && i > j {
+                if i == j {
                     continue;
                 }
                 let divides = |t: &Expr| match t.node() {
