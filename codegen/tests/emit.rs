@@ -163,3 +163,17 @@ fn generated_crate_builds_no_std_with_libm() {
     assert!(lib.starts_with(plantc_codegen::HEADER_PREFIX));
     assert!(lib.contains("#![cfg_attr(not(feature = \"std\"), no_std)]"));
 }
+
+/// The other reference models generate (the emitted code parses; their
+/// equations go through the same graph).
+#[test]
+fn other_models_generate() {
+    for m in ["cart_pole", "pendubot"] {
+        let code = plantc_codegen::Builder::new()
+            .model(manifest().join(format!("../models/{m}.plant")))
+            .emit_to_string()
+            .unwrap_or_else(|e| panic!("{m}: {e}"));
+        assert!(code.contains("pub fn rk4_step("), "{m}");
+        assert!(code.contains("math::sin_cos("), "{m}");
+    }
+}
