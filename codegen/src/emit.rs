@@ -327,7 +327,15 @@ pub(crate) fn generate_body(spec: &Spec) -> Result<String, Error> {
 }
 
 fn controller(model: &Model, rc: &ResolvedController) -> Result<TokenStream, Error> {
-    let sname = format_ident!("{}", camel(rc.name()));
+    let type_name = camel(rc.name());
+    if ["Plant", "PlantCoeffs", "Params", "Derived"].contains(&type_name.as_str()) {
+        return Err(Error::Generate(format!(
+            "controller `{}` would generate the type `{type_name}`, which the generated \
+             module already defines; rename the controller",
+            rc.name()
+        )));
+    }
+    let sname = format_ident!("{}", type_name);
     let sat = |u: Vec<TokenStream>| -> Result<Vec<TokenStream>, Error> {
         u.into_iter()
             .zip(&model.inputs)
