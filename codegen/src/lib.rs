@@ -3,7 +3,16 @@
 //! The generated module has `Params` (one field per parameter), `dynamics`,
 //! `jacobian_x`, `jacobian_u`, `rk4_step`, the linearization about 0 as
 //! `const`s `A`, `B`, and one struct per requested controller with
-//! `control(&mut self, x) -> u` (saturated at the input limits). It never
+//! `control(&mut self, x) -> u` (saturated at the input limits).
+//!
+//! Parameter-only subexpressions (products of parameters, derived
+//! quantities, gains) are hoisted out of the per-call code: `Plant` holds the
+//! parameters with their `PlantCoeffs` and offers the same functions as
+//! methods plus `closed_loop_rk4_step` (a controller evaluated at every
+//! stage); controllers keep their coefficients beside private parameters and
+//! gains changed through setters. The free functions recompute the
+//! coefficients they need on every call. See `ir.rs` for the graph
+//! (value numbering, folding, term collection, closed-form solves). It never
 //! allocates, uses fixed-size arrays only and is `#![no_std]`-compatible:
 //! transcendentals go through a generated `mod math` that uses `std` by
 //! default and `libm` when the including crate enables its `libm` feature.
