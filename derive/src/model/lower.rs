@@ -5,10 +5,11 @@ use std::fmt;
 use std::path::Path;
 
 use super::{
-    ControllerSpec, Coordinate, CoordinateKind, Derived, Input, Model, Output, Parameter,
-    ParameterSet,
+    ActuatorEffect, ActuatorEffectKind, ControllerSpec, Coordinate, CoordinateKind, Derived, Input,
+    Model, Output, Parameter, ParameterSet, SensorEffect, SensorEffectKind,
 };
 use crate::lang::ast::{self, BinOp, ExprKind};
+use crate::lang::effects;
 use crate::lang::units::parse_unit;
 use crate::lang::{eval_si, parse_and_check, Diagnostic, SourceFile, Symbols};
 use crate::sym::{CoordinateSymbols, Expr, Func, Rational, Symbol};
@@ -233,7 +234,7 @@ pub fn lower(file: &ast::ModelFile, symbols: Option<&Symbols>) -> Model {
             description: c.doc.as_ref().map(|d| d.value.clone()),
         })
         .collect();
-    let inputs = file
+    let inputs: Vec<Input> = file
         .inputs
         .iter()
         .map(|i| {
@@ -287,7 +288,7 @@ pub fn lower(file: &ast::ModelFile, symbols: Option<&Symbols>) -> Model {
         .potential
         .first()
         .map_or(Expr::zero(), |v| lw.expr(&v.expr));
-    let forces = coordinates
+    let mut forces: Vec<Expr> = coordinates
         .iter()
         .map(|c| {
             file.forces
@@ -297,6 +298,27 @@ pub fn lower(file: &ast::ModelFile, symbols: Option<&Symbols>) -> Model {
                 .sum()
         })
         .collect();
+    let (sensors, actuators) = lower_signal_effects(&mut lw, file, &coordinates, &inputs);
+    // Algebraic actuator effects are folded into the forces: every input
+    // symbol becomes what the plant receives (`u` -> `u + V0`), line by line
+    // in file order.
+    for line in &file.actuators {
+        let Some(j) = inputs.iter().position(|i| i.name == line.target.name) else {
+            continue;
+        };
+        let algebraic = effects::lookup(line.effect_name().unwrap_or(""))
+            .is_some_and(|e| !e.formula.is_empty());
+        if !algebraic {
+            continue;
+        }
+        let Ok(received) = effects::expand(&line.call, &line.target) else {
+            continue;
+        };
+        let map: HashMap<Symbol, Expr> = [(inputs[j].symbol, lw.expr(&received))].into();
+        for f in forces.iter_mut() {
+            *f = crate::sym::substitute_symbols(*f, &map);
+        }
+    }
     // Parameter sets: entries evaluated against the nominal values.
     let nominal: HashMap<Symbol, f64> = parameters.iter().map(|p| (p.symbol, p.value)).collect();
     let sets = file
@@ -341,8 +363,47 @@ pub fn lower(file: &ast::ModelFile, symbols: Option<&Symbols>) -> Model {
         kinetic,
         potential,
         forces,
+        sensors,
+        actuators,
         controllers,
     }
+}
+
+/// The `sensor` and `actuator` lines with their parameter expressions.
+fn lower_signal_effects(
+    lw: &mut Lowerer<'_>,
+    file: &ast::ModelFile,
+    coordinates: &[Coordinate],
+    inputs: &[Input],
+) -> (Vec<SensorEffect>, Vec<ActuatorEffect>) {
+    let arg = |lw: &mut Lowerer<'_>, line: &ast::SignalEffect| {
+        line.args().first().map_or(Expr::zero(), |a| lw.expr(a))
+    };
+    let mut sensors = Vec::new();
+    for line in &file.sensors {
+        let Some(i) = coordinates.iter().position(|c| c.name == line.target.name) else {
+            continue;
+        };
+        if line.effect_name() == Some("sensor_offset") {
+            sensors.push(SensorEffect {
+                coordinate: i,
+                effect: SensorEffectKind::Offset(arg(lw, line)),
+            });
+        }
+    }
+    let mut actuators = Vec::new();
+    for line in &file.actuators {
+        let Some(j) = inputs.iter().position(|u| u.name == line.target.name) else {
+            continue;
+        };
+        let effect = match line.effect_name() {
+            Some("input_offset") => ActuatorEffectKind::Offset(arg(lw, line)),
+            Some("input_delay") => ActuatorEffectKind::Delay(arg(lw, line)),
+            _ => continue,
+        };
+        actuators.push(ActuatorEffect { input: j, effect });
+    }
+    (sensors, actuators)
 }
 
 fn lower_controller(lw: &mut Lowerer<'_>, c: &ast::Controller) -> ControllerSpec {
