@@ -188,3 +188,27 @@ fn add_effect_refuses_bad_input() {
         Err(EditError::WouldBreak(_))
     ));
 }
+
+#[test]
+fn consumers_of_the_plant_equations_get_warnings() {
+    let loaded = load_model_text("m.plant", MODEL).unwrap();
+    let w = loaded.ignored_signal_effects("`plantc sim`");
+    // two sensor offsets and two delays; the input offset is folded, no warning
+    assert_eq!(w.len(), 4);
+    assert!(w.iter().all(|d| !d.is_error()));
+    let lines: Vec<&str> = w
+        .iter()
+        .map(|d| &MODEL[d.primary.start..d.primary.end])
+        .collect();
+    assert_eq!(
+        lines,
+        [
+            "sensor theta = sensor_offset(d)",
+            "sensor x = sensor_offset(dx)",
+            "actuator Vm = input_delay(Td)",
+            "actuator Vm = input_delay(2*Td)"
+        ]
+    );
+    let plain = load_model_text("m.plant", &without_effect_lines()).unwrap();
+    assert!(plain.ignored_signal_effects("`plantc sim`").is_empty());
+}

@@ -25,6 +25,42 @@ pub struct LoadedModel {
     pub diagnostics: Vec<Diagnostic>,
 }
 
+impl LoadedModel {
+    /// Warnings, one per `sensor_offset` and `input_delay` line, for a
+    /// consumer (`consumer`, e.g. "`plantc sim`") that works on the plant
+    /// equations and so ignores them (see [`Model`]'s docs). Empty for most
+    /// models. Render them with [`crate::lang::render`] and `self.source`.
+    pub fn ignored_signal_effects(&self, consumer: &str) -> Vec<Diagnostic> {
+        let (file, _) = crate::lang::parser::parse(&self.source.text);
+        let sensors = file.sensors.iter();
+        let delays = file
+            .actuators
+            .iter()
+            .filter(|a| a.effect_name() == Some("input_delay"));
+        let mut lines: Vec<&ast::SignalEffect> = sensors.chain(delays).collect();
+        lines.sort_by_key(|l| l.span.start);
+        lines
+            .into_iter()
+            .map(|line| {
+                let what = if line.kind == effects::EffectKind::Sensor {
+                    "measurement effect"
+                } else {
+                    "input delay"
+                };
+                Diagnostic::warning(
+                    "plantc::effect_ignored",
+                    format!("{consumer} ignores this {what}"),
+                    line.span,
+                    "not part of the plant equations",
+                )
+                .with_help(
+                    "sensor offsets and input delays are honoured when comparing with measurements (compare, fit, diagnose); simulation, linearization and generated code describe the plant itself",
+                )
+            })
+            .collect()
+    }
+}
+
 /// Why a model could not be loaded.
 #[derive(Clone, Debug)]
 pub enum LoadError {
