@@ -259,13 +259,27 @@ fn pendulum_sensitivities_to_offset_input_offset_and_delay() {
     );
 }
 
+/// The checker refuses a negative delay in the file; a fit or a caller can
+/// still pass one in the parameter vector: an error, not a panic.
 #[test]
 fn negative_delay_is_an_error() {
-    let m = pendulum_with("parameter Td = -0.001 [s]\nactuator Vm = input_delay(Td)\n");
+    assert!(load_model_text(
+        "neg.plant",
+        &(pendulum_text() + "\nparameter Td = -0.001 [s]\nactuator Vm = input_delay(Td)\n")
+    )
+    .is_err());
+    let m = pendulum_with("parameter Td = 0.001 [s]\nactuator Vm = input_delay(Td)\n");
+    let mut base: Vec<f64> = m.parameters.iter().map(|p| p.value).collect();
+    let i = m
+        .parameters
+        .iter()
+        .position(|p| p.name == "Td")
+        .expect("Td");
+    base[i] = -0.001;
     let sig = driven_signals();
     let r = Simulator::new(&m, SimOptions::default())
         .expect("compiles")
-        .simulate(&sig, &nominal(&m), sig.len());
+        .simulate(&sig, &ParameterValues::from_base(&m, base).full, sig.len());
     match r {
         Err(e @ SimError::BadDelay { .. }) => {
             assert!(e.to_string().contains("`Vm`"), "{e}")

@@ -1223,6 +1223,20 @@ impl Checker {
                     diag = diag.with_label(t.span, format!("`{}` is {expected}", t.name));
                 }
                 self.diags.push(diag);
+            } else if *unit == ArgUnit::Time {
+                if let Some(v) = eval_si(a, &self.syms).filter(|v| v.is_nan() || *v < 0.0) {
+                    self.diags.push(
+                        Diagnostic::error(
+                            "plantc::negative_delay",
+                            format!("the delay of `{}` is negative", t.name),
+                            a.span,
+                            format!("= {} s", fmt_num(v)),
+                        )
+                        .with_help(
+                            "a delay is a time >= 0 s by which the plant receives the input late",
+                        ),
+                    );
+                }
             }
         }
     }
