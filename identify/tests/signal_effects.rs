@@ -339,3 +339,77 @@ fn effect_candidates_on_sensors_and_inputs() {
         other => panic!("{other:?}"),
     }
 }
+
+/// Noise-free data from the pendulum with hidden offset, input offset and
+/// delay; a fit of the three from other starts recovers the true values
+/// (the data are the model's own simulation, so the optimum is exact).
+#[test]
+fn fit_recovers_hidden_offsets_and_delay() {
+    use plantc_identify::data::{Channel, Experiment};
+    use plantc_identify::{fit, FitOptions};
+    let lines = |d: &str, v0: &str, td: &str, est: bool| {
+        let e = |b: &str| {
+            if est {
+                format!(" estimate {b}")
+            } else {
+                String::new()
+            }
+        };
+        format!(
+            "parameter d_alpha = {d} [rad]{}\nparameter V0_Vm = {v0} [V]{}\n\
+             parameter Td_Vm = {td} [s]{}\nsensor alpha = sensor_offset(d_alpha)\n\
+             actuator Vm = input_offset(V0_Vm)\nactuator Vm = input_delay(Td_Vm)\n",
+            e("[-0.2, 0.2]"),
+            e("[-1, 1]"),
+            e("[0, 0.05]")
+        )
+    };
+    let truth = pendulum_with(&lines("0.03", "0.15", "0.0042", false));
+    let sig = driven_signals();
+    let q = simulate(&truth, &sig);
+    let exp = Experiment {
+        name: "hidden".into(),
+        file: "hidden.csv".into(),
+        t: sig.t.clone(),
+        channels: vec![
+            Channel {
+                name: "theta".into(),
+                unit_note: None,
+                values: q[0].clone(),
+            },
+            Channel {
+                name: "alpha".into(),
+                unit_note: None,
+                values: q[1].clone(),
+            },
+            Channel {
+                name: "Vm".into(),
+                unit_note: None,
+                values: sig.u[0].clone(),
+            },
+        ],
+    };
+    let m = pendulum_with(&lines("0", "0", "0.001", true));
+    let free: Vec<String> = ["d_alpha", "V0_Vm", "Td_Vm"].map(String::from).to_vec();
+    let opts = FitOptions {
+        free: Some(free),
+        ..FitOptions::default()
+    };
+    let r = fit(&m, &[exp], &opts).expect("fits");
+    for (name, want) in [("d_alpha", 0.03), ("V0_Vm", 0.15), ("Td_Vm", 0.0042)] {
+        let e = r
+            .parameters
+            .iter()
+            .find(|e| e.name == name)
+            .expect("estimate");
+        eprintln!(
+            "{name}: {:.6e} (true {want:e}), after rmse {:.2e}",
+            e.value, r.after_rmse
+        );
+        assert!(
+            (e.value - want).abs() < 1e-4 * want.abs().max(1e-3),
+            "{name}: {}",
+            e.value
+        );
+    }
+}
