@@ -406,10 +406,6 @@ fn fit_recovers_hidden_offsets_and_delay() {
             "{name}: {:.6e} (true {want:e}), after rmse {:.2e}",
             e.value, r.after_rmse
         );
-        assert!(
-            (e.value - want).abs() < 1e-4 * want.abs().max(1e-3),
-            "{name}: {}",
-            e.value
-        );
+        assert!((e.value - want).abs() < 1e-8 * want, "{name}: {}", e.value);
     }
 }
