@@ -2,10 +2,12 @@
 //! (candidates, `--apply`) and `synth` (hidden effects in generated data).
 //!
 //! An [`EffectInstance`] is one effect of the language's effect table on one
-//! target (a coordinate for force effects), with its new parameters named
-//! `<base>_<target>` (e.g. `Fc_alpha`). [`EffectInstance::apply`] edits the
+//! target (a coordinate for force and sensor effects, an input for actuator
+//! effects), with its new parameters named `<base>_<target>` (e.g.
+//! `Fc_alpha`, `d_alpha`, `Td_Vm`). [`EffectInstance::apply`] edits the
 //! model text losslessly (`lang::edit`): it appends the parameter
-//! declarations and the effect call, and touches nothing else.
+//! declarations and the effect call (a force term, or a `sensor`/`actuator`
+//! line), and touches nothing else.
 //!
 //! The parameter templates (units, start values, bounds) live in
 //! [`templates`]; an effect without a template cannot be instantiated.
@@ -20,17 +22,35 @@ use plantc_derive::model::{CoordinateKind, Model};
 pub enum EffectKind {
     /// A generalised force on a coordinate (`force q = ... + effect(..)`).
     Force,
+    /// A measurement effect on a coordinate (`sensor q = effect(..)`).
+    Sensor,
+    /// An effect on an input (`actuator u = effect(..)`).
+    Actuator,
 }
 
-/// One parameter of an effect: base name, units, start value and bounds.
+/// The unit of an effect parameter.
+#[derive(Copy, Clone, Debug, PartialEq, Eq)]
+pub enum TemplateUnit {
+    /// Depends on the target coordinate's kind.
+    Coordinate {
+        /// Unit when the target is an angle coordinate.
+        angle: &'static str,
+        /// Unit when the target is a length coordinate.
+        length: &'static str,
+    },
+    /// The target input's own unit (start value and bounds in that unit).
+    Input,
+    /// A fixed unit.
+    Fixed(&'static str),
+}
+
+/// One parameter of an effect: base name, unit, start value and bounds.
 #[derive(Copy, Clone, Debug, PartialEq)]
 pub struct ParamTemplate {
     /// Base name; the model parameter is `<base>_<target>`.
     pub base: &'static str,
-    /// Unit when the target is an angle coordinate.
-    pub unit_angle: &'static str,
-    /// Unit when the target is a length coordinate.
-    pub unit_length: &'static str,
+    /// Its unit.
+    pub unit: TemplateUnit,
     /// Start value of a fit (in the unit above).
     pub start: f64,
     /// Lower bound of the `estimate` box.
@@ -49,8 +69,26 @@ const fn pt(
 ) -> ParamTemplate {
     ParamTemplate {
         base,
-        unit_angle,
-        unit_length,
+        unit: TemplateUnit::Coordinate {
+            angle: unit_angle,
+            length: unit_length,
+        },
+        start,
+        lo,
+        hi,
+    }
+}
+
+const fn pt_unit(
+    base: &'static str,
+    unit: TemplateUnit,
+    start: f64,
+    lo: f64,
+    hi: f64,
+) -> ParamTemplate {
+    ParamTemplate {
+        base,
+        unit,
         start,
         lo,
         hi,
@@ -89,6 +127,23 @@ pub const TEMPLATES: &[(&str, EffectKind, &[ParamTemplate])] = &[
         EffectKind::Force,
         &[pt("k", "N*m/rad", "N/m", 1e-3, 0.0, 1.0)],
     ),
+    (
+        // an encoder offset is small but may have either sign
+        "sensor_offset",
+        EffectKind::Sensor,
+        &[pt("d", "rad", "m", 0.0, -0.2, 0.2)],
+    ),
+    (
+        "input_offset",
+        EffectKind::Actuator,
+        &[pt_unit("V0", TemplateUnit::Input, 0.0, -1.0, 1.0)],
+    ),
+    (
+        // a start above 0 so the first sensitivity is not at the box edge
+        "input_delay",
+        EffectKind::Actuator,
+        &[pt_unit("Td", TemplateUnit::Fixed("s"), 1e-3, 0.0, 0.05)],
+    ),
 ];
 
 /// Kind and parameter templates of an effect, if it has templates.
@@ -109,7 +164,8 @@ pub enum EffectEditError {
         /// Effects that do exist.
         known: Vec<String>,
     },
-    /// The target is not a coordinate (force effects) of the model.
+    /// The target is not a coordinate (force and sensor effects) or an input
+    /// (actuator effects) of the model.
     UnknownTarget {
         /// The effect.
         effect: String,
@@ -203,7 +259,8 @@ pub struct EffectInstance {
     pub effect: String,
     /// Kind of the effect.
     pub kind: EffectKind,
-    /// Target: a coordinate for force effects.
+    /// Target: a coordinate for force and sensor effects, an input for
+    /// actuator effects.
     pub target: String,
     /// New parameters, in the effect's call order.
     pub parameters: Vec<NewParameter>,
@@ -241,15 +298,29 @@ impl EffectInstance {
                 known: TEMPLATES.iter().map(|(n, _, _)| n.to_string()).collect(),
             });
         };
-        let coordinate_kind = match kind {
-            EffectKind::Force => match model.coordinates.iter().find(|c| c.name == target) {
-                Some(c) => c.kind,
+        let unknown_target = |valid: Vec<String>| EffectEditError::UnknownTarget {
+            effect: effect.to_string(),
+            target: target.to_string(),
+            valid,
+        };
+        // (coordinate kind, input unit) of the target
+        let (coordinate_kind, input_unit) = match kind {
+            EffectKind::Force | EffectKind::Sensor => {
+                match model.coordinates.iter().find(|c| c.name == target) {
+                    Some(c) => (Some(c.kind), None),
+                    None => {
+                        return Err(unknown_target(
+                            model.coordinates.iter().map(|c| c.name.clone()).collect(),
+                        ))
+                    }
+                }
+            }
+            EffectKind::Actuator => match model.inputs.iter().find(|i| i.name == target) {
+                Some(i) => (None, Some(i.unit.clone())),
                 None => {
-                    return Err(EffectEditError::UnknownTarget {
-                        effect: effect.to_string(),
-                        target: target.to_string(),
-                        valid: model.coordinates.iter().map(|c| c.name.clone()).collect(),
-                    })
+                    return Err(unknown_target(
+                        model.inputs.iter().map(|i| i.name.clone()).collect(),
+                    ))
                 }
             },
         };
@@ -277,14 +348,21 @@ impl EffectInstance {
                 .find(|(n, _)| n == t.base)
                 .map(|(_, v)| *v)
                 .unwrap_or(t.start);
-            let unit = match coordinate_kind {
-                CoordinateKind::Angle => t.unit_angle,
-                CoordinateKind::Length => t.unit_length,
+            let unit = match (t.unit, coordinate_kind) {
+                (TemplateUnit::Coordinate { length, .. }, Some(CoordinateKind::Length)) => {
+                    length.to_string()
+                }
+                (TemplateUnit::Coordinate { angle, .. }, _) => angle.to_string(),
+                (TemplateUnit::Fixed(u), _) => u.to_string(),
+                (TemplateUnit::Input, _) => match input_unit.as_deref() {
+                    Some(u) if !u.trim().is_empty() => u.to_string(),
+                    _ => "1".to_string(),
+                },
             };
             parameters.push(NewParameter {
                 base: t.base.to_string(),
                 name,
-                unit: unit.to_string(),
+                unit,
                 value,
                 estimate: estimate.then_some((t.lo, t.hi)),
             });
@@ -329,7 +407,8 @@ impl EffectInstance {
 
     /// The text a user adds to the model file by hand: the parameter lines
     /// and the line that holds the effect (for force effects, the term to
-    /// append to the `force <target> = ...` line).
+    /// append to the `force <target> = ...` line; for the others, the whole
+    /// `sensor`/`actuator` line).
     pub fn snippet(&self) -> String {
         let mut s = String::new();
         for p in &self.parameters {
@@ -339,6 +418,12 @@ impl EffectInstance {
         match self.kind {
             EffectKind::Force => {
                 s.push_str(&format!("force {} = ... + {}\n", self.target, self.call()))
+            }
+            EffectKind::Sensor => {
+                s.push_str(&format!("sensor {} = {}\n", self.target, self.call()))
+            }
+            EffectKind::Actuator => {
+                s.push_str(&format!("actuator {} = {}\n", self.target, self.call()))
             }
         }
         s
@@ -354,18 +439,36 @@ impl EffectInstance {
         }
         match self.kind {
             EffectKind::Force => edit::add_force_term(&t, &self.target, &self.call()).map_err(err),
+            EffectKind::Sensor => {
+                edit::add_sensor_effect(&t, &self.target, &self.call()).map_err(err)
+            }
+            EffectKind::Actuator => {
+                edit::add_actuator_effect(&t, &self.target, &self.call()).map_err(err)
+            }
         }
     }
 }
 
 /// Every template effect on every valid target of `model`, as fit
-/// candidates (see [`EffectInstance::candidate`]), in table order per target.
+/// candidates (see [`EffectInstance::candidate`]): for each coordinate the
+/// force and sensor effects in table order, then for each input the actuator
+/// effects in table order.
 pub fn all_candidates(model: &Model) -> Vec<EffectInstance> {
     let mut v = Vec::new();
-    for c in &model.coordinates {
+    let targets = model
+        .coordinates
+        .iter()
+        .map(|c| (&c.name, [EffectKind::Force, EffectKind::Sensor]))
+        .chain(
+            model
+                .inputs
+                .iter()
+                .map(|i| (&i.name, [EffectKind::Actuator, EffectKind::Actuator])),
+        );
+    for (target, kinds) in targets {
         for (name, kind, _) in TEMPLATES {
-            if *kind == EffectKind::Force {
-                if let Ok(e) = EffectInstance::candidate(model, name, &c.name) {
+            if kinds.contains(kind) {
+                if let Ok(e) = EffectInstance::candidate(model, name, target) {
                     v.push(e);
                 }
             }

@@ -12,6 +12,18 @@
 //! right-hand side without input; `M a = r0 + B u` is solved by a small LU
 //! with partial pivoting in preallocated buffers (no allocation per step).
 //!
+//! Sensor and actuator effects of the model are honoured here (the plant
+//! equations cannot hold them; see `plantc_derive::model::Model`):
+//! - `sensor q = sensor_offset(d)`: the simulated measurement is `q + d`, and
+//!   the true initial coordinate is the measured one minus `d`;
+//! - `actuator u = input_delay(Td)` (`Td >= 0`): the held input `u[k]` acts
+//!   over `[t_k + Td, t_{k+1} + Td)`; before `t_0 + Td` the plant receives
+//!   `u[0]` (the input before the experiment is taken as its first sample,
+//!   i.e. the rig was holding it). The RK4 substeps are split at the switch
+//!   instants, so no step straddles an input change; a switch within 1e-9 of
+//!   a sample interval of a sample instant is taken at that instant.
+//! - `input_offset` is already folded into the model's forces.
+//!
 //! Dry friction `sign(q')` is replaced by `tanh(q'/w)` (default `w = 1e-3`
 //! rad/s, see [`SimOptions::dry_friction_width`]): RK4 cannot integrate a
 //! discontinuous force, and the identification notes measured that a softer
@@ -22,7 +34,7 @@ use std::fmt;
 
 use plantc_derive::mechanics::{derive_equations, flat_outputs, small_lu, smooth_signs, Equations};
 use plantc_derive::model::Model;
-use plantc_derive::sym::{Expr, Symbol, Tape};
+use plantc_derive::sym::{diff, Expr, Symbol, Tape};
 
 use crate::data::Experiment;
 
@@ -98,6 +110,13 @@ pub enum SimError {
     },
     /// An option is out of range.
     BadOption(String),
+    /// An input delay evaluated to a negative or non-finite value.
+    BadDelay {
+        /// The input.
+        input: String,
+        /// The delay in s.
+        value: f64,
+    },
     /// The state became non-finite or the mass matrix singular.
     Diverged {
         /// Experiment name.
@@ -131,6 +150,10 @@ impl fmt::Display for SimError {
                 write!(f, "the model has no parameter `{name}`")
             }
             SimError::BadOption(m) => write!(f, "bad simulation option: {m}"),
+            SimError::BadDelay { input, value } => write!(
+                f,
+                "the delay of input `{input}` must be a finite value >= 0 s, got {value} s"
+            ),
             SimError::Diverged { experiment, time } => write!(
                 f,
                 "simulation of `{experiment}` diverged (non-finite state or singular mass matrix) at t = {time} s"
@@ -250,12 +273,13 @@ pub(crate) fn lu_factor(a: &mut [f64], n: usize, piv: &mut [usize]) -> bool {
 
 pub(crate) use small_lu::lu_solve;
 
-/// Initial state `(q(t0), q'(t0))` from the data.
-pub(crate) fn initial_state(sig: &Signals, how: InitialVelocity) -> Vec<f64> {
+/// Initial state `(q(t0) - d, q'(t0))` from the data, with `offsets` the
+/// sensor offsets `d` (the sensors read `q + d`).
+pub(crate) fn initial_state(sig: &Signals, how: InitialVelocity, offsets: &[f64]) -> Vec<f64> {
     let n = sig.q.len();
     let mut x = vec![0.0; 2 * n];
     for i in 0..n {
-        x[i] = sig.q[i][0];
+        x[i] = sig.q[i][0] - offsets.get(i).copied().unwrap_or(0.0);
         if let InitialVelocity::Estimate { samples } = how {
             let k = samples.clamp(2, sig.len());
             let t0 = sig.t[0];
@@ -277,72 +301,246 @@ pub(crate) fn initial_state(sig: &Signals, how: InitialVelocity) -> Vec<f64> {
     x
 }
 
-/// RK4 over the sample intervals with zero-order-hold input. `rhs(z, u, dz)`
-/// returns false when the dynamics cannot be evaluated (singular mass matrix).
-/// `record(k, z)` is called at every sample instant `k < n_samples`.
+/// Called at an input switch taken at a sample instant, with the input
+/// index `j`, the state derivative before (`f_old`) and after (`f_new`) the
+/// switch, and the state (to update sensitivities).
+pub(crate) type OnSwitch<'a> = &'a mut dyn FnMut(usize, &[f64], &[f64], &mut [f64]);
+
+/// One integration segment: an interval between consecutive boundaries
+/// (sample instants and switch instants of delayed inputs) over which the
+/// input is constant.
+#[derive(Copy, Clone, Debug, PartialEq)]
+pub(crate) struct Segment {
+    /// Length in s.
+    pub(crate) len: f64,
+    /// The input whose delayed switch starts the segment (None: a sample
+    /// instant, which does not move with the delays).
+    pub(crate) start: Option<usize>,
+    /// The input whose delayed switch ends the segment (None: a sample
+    /// instant).
+    pub(crate) end: Option<usize>,
+}
+
+/// RK4 over the sample intervals with zero-order-hold input, each input `j`
+/// delayed by `delays[j] >= 0` s (see the module docs). `rhs(z, u, segment,
+/// dz)` returns false when the dynamics cannot be evaluated (singular mass
+/// matrix). `record(k, z)` is called at every sample instant `k <
+/// n_samples`. A switch that falls on a sample instant (within `1e-9 dt`)
+/// is taken there and reported to `on_switch` (with the state derivatives
+/// before and after it) when its value changes; a switch inside a sample
+/// interval ends a segment instead. Buffers are allocated once per call,
+/// none per step.
+#[allow(clippy::too_many_arguments)]
 pub(crate) fn integrate(
     sig: &Signals,
     n_samples: usize,
     substep: f64,
     z: &mut [f64],
-    mut rhs: impl FnMut(&[f64], &[f64], &mut [f64]) -> bool,
+    delays: &[f64],
+    mut rhs: impl FnMut(&[f64], &[f64], &Segment, &mut [f64]) -> bool,
+    mut on_switch: Option<OnSwitch<'_>>,
     mut record: impl FnMut(usize, &[f64]),
 ) -> Result<(), SimError> {
     let dim = z.len();
     let m = sig.u.len();
     let mut u = vec![0.0; m];
+    let mut u_new = vec![0.0; m];
     let mut k1 = vec![0.0; dim];
     let mut k2 = vec![0.0; dim];
     let mut k3 = vec![0.0; dim];
     let mut k4 = vec![0.0; dim];
     let mut tmp = vec![0.0; dim];
     let n_samples = n_samples.min(sig.len());
+    // idx[j]: the sample whose value input j currently holds
+    let mut idx = vec![0usize; m];
+    for (j, uj) in u.iter_mut().enumerate() {
+        *uj = sig.u[j][0];
+    }
+    let delay = |j: usize| delays.get(j).copied().unwrap_or(0.0);
     for k in 0..n_samples {
         record(k, z);
         if k + 1 == n_samples {
             break;
         }
-        for (j, uj) in u.iter_mut().enumerate() {
-            *uj = sig.u[j][k];
-        }
-        let dt = sig.t[k + 1] - sig.t[k];
-        let steps = ((dt / substep) - 1e-9).ceil().max(1.0) as usize;
-        let h = dt / steps as f64;
-        let diverged = || SimError::Diverged {
-            experiment: sig.name.clone(),
-            time: sig.t[k],
-        };
-        for _ in 0..steps {
-            if !rhs(z, &u, &mut k1) {
+        let (t_end, dt) = (sig.t[k + 1], sig.t[k + 1] - sig.t[k]);
+        let tol = 1e-9 * dt;
+        let mut a = sig.t[k];
+        let mut a_input: Option<usize> = None;
+        loop {
+            let diverged = || SimError::Diverged {
+                experiment: sig.name.clone(),
+                time: a,
+            };
+            // switches due at `a`; the one that ends the previous segment is
+            // a segment boundary, the others are taken as jumps
+            let mut seg = Segment {
+                len: 0.0,
+                start: a_input,
+                end: None,
+            };
+            for j in 0..m {
+                let mut boundary = a_input == Some(j);
+                while idx[j] + 1 < n_samples && sig.t[idx[j] + 1] + delay(j) <= a + tol {
+                    idx[j] += 1;
+                    let new = sig.u[j][idx[j]];
+                    if boundary {
+                        boundary = false;
+                    } else if let Some(cb) = on_switch.as_mut() {
+                        if new != u[j] {
+                            u_new.copy_from_slice(&u);
+                            u_new[j] = new;
+                            if !rhs(z, &u, &seg, &mut k1) || !rhs(z, &u_new, &seg, &mut k2) {
+                                return Err(diverged());
+                            }
+                            cb(j, &k1, &k2, z);
+                        }
+                    }
+                    u[j] = new;
+                }
+            }
+            // the next switch inside the interval ends the segment
+            let mut b = t_end;
+            for (j, &held) in idx.iter().enumerate() {
+                if held + 1 < n_samples {
+                    let s = sig.t[held + 1] + delay(j);
+                    if s < b - tol {
+                        b = s;
+                        seg.end = Some(j);
+                    }
+                }
+            }
+            seg.len = b - a;
+            let steps = ((seg.len / substep) - 1e-9).ceil().max(1.0) as usize;
+            let h = seg.len / steps as f64;
+            for _ in 0..steps {
+                if !rhs(z, &u, &seg, &mut k1) {
+                    return Err(diverged());
+                }
+                for i in 0..dim {
+                    tmp[i] = z[i] + 0.5 * h * k1[i];
+                }
+                if !rhs(&tmp, &u, &seg, &mut k2) {
+                    return Err(diverged());
+                }
+                for i in 0..dim {
+                    tmp[i] = z[i] + 0.5 * h * k2[i];
+                }
+                if !rhs(&tmp, &u, &seg, &mut k3) {
+                    return Err(diverged());
+                }
+                for i in 0..dim {
+                    tmp[i] = z[i] + h * k3[i];
+                }
+                if !rhs(&tmp, &u, &seg, &mut k4) {
+                    return Err(diverged());
+                }
+                for i in 0..dim {
+                    z[i] += h / 6.0 * (k1[i] + 2.0 * k2[i] + 2.0 * k3[i] + k4[i]);
+                }
+            }
+            if z.iter().any(|v| !v.is_finite()) {
                 return Err(diverged());
             }
-            for i in 0..dim {
-                tmp[i] = z[i] + 0.5 * h * k1[i];
+            if seg.end.is_none() {
+                break;
             }
-            if !rhs(&tmp, &u, &mut k2) {
-                return Err(diverged());
-            }
-            for i in 0..dim {
-                tmp[i] = z[i] + 0.5 * h * k2[i];
-            }
-            if !rhs(&tmp, &u, &mut k3) {
-                return Err(diverged());
-            }
-            for i in 0..dim {
-                tmp[i] = z[i] + h * k3[i];
-            }
-            if !rhs(&tmp, &u, &mut k4) {
-                return Err(diverged());
-            }
-            for i in 0..dim {
-                z[i] += h / 6.0 * (k1[i] + 2.0 * k2[i] + 2.0 * k3[i] + k4[i]);
-            }
-        }
-        if z.iter().any(|v| !v.is_finite()) {
-            return Err(diverged());
+            a = b;
+            a_input = seg.end;
         }
     }
     Ok(())
+}
+
+/// Sensor offsets and input delays of a model, compiled over the full
+/// parameter vector, with their derivatives along free base parameters.
+/// Outputs: offsets (one per coordinate), delays (one per input), then per
+/// free parameter the derivatives of the offsets and of the delays.
+#[derive(Clone, Debug)]
+pub(crate) struct SignalEffects {
+    tape: Tape,
+    n: usize,
+    m: usize,
+    p: usize,
+    inputs: Vec<String>,
+    /// True if some delay depends on some free parameter.
+    pub(crate) delay_depends_on_free: bool,
+}
+
+/// Evaluated [`SignalEffects`].
+pub(crate) struct SignalValues {
+    /// Sensor offset per coordinate (SI).
+    pub(crate) offsets: Vec<f64>,
+    /// Delay per input in s.
+    pub(crate) delays: Vec<f64>,
+    /// `d offset_i / d theta_j` at `[j * n + i]`.
+    pub(crate) d_offsets: Vec<f64>,
+    /// `d delay_l / d theta_j` at `[j * m + l]`.
+    pub(crate) d_delays: Vec<f64>,
+}
+
+impl SignalEffects {
+    /// Compile for `model` with derivatives along the base parameters `free`
+    /// (indices into `model.parameters`).
+    pub(crate) fn new(model: &Model, free: &[usize]) -> Result<SignalEffects, SimError> {
+        let n = model.coordinates.len();
+        let m = model.inputs.len();
+        let values: Vec<Expr> = (0..n)
+            .map(|i| model.sensor_offset(i))
+            .chain((0..m).map(|j| model.input_delay(j)))
+            .collect();
+        let expanded: Vec<Expr> = values.iter().map(|e| model.expand_derived(*e)).collect();
+        let mut outs = values;
+        let mut delay_depends_on_free = false;
+        for &i in free {
+            let p = model.parameters[i].symbol;
+            for (k, e) in expanded.iter().enumerate() {
+                let d = diff(*e, p);
+                if k >= n && !d.is_zero() {
+                    delay_depends_on_free = true;
+                }
+                outs.push(d);
+            }
+        }
+        let tape = Tape::compile(&outs, &model.parameter_symbols())
+            .map_err(|e| SimError::Tape(e.to_string()))?;
+        Ok(SignalEffects {
+            tape,
+            n,
+            m,
+            p: free.len(),
+            inputs: model.inputs.iter().map(|i| i.name.clone()).collect(),
+            delay_depends_on_free,
+        })
+    }
+
+    /// Evaluate at the full parameter vector; a negative or non-finite
+    /// delay is an error.
+    pub(crate) fn eval(&self, params: &[f64]) -> Result<SignalValues, SimError> {
+        let out = self.tape.eval_vec(params);
+        let (n, m, p) = (self.n, self.m, self.p);
+        let delays = out[n..n + m].to_vec();
+        for (j, &d) in delays.iter().enumerate() {
+            if !(d >= 0.0 && d.is_finite()) {
+                return Err(SimError::BadDelay {
+                    input: self.inputs[j].clone(),
+                    value: d,
+                });
+            }
+        }
+        let mut d_offsets = Vec::with_capacity(n * p);
+        let mut d_delays = Vec::with_capacity(m * p);
+        for j in 0..p {
+            let blk = &out[(n + m) * (j + 1)..(n + m) * (j + 2)];
+            d_offsets.extend_from_slice(&blk[..n]);
+            d_delays.extend_from_slice(&blk[n..]);
+        }
+        Ok(SignalValues {
+            offsets: out[..n].to_vec(),
+            delays,
+            d_offsets,
+            d_delays,
+        })
+    }
 }
 
 /// The substep for an experiment under `opts`.
@@ -363,6 +561,7 @@ pub struct Simulator {
     m: usize,
     n_params: usize,
     tape: Tape,
+    signals: SignalEffects,
     opts: SimOptions,
 }
 
@@ -384,6 +583,7 @@ impl Simulator {
             m: model.inputs.len(),
             n_params: model.parameter_symbols().len(),
             tape,
+            signals: SignalEffects::new(model, &[])?,
             opts,
         })
     }
@@ -424,7 +624,7 @@ impl Simulator {
         let mut piv = vec![0; n];
         let mut acc = vec![0.0; n];
         let mut tmp = vec![0.0; n];
-        let rhs = |x: &[f64], u: &[f64], dx: &mut [f64]| {
+        let rhs = |x: &[f64], u: &[f64], _: &Segment, dx: &mut [f64]| {
             tin[..2 * n].copy_from_slice(x);
             tin[2 * n..2 * n + m].copy_from_slice(u);
             self.tape.eval(&tin, &mut out, &mut scratch);
@@ -445,13 +645,25 @@ impl Simulator {
             dx[n..2 * n].copy_from_slice(&acc);
             true
         };
+        let effects = self.signals.eval(params)?;
+        let offsets = &effects.offsets;
         let mut q = vec![vec![0.0; n_samples]; n];
-        let mut z = initial_state(sig, self.opts.initial_velocity);
-        integrate(sig, n_samples, h, &mut z, rhs, |k, z| {
+        let mut z = initial_state(sig, self.opts.initial_velocity, offsets);
+        let record = |k: usize, z: &[f64]| {
             for (i, qi) in q.iter_mut().enumerate() {
-                qi[k] = z[i];
+                qi[k] = z[i] + offsets[i];
             }
-        })?;
+        };
+        integrate(
+            sig,
+            n_samples,
+            h,
+            &mut z,
+            &effects.delays,
+            rhs,
+            None,
+            record,
+        )?;
         Ok(Trajectory { q })
     }
 }

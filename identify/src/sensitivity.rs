@@ -8,11 +8,29 @@
 //! da/dz = M^-1 (dr0/dz + dB/dz u - dM/dz a)
 //! ```
 //!
-//! and the variational equations `S' = (df/dx) S + df/dtheta`, `S(0) = 0`
-//! (the initial state is measured, so it does not depend on `theta`) are
-//! integrated alongside the state with the same RK4 and zero-order hold as
+//! and the variational equations `S' = (df/dx) S + df/dtheta` are integrated
+//! alongside the state with the same RK4 and zero-order hold as
 //! [`crate::experiment_sim::Simulator`], so the sensitivities are the exact
 //! derivatives of the discrete simulation up to rounding.
+//!
+//! Sensor and actuator effects:
+//! - a sensor offset `d(theta)` on coordinate `i`: the initial state is the
+//!   measured `q_i(t0) - d`, so `S(0)` is `-dd/dtheta` on that coordinate
+//!   (zero elsewhere: the rest of the initial state is measured), and the
+//!   measurement `q_i + d` adds `+dd/dtheta` to the output sensitivity;
+//! - an input delay `Td(theta)`: for the exact solution, at each switch of
+//!   the delayed input from `u_old` to `u_new` at `s = t_k + Td`, moving the
+//!   switch later by `dTd` keeps `u_old` acting for `dTd` longer, so `S`
+//!   jumps by `(f(x(s), u_old) - f(x(s), u_new)) dTd/dtheta`. The simulation
+//!   ends an RK4 segment at each switch inside a sample interval, so its
+//!   substep lengths move with `Td`; to stay the exact derivative of the
+//!   discrete simulation, each segment `[a, b]` is integrated in the scaled
+//!   time `tau = (t - a)/(b - a)` (identical RK4 steps), whose variational
+//!   equation gains the term `f (db/dtheta - da/dtheta)/(b - a)`. Summed over
+//!   the segments around a switch this is the jump above as the substep goes
+//!   to zero. A switch that falls on a sample instant is not a moving
+//!   boundary: there the jump is applied as such;
+//! - an input offset is a parameter of the folded forces like any other.
 //!
 //! The partial derivatives are symbolic: derived quantities (`let`) are
 //! expanded into base parameters before differentiating with respect to a
@@ -24,7 +42,7 @@ use plantc_derive::sym::{diff, Expr, Tape};
 
 use crate::experiment_sim::{
     dynamics_outputs, initial_state, integrate, lu_factor, lu_solve, substep_for, tape_inputs,
-    Signals, SimError, SimOptions,
+    OnSwitch, Segment, SignalEffects, Signals, SimError, SimOptions,
 };
 
 /// Simulated coordinates and their sensitivities at the sample instants.
@@ -46,6 +64,7 @@ pub struct SensitivitySimulator {
     free: Vec<usize>,
     names: Vec<String>,
     tape: Tape,
+    signals: SignalEffects,
     opts: SimOptions,
 }
 
@@ -98,6 +117,7 @@ impl SensitivitySimulator {
         }
         let tape =
             Tape::compile(&outs, &tape_inputs(model)).map_err(|e| SimError::Tape(e.to_string()))?;
+        let signals = SignalEffects::new(model, &idx)?;
         Ok(SensitivitySimulator {
             n: model.coordinates.len(),
             m: model.inputs.len(),
@@ -105,6 +125,7 @@ impl SensitivitySimulator {
             free: idx,
             names: free.to_vec(),
             tape,
+            signals,
             opts,
         })
     }
@@ -140,6 +161,7 @@ impl SensitivitySimulator {
             )));
         }
         let h = substep_for(sig, &self.opts)?;
+        let effects = self.signals.eval(params)?;
         let (n, m, p) = (self.n, self.m, self.free.len());
         let nx = 2 * n;
         let bs = n * n + n + n * m;
@@ -155,7 +177,8 @@ impl SensitivitySimulator {
         let mut tmp = vec![0.0; n];
         // jd[d * n + i] = d a_i / d z_d, z = (state, free parameters)
         let mut jd = vec![0.0; (nx + p) * n];
-        let rhs = |z: &[f64], u: &[f64], dz: &mut [f64]| {
+        let d_delay = &effects.d_delays;
+        let rhs = |z: &[f64], u: &[f64], seg: &Segment, dz: &mut [f64]| {
             tin[..nx].copy_from_slice(&z[..nx]);
             tin[nx..nx + m].copy_from_slice(u);
             self.tape.eval(&tin, &mut out, &mut scratch);
@@ -204,20 +227,66 @@ impl SensitivitySimulator {
                     ds[(n + i) * p + j] = v;
                 }
             }
-            true
-        };
-        let mut z = initial_state(sig, self.opts.initial_velocity);
-        z.resize(nx + nx * p, 0.0);
-        let mut q = vec![vec![0.0; n_samples]; n];
-        let mut dq = vec![vec![vec![0.0; n_samples]; p]; n];
-        integrate(sig, n_samples, h, &mut z, rhs, |k, z| {
-            for i in 0..n {
-                q[i][k] = z[i];
+            // moving segment boundaries (delayed switches): f (b' - a') / L
+            if seg.start.is_some() || seg.end.is_some() {
                 for j in 0..p {
-                    dq[i][j][k] = z[nx + i * p + j];
+                    let rate = (seg.end.map_or(0.0, |l| d_delay[j * m + l])
+                        - seg.start.map_or(0.0, |l| d_delay[j * m + l]))
+                        / seg.len;
+                    if rate != 0.0 {
+                        for i in 0..n {
+                            ds[i * p + j] += z[n + i] * rate;
+                            ds[(n + i) * p + j] += acc[i] * rate;
+                        }
+                    }
                 }
             }
-        })?;
+            true
+        };
+        let (off, d_off) = (&effects.offsets, &effects.d_offsets);
+        let mut z = initial_state(sig, self.opts.initial_velocity, off);
+        z.resize(nx + nx * p, 0.0);
+        for i in 0..n {
+            for j in 0..p {
+                z[nx + i * p + j] = -d_off[j * n + i];
+            }
+        }
+        let mut q = vec![vec![0.0; n_samples]; n];
+        let mut dq = vec![vec![vec![0.0; n_samples]; p]; n];
+        let record = |k: usize, z: &[f64]| {
+            for i in 0..n {
+                q[i][k] = z[i] + off[i];
+                for j in 0..p {
+                    dq[i][j][k] = z[nx + i * p + j] + d_off[j * n + i];
+                }
+            }
+        };
+        // jump of S at a switch of input `l`: (f_old - f_new) dTd_l/dtheta
+        let mut jump = |l: usize, f_old: &[f64], f_new: &[f64], z: &mut [f64]| {
+            for i in 0..nx {
+                let df = f_old[i] - f_new[i];
+                if df != 0.0 {
+                    for j in 0..p {
+                        z[nx + i * p + j] += df * d_delay[j * m + l];
+                    }
+                }
+            }
+        };
+        let on_switch: Option<OnSwitch<'_>> = if self.signals.delay_depends_on_free {
+            Some(&mut jump)
+        } else {
+            None
+        };
+        integrate(
+            sig,
+            n_samples,
+            h,
+            &mut z,
+            &effects.delays,
+            rhs,
+            on_switch,
+            record,
+        )?;
         Ok(SensitivityTrajectory { q, dq })
     }
 }

@@ -22,7 +22,8 @@ fn every_candidate_edit_gives_a_valid_model() {
     let text = pendulum_text();
     let model = model_from_text("baseline", &text).expect("baseline checks");
     let cs = candidates(&model);
-    assert_eq!(cs.len(), 10);
+    // 5 force + 1 sensor effects on each of 2 coordinates, 2 actuator effects on Vm
+    assert_eq!(cs.len(), 14);
     for c in &cs {
         let edited = c.apply(&text).expect("edit applies");
         let m = model_from_text(&c.label(), &edited).expect("edited model checks");

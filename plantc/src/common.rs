@@ -50,6 +50,19 @@ pub fn load(path: &Path, err: &mut dyn Write) -> Result<LoadedModel, CliError> {
     Ok(loaded)
 }
 
+/// Print a warning for each sensor offset or input delay of the model, which
+/// `consumer` (a command working on the plant equations) ignores.
+pub fn warn_ignored_effects(loaded: &LoadedModel, consumer: &str, err: &mut dyn Write) {
+    let w = loaded.ignored_signal_effects(consumer);
+    if !w.is_empty() {
+        let _ = write!(
+            err,
+            "{}",
+            plantc_derive::lang::diagnostic::render(&loaded.source, &w)
+        );
+    }
+}
+
 /// Parse `--param NAME=VALUE` overrides.
 pub fn parse_overrides(params: &[String]) -> Result<Vec<(String, f64)>, CliError> {
     params

@@ -178,6 +178,54 @@ pub struct Force {
     pub span: Span,
 }
 
+/// `sensor q = sensor_offset(d)` or `actuator u = input_delay(Td)`: one
+/// measurement or input effect on a coordinate or an input. Several lines may
+/// target the same name; their effects compose.
+#[derive(Debug, Clone, PartialEq)]
+pub struct SignalEffect {
+    /// [`EffectKind::Sensor`](super::effects::EffectKind::Sensor) for a
+    /// `sensor` line, `Actuator` for an `actuator` line.
+    pub kind: super::effects::EffectKind,
+    /// The coordinate (sensor lines) or input (actuator lines).
+    pub target: Ident,
+    /// The effect call as written.
+    pub call: Expr,
+    /// Whole statement.
+    pub span: Span,
+}
+
+impl SignalEffect {
+    /// The effect's name, when the line holds a call.
+    pub fn effect_name(&self) -> Option<&str> {
+        match &self.call.kind {
+            ExprKind::Call(f, _) => Some(&f.name),
+            _ => None,
+        }
+    }
+
+    /// The effect's arguments (empty when the line holds no call).
+    pub fn args(&self) -> &[Expr] {
+        match &self.call.kind {
+            ExprKind::Call(_, a) => a,
+            _ => &[],
+        }
+    }
+}
+
+impl std::fmt::Display for SignalEffect {
+    /// The line in model-language text, e.g. `sensor alpha = sensor_offset(d)`
+    /// (arguments fully parenthesised).
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        write!(
+            f,
+            "{} {} = {}",
+            self.kind.keyword(),
+            self.target.name,
+            self.call
+        )
+    }
+}
+
 /// `name = expr` inside a `set`.
 #[derive(Debug, Clone, PartialEq)]
 pub struct SetEntry {
@@ -327,6 +375,10 @@ pub struct ModelFile {
     pub potential: Vec<Energy>,
     /// Generalised forces.
     pub forces: Vec<Force>,
+    /// `sensor` lines (measurement effects on coordinates).
+    pub sensors: Vec<SignalEffect>,
+    /// `actuator` lines (effects on inputs).
+    pub actuators: Vec<SignalEffect>,
     /// Parameter sets.
     pub sets: Vec<ParamSet>,
     /// Controllers.

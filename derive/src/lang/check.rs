@@ -3,7 +3,7 @@
 
 use super::ast::*;
 use super::diagnostic::{Diagnostic, Severity};
-use super::effects;
+use super::effects::{self, ArgUnit, EffectKind};
 use super::parser::parse;
 use super::span::Span;
 use super::units::{parse_unit, Dim, Ratio, Unit};
@@ -498,18 +498,33 @@ impl Infer<'_> {
 
     fn call(&mut self, e: &Expr, f: &Ident, args: &[Expr]) -> Option<Dim> {
         if let Some(eff) = effects::lookup(&f.name) {
-            let _ = eff;
+            let kw = eff.kind.keyword();
+            let help = match eff.kind {
+                EffectKind::Force => format!(
+                    "an effect is the force on the coordinate of its line, e.g. `force theta = tau + {}`",
+                    eff.signature()
+                ),
+                EffectKind::Sensor => format!(
+                    "a sensor effect is written on its own line, e.g. `sensor theta = {}`",
+                    eff.signature()
+                ),
+                EffectKind::Actuator => format!(
+                    "an actuator effect is written on its own line, e.g. `actuator Vm = {}`",
+                    eff.signature()
+                ),
+            };
             self.diags.push(
                 Diagnostic::error(
                     "plantc::effect_outside_force",
-                    format!("effect `{}` can only be used in a `force` line", f.name),
+                    format!(
+                        "effect `{}` can only be used in {} `{kw}` line",
+                        f.name,
+                        article(kw)
+                    ),
                     e.span,
-                    "not in a force line",
+                    format!("not in {} {kw} line", article(kw)),
                 )
-                .with_help(format!(
-                    "an effect is the force on the coordinate of its line, e.g. `force theta = tau + {}`",
-                    eff.signature()
-                )),
+                .with_help(help),
             );
             for a in args {
                 self.infer(a);
@@ -608,6 +623,81 @@ fn unit_error(u: &UnitExpr, err: super::units::UnitError) -> Diagnostic {
         "in this unit",
     )
     .with_help(err.help)
+}
+
+/// `a` or `an` before a word.
+fn article(word: &str) -> &'static str {
+    if word.starts_with(['a', 'e', 'i', 'o', 'u']) {
+        "an"
+    } else {
+        "a"
+    }
+}
+
+/// `a` -> `A`, `an` -> `An`.
+fn capital(article: &str) -> &'static str {
+    if article == "an" {
+        "An"
+    } else {
+        "A"
+    }
+}
+
+/// A number 0 standing in for an effect call that was reported as an error.
+fn zero_at(span: Span) -> Expr {
+    Expr::new(
+        ExprKind::Number(NumLit {
+            text: "0".into(),
+            span,
+        }),
+        span,
+    )
+}
+
+/// `effect` (of kind `is`) written in a line of kind `line`, on `target`.
+fn wrong_kind(
+    call: &Expr,
+    effect: &str,
+    is: EffectKind,
+    line: EffectKind,
+    target: &Ident,
+) -> Diagnostic {
+    let (is_kw, line_kw) = (is.keyword(), line.keyword());
+    let args = match &call.kind {
+        ExprKind::Call(_, a) => a
+            .iter()
+            .map(|x| x.to_string())
+            .collect::<Vec<_>>()
+            .join(", "),
+        _ => String::new(),
+    };
+    let elsewhere = match is {
+        EffectKind::Force => format!(
+            "force effects go into a force line: `force {} = ... + {effect}({args})`",
+            target.name
+        ),
+        EffectKind::Sensor => format!(
+            "sensor effects act on a measured coordinate: `sensor <coordinate> = {effect}({args})`"
+        ),
+        EffectKind::Actuator => {
+            format!("actuator effects act on an input: `actuator <input> = {effect}({args})`")
+        }
+    };
+    Diagnostic::error(
+        "plantc::effect_kind",
+        format!(
+            "`{effect}` is {} {is_kw} effect and cannot be used in {} `{line_kw}` line",
+            article(is_kw),
+            article(line_kw)
+        ),
+        call.span,
+        format!("{} {is_kw} effect", article(is_kw)),
+    )
+    .with_help(format!(
+        "effects valid in {} `{line_kw}` line: {}; {elsewhere}",
+        article(line_kw),
+        effects::signatures(line)
+    ))
 }
 
 struct Checker {
@@ -950,8 +1040,15 @@ impl Checker {
                     forced.insert(q.name.clone(), f.span);
                 }
             }
+            let errors_before = self.diags.iter().filter(|d| d.is_error()).count();
             f.expr = self.expand_effects(&f.written, &q);
-            if let (Some(k), Some(d)) = (kind, self.infer(&f.expr, Ctx::Force)) {
+            let effect_error = self.diags.iter().filter(|d| d.is_error()).count() > errors_before;
+            let dim = if effect_error {
+                None
+            } else {
+                self.infer(&f.expr, Ctx::Force)
+            };
+            if let (Some(k), Some(d)) = (kind, dim) {
                 let expected = match k {
                     CoordKind::Angle => Dim::energy(),
                     CoordKind::Length => Dim::force(),
@@ -974,14 +1071,185 @@ impl Checker {
                 }
             }
         }
+        for line in file.sensors.iter().chain(file.actuators.iter()) {
+            self.check_signal_effect(line);
+        }
         self.check_sets(&file);
         self.check_controllers(&file);
         file
     }
 
+    /// A `sensor` or `actuator` line: its target, its one effect call (of the
+    /// line's kind, right arity) and the units of the arguments.
+    fn check_signal_effect(&mut self, line: &SignalEffect) {
+        let kind = line.kind;
+        let kw = kind.keyword();
+        let t = &line.target;
+        // the target and its unit
+        let target_dim = match (kind, self.syms.names.get(&t.name)) {
+            (
+                EffectKind::Sensor,
+                Some(Symbol {
+                    kind: SymbolKind::Coordinate(k),
+                    ..
+                }),
+            ) => Some(coord_dim(*k)),
+            (EffectKind::Actuator, Some(s)) if s.kind == SymbolKind::Input => {
+                Some(s.dim.unwrap_or(Dim::NONE))
+            }
+            (_, other) => {
+                let wanted = |s: &Symbol| match kind {
+                    EffectKind::Actuator => s.kind == SymbolKind::Input,
+                    _ => matches!(s.kind, SymbolKind::Coordinate(_)),
+                };
+                let cands: Vec<&str> = self
+                    .syms
+                    .names
+                    .iter()
+                    .filter(|(_, s)| wanted(s))
+                    .map(|(n, _)| n.as_str())
+                    .collect();
+                let what = kind.target();
+                let mut d = Diagnostic::error(
+                    "plantc::bad_target",
+                    match other {
+                        None => format!(
+                            "unknown {} `{}`",
+                            if kind == EffectKind::Actuator {
+                                "input"
+                            } else {
+                                "coordinate"
+                            },
+                            t.name
+                        ),
+                        Some(s) => format!("`{}` is {}, not {what}", t.name, s.kind.describe()),
+                    },
+                    t.span,
+                    format!("{} `{kw}` line acts on {what}", capital(article(kw))),
+                );
+                if let Some(s) = other {
+                    d = d.with_label(s.span, format!("`{}` declared here", t.name));
+                }
+                d.help = did_you_mean(&suggest(&t.name, cands.iter().copied())).or(Some(
+                    if cands.is_empty() {
+                        format!(
+                            "the model declares no {}",
+                            if kind == EffectKind::Actuator {
+                                "input"
+                            } else {
+                                "coordinate"
+                            }
+                        )
+                    } else {
+                        format!(
+                            "{} of this model: {}",
+                            if kind == EffectKind::Actuator {
+                                "inputs"
+                            } else {
+                                "coordinates"
+                            },
+                            cands.join(", ")
+                        )
+                    },
+                ));
+                self.diags.push(d);
+                None
+            }
+        };
+        // the call
+        let valid = effects::signatures(kind);
+        let ExprKind::Call(f, args) = &line.call.kind else {
+            self.diags.push(
+                Diagnostic::error(
+                    "plantc::not_an_effect",
+                    format!("a `{kw}` line holds one effect call"),
+                    line.call.span,
+                    "not an effect call",
+                )
+                .with_help(format!(
+                    "effects valid in {} `{kw}` line: {valid}",
+                    article(kw)
+                )),
+            );
+            return;
+        };
+        let Some(effect) = effects::lookup(&f.name) else {
+            let cands: Vec<&str> = effects::of_kind(kind).map(|e| e.name).collect();
+            let mut d = Diagnostic::error(
+                "plantc::not_an_effect",
+                format!("`{}` is not {} {kw} effect", f.name, article(kw)),
+                f.span,
+                "unknown effect",
+            );
+            d.help = Some(match did_you_mean(&suggest(&f.name, cands)) {
+                Some(m) => format!("{m} effects valid in {} `{kw}` line: {valid}", article(kw)),
+                None => format!("effects valid in {} `{kw}` line: {valid}", article(kw)),
+            });
+            self.diags.push(d);
+            for a in args {
+                self.infer(a, Ctx::Constant);
+            }
+            return;
+        };
+        if effect.kind != kind {
+            self.diags
+                .push(wrong_kind(&line.call, &f.name, effect.kind, kind, t));
+            return;
+        }
+        if let Err(d) = effects::resolve_call(&line.call) {
+            self.diags.push(d);
+            return;
+        }
+        for (a, unit) in args.iter().zip(effect.arg_units.iter()) {
+            let Some(d) = self.infer(a, Ctx::Constant) else {
+                continue;
+            };
+            let (expected, what) = match unit {
+                ArgUnit::Time => (Dim::time(), "a time".to_string()),
+                ArgUnit::Target => match target_dim {
+                    Some(td) => (td, format!("in the unit of `{}`", t.name)),
+                    None => continue,
+                },
+            };
+            if d != expected {
+                let mut diag = Diagnostic::error(
+                    "plantc::unit_mismatch",
+                    format!("the argument of `{}` must be {what}", f.name),
+                    a.span,
+                    format!("expected {expected}, found {d}"),
+                )
+                .with_help(format!("{}: {}", effect.signature(), effect.doc));
+                if *unit == ArgUnit::Target {
+                    diag = diag.with_label(t.span, format!("`{}` is {expected}", t.name));
+                }
+                self.diags.push(diag);
+            } else if *unit == ArgUnit::Time {
+                if let Some(v) = eval_si(a, &self.syms).filter(|v| v.is_nan() || *v < 0.0) {
+                    self.diags.push(
+                        Diagnostic::error(
+                            "plantc::negative_delay",
+                            format!("the delay of `{}` is negative", t.name),
+                            a.span,
+                            format!("= {} s", fmt_num(v)),
+                        )
+                        .with_help(
+                            "a delay is a time >= 0 s by which the plant receives the input late",
+                        ),
+                    );
+                }
+            }
+        }
+    }
+
     fn expand_effects(&mut self, e: &Expr, q: &Ident) -> Expr {
         let kind = match &e.kind {
             ExprKind::Call(f, _) if effects::lookup(&f.name).is_some() => {
+                let eff = effects::lookup(&f.name).map(|x| x.kind);
+                if let Some(kind @ (EffectKind::Sensor | EffectKind::Actuator)) = eff {
+                    self.diags
+                        .push(wrong_kind(e, &f.name, kind, EffectKind::Force, q));
+                    return zero_at(e.span);
+                }
                 return match effects::expand(e, q) {
                     Ok(x) => x,
                     Err(d) => {

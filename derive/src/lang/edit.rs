@@ -31,6 +31,15 @@ pub enum EditError {
         /// Close names that exist.
         suggestions: Vec<String>,
     },
+    /// No input of that name.
+    UnknownInput {
+        /// The name asked for.
+        name: String,
+        /// Close names that exist.
+        suggestions: Vec<String>,
+    },
+    /// The given text is not a single effect call on one line.
+    NotAnEffectCall(String),
     /// The given text is not a plain number literal (optionally negative).
     NotANumber(String),
     /// The given declaration is not a single `parameter` line.
@@ -59,6 +68,14 @@ impl fmt::Display for EditError {
                 }
                 Ok(())
             }
+            EditError::UnknownInput { name, suggestions } => {
+                write!(f, "no input `{name}`")?;
+                if !suggestions.is_empty() {
+                    write!(f, " (did you mean {}?)", suggestions.join(", "))?;
+                }
+                Ok(())
+            }
+            EditError::NotAnEffectCall(t) => write!(f, "`{t}` is not a single effect call"),
             EditError::NotANumber(t) => write!(f, "`{t}` is not a number literal"),
             EditError::NotAParameterDeclaration(t) => {
                 write!(f, "`{t}` is not a single `parameter` declaration")
@@ -283,4 +300,84 @@ pub fn add_parameter(text: &str, decl_line: &str) -> Result<String, EditError> {
         })
         .unwrap_or(text.len());
     apply(text, &before, vec![insert_line(text, anchor, decl)])
+}
+
+/// Checks that `call_text` is one call expression on one line.
+fn check_call(call_text: &str) -> Result<String, EditError> {
+    let call = call_text.trim();
+    let ok = !call.contains('\n')
+        && !call.contains('\r')
+        && matches!(
+            super::parser::parse_expr(call),
+            Ok(super::ast::Expr {
+                kind: super::ast::ExprKind::Call(..),
+                ..
+            })
+        );
+    if ok {
+        Ok(call.to_string())
+    } else {
+        Err(EditError::NotAnEffectCall(call.to_string()))
+    }
+}
+
+/// Where a new `force`/`sensor`/`actuator` line goes: after the last of
+/// those lines, or after the energies when there is none.
+fn effect_anchor(m: &ModelFile, text: &str) -> usize {
+    m.forces
+        .iter()
+        .map(|f| f.span.end)
+        .chain(m.sensors.iter().map(|s| s.span.end))
+        .chain(m.actuators.iter().map(|a| a.span.end))
+        .max()
+        .or_else(|| {
+            m.kinetic
+                .iter()
+                .chain(m.potential.iter())
+                .map(|e| e.span.end)
+                .max()
+        })
+        .unwrap_or(text.len())
+}
+
+/// Adds the line `sensor <coordinate> = <call>` (e.g. `sensor_offset(d_alpha)`)
+/// after the last force, sensor or actuator line. The result must check:
+/// the call must be a sensor effect whose arguments exist, with the right units.
+pub fn add_sensor_effect(
+    text: &str,
+    coordinate: &str,
+    call_text: &str,
+) -> Result<String, EditError> {
+    let call = check_call(call_text)?;
+    let (m, before) = parse_ok(text)?;
+    if !m.coordinates.iter().any(|c| c.name.name == coordinate) {
+        return Err(EditError::UnknownCoordinate {
+            name: coordinate.to_string(),
+            suggestions: suggest(
+                coordinate,
+                m.coordinates.iter().map(|c| c.name.name.as_str()),
+            ),
+        });
+    }
+    let anchor = effect_anchor(&m, text);
+    let edit = insert_line(text, anchor, &format!("sensor {coordinate} = {call}"));
+    apply(text, &before, vec![edit])
+}
+
+/// Adds the line `actuator <input> = <call>` (e.g. `input_delay(Td_Vm)`)
+/// after the last force, sensor or actuator line. The result must check:
+/// the call must be an actuator effect whose arguments exist, with the right
+/// units.
+pub fn add_actuator_effect(text: &str, input: &str, call_text: &str) -> Result<String, EditError> {
+    let call = check_call(call_text)?;
+    let (m, before) = parse_ok(text)?;
+    if !m.inputs.iter().any(|i| i.name.name == input) {
+        return Err(EditError::UnknownInput {
+            name: input.to_string(),
+            suggestions: suggest(input, m.inputs.iter().map(|i| i.name.name.as_str())),
+        });
+    }
+    let anchor = effect_anchor(&m, text);
+    let edit = insert_line(text, anchor, &format!("actuator {input} = {call}"));
+    apply(text, &before, vec![edit])
 }

@@ -22,6 +22,9 @@
 //!           + 1/2*J2h*alpha'^2
 //! potential V = m2*g*l2*cos(alpha)              # optional, 0 if absent
 //! force theta = tau + viscous_friction(b1) + coulomb_friction(Fg1)
+//! sensor alpha = sensor_offset(d_alpha)         # the encoder reads alpha + d_alpha
+//! actuator Vm = input_offset(V0)                # the plant receives Vm + V0
+//! actuator Vm = input_delay(Td)                 # the plant receives Vm(t - Td)
 //!
 //! set quanser_manual "manual values" { l2 = 0.1685 [m]
 //!     J1 = 9.98e-4 [kg*m^2] - m1*l1^2 }
@@ -71,6 +74,16 @@
 //! `viscous_friction(b)`, `coulomb_friction(Fc)`, `stribeck_friction(Fc, Fs, vs)`,
 //! `quadratic_drag(cd)`, `spring(k)`, `spring(k, q0)`; each is the force on the
 //! coordinate of its line and already carries the minus sign.
+//!
+//! ## Sensor and actuator effects
+//! `sensor q = effect(..)` (q a coordinate) and `actuator u = effect(..)` (u an
+//! input) hold exactly one effect call of their kind; several lines may target
+//! the same name and compose (offsets add, delays add; offset and delay
+//! commute). Sensor effects: `sensor_offset(d)` (d in the coordinate's unit).
+//! Actuator effects: `input_offset(V0)` (the input's unit), `input_delay(Td)`
+//! (s). Arguments are expressions of parameters and numbers. An effect of the
+//! wrong kind for its line is an error that lists the effects valid there.
+//! See [`crate::model::Model`] for which consumers honour them.
 //!
 //! ## Units
 //! Known units are listed in [`units::UNITS`]; combine with `*`, `/`, `^n`,

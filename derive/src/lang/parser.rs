@@ -22,6 +22,8 @@ pub const KEYWORDS: &[&str] = &[
     "kinetic",
     "potential",
     "force",
+    "sensor",
+    "actuator",
     "set",
     "controller",
 ];
@@ -476,6 +478,32 @@ impl<'a> Parser<'a> {
                     expr,
                     span: Span::new(start, self.prev_end()),
                 });
+            }
+            "sensor" | "actuator" => {
+                self.bump();
+                let target = if kw == "sensor" {
+                    self.ident("a coordinate name")?
+                } else {
+                    self.ident("an input name")?
+                };
+                self.expect(Tok::Eq, "`=`")?;
+                self.skip_newlines();
+                let call = self.expr()?;
+                let line = SignalEffect {
+                    kind: if kw == "sensor" {
+                        super::effects::EffectKind::Sensor
+                    } else {
+                        super::effects::EffectKind::Actuator
+                    },
+                    target,
+                    call,
+                    span: Span::new(start, self.prev_end()),
+                };
+                if kw == "sensor" {
+                    file.sensors.push(line);
+                } else {
+                    file.actuators.push(line);
+                }
             }
             "set" => {
                 self.bump();

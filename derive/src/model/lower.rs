@@ -5,10 +5,11 @@ use std::fmt;
 use std::path::Path;
 
 use super::{
-    ControllerSpec, Coordinate, CoordinateKind, Derived, Input, Model, Output, Parameter,
-    ParameterSet,
+    ActuatorEffect, ActuatorEffectKind, ControllerSpec, Coordinate, CoordinateKind, Derived, Input,
+    Model, Output, Parameter, ParameterSet, SensorEffect, SensorEffectKind,
 };
 use crate::lang::ast::{self, BinOp, ExprKind};
+use crate::lang::effects;
 use crate::lang::units::parse_unit;
 use crate::lang::{eval_si, parse_and_check, Diagnostic, SourceFile, Symbols};
 use crate::sym::{CoordinateSymbols, Expr, Func, Rational, Symbol};
@@ -22,6 +23,42 @@ pub struct LoadedModel {
     pub source: SourceFile,
     /// Warnings and notes (never errors).
     pub diagnostics: Vec<Diagnostic>,
+}
+
+impl LoadedModel {
+    /// Warnings, one per `sensor_offset` and `input_delay` line, for a
+    /// consumer (`consumer`, e.g. "`plantc sim`") that works on the plant
+    /// equations and so ignores them (see [`Model`]'s docs). Empty for most
+    /// models. Render them with [`crate::lang::render`] and `self.source`.
+    pub fn ignored_signal_effects(&self, consumer: &str) -> Vec<Diagnostic> {
+        let (file, _) = crate::lang::parser::parse(&self.source.text);
+        let sensors = file.sensors.iter();
+        let delays = file
+            .actuators
+            .iter()
+            .filter(|a| a.effect_name() == Some("input_delay"));
+        let mut lines: Vec<&ast::SignalEffect> = sensors.chain(delays).collect();
+        lines.sort_by_key(|l| l.span.start);
+        lines
+            .into_iter()
+            .map(|line| {
+                let what = if line.kind == effects::EffectKind::Sensor {
+                    "measurement effect"
+                } else {
+                    "input delay"
+                };
+                Diagnostic::warning(
+                    "plantc::effect_ignored",
+                    format!("{consumer} ignores this {what}"),
+                    line.span,
+                    "not part of the plant equations",
+                )
+                .with_help(
+                    "sensor offsets and input delays are honoured when comparing with measurements (compare, fit, diagnose); simulation, linearization and generated code describe the plant itself",
+                )
+            })
+            .collect()
+    }
 }
 
 /// Why a model could not be loaded.
@@ -233,7 +270,7 @@ pub fn lower(file: &ast::ModelFile, symbols: Option<&Symbols>) -> Model {
             description: c.doc.as_ref().map(|d| d.value.clone()),
         })
         .collect();
-    let inputs = file
+    let inputs: Vec<Input> = file
         .inputs
         .iter()
         .map(|i| {
@@ -287,7 +324,7 @@ pub fn lower(file: &ast::ModelFile, symbols: Option<&Symbols>) -> Model {
         .potential
         .first()
         .map_or(Expr::zero(), |v| lw.expr(&v.expr));
-    let forces = coordinates
+    let mut forces: Vec<Expr> = coordinates
         .iter()
         .map(|c| {
             file.forces
@@ -297,6 +334,27 @@ pub fn lower(file: &ast::ModelFile, symbols: Option<&Symbols>) -> Model {
                 .sum()
         })
         .collect();
+    let (sensors, actuators) = lower_signal_effects(&mut lw, file, &coordinates, &inputs);
+    // Algebraic actuator effects are folded into the forces: every input
+    // symbol becomes what the plant receives (`u` -> `u + V0`), line by line
+    // in file order.
+    for line in &file.actuators {
+        let Some(j) = inputs.iter().position(|i| i.name == line.target.name) else {
+            continue;
+        };
+        let algebraic = effects::lookup(line.effect_name().unwrap_or(""))
+            .is_some_and(|e| !e.formula.is_empty());
+        if !algebraic {
+            continue;
+        }
+        let Ok(received) = effects::expand(&line.call, &line.target) else {
+            continue;
+        };
+        let map: HashMap<Symbol, Expr> = [(inputs[j].symbol, lw.expr(&received))].into();
+        for f in forces.iter_mut() {
+            *f = crate::sym::substitute_symbols(*f, &map);
+        }
+    }
     // Parameter sets: entries evaluated against the nominal values.
     let nominal: HashMap<Symbol, f64> = parameters.iter().map(|p| (p.symbol, p.value)).collect();
     let sets = file
@@ -341,8 +399,47 @@ pub fn lower(file: &ast::ModelFile, symbols: Option<&Symbols>) -> Model {
         kinetic,
         potential,
         forces,
+        sensors,
+        actuators,
         controllers,
     }
+}
+
+/// The `sensor` and `actuator` lines with their parameter expressions.
+fn lower_signal_effects(
+    lw: &mut Lowerer<'_>,
+    file: &ast::ModelFile,
+    coordinates: &[Coordinate],
+    inputs: &[Input],
+) -> (Vec<SensorEffect>, Vec<ActuatorEffect>) {
+    let arg = |lw: &mut Lowerer<'_>, line: &ast::SignalEffect| {
+        line.args().first().map_or(Expr::zero(), |a| lw.expr(a))
+    };
+    let mut sensors = Vec::new();
+    for line in &file.sensors {
+        let Some(i) = coordinates.iter().position(|c| c.name == line.target.name) else {
+            continue;
+        };
+        if line.effect_name() == Some("sensor_offset") {
+            sensors.push(SensorEffect {
+                coordinate: i,
+                effect: SensorEffectKind::Offset(arg(lw, line)),
+            });
+        }
+    }
+    let mut actuators = Vec::new();
+    for line in &file.actuators {
+        let Some(j) = inputs.iter().position(|u| u.name == line.target.name) else {
+            continue;
+        };
+        let effect = match line.effect_name() {
+            Some("input_offset") => ActuatorEffectKind::Offset(arg(lw, line)),
+            Some("input_delay") => ActuatorEffectKind::Delay(arg(lw, line)),
+            _ => continue,
+        };
+        actuators.push(ActuatorEffect { input: j, effect });
+    }
+    (sensors, actuators)
 }
 
 fn lower_controller(lw: &mut Lowerer<'_>, c: &ast::Controller) -> ControllerSpec {

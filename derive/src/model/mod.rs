@@ -150,7 +150,58 @@ impl ControllerSpec {
     }
 }
 
+/// What a `sensor` line does to the measurement of a coordinate.
+#[derive(Clone, Debug, PartialEq)]
+pub enum SensorEffectKind {
+    /// `sensor q = sensor_offset(d)`: the encoder reads `q + d`; the
+    /// expression `d` is over parameters (SI, the coordinate's unit).
+    Offset(Expr),
+}
+
+/// A measurement effect on one coordinate (`sensor q = ...`).
+#[derive(Clone, Debug, PartialEq)]
+pub struct SensorEffect {
+    /// Index of the coordinate in [`Model::coordinates`].
+    pub coordinate: usize,
+    /// The effect with its parameter expression.
+    pub effect: SensorEffectKind,
+}
+
+/// What an `actuator` line does to an input on its way to the plant.
+#[derive(Clone, Debug, PartialEq)]
+pub enum ActuatorEffectKind {
+    /// `actuator u = input_offset(V0)`: the plant receives `u + V0`. Already
+    /// folded into [`Model::forces`]; kept here for reporting.
+    Offset(Expr),
+    /// `actuator u = input_delay(Td)`: the plant receives `u(t - Td)`, with
+    /// `Td` (s) an expression over parameters. Not in the forces.
+    Delay(Expr),
+}
+
+/// An effect on one input (`actuator u = ...`).
+#[derive(Clone, Debug, PartialEq)]
+pub struct ActuatorEffect {
+    /// Index of the input in [`Model::inputs`].
+    pub input: usize,
+    /// The effect with its parameter expression.
+    pub effect: ActuatorEffectKind,
+}
+
 /// A mechanical model: Lagrangian `T - V`, generalised forces, inputs, outputs.
+///
+/// # Sensor and actuator effects
+/// `actuator u = input_offset(V0)` is folded into [`Model::forces`] at
+/// lowering (every `u` becomes `u + V0`), so mechanics, linearization, code
+/// generation and simulation see it with no change. `sensor q =
+/// sensor_offset(d)` and `actuator u = input_delay(Td)` cannot be folded
+/// into the equations of motion: they are listed in [`Model::sensors`] and
+/// [`Model::actuators`], and only consumers that compare with measurements
+/// honour them (identification's experiment simulation and sensitivities in
+/// `plantc-identify`: measurement `q + d`, input `u(t - Td)` with a
+/// zero-order hold). The state-space equations, `plantc sim`, linearization
+/// and code generation describe the plant itself: they ignore both, and
+/// [`Model::ignored_signal_effects`] names what they ignore so a command can
+/// warn.
 #[derive(Clone, Debug)]
 pub struct Model {
     /// Model name.
@@ -174,8 +225,13 @@ pub struct Model {
     pub kinetic: Expr,
     /// Potential energy `V(q)`.
     pub potential: Expr,
-    /// Generalised force on each coordinate, `Q_i(q, q', u)`.
+    /// Generalised force on each coordinate, `Q_i(q, q', u)` (input offsets
+    /// folded in).
     pub forces: Vec<Expr>,
+    /// Measurement effects (`sensor` lines), in file order.
+    pub sensors: Vec<SensorEffect>,
+    /// Input effects (`actuator` lines), in file order.
+    pub actuators: Vec<ActuatorEffect>,
     /// Controllers declared in the file.
     pub controllers: Vec<ControllerSpec>,
 }
@@ -222,6 +278,54 @@ impl Model {
             map.insert(d.symbol, def);
         }
         crate::sym::substitute_symbols(e, &map)
+    }
+
+    /// The total sensor offset of coordinate `i` (sum of its
+    /// `sensor_offset` lines; zero without any), over parameters.
+    pub fn sensor_offset(&self, i: usize) -> Expr {
+        self.sensors
+            .iter()
+            .filter(|s| s.coordinate == i)
+            .map(|s| match &s.effect {
+                SensorEffectKind::Offset(d) => *d,
+            })
+            .sum()
+    }
+
+    /// The total delay of input `j` (sum of its `input_delay` lines, since
+    /// delays compose; zero without any), over parameters.
+    pub fn input_delay(&self, j: usize) -> Expr {
+        self.actuators
+            .iter()
+            .filter(|a| a.input == j)
+            .filter_map(|a| match &a.effect {
+                ActuatorEffectKind::Delay(d) => Some(*d),
+                ActuatorEffectKind::Offset(_) => None,
+            })
+            .sum()
+    }
+
+    /// Effects that the plant equations cannot hold (sensor offsets and
+    /// input delays), as `sensor alpha = sensor_offset(...)`-like labels:
+    /// consumers other than identification ignore them and may warn with
+    /// this list. Empty for most models.
+    pub fn ignored_signal_effects(&self) -> Vec<String> {
+        let mut v = Vec::new();
+        for s in &self.sensors {
+            let name = &self.coordinates[s.coordinate].name;
+            match &s.effect {
+                SensorEffectKind::Offset(d) => {
+                    v.push(format!("sensor {name} = sensor_offset({d})"))
+                }
+            }
+        }
+        for a in &self.actuators {
+            let name = &self.inputs[a.input].name;
+            if let ActuatorEffectKind::Delay(d) = &a.effect {
+                v.push(format!("actuator {name} = input_delay({d})"));
+            }
+        }
+        v
     }
 
     /// Find a parameter by name.

@@ -6,7 +6,7 @@ use std::path::Path;
 use plantc_codegen::{write_crate, CrateOptions, Error};
 
 use crate::cli::ParamArgs;
-use crate::common::{load, parse_overrides, CliError};
+use crate::common::{load, parse_overrides, warn_ignored_effects, CliError};
 
 /// Generate the crate for `model` into `dir`.
 pub fn run(
@@ -19,7 +19,8 @@ pub fn run(
     err: &mut dyn Write,
 ) -> Result<(), CliError> {
     // Load once here for the warnings and a rendered error with file positions.
-    load(model, err)?;
+    let loaded = load(model, err)?;
+    warn_ignored_effects(&loaded, "`plantc gen`", err);
     let opts = CrateOptions {
         model: model.to_path_buf(),
         controllers: controllers.to_vec(),

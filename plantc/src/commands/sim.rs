@@ -12,7 +12,9 @@ use plantc_derive::simulate::{
 };
 
 use crate::cli::SimArgs;
-use crate::common::{load, num, parse_assignments, parse_quantity, values, CliError};
+use crate::common::{
+    load, num, parse_assignments, parse_quantity, values, warn_ignored_effects, CliError,
+};
 
 pub(crate) fn refuse_overwrite(path: &Path, force: bool, what: &str) -> Result<(), CliError> {
     if path.exists() && !force {
@@ -155,6 +157,7 @@ pub fn run(args: &SimArgs, out: &mut dyn Write, err: &mut dyn Write) -> Result<(
         )));
     }
     let loaded = load(&args.model, err)?;
+    warn_ignored_effects(&loaded, "`plantc sim`", err);
     let model = &loaded.model;
     let vals = values(&loaded, &args.params)?;
     let x0 = match &args.x0 {
