@@ -289,6 +289,7 @@ pub fn diagnose_with(
     scored.sort_by(|a, b| b.2.bic_gain.total_cmp(&a.2.bic_gain));
     let mut ranking = Vec::new();
     for (rank, (c, m, score)) in scored.into_iter().enumerate() {
+        let informative = score.columns > 0 && score.bic_gain > 0.0;
         let mut r = Ranked {
             parameters: score
                 .estimates
@@ -317,7 +318,10 @@ pub fn diagnose_with(
             error: None,
             gain: 0.0,
         };
-        if rank < opts.refit {
+        // refit the leaders that explain anything at all (a candidate whose
+        // columns the model's own parameters already span, e.g. viscous
+        // friction where a damping is estimated, adds nothing)
+        if rank < opts.refit && informative {
             refit(&mut r, &m, &model, &baseline, experiments, opts);
         }
         ranking.push(r);
@@ -348,7 +352,9 @@ pub fn diagnose_with(
 }
 
 /// Refit one candidate's model from the baseline estimates and the
-/// equation-error estimates of its own parameters.
+/// equation-error estimates of its own parameters; if that fails (a baseline
+/// distorted by the missing effect can make the edited model diverge), from
+/// the model's nominal values instead.
 fn refit(
     r: &mut Ranked,
     m: &Model,
@@ -357,10 +363,41 @@ fn refit(
     experiments: &[Experiment],
     opts: &DiagnoseOptions,
 ) {
+    let mut outcome = refit_from(r, m, Some((model, baseline)), experiments, opts);
+    if outcome.is_err() {
+        outcome = refit_from(r, m, None, experiments, opts);
+    }
+    match outcome {
+        Ok(f) => {
+            let gain = baseline.after_rmse / f.after_rmse.max(f64::MIN_POSITIVE);
+            r.gain = gain;
+            r.evidence.rmse_after = Some(f.after_rmse);
+            r.evidence.gain = Some(gain);
+            r.parameters = f
+                .parameters
+                .iter()
+                .filter(|e| r.candidate.parameters.iter().any(|p| p.name == e.name))
+                .cloned()
+                .collect();
+            r.fit = Some(f);
+        }
+        Err(e) => r.error = Some(e.to_string()),
+    }
+}
+
+fn refit_from(
+    r: &Ranked,
+    m: &Model,
+    from: Option<(&Model, &FitResult)>,
+    experiments: &[Experiment],
+    opts: &DiagnoseOptions,
+) -> Result<FitResult, FitError> {
     let mut start: Vec<f64> = m.parameters.iter().map(|p| p.value).collect();
-    for (i, p) in model.parameters.iter().enumerate() {
-        if let Some(j) = m.parameters.iter().position(|q| q.name == p.name) {
-            start[j] = baseline.base[i];
+    if let Some((model, baseline)) = from {
+        for (i, p) in model.parameters.iter().enumerate() {
+            if let Some(j) = m.parameters.iter().position(|q| q.name == p.name) {
+                start[j] = baseline.base[i];
+            }
         }
     }
     for e in &r.parameters {
@@ -378,20 +415,5 @@ fn refit(
         start: Some(start),
         ..opts.fit.clone()
     };
-    match fit(m, experiments, &o) {
-        Ok(f) => {
-            let gain = baseline.after_rmse / f.after_rmse.max(f64::MIN_POSITIVE);
-            r.gain = gain;
-            r.evidence.rmse_after = Some(f.after_rmse);
-            r.evidence.gain = Some(gain);
-            r.parameters = f
-                .parameters
-                .iter()
-                .filter(|e| r.candidate.parameters.iter().any(|p| p.name == e.name))
-                .cloned()
-                .collect();
-            r.fit = Some(f);
-        }
-        Err(e) => r.error = Some(e.to_string()),
-    }
+    fit(m, experiments, &o)
 }
