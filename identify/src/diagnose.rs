@@ -167,8 +167,8 @@ pub struct Evidence {
     pub by_experiment: Vec<Share>,
     /// Where the candidate acts: low-speed versus higher-speed samples.
     pub by_speed: Vec<Share>,
-    /// One line summarising where it acts, e.g. `mostly in free_swing_small
-    /// (64 %); 71 % at low speed (|alpha'| < 0.35 rad/s ...)`.
+    /// One line summarising where it acts, e.g. `free_swing_small 37 %,
+    /// free_swing_large 32 %, driven 31 %; 47 % near zero speed`.
     pub acts_where: String,
 }
 
@@ -210,7 +210,7 @@ pub struct Diagnosis {
 pub fn regressor_for(candidate: &Candidate, edited: Model) -> Regressor {
     match candidate.kind {
         EffectKind::Force => Regressor::Parameters {
-            model: edited,
+            model: Box::new(edited),
             names: candidate
                 .parameters
                 .iter()
@@ -221,20 +221,19 @@ pub fn regressor_for(candidate: &Candidate, edited: Model) -> Regressor {
 }
 
 fn where_summary(score: &Score) -> String {
-    let mut s = String::new();
-    if let Some(top) = score.by_experiment.first() {
-        s.push_str(&format!(
-            "mostly in {} ({:.0} %)",
-            top.label,
-            100.0 * top.share
-        ));
-    }
+    let exps: Vec<String> = score
+        .by_experiment
+        .iter()
+        .filter(|s| s.share >= 0.005)
+        .map(|s| format!("{} {:.0} %", s.label, 100.0 * s.share))
+        .collect();
+    let mut s = if exps.is_empty() {
+        "nowhere in particular".to_string()
+    } else {
+        exps.join(", ")
+    };
     if let Some(slow) = score.by_speed.first() {
-        s.push_str(&format!(
-            "; {:.0} % at low speed ({})",
-            100.0 * slow.share,
-            slow.label
-        ));
+        s.push_str(&format!("; {:.0} % {}", 100.0 * slow.share, slow.label));
     }
     s
 }

@@ -155,7 +155,7 @@ pub enum Regressor {
     /// Estimates are `p = p0 - beta`.
     Parameters {
         /// The edited model.
-        model: Model,
+        model: Box<Model>,
         /// The new parameters (names in `model`).
         names: Vec<String>,
     },
@@ -195,8 +195,8 @@ pub struct LinearEstimate {
 /// A share of the explained residual variance.
 #[derive(Clone, Debug, PartialEq)]
 pub struct Share {
-    /// What the share is of: an experiment name, or a speed regime such as
-    /// `|alpha'| < 0.35 rad/s`.
+    /// What the share is of: an experiment name, or a speed regime
+    /// (`near zero speed`, `moving`).
     pub label: String,
     /// Fraction of the candidate's reduction of the residual sum of squares
     /// (0..1; regimes of one kind sum to 1).
@@ -218,8 +218,9 @@ pub struct Score {
     pub estimates: Vec<LinearEstimate>,
     /// Where the explained variance lies: by experiment (largest first).
     pub by_experiment: Vec<Share>,
-    /// Where the explained variance lies: low-speed samples of the
-    /// equation's own coordinate versus the rest.
+    /// Where the explained variance lies: `near zero speed` (samples where
+    /// the speed of the equation's own coordinate is below a quarter of its
+    /// RMS over all experiments) versus `moving`.
     pub by_speed: Vec<Share>,
 }
 
@@ -271,7 +272,6 @@ pub struct EquationError {
     rss0: f64,
     /// Low-speed threshold per coordinate (for the `by_speed` shares).
     slow: Vec<f64>,
-    names: Vec<String>,
 }
 
 fn has_sign(e: Expr) -> bool {
@@ -531,11 +531,11 @@ impl EquationError {
             .unwrap_or_else(|| speed_noise.iter().fold(1e-3f64, |a, b| a.max(*b)));
         let raw =
             derive_equations(model).map_err(|e| EquationErrorError::Mechanics(e.to_string()))?;
-        for i in 0..n {
+        for (i, noise_i) in speed_noise.iter().enumerate() {
             if !has_sign(raw.forces[i]) {
                 continue;
             }
-            let limit = (opts.stuck_speed_factor * speed_noise[i]).max(width);
+            let limit = (opts.stuck_speed_factor * noise_i).max(width);
             for ex in &mut exps {
                 let len = ex.len();
                 let stuck: Vec<bool> = ex.qd[i].iter().map(|v| v.abs() < limit).collect();
@@ -649,7 +649,6 @@ impl EquationError {
             rss0: fit0.rss,
             r0,
             slow,
-            names: model.coordinates.iter().map(|c| c.name.clone()).collect(),
         })
     }
 
@@ -670,39 +669,41 @@ impl EquationError {
 
     /// Score one candidate.
     pub fn score(&self, reg: &Regressor) -> Result<Score, EquationErrorError> {
-        let (target, cand, names, p0, sign): (Vec<f64>, Vec<Vec<f64>>, Vec<String>, Vec<f64>, f64) =
-            match reg {
-                Regressor::Parameters { model, names } => {
-                    let (t, c, p0) = self.parameter_columns(model, names)?;
-                    (t, c, names.clone(), p0, -1.0)
-                }
-                Regressor::SensorOffset { coordinate, name } => {
-                    let c = self
-                        .dq
-                        .get(*coordinate)
-                        .ok_or(EquationErrorError::BadIndex(*coordinate))?;
-                    (
-                        self.r.clone(),
-                        vec![c.clone()],
-                        vec![name.clone()],
-                        vec![0.0],
-                        1.0,
-                    )
-                }
-                Regressor::InputDelay { input, name } => {
-                    let c = self
-                        .du
-                        .get(*input)
-                        .ok_or(EquationErrorError::BadIndex(*input))?;
-                    (
-                        self.r.clone(),
-                        vec![c.clone()],
-                        vec![name.clone()],
-                        vec![0.0],
-                        1.0,
-                    )
-                }
-            };
+        // regression target, candidate columns, estimate names, start values
+        // and the sign of the estimate (p = p0 + sign * beta)
+        type Columns = (Vec<f64>, Vec<Vec<f64>>, Vec<String>, Vec<f64>, f64);
+        let (target, cand, names, p0, sign): Columns = match reg {
+            Regressor::Parameters { model, names } => {
+                let (t, c, p0) = self.parameter_columns(model, names)?;
+                (t, c, names.clone(), p0, -1.0)
+            }
+            Regressor::SensorOffset { coordinate, name } => {
+                let c = self
+                    .dq
+                    .get(*coordinate)
+                    .ok_or(EquationErrorError::BadIndex(*coordinate))?;
+                (
+                    self.r.clone(),
+                    vec![c.clone()],
+                    vec![name.clone()],
+                    vec![0.0],
+                    1.0,
+                )
+            }
+            Regressor::InputDelay { input, name } => {
+                let c = self
+                    .du
+                    .get(*input)
+                    .ok_or(EquationErrorError::BadIndex(*input))?;
+                (
+                    self.r.clone(),
+                    vec![c.clone()],
+                    vec![name.clone()],
+                    vec![0.0],
+                    1.0,
+                )
+            }
+        };
         let mut cols: Vec<&[f64]> = self.nuisance.iter().map(Vec::as_slice).collect();
         let nn = cols.len();
         cols.extend(cand.iter().map(Vec::as_slice));
@@ -754,22 +755,13 @@ impl EquationError {
             .collect();
         by_experiment.sort_by(|a, b| b.share.total_cmp(&a.share));
         let sp = shares(&by_speed);
-        let speed_label = |slow: bool| {
-            let parts: Vec<String> = self
-                .names
-                .iter()
-                .zip(&self.slow)
-                .map(|(n, s)| format!("|{n}'| {} {s:.2} rad/s", if slow { "<" } else { ">=" }))
-                .collect();
-            format!("{} (in its own equation)", parts.join(" or "))
-        };
         let by_speed = vec![
             Share {
-                label: speed_label(true),
+                label: "near zero speed".into(),
                 share: sp[0],
             },
             Share {
-                label: speed_label(false),
+                label: "moving".into(),
                 share: sp[1],
             },
         ];
@@ -785,7 +777,7 @@ impl EquationError {
 
     /// Target (edited residual at the start values) and columns
     /// (`d r / d p_new`), weighted, plus the start values.
-    #[allow(clippy::type_complexity)]
+    #[allow(clippy::type_complexity)] // (target, columns, start values)
     fn parameter_columns(
         &self,
         model: &Model,
