@@ -39,7 +39,7 @@
 //! `N ln(RSS0 / RSS1) - k ln N` over the nuisance-only regression. Residuals
 //! of smoothed signals are strongly correlated in time, so the BIC over-counts
 //! the evidence: it ranks candidates, it does not decide (the simulation-error
-//! refit in [`crate::diagnose`] does; trap 6).
+//! refit in [`crate::diagnose()`] does; trap 6).
 
 use std::fmt;
 

@@ -12,7 +12,13 @@
 //! The horizon grows (3 s, 8 s, everything by default): single shooting from
 //! table values can stall in a local minimum over the whole record
 //! (identification notes, trap 7), while a short horizon is nearly linear in
-//! the parameters.
+//! the parameters. An intermediate stage is skipped when the estimates of
+//! the previous one already predict the whole record about as well
+//! ([`SKIP_RATIO`]); short stages stop at a loose tolerance, the last one
+//! when a step gains less than a tenth of the residual variance or
+//! [`FINAL_TOLERANCE`] of the SSR.
+//!
+//! The experiments are simulated in parallel (one scoped thread each).
 //!
 //! Standard errors come from `sigma^2 (J'J)^-1` with `sigma^2 = SSR/(N - p)`
 //! in physical units. Simulation residuals are strongly correlated in time, so
@@ -199,11 +205,11 @@ impl Serialize for FitResult {
 /// An intermediate horizon stage is skipped when the RMSE over the whole
 /// record is at most this multiple of the RMSE the previous (shorter) stage
 /// ended with: the short-horizon estimates already hold over everything.
-const SKIP_RATIO: f64 = 1.5;
+pub const SKIP_RATIO: f64 = 1.5;
 
 /// On the whole record, LM stops when an accepted step lowers the SSR by
 /// less than this fraction (the RMSE by less than 0.0025 %).
-const FINAL_TOLERANCE: f64 = 5e-5;
+pub const FINAL_TOLERANCE: f64 = 5e-5;
 
 fn logistic(z: f64) -> f64 {
     1.0 / (1.0 + (-z).exp())
