@@ -468,6 +468,7 @@ pub fn fit(
     // the last step taken was negligible: no extra simulation for the
     // statistics
     let mut converged: Option<(Vec<f64>, f64)> = None;
+    let mut lambda: f64 = 1e-3;
     // RMSE at the end of the previous stage, over its horizon
     let mut stage_rmse: Option<f64> = None;
     for (stage, &horizon) in stages.iter().enumerate() {
@@ -483,7 +484,9 @@ pub fn fit(
                 }
             }
         }
-        let mut lambda = 1e-3;
+        // the damping carries over from the previous stage (a hard problem
+        // stays hard when the horizon grows), never below the initial 1e-3
+        lambda = lambda.max(1e-3);
         converged = None;
         for _ in 0..opts.max_iterations {
             let Ok((a, g, ssr, count)) = pb.normal(pb.theta(&z), horizon) else {
@@ -529,9 +532,9 @@ pub fn fit(
                 match pb.ssr(pb.theta(&zt), horizon) {
                     Ok((s, _)) if s < ssr => {
                         small_step = step.iter().all(|v| v.abs() < 1e-6) || (ssr - s) < tol * ssr;
+                        lambda = (lambda / 3.0).max(1e-9);
                         z = zt;
                         new_ssr = s;
-                        lambda = (lambda / 3.0).max(1e-9);
                         accepted = true;
                         break;
                     }
