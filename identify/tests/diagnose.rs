@@ -317,3 +317,39 @@ fn equation_error_columns_for_sensor_offset_and_input_delay() {
     eprintln!("input delay: {td:.4e} s, bic {:.1}", s.bic_gain);
     assert!((td / 2e-3 - 1.0).abs() < 0.10, "{td}");
 }
+
+/// Bad requests are errors with data, not panics.
+#[test]
+fn equation_error_rejects_bad_requests() {
+    use plantc_identify::equation_error::EquationErrorError;
+    let Some((clean, _)) = case("clean") else {
+        return;
+    };
+    let model = model_from_text("baseline", &pendulum_text()).expect("checks");
+    let base: Vec<f64> = model.parameters.iter().map(|p| p.value).collect();
+    let nuisance = estimated_parameters(&model);
+    let opts = EquationErrorOptions::default();
+    assert!(matches!(
+        EquationError::new(&model, &base[1..], &nuisance, &clean, &opts),
+        Err(EquationErrorError::ParameterCount { .. })
+    ));
+    let mut jittered = clean[..1].to_vec();
+    jittered[0].t[100] += 0.3e-3;
+    assert!(matches!(
+        EquationError::new(&model, &base, &nuisance, &jittered, &opts),
+        Err(EquationErrorError::NonUniform { .. })
+    ));
+    let mut short = clean[..1].to_vec();
+    short[0].t.truncate(40);
+    for c in &mut short[0].channels {
+        c.values.truncate(40);
+    }
+    let e = EquationError::new(&model, &base, &nuisance, &short, &opts);
+    assert_eq!(e.err(), Some(EquationErrorError::NoSamples));
+    let ee = EquationError::new(&model, &base, &nuisance, &clean[..1], &opts).expect("prepares");
+    let bad = ee.score(&Regressor::SensorOffset {
+        coordinate: 7,
+        name: "d".into(),
+    });
+    assert_eq!(bad.err(), Some(EquationErrorError::BadIndex(7)));
+}
