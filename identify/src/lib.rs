@@ -11,8 +11,9 @@
 //!   forward sensitivities to the free parameters.
 //! - [`fit()`] estimates bounded parameters by Levenberg-Marquardt on the
 //!   simulation error, with standard errors and correlated pairs.
-//! - [`diagnose()`] (skeleton) refits the model with each candidate effect
-//!   added and ranks them.
+//! - [`EquationError`] ranks candidate effects by equation error (smoothed
+//!   derivatives, BIC gain); [`diagnose()`] confirms the leaders by
+//!   simulation-error refits and names the missing effect or says "adequate".
 
 mod csv_reader;
 pub mod data;
@@ -30,15 +31,21 @@ pub use units::Kind;
 
 pub mod diagnose;
 pub mod effect_edit;
+pub mod equation_error;
 pub mod experiment_sim;
 pub mod fit;
 pub mod metrics;
 pub mod plot;
+pub mod savitzky_golay;
 pub mod sensitivity;
 pub mod where_it_fails;
 
-pub use diagnose::{candidates, diagnose, Candidate, DiagnoseError, Diagnosis, Ranked};
+pub use diagnose::{
+    candidates, diagnose, diagnose_with, Candidate, DiagnoseError, DiagnoseOptions, Diagnosis,
+    Evidence, Ranked,
+};
 pub use effect_edit::{EffectEditError, EffectInstance, EffectKind};
+pub use equation_error::{EquationError, EquationErrorOptions, Regressor, Score, Share};
 pub use experiment_sim::{InitialVelocity, Signals, SimError, SimOptions, Simulator, Trajectory};
 pub use fit::{fit, Estimate, FitError, FitOptions, FitResult};
 pub use metrics::{compare, fit_percent, rmse, ChannelFit, ExperimentFit, FitReport, MetricsError};
