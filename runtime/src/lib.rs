@@ -44,6 +44,7 @@ pub mod rt_os;
 pub mod sim;
 pub mod supervisor;
 pub mod velocity_filter;
+pub mod velocity_observer;
 
 pub use backend::{Backend, BackendError, EncoderMap, Tick};
 pub use control_loop::{run, run_with_events, RunConfig, MAX_RATE_HZ};
@@ -57,3 +58,4 @@ pub use reference_pendulum::{PendulumParams, RotaryPendulumReference};
 pub use report::{Percentiles, RunReport};
 pub use sim::{SimBackend, SimConfig, SimNoise};
 pub use supervisor::{FaultKind, Supervisor, SupervisorConfig, SupervisorState, Transition};
+pub use velocity_observer::{ObserverSpec, VelocityObserver};
