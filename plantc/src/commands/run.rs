@@ -7,8 +7,8 @@ use plantc_derive::control::{resolve, Derivation};
 use plantc_derive::mechanics::NumericDynamics;
 use plantc_derive::model::{Model, ParameterValues};
 use plantc_runtime::{
-    run_with_events, Backend, LogWriter, ModelController, ModelPlant, ObserverSpec, Q2Usb,
-    Q2UsbConfig, RunConfig, SimBackend, SimConfig,
+    run_with_events, stop_on_ctrl_c, Backend, FaultKind, LogWriter, ModelController, ModelPlant,
+    ObserverSpec, Q2Usb, Q2UsbConfig, RunConfig, SimBackend, SimConfig, SupervisorState,
 };
 
 use super::sim::{parse_gains, refuse_overwrite};
@@ -106,6 +106,12 @@ pub fn run(args: &RunArgs, out: &mut dyn Write, err: &mut dyn Write) -> Result<(
         "running `{}` on {:?} at {} Hz for {} s",
         args.controller, args.backend, args.rate, args.duration
     );
+    if let Err(e) = stop_on_ctrl_c(config.stop.clone()) {
+        let _ = writeln!(
+            err,
+            "note: Ctrl-C handler not installed ({e}); Ctrl-C will kill the process without the 0 V stop"
+        );
+    }
     let report = run_with_events(
         &config,
         backend.as_mut(),
@@ -117,12 +123,14 @@ pub fn run(args: &RunArgs, out: &mut dyn Write, err: &mut dyn Write) -> Result<(
     )
     .map_err(|e| fail(&e))?;
     let _ = writeln!(out, "{report}");
-    if report.fault_detail.is_some()
-        || matches!(
-            report.final_state,
-            plantc_runtime::SupervisorState::Fault(_)
-        )
-    {
+    if report.final_state == SupervisorState::Fault(FaultKind::Stopped) {
+        // Exit code of a process ended by SIGINT, by convention.
+        return Err(CliError {
+            message: "stopped by Ctrl-C (0 V written, log flushed)".to_string(),
+            code: 130,
+        });
+    }
+    if report.fault_detail.is_some() || matches!(report.final_state, SupervisorState::Fault(_)) {
         // A fault that ends the run (other than the planned end) is a failure.
         if !report.final_state.to_string().contains("duration") {
             return Err(CliError::failure(format!(
