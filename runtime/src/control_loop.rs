@@ -377,8 +377,9 @@ fn cycle_loop(
                     velocities[i] = filters[i].update(q_unwrapped[i]);
                 }
             }
-            // u_out still holds the voltage applied since the previous sample.
-            Estimator::Observer(o) => o.update(&q_unwrapped, u_out[0], &mut velocities),
+            // The observer's model holds about upright: it takes the state
+            // angles; u_out still holds the voltage applied since the previous sample.
+            Estimator::Observer(o) => o.update(&x[..nq], u_out[0], &mut velocities),
         }
         x[nq..].copy_from_slice(&velocities);
         if config.stop.load(Ordering::Relaxed) {

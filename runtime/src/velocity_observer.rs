@@ -241,9 +241,14 @@ impl VelocityObserver {
         self.fastest_pole
     }
 
-    /// Feeds this sample's (unwrapped) angles `q` and the voltage applied
-    /// during the previous period `u_prev`; writes the velocity estimates.
-    /// The first call initialises the state to `(q, 0)`. No allocation.
+    /// Feeds this sample's angles `q` (the state angles, wrapped into
+    /// `(-pi, pi]` where the encoder map wraps) and the voltage applied during
+    /// the previous period `u_prev`; writes the velocity estimates. The first
+    /// call initialises the state to `(q, 0)`. No allocation.
+    ///
+    /// The linear model holds about upright (angle 0), so the observer works
+    /// on the wrapped angle the controller sees: when an angle wraps by a
+    /// multiple of 2 pi between samples, the estimate is shifted with it.
     pub fn update(&mut self, q: &[f64], u_prev: f64, velocities: &mut [f64]) {
         let (n, nq) = (self.n, self.nq);
         if q.len() != nq || velocities.len() != nq {
@@ -255,6 +260,12 @@ impl VelocityObserver {
             self.xh[..nq].copy_from_slice(q);
             self.xh[nq..].fill(0.0);
         } else {
+            for (xh, q) in self.xh[..nq].iter_mut().zip(q) {
+                let turns = ((q - *xh) / std::f64::consts::TAU).round();
+                if turns != 0.0 && turns.is_finite() {
+                    *xh += turns * std::f64::consts::TAU;
+                }
+            }
             for i in 0..n {
                 let row = &self.ad[i * n..(i + 1) * n];
                 let mut s = self.bd[i] * u_prev;
@@ -300,6 +311,23 @@ mod tests {
         }
         // A filtered derivative with wc = 50 rad/s lags a ramp by slope/wc = 0.04 rad/s.
         assert!((v[0] - 2.0).abs() < 1e-3, "{v:?}");
+    }
+
+    #[test]
+    fn a_wrapping_angle_does_not_disturb_the_velocity() {
+        let enc = [EncoderMap::plain(4096.0); 2];
+        let mut obs = VelocityObserver::design(&double_integrator(), &enc, 1e-3).unwrap();
+        // Both joints turn at 1 rad/s through +-pi at t = 0.5 s (no input).
+        let mut v = [0.0; 2];
+        for k in 0..=1000 {
+            let t = k as f64 * 1e-3;
+            let q = crate::backend::wrap_pi(std::f64::consts::PI - 0.5 + t);
+            obs.update(&[q, q], 0.0, &mut v);
+            // After the start-up transient (observer poles near -100 rad/s).
+            if t >= 0.3 {
+                assert!((v[0] - 1.0).abs() < 1e-6, "t = {t}: {v:?}");
+            }
+        }
     }
 
     #[test]
