@@ -43,7 +43,7 @@ pub struct RunConfig {
     /// this linear model instead of the filtered derivative (default `None`;
     /// `plantc run` uses it by default, see [`crate::velocity_observer`]).
     pub observer: Option<ObserverSpec>,
-    /// Set to stop the run (e.g. from a Ctrl-C handler); ends in `fault:stopped`.
+    /// Set to stop the run (e.g. by [`crate::stop_on_ctrl_c`]); ends in `fault:stopped`.
     pub stop: Arc<AtomicBool>,
     /// Try real-time priority and memory locking when the backend runs in real time (default true).
     pub os_realtime: bool,

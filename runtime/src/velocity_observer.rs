@@ -208,7 +208,7 @@ impl VelocityObserver {
         let err_dyn = (&identity - &gain * &c) * &ad;
         let eig = err_dyn.complex_eigenvalues();
         let radius = eig.iter().map(|z| z.norm()).fold(0.0, f64::max);
-        if !(radius < 1.0) {
+        if radius.is_nan() || radius >= 1.0 {
             return Err(invalid(format!(
                 "observer unstable (spectral radius {radius})"
             )));
@@ -275,9 +275,10 @@ impl VelocityObserver {
                 self.xp[i] = s;
             }
             for i in 0..n {
+                let gains = &self.gain[i * nq..(i + 1) * nq];
                 let mut s = self.xp[i];
-                for j in 0..nq {
-                    s += self.gain[i * nq + j] * (q[j] - self.xp[j]);
+                for ((g, q), p) in gains.iter().zip(q).zip(&self.xp[..nq]) {
+                    s += g * (q - p);
                 }
                 self.xh[i] = s;
             }

@@ -84,12 +84,10 @@ fn observer_spec_linearizes_like_the_printed_model() {
     let p = RotaryPendulumReference::default();
     let (a, b) = jacobian(&p);
     let spec = plantc_runtime::ObserverSpec::from_smooth_plant(&p).unwrap();
-    for i in 0..4 {
-        for j in 0..4 {
-            assert_eq!(spec.a[i * 4 + j], a[i][j], "A[{i}][{j}]");
-        }
-        assert_eq!(spec.b[i], b[i], "B[{i}]");
+    for (i, row) in a.iter().enumerate() {
+        assert_eq!(&spec.a[i * 4..(i + 1) * 4], row, "row {i} of A");
     }
+    assert_eq!(spec.b, b, "B");
     assert_eq!(
         spec.accel_std,
         plantc_runtime::velocity_observer::DEFAULT_ACCEL_STD

@@ -152,11 +152,11 @@ fn observer_spec(
     let op = OperatingPoint::zero(model);
     let lin = linearize(model, &derivation.equations, vals, &op)
         .map_err(|e| CliError::failure(format!("error: observer: {e}")))?;
-    if !(lin.equilibrium_residual.abs() < 1e-9) {
+    let residual = lin.equilibrium_residual;
+    if residual.is_nan() || residual.abs() >= 1e-9 {
         return Err(CliError::failure(format!(
             "error: observer: the zero state is not an equilibrium of the model \
-             (largest acceleration {:e}); use --velocity derivative",
-            lin.equilibrium_residual
+             (largest acceleration {residual:e}); use --velocity derivative"
         )));
     }
     if lin.b.ncols() != 1 {
