@@ -148,6 +148,15 @@ pub enum BackendKind {
     Q2usb,
 }
 
+/// How `plantc run` estimates velocities.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, clap::ValueEnum)]
+pub enum VelocityKind {
+    /// Steady-state Kalman observer on the model linearized about upright.
+    Observer,
+    /// Filtered derivative `wc s / (s + wc)` of each angle (Quanser's examples).
+    Derivative,
+}
+
 /// Arguments of `plantc run`.
 #[derive(Debug, Args, Clone)]
 pub struct RunArgs {
@@ -189,9 +198,18 @@ pub struct RunArgs {
     /// Fault once the pendulum is this far from upright after engaging.
     #[arg(long, value_name = "ANGLE", default_value = "30deg")]
     pub fall_angle: String,
-    /// Bandwidth of the filtered derivative that estimates velocities (rad/s).
+    /// How velocities are estimated from the encoder angles: a Kalman
+    /// observer on the model linearized about upright, or Quanser's filtered
+    /// derivative (see --velocity-bandwidth).
+    #[arg(long, value_enum, default_value_t = VelocityKind::Observer)]
+    pub velocity: VelocityKind,
+    /// Bandwidth of the filtered derivative (rad/s; with --velocity derivative).
     #[arg(long, value_name = "RAD_PER_S", default_value_t = 50.0)]
     pub velocity_bandwidth: f64,
+    /// Observer process noise: unmodelled angular acceleration (rad/s^2;
+    /// larger = faster, noisier observer).
+    #[arg(long, value_name = "RAD_PER_S2", default_value_t = 30.0)]
+    pub observer_accel: f64,
     /// Run the simulator in real time (default: as fast as possible).
     #[arg(long)]
     pub realtime: bool,

@@ -12,6 +12,7 @@ use crate::report::{Percentiles, RunReport};
 use crate::rt_os::try_realtime;
 use crate::supervisor::{FaultKind, Supervisor, SupervisorConfig, Transition};
 use crate::velocity_filter::VelocityFilter;
+use crate::velocity_observer::{ObserverSpec, VelocityObserver};
 use std::panic::{catch_unwind, AssertUnwindSafe};
 use std::sync::atomic::{AtomicBool, Ordering};
 use std::sync::Arc;
@@ -35,9 +36,14 @@ pub struct RunConfig {
     pub input_limits: Vec<(f64, f64)>,
     /// Supervisor limits.
     pub supervisor: SupervisorConfig,
-    /// Bandwidth of the velocity-estimating filtered derivative (rad/s, default 50).
+    /// Bandwidth of the velocity-estimating filtered derivative (rad/s,
+    /// default 50 as in Quanser's examples); used when `observer` is `None`.
     pub velocity_bandwidth: f64,
-    /// Set to stop the run (e.g. from a Ctrl-C handler); ends in `fault:stopped`.
+    /// Estimate velocities with a steady-state Kalman observer designed from
+    /// this linear model instead of the filtered derivative (default `None`;
+    /// `plantc run` uses it by default, see [`crate::velocity_observer`]).
+    pub observer: Option<ObserverSpec>,
+    /// Set to stop the run (e.g. by [`crate::stop_on_ctrl_c`]); ends in `fault:stopped`.
     pub stop: Arc<AtomicBool>,
     /// Try real-time priority and memory locking when the backend runs in real time (default true).
     pub os_realtime: bool,
@@ -63,6 +69,7 @@ impl RunConfig {
             input_limits: plant.input_limits().to_vec(),
             supervisor: SupervisorConfig::default(),
             velocity_bandwidth: 50.0,
+            observer: None,
             stop: Arc::new(AtomicBool::new(false)),
             os_realtime: true,
             rt_priority: 80,
@@ -128,6 +135,14 @@ struct Stats {
     samples: u64,
 }
 
+/// How the loop estimates velocities from encoder angles.
+enum Estimator {
+    /// One filtered derivative per encoder.
+    Derivative(Vec<VelocityFilter>),
+    /// A model-based observer over all encoders.
+    Observer(VelocityObserver),
+}
+
 struct Outcome {
     fault_detail: Option<BackendError>,
 }
@@ -154,6 +169,32 @@ pub fn run_with_events(
     }
     let period = 1.0 / config.rate_hz;
     let mut notes = Vec::new();
+    let estimator = match &config.observer {
+        Some(spec) => match VelocityObserver::design(spec, &maps, period) {
+            Ok(o) => {
+                notes.push(format!(
+                    "velocities: steady-state Kalman observer (poles {:.0} to {:.0} rad/s)",
+                    o.slowest_pole(),
+                    o.fastest_pole()
+                ));
+                Estimator::Observer(o)
+            }
+            Err(e) => {
+                let _ = backend.close();
+                return Err(e);
+            }
+        },
+        None => {
+            notes.push(format!(
+                "velocities: filtered derivative, bandwidth {} rad/s",
+                config.velocity_bandwidth
+            ));
+            Estimator::Derivative(vec![
+                VelocityFilter::new(config.velocity_bandwidth, period);
+                nq
+            ])
+        }
+    };
     if let Some(l) = log.as_deref_mut() {
         if let Err(e) = l.begin(&config.state_names, nq, &config.input_names) {
             let _ = backend.close();
@@ -195,6 +236,7 @@ pub fn run_with_events(
             config,
             period,
             &maps,
+            estimator,
             backend,
             controller,
             log.as_deref_mut(),
@@ -255,6 +297,7 @@ fn cycle_loop(
     config: &RunConfig,
     period: f64,
     maps: &[EncoderMap],
+    mut estimator: Estimator,
     backend: &mut dyn Backend,
     controller: &mut dyn Controller,
     mut log: Option<&mut LogWriter>,
@@ -269,7 +312,8 @@ fn cycle_loop(
     let mut counts = vec![0i32; nq];
     let mut u_cmd = vec![0.0; 1];
     let mut u_out = [0.0f64; 1];
-    let mut filters = vec![VelocityFilter::new(config.velocity_bandwidth, period); nq];
+    let mut q_unwrapped = vec![0.0; nq];
+    let mut velocities = vec![0.0; nq];
     let (lo, hi) = config.input_limits[0];
     let total = config
         .duration_s
@@ -324,10 +368,20 @@ fn cycle_loop(
             }
         }
         for i in 0..nq {
-            let m = &maps[i];
-            x[i] = m.angle(counts[i]);
-            x[nq + i] = filters[i].update(m.angle_unwrapped(counts[i]));
+            x[i] = maps[i].angle(counts[i]);
+            q_unwrapped[i] = maps[i].angle_unwrapped(counts[i]);
         }
+        match &mut estimator {
+            Estimator::Derivative(filters) => {
+                for i in 0..nq {
+                    velocities[i] = filters[i].update(q_unwrapped[i]);
+                }
+            }
+            // The observer's model holds about upright: it takes the state
+            // angles; u_out still holds the voltage applied since the previous sample.
+            Estimator::Observer(o) => o.update(&x[..nq], u_out[0], &mut velocities),
+        }
+        x[nq..].copy_from_slice(&velocities);
         if config.stop.load(Ordering::Relaxed) {
             emit(sup.fault(t, FaultKind::Stopped), transitions);
         }

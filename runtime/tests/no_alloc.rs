@@ -1,8 +1,8 @@
 //! A counting global allocator: zero allocations over 1e5 loop cycles after start.
 
 use plantc_runtime::{
-    run, Controller, LogWriter, RotaryPendulumReference, RunConfig, SimBackend, SimConfig,
-    SimNoise, StateFeedback, SupervisorState,
+    run, Controller, LogWriter, ObserverSpec, RotaryPendulumReference, RunConfig, SimBackend,
+    SimConfig, SimNoise, StateFeedback, SupervisorState,
 };
 use std::alloc::{GlobalAlloc, Layout, System};
 use std::cell::Cell;
@@ -60,9 +60,21 @@ impl Controller for Probe {
 
 #[test]
 fn no_allocation_in_the_loop() {
+    count_loop_allocations(false, "noalloc");
+}
+
+#[test]
+fn no_allocation_in_the_loop_with_the_velocity_observer() {
+    count_loop_allocations(true, "noalloc-observer");
+}
+
+fn count_loop_allocations(observer: bool, name: &str) {
     let plant = RotaryPendulumReference::default();
     let mut cfg = RunConfig::for_plant(&plant);
     cfg.duration_s = Some(100.0);
+    if observer {
+        cfg.observer = Some(ObserverSpec::from_smooth_plant(&plant).unwrap());
+    }
     let sim = SimConfig {
         noise: Some(SimNoise {
             seed: 1,
@@ -80,12 +92,18 @@ fn no_allocation_in_the_loop() {
         until: cycles + 1,
     };
     let path = std::path::PathBuf::from(env!("CARGO_TARGET_TMPDIR"))
-        .join(format!("{}-noalloc.csv", std::process::id()));
+        .join(format!("{}-{name}.csv", std::process::id()));
     let mut log = LogWriter::create(&path).unwrap();
     let report = run(&cfg, &mut be, &mut ctl, Some(&mut log)).unwrap();
     assert_eq!(report.final_state, SupervisorState::Engaged, "{report}");
     assert!(ctl.calls > cycles, "{}", ctl.calls);
     let n = ALLOCS.load(Ordering::Relaxed);
-    println!("allocations over {cycles} loop cycles (with CSV logging): {n}");
+    println!("allocations over {cycles} loop cycles (with CSV logging, observer {observer}): {n}");
     assert_eq!(n, 0);
+    if observer {
+        assert!(
+            report.notes.iter().any(|n| n.contains("Kalman observer")),
+            "{report}"
+        );
+    }
 }

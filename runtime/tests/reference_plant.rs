@@ -76,3 +76,20 @@ fn wrong_lengths_give_nan_not_panic() {
     let mut short = [0.0; 2];
     p.derivatives(&[0.0; 4], &[0.0], &mut short);
 }
+
+#[test]
+fn observer_spec_linearizes_like_the_printed_model() {
+    // ObserverSpec::from_smooth_plant uses the same central differences as
+    // `jacobian` above, whose result is checked against the thesis' Eq. 3-4.
+    let p = RotaryPendulumReference::default();
+    let (a, b) = jacobian(&p);
+    let spec = plantc_runtime::ObserverSpec::from_smooth_plant(&p).unwrap();
+    for (i, row) in a.iter().enumerate() {
+        assert_eq!(&spec.a[i * 4..(i + 1) * 4], row, "row {i} of A");
+    }
+    assert_eq!(spec.b, b, "B");
+    assert_eq!(
+        spec.accel_std,
+        plantc_runtime::velocity_observer::DEFAULT_ACCEL_STD
+    );
+}

@@ -2,15 +2,17 @@
 
 use std::io::Write;
 
+use plantc_derive::analysis::{linearize, OperatingPoint};
 use plantc_derive::control::{resolve, Derivation};
 use plantc_derive::mechanics::NumericDynamics;
+use plantc_derive::model::{Model, ParameterValues};
 use plantc_runtime::{
-    run_with_events, Backend, LogWriter, ModelController, ModelPlant, Q2Usb, Q2UsbConfig,
-    RunConfig, SimBackend, SimConfig,
+    run_with_events, stop_on_ctrl_c, Backend, FaultKind, LogWriter, ModelController, ModelPlant,
+    ObserverSpec, Q2Usb, Q2UsbConfig, RunConfig, SimBackend, SimConfig, SupervisorState,
 };
 
 use super::sim::{parse_gains, refuse_overwrite};
-use crate::cli::{BackendKind, RunArgs};
+use crate::cli::{BackendKind, RunArgs, VelocityKind};
 use crate::common::{load, parse_assignments, parse_quantity, values, CliError};
 
 pub fn run(args: &RunArgs, out: &mut dyn Write, err: &mut dyn Write) -> Result<(), CliError> {
@@ -40,7 +42,24 @@ pub fn run(args: &RunArgs, out: &mut dyn Write, err: &mut dyn Write) -> Result<(
                 ))
             })
     };
+    if !(args.velocity_bandwidth.is_finite() && args.velocity_bandwidth > 0.0) {
+        return Err(CliError::input(format!(
+            "error: --velocity-bandwidth {}: expected a positive rate in rad/s",
+            args.velocity_bandwidth
+        )));
+    }
     config.velocity_bandwidth = args.velocity_bandwidth;
+    if args.velocity == VelocityKind::Observer {
+        let mut spec = observer_spec(model, &derivation, &vals)?;
+        if !(args.observer_accel.is_finite() && args.observer_accel > 0.0) {
+            return Err(CliError::input(format!(
+                "error: --observer-accel {}: expected a positive acceleration in rad/s^2",
+                args.observer_accel
+            )));
+        }
+        spec.accel_std = args.observer_accel;
+        config.observer = Some(spec);
+    }
     config.supervisor.arm_limit_rad = angle(&args.arm_limit, "arm-limit")?;
     config.supervisor.fall_angle_rad = angle(&args.fall_angle, "fall-angle")?;
     let mut backend: Box<dyn Backend> = match args.backend {
@@ -87,6 +106,12 @@ pub fn run(args: &RunArgs, out: &mut dyn Write, err: &mut dyn Write) -> Result<(
         "running `{}` on {:?} at {} Hz for {} s",
         args.controller, args.backend, args.rate, args.duration
     );
+    if let Err(e) = stop_on_ctrl_c(config.stop.clone()) {
+        let _ = writeln!(
+            err,
+            "note: Ctrl-C handler not installed ({e}); Ctrl-C will kill the process without the 0 V stop"
+        );
+    }
     let report = run_with_events(
         &config,
         backend.as_mut(),
@@ -98,12 +123,14 @@ pub fn run(args: &RunArgs, out: &mut dyn Write, err: &mut dyn Write) -> Result<(
     )
     .map_err(|e| fail(&e))?;
     let _ = writeln!(out, "{report}");
-    if report.fault_detail.is_some()
-        || matches!(
-            report.final_state,
-            plantc_runtime::SupervisorState::Fault(_)
-        )
-    {
+    if report.final_state == SupervisorState::Fault(FaultKind::Stopped) {
+        // Exit code of a process ended by SIGINT, by convention.
+        return Err(CliError {
+            message: "stopped by Ctrl-C (0 V written, log flushed)".to_string(),
+            code: 130,
+        });
+    }
+    if report.fault_detail.is_some() || matches!(report.final_state, SupervisorState::Fault(_)) {
         // A fault that ends the run (other than the planned end) is a failure.
         if !report.final_state.to_string().contains("duration") {
             return Err(CliError::failure(format!(
@@ -113,4 +140,33 @@ pub fn run(args: &RunArgs, out: &mut dyn Write, err: &mut dyn Write) -> Result<(
         }
     }
     Ok(())
+}
+
+/// The observer's linear model: the model linearized about zero state and
+/// input (upright), which must be an equilibrium.
+fn observer_spec(
+    model: &Model,
+    derivation: &Derivation,
+    vals: &ParameterValues,
+) -> Result<ObserverSpec, CliError> {
+    let op = OperatingPoint::zero(model);
+    let lin = linearize(model, &derivation.equations, vals, &op)
+        .map_err(|e| CliError::failure(format!("error: observer: {e}")))?;
+    let residual = lin.equilibrium_residual;
+    if residual.is_nan() || residual.abs() >= 1e-9 {
+        return Err(CliError::failure(format!(
+            "error: observer: the zero state is not an equilibrium of the model \
+             (largest acceleration {residual:e}); use --velocity derivative"
+        )));
+    }
+    if lin.b.ncols() != 1 {
+        return Err(CliError::failure(format!(
+            "error: observer: {} inputs, exactly one (the motor voltage) supported",
+            lin.b.ncols()
+        )));
+    }
+    let n = lin.a.nrows();
+    let a = (0..n * n).map(|k| lin.a[(k / n, k % n)]).collect();
+    let b = (0..n).map(|i| lin.b[(i, 0)]).collect();
+    Ok(ObserverSpec::new(a, b))
 }
