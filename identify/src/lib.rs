@@ -11,6 +11,8 @@
 //!   forward sensitivities to the free parameters.
 //! - [`fit()`] estimates bounded parameters by Levenberg-Marquardt on the
 //!   simulation error, with standard errors and correlated pairs.
+//! - [`synthesize`] makes measurement-like data from a model with hidden
+//!   effects ([`synth`]).
 //! - [`diagnose()`] (skeleton) refits the model with each candidate effect
 //!   added and ranks them.
 
@@ -35,6 +37,7 @@ pub mod fit;
 pub mod metrics;
 pub mod plot;
 pub mod sensitivity;
+pub mod synth;
 pub mod where_it_fails;
 
 pub use diagnose::{candidates, diagnose, Candidate, DiagnoseError, Diagnosis, Ranked};
@@ -44,6 +47,9 @@ pub use fit::{fit, Estimate, FitError, FitOptions, FitResult};
 pub use metrics::{compare, fit_percent, rmse, ChannelFit, ExperimentFit, FitReport, MetricsError};
 pub use plot::{plot_comparison, render_comparison, PlotError};
 pub use sensitivity::{estimated_parameters, SensitivitySimulator, SensitivityTrajectory};
+pub use synth::{
+    synthesize, EffectSpec, ExperimentSpec, SynthError, SynthOptions, SynthSpec, Synthesized,
+};
 pub use where_it_fails::{
     residual_summary, where_it_fails, ChannelDiagnosis, FailOptions, Finding, FindingKind,
     GroupStats, ResidualSummary,

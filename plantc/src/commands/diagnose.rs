@@ -1,0 +1,157 @@
+//! `plantc diagnose`: which physical effect is the model missing? Ranks the
+//! candidates of `plantc_identify::diagnose`, prints the verdict, the evidence
+//! and the text to add; `--apply -o OUT` writes the model with the top effect
+//! added (its parameters marked `estimate`).
+
+use std::io::Write;
+
+use plantc_identify::{diagnose, Diagnosis, EffectInstance, FitOptions, Ranked};
+
+use crate::cli::DiagnoseArgs;
+use crate::commands::fit::with_progress;
+use crate::common::{load, read_data, refuse_to_clobber, write_json, CliError};
+
+/// The candidate with its parameters at their fitted values (still marked
+/// `estimate`, so the next `plantc fit` refines them).
+fn fitted_instance(r: &Ranked) -> EffectInstance {
+    let mut inst = r.candidate.clone();
+    if let Some(f) = &r.fit {
+        for p in &mut inst.parameters {
+            if let Some(e) = f.parameters.iter().find(|e| e.name == p.name) {
+                p.value = e.value;
+            }
+        }
+    }
+    inst
+}
+
+/// One finding in the JSON shape of `plantc diagnose --json`.
+fn finding_json(d: &Diagnosis, r: &Ranked) -> serde_json::Value {
+    let inst = fitted_instance(r);
+    let mut params = serde_json::Map::new();
+    for p in &inst.parameters {
+        params.insert(p.base.clone(), serde_json::json!(p.value));
+    }
+    let after = r.fit.as_ref().map(|f| f.after_rmse);
+    serde_json::json!({
+        "effect": inst.effect,
+        "target": inst.target,
+        "parameters": params,
+        "evidence": {
+            "rmse_before": d.baseline.after_rmse,
+            "rmse_after": after,
+            "gain": r.gain,
+        },
+        "snippet": inst.snippet(),
+    })
+}
+
+/// Whether a ranked candidate is a finding: the accepted one and any other
+/// that clears the same bar.
+fn is_finding(d: &Diagnosis, r: &Ranked) -> bool {
+    d.verdict.is_some() && r.fit.is_some() && r.gain >= plantc_identify::diagnose::MIN_GAIN
+}
+
+pub fn run(args: &DiagnoseArgs, out: &mut dyn Write, err: &mut dyn Write) -> Result<(), CliError> {
+    if let (true, Some(o)) = (args.apply, &args.out) {
+        refuse_to_clobber(o, &args.model, args.force)?;
+    }
+    let loaded = load(&args.model, err)?;
+    let model = &loaded.model;
+    let measured = read_data(model, &args.data, err)?;
+    let text = std::fs::read_to_string(&args.model).map_err(|e| {
+        CliError::input(format!(
+            "error: cannot read `{}`: {e}",
+            args.model.display()
+        ))
+    })?;
+    let _ = writeln!(
+        err,
+        "refitting the model with each candidate effect on {} experiment(s)...",
+        measured.len()
+    );
+    let d = with_progress("diagnosing", || {
+        diagnose(&text, &measured, &FitOptions::default())
+    })
+    .map_err(|e| CliError::failure(format!("error: {e}")))?;
+    let findings: Vec<&Ranked> = d.ranking.iter().filter(|r| is_finding(&d, r)).collect();
+    if args.apply {
+        if let (Some(o), Some(top)) = (&args.out, findings.first()) {
+            let edited = fitted_instance(top)
+                .apply(&text)
+                .map_err(|e| CliError::failure(format!("error: {e}")))?;
+            std::fs::write(o, edited).map_err(|e| {
+                CliError::failure(format!("error: cannot write `{}`: {e}", o.display()))
+            })?;
+            let _ = writeln!(
+                err,
+                "model with {} added -> {}",
+                top.candidate.label(),
+                o.display()
+            );
+        } else {
+            let _ = writeln!(
+                err,
+                "note: the model is adequate: nothing to apply, no file written"
+            );
+        }
+    }
+    if args.json {
+        let v = serde_json::json!({
+            "verdict": if findings.is_empty() { "adequate" } else { "missing_effect" },
+            "findings": findings.iter().map(|r| finding_json(&d, r)).collect::<Vec<_>>(),
+            "baseline": {"rmse": d.baseline.after_rmse},
+            "candidates": d.ranking.iter().map(|r| serde_json::json!({
+                "effect": r.candidate.effect,
+                "target": r.candidate.target,
+                "rmse": r.fit.as_ref().map(|f| f.after_rmse),
+                "gain": r.gain,
+                "error": r.error,
+            })).collect::<Vec<_>>(),
+        });
+        write_json(out, &v);
+        return Ok(());
+    }
+    let _ = writeln!(
+        out,
+        "baseline (nominal model refitted): RMSE {:.3e}",
+        d.baseline.after_rmse
+    );
+    let _ = writeln!(
+        out,
+        "{:<20} {:<8} {:>12} {:>8}",
+        "effect", "target", "RMSE", "gain"
+    );
+    for r in &d.ranking {
+        let rmse = r
+            .fit
+            .as_ref()
+            .map_or("failed".to_string(), |f| format!("{:.3e}", f.after_rmse));
+        let _ = writeln!(
+            out,
+            "{:<20} {:<8} {:>12} {:>7.2}x",
+            r.candidate.effect, r.candidate.target, rmse, r.gain
+        );
+    }
+    match findings.first() {
+        Some(top) => {
+            let inst = fitted_instance(top);
+            let _ = writeln!(
+                out,
+                "\nverdict: missing effect `{}` on `{}` (RMSE {:.2}x lower with it). Add to the model:\n{}",
+                inst.effect,
+                inst.target,
+                top.gain,
+                inst.snippet()
+            );
+        }
+        None => {
+            let _ = writeln!(
+                out,
+                "\nverdict: adequate: no candidate lowers the RMSE by {}x or more",
+                plantc_identify::diagnose::MIN_GAIN
+            );
+        }
+    }
+    Ok(())
+}
