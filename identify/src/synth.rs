@@ -789,15 +789,19 @@ pub fn synthesize(model_text: &str, spec: &SynthSpec) -> Result<Synthesized, Syn
             bad(
                 &format!("--set {}", spec.parameter_set.clone().unwrap_or_default()),
                 e.to_string(),
-                format!(
-                    "named sets of the model: {}",
-                    nominal
-                        .sets
-                        .iter()
-                        .map(|s| s.name.as_str())
-                        .collect::<Vec<_>>()
-                        .join(", ")
-                ),
+                if nominal.sets.is_empty() {
+                    "the model defines no named sets; give single values as NAME=VALUE".to_string()
+                } else {
+                    format!(
+                        "named sets of the model: {}",
+                        nominal
+                            .sets
+                            .iter()
+                            .map(|s| s.name.as_str())
+                            .collect::<Vec<_>>()
+                            .join(", ")
+                    )
+                },
             )
         })?;
     let mut text = model_text.to_string();
@@ -1101,4 +1105,60 @@ pub fn synthesize(model_text: &str, spec: &SynthSpec) -> Result<Synthesized, Syn
         truth: truth_text,
         true_model: text,
     })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn multisine_is_zero_mean_with_the_asked_rms() {
+        let t: Vec<f64> = (0..5001).map(|k| k as f64 / 500.0).collect();
+        let mut rng = SplitMix(3);
+        let u = multisine(&t, 10.0, 0.3, 6.0, 1.5, &mut rng, "driven").unwrap();
+        let n = u.len() as f64;
+        let mean = u.iter().sum::<f64>() / n;
+        let rms = (u.iter().map(|v| v * v).sum::<f64>() / n).sqrt();
+        assert!(mean.abs() < 1e-12, "mean {mean}");
+        assert!((rms - 1.5).abs() < 1e-12, "rms {rms}");
+        // a band narrower than the resolution 1/duration has no component
+        let mut rng = SplitMix(3);
+        assert!(multisine(&t, 10.0, 0.31, 0.32, 1.0, &mut rng, "x").is_err());
+    }
+
+    #[test]
+    fn number_formats() {
+        assert_eq!(time_decimals(500.0), 4);
+        assert_eq!(time_decimals(1000.0), 4);
+        assert_eq!(time_decimals(3.2e4), 8); // 1/32000 s = 0.00003125 s
+        assert_eq!(fixed(-1e-12, 9), "0.000000000");
+        assert_eq!(fixed(-0.5, 2), "-0.50");
+    }
+
+    #[test]
+    fn gaussian_generator_has_unit_variance() {
+        // 20 000 draws: the sample mean has standard error 1/sqrt(20000) = 0.007
+        // and the sample variance about sqrt(2/20000) = 0.01; 5 sigma bounds.
+        let mut g = stream(42, 0, 2);
+        let x: Vec<f64> = (0..20_000).map(|_| g.normal()).collect();
+        let m = x.iter().sum::<f64>() / x.len() as f64;
+        let v = x.iter().map(|a| (a - m).powi(2)).sum::<f64>() / x.len() as f64;
+        assert!(m.abs() < 0.035, "mean {m}");
+        assert!((v - 1.0).abs() < 0.05, "variance {v}");
+    }
+
+    #[test]
+    fn effect_specs() {
+        let e = parse_effect_spec("coulomb_friction:alpha=8e-4").unwrap();
+        assert_eq!(
+            (e.effect.as_str(), e.target.as_str()),
+            ("coulomb_friction", "alpha")
+        );
+        assert_eq!(e.values, vec![("Fc".to_string(), 8e-4)]);
+        let e = parse_effect_spec("stribeck_friction:alpha:Fc=8e-4,Fs=1.2e-3,vs=0.1").unwrap();
+        assert_eq!(e.values.len(), 3);
+        let x = parse_experiment_spec("free_swing:alpha0=120deg,duration=20").unwrap();
+        assert_eq!(x.initial, vec![("alpha".to_string(), 120f64.to_radians())]);
+        assert_eq!(x.duration, 20.0);
+    }
 }
