@@ -1,7 +1,9 @@
 //! `plantc diagnose`: which physical effect is the model missing? Ranks the
 //! candidates of `plantc_identify::diagnose`, prints the verdict, the evidence
 //! and the text to add; `--apply -o OUT` writes the model with the top effect
-//! added (its parameters marked `estimate`).
+//! added (its parameters marked `estimate`), the effect's and the model's
+//! estimated parameters at the values of the refit with the effect, so that
+//! `plantc fit OUT` starts where the diagnosis ended.
 
 use std::io::Write;
 
@@ -9,7 +11,11 @@ use plantc_identify::{diagnose, Diagnosis, EffectInstance, FitOptions, Ranked};
 
 use crate::cli::DiagnoseArgs;
 use crate::commands::fit::with_progress;
-use crate::common::{load, read_data, refuse_to_clobber, write_json, CliError};
+use plantc_derive::lang::edit::set_parameter_value;
+
+use crate::common::{
+    declared_value_text, load, read_data, refuse_to_clobber, write_json, CliError,
+};
 
 /// The candidate with its parameters at their fitted values (still marked
 /// `estimate`, so the next `plantc fit` refines them).
@@ -77,9 +83,22 @@ pub fn run(args: &DiagnoseArgs, out: &mut dyn Write, err: &mut dyn Write) -> Res
     let findings: Vec<&Ranked> = d.ranking.iter().filter(|r| is_finding(&d, r)).collect();
     if args.apply {
         if let (Some(o), Some(top)) = (&args.out, findings.first()) {
-            let edited = fitted_instance(top)
+            let mut edited = fitted_instance(top)
                 .apply(&text)
                 .map_err(|e| CliError::failure(format!("error: {e}")))?;
+            // The model's own estimated parameters at the values refitted
+            // with the effect: `plantc fit OUT` starts where diagnose ended.
+            if let Some(f) = &top.fit {
+                for e in &f.parameters {
+                    if let Some(p) = model.parameters.iter().find(|p| p.name == e.name) {
+                        edited =
+                            set_parameter_value(&edited, &p.name, &declared_value_text(p, e.value))
+                                .map_err(|err| {
+                                    CliError::failure(format!("error: writing `{}`: {err}", p.name))
+                                })?;
+                    }
+                }
+            }
             std::fs::write(o, edited).map_err(|e| {
                 CliError::failure(format!("error: cannot write `{}`: {e}", o.display()))
             })?;
