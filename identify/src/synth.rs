@@ -28,6 +28,11 @@
 //! is the true one plus the offset, so that offset is added to the first
 //! sample handed to the simulator.
 //!
+//! **Samples.** An experiment of duration `D` at rate `r` has `round(D r)`
+//! samples at `t = k / r`, `k = 0 .. round(D r) - 1` (20 s at 500 Hz: 10 000
+//! samples, the last at 19.998 s), like the shared recordings; a multisine
+//! then covers exactly one period of its frequency grid `1/D`.
+//!
 //! **Determinism.** Noise and multisine phases come from a SplitMix64
 //! generator seeded from [`SynthOptions::seed`] and the experiment's index;
 //! numbers are written with fixed decimals; the same inputs give the same
@@ -883,7 +888,7 @@ pub fn synthesize(model_text: &str, spec: &SynthSpec) -> Result<Synthesized, Syn
             };
             x0[i] = *v;
         }
-        let n = (e.duration * opts.rate).round() as usize + 1;
+        let n = (e.duration * opts.rate).round() as usize;
         if n < 2 {
             return Err(bad(
                 &e.token,

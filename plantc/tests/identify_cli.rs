@@ -81,7 +81,7 @@ fn compare_json_shape_table_findings_and_plots() {
     let exps = v["experiments"].as_array().unwrap();
     assert_eq!(exps.len(), 2);
     // The pooled RMSE is over all samples of all channels and experiments:
-    // every channel here has 1001 samples, so rmse^2 = mean of the rmse_ch^2.
+    // every channel here has 1000 samples, so rmse^2 = mean of the rmse_ch^2.
     let mut sum = 0.0;
     for (e, f) in exps.iter().zip(&files) {
         assert_eq!(e["file"].as_str().unwrap(), f);

@@ -285,3 +285,68 @@ fn bad_specs_exit_2_naming_the_token() {
     }
     assert!(!dir.join("out").exists(), "nothing is written on bad input");
 }
+
+#[test]
+fn reproduces_the_shared_clean_free_swings() {
+    // ../shared/data/clean was made by an independent simulator (fine-step
+    // RK4, ZOH, 500 Hz, 4096 counts/rev) from the true values in its
+    // truth.json; synth with those values and the same releases (60 and 12
+    // deg from hanging) must record the same counts.
+    let shared = PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../../shared/data/clean");
+    if !shared.join("free_swing_large.csv").is_file() {
+        eprintln!("skipped: {} is absent", shared.display());
+        return;
+    }
+    let dir = tmp("shared");
+    let (code, out, err) = plantc(&[
+        "synth",
+        &model(),
+        "--set",
+        "J1=0.0016",
+        "--set",
+        "l2=0.162",
+        "--set",
+        "b1=0.003",
+        "--set",
+        "b2=0.0008",
+        "--set",
+        "Fg1=0.015",
+        "--experiment",
+        "free_swing:alpha0=120deg,duration=20,name=free_swing_large",
+        "--experiment",
+        "free_swing:alpha0=168deg,duration=20,name=free_swing_small",
+        "-o",
+        &s(&dir),
+    ]);
+    assert_eq!(code, 0, "{out}{err}");
+    let q = 2.0 * std::f64::consts::PI / 4096.0;
+    for name in ["free_swing_large.csv", "free_swing_small.csv"] {
+        let read = |p: PathBuf| -> Vec<Vec<f64>> {
+            std::fs::read_to_string(p)
+                .unwrap()
+                .lines()
+                .skip(1)
+                .map(|l| l.split(',').map(|c| c.parse().unwrap()).collect())
+                .collect()
+        };
+        let ours = read(dir.join(name));
+        let theirs = read(shared.join(name));
+        assert_eq!(ours.len(), theirs.len(), "{name}: sample count");
+        let mut differ = 0;
+        for (a, b) in ours.iter().zip(&theirs) {
+            assert_eq!(a[0], b[0], "{name}: time");
+            for c in 1..=2 {
+                let d = ((a[c] - b[c]) / q).abs();
+                assert!(d < 1.0 + 1e-6, "{name}: {} counts apart at t = {}", d, a[0]);
+                if d > 0.5 {
+                    differ += 1;
+                }
+            }
+        }
+        // a count boundary crossed a hair earlier or later may flip a sample
+        assert!(
+            differ * 1000 <= ours.len(),
+            "{name}: {differ} samples differ"
+        );
+    }
+}
