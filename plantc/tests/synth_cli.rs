@@ -350,3 +350,82 @@ fn reproduces_the_shared_clean_free_swings() {
         );
     }
 }
+
+#[test]
+fn every_effect_of_the_vocabulary_round_trips_through_its_true_model() {
+    // For every effect effect_edit knows, on every target it accepts, synth
+    // data and compare them with the true model (the text synth built: effect
+    // added, values written). Only the encoder rounding should remain:
+    // RMSE about q / sqrt(12) = 4.43e-4 rad (see the round-trip test above);
+    // 1.1x allows for the initial state read from the rounded first sample
+    // (a sensor offset moves it off the count grid).
+    use plantc_identify::effect_edit::{EffectInstance, TEMPLATES};
+    use plantc_identify::synth::{parse_experiment_spec, synthesize, SynthSpec};
+    let text = std::fs::read_to_string(model()).unwrap();
+    let nominal = plantc_derive::model::load_model_text("m", &text)
+        .unwrap()
+        .model;
+    let targets: Vec<String> = nominal
+        .coordinates
+        .iter()
+        .map(|c| c.name.clone())
+        .chain(nominal.inputs.iter().map(|i| i.name.clone()))
+        .collect();
+    let floor = 2.0 * std::f64::consts::PI / 4096.0 / 12f64.sqrt();
+    let dir = tmp("vocabulary");
+    let mut cases = 0;
+    for (effect, _, temps) in TEMPLATES {
+        // a clear but moderate value: the template start, or a tenth of the
+        // upper bound when the start is 0 (offsets)
+        let values: Vec<(String, f64)> = temps
+            .iter()
+            .map(|t| {
+                let v = if t.start != 0.0 { t.start } else { 0.1 * t.hi };
+                (t.base.to_string(), v)
+            })
+            .collect();
+        for target in &targets {
+            if EffectInstance::with_values(&nominal, effect, target, &values).is_err() {
+                continue;
+            }
+            let token = format!(
+                "{effect}:{target}:{}",
+                values
+                    .iter()
+                    .map(|(n, v)| format!("{n}={v}"))
+                    .collect::<Vec<_>>()
+                    .join(",")
+            );
+            let spec = SynthSpec {
+                case: token.clone(),
+                model_name: "rotary_pendulum.plant".into(),
+                effects: vec![plantc_identify::synth::parse_effect_spec(&token).unwrap()],
+                experiments: vec![
+                    parse_experiment_spec("free_swing:alpha0=135deg,duration=2").unwrap(),
+                    parse_experiment_spec("driven:alpha0=180deg,duration=2").unwrap(),
+                ],
+                ..SynthSpec::default()
+            };
+            let made = synthesize(&text, &spec).unwrap_or_else(|e| panic!("{token}: {e}"));
+            let case = dir.join(format!("{effect}_{target}"));
+            std::fs::create_dir_all(&case).unwrap();
+            let true_model = case.join("true.plant");
+            std::fs::write(&true_model, &made.true_model).unwrap();
+            let mut args = vec!["compare".to_string(), s(&true_model), "--json".into()];
+            for f in &made.files {
+                std::fs::write(case.join(&f.file_name), &f.text).unwrap();
+                args.push(s(&case.join(&f.file_name)));
+            }
+            let r: Vec<&str> = args.iter().map(String::as_str).collect();
+            let (code, out, err) = plantc(&r);
+            assert_eq!(code, 0, "{token}: {err}");
+            let v: serde_json::Value = serde_json::from_str(&out).unwrap();
+            let rmse = v["rmse"].as_f64().unwrap();
+            assert!(rmse < 1.1 * floor, "{token}: RMSE {rmse} vs floor {floor}");
+            cases += 1;
+        }
+    }
+    // 5 force effects on 2 coordinates at least (more once sensor and
+    // actuator effects are in the table)
+    assert!(cases >= 10, "{cases} cases");
+}
