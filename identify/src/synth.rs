@@ -33,6 +33,17 @@
 //! samples, the last at 19.998 s), like the shared recordings; a multisine
 //! then covers exactly one period of its frequency grid `1/D`.
 //!
+//! **truth.json** has the shape of the shared recordings' one: `case`,
+//! `effect` and `coordinate` (the effect's name and target, which may be an
+//! input or a sensor; `null` without effect, arrays with several),
+//! `effect_parameters` (by base name, e.g. `Fc`; by model name, e.g.
+//! `Fc_alpha`, with several effects), `true_parameters` and
+//! `nominal_parameters` (the model's own parameters, SI), `sample_rate_hz`,
+//! `encoder_counts_per_rev` (`null` without quantisation) and `experiments`
+//! (file stems); then `effects` (each with its target and parameters),
+//! `noise_std`, `seed`, `substep_s`, `model` and `experiment_specs`, enough to
+//! make the data again.
+//!
 //! **Determinism.** Noise and multisine phases come from a SplitMix64
 //! generator seeded from [`SynthOptions::seed`] and the experiment's index;
 //! numbers are written with fixed decimals; the same inputs give the same
