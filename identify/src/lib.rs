@@ -14,6 +14,8 @@
 //! - [`EquationError`] ranks candidate effects by equation error (smoothed
 //!   derivatives, BIC gain); [`diagnose()`] confirms the leaders by
 //!   simulation-error refits and names the missing effect or says "adequate".
+//! - [`synthesize`] makes measurement-like data from a model with hidden
+//!   effects ([`synth`]).
 
 mod csv_reader;
 pub mod data;
@@ -38,6 +40,7 @@ pub mod metrics;
 pub mod plot;
 pub mod savitzky_golay;
 pub mod sensitivity;
+pub mod synth;
 pub mod where_it_fails;
 
 pub use diagnose::{
@@ -51,6 +54,9 @@ pub use fit::{fit, Estimate, FitError, FitOptions, FitResult};
 pub use metrics::{compare, fit_percent, rmse, ChannelFit, ExperimentFit, FitReport, MetricsError};
 pub use plot::{plot_comparison, render_comparison, PlotError};
 pub use sensitivity::{estimated_parameters, SensitivitySimulator, SensitivityTrajectory};
+pub use synth::{
+    synthesize, EffectSpec, ExperimentSpec, SynthError, SynthOptions, SynthSpec, Synthesized,
+};
 pub use where_it_fails::{
     residual_summary, where_it_fails, ChannelDiagnosis, FailOptions, Finding, FindingKind,
     GroupStats, ResidualSummary,

@@ -137,6 +137,145 @@ pub enum Command {
     /// Run a controller in the real-time loop on the simulator or a Quanser
     /// Q2-USB board, with the safety supervisor and a CSV log.
     Run(RunArgs),
+    /// Make measurement-like CSV data from the model with hidden effects
+    /// (true parameter values, encoder quantisation, optional noise).
+    Synth(SynthArgs),
+    /// Compare the model with measured experiments: fit %, RMSE, where it fails.
+    Compare(CompareArgs),
+    /// Fit the parameters marked `estimate` (or `--free`) to measured experiments.
+    Fit(FitArgs),
+    /// Name the physical effect the model is missing, from measured experiments.
+    Diagnose(DiagnoseArgs),
+}
+
+/// Arguments of `plantc synth`.
+#[derive(Debug, Args, Clone)]
+pub struct SynthArgs {
+    /// The model file.
+    pub model: PathBuf,
+    /// A hidden effect (repeatable): `coulomb_friction:alpha=8e-4` or
+    /// `stribeck_friction:alpha:Fc=8e-4,Fs=1.2e-3,vs=0.1` (values in SI).
+    #[arg(long = "effect", value_name = "EFFECT:TARGET=VALUE")]
+    pub effects: Vec<String>,
+    /// A true parameter value (repeatable, SI or `deg`): `--set J1=1.6e-3`;
+    /// a name without `=` selects a named parameter set of the model.
+    #[arg(long = "set", value_name = "NAME=VALUE")]
+    pub set: Vec<String>,
+    /// An experiment (repeatable): `free_swing:alpha0=120deg,duration=20`,
+    /// `driven:alpha0=180deg,band=0.3-6,rms=1.5,seed=1,duration=20`,
+    /// `step:amplitude=1,at=0.5,duration=5`; `name=` names the file.
+    #[arg(
+        long = "experiment",
+        value_name = "KIND:KEY=VALUE,...",
+        required = true
+    )]
+    pub experiments: Vec<String>,
+    /// Sample rate (Hz).
+    #[arg(long, default_value_t = 500.0)]
+    pub rate: f64,
+    /// Encoder counts per revolution of angle coordinates (0: no quantisation).
+    #[arg(long, default_value_t = 4096)]
+    pub counts: u32,
+    /// Standard deviation of Gaussian noise on the coordinates (SI, before
+    /// quantisation).
+    #[arg(long, default_value_t = 0.0)]
+    pub noise: f64,
+    /// Seed of the noise and of the multisine phases.
+    #[arg(long, default_value_t = 1)]
+    pub seed: u64,
+    /// Simulation substep (s).
+    #[arg(long, default_value_t = 1e-4)]
+    pub substep: f64,
+    /// Name of the case in truth.json (default: the directory's name).
+    #[arg(long)]
+    pub case: Option<String>,
+    /// Output directory (created if missing).
+    #[arg(short = 'o', long = "out", value_name = "DIR")]
+    pub out: PathBuf,
+    /// Overwrite existing files in DIR.
+    #[arg(long)]
+    pub force: bool,
+}
+
+/// Measured data files and how to read them.
+#[derive(Debug, Args, Clone)]
+pub struct DataArgs {
+    /// Measured experiments: CSV files with a header (`t` and the model's
+    /// coordinates and inputs, unit suffixes like `alpha[deg]` allowed) or
+    /// MAT v5 files.
+    #[arg(required = true, value_name = "DATA")]
+    pub data: Vec<PathBuf>,
+    /// For MAT files: the signal rows after time, e.g. `theta,alpha,Vm`.
+    #[arg(long, value_name = "NAME,...")]
+    pub channels: Option<String>,
+}
+
+/// Arguments of `plantc compare`.
+#[derive(Debug, Args, Clone)]
+pub struct CompareArgs {
+    /// The model file.
+    pub model: PathBuf,
+    #[command(flatten)]
+    pub data: DataArgs,
+    #[command(flatten)]
+    pub params: ParamArgs,
+    /// Print JSON.
+    #[arg(long)]
+    pub json: bool,
+    /// Write an overlay + residual SVG per experiment into this directory.
+    #[arg(long, value_name = "DIR")]
+    pub plots: Option<PathBuf>,
+}
+
+/// Arguments of `plantc fit`.
+#[derive(Debug, Args, Clone)]
+pub struct FitArgs {
+    /// The model file.
+    pub model: PathBuf,
+    #[command(flatten)]
+    pub data: DataArgs,
+    #[command(flatten)]
+    pub params: ParamArgs,
+    /// Parameters to fit (default: those marked `estimate`), e.g. `J1,l2`.
+    #[arg(long, value_name = "NAME,...")]
+    pub free: Option<String>,
+    /// Write the model with the fitted values here (never the input file or
+    /// an existing file unless --force).
+    #[arg(short = 'o', long = "out", value_name = "OUT.plant")]
+    pub out: Option<PathBuf>,
+    /// Overwrite OUT.
+    #[arg(long)]
+    pub force: bool,
+    /// Print JSON.
+    #[arg(long)]
+    pub json: bool,
+}
+
+/// Arguments of `plantc diagnose`.
+#[derive(Debug, Args, Clone)]
+pub struct DiagnoseArgs {
+    /// The model file.
+    pub model: PathBuf,
+    #[command(flatten)]
+    pub data: DataArgs,
+    /// Print JSON.
+    #[arg(long)]
+    pub json: bool,
+    /// Write the model with the top effect added (needs -o).
+    #[arg(long, requires = "out")]
+    pub apply: bool,
+    /// Where --apply writes (never the input file or an existing file unless
+    /// --force).
+    #[arg(
+        short = 'o',
+        long = "out",
+        value_name = "OUT.plant",
+        requires = "apply"
+    )]
+    pub out: Option<PathBuf>,
+    /// Overwrite OUT.
+    #[arg(long)]
+    pub force: bool,
 }
 
 /// Which hardware the loop drives.

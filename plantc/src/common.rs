@@ -176,3 +176,82 @@ pub fn write_json(out: &mut dyn Write, v: &serde_json::Value) {
         serde_json::to_string_pretty(v).unwrap_or_default()
     );
 }
+
+/// The channels a model needs from a measurement file: its coordinates
+/// (angle or length) and its inputs (kind from the declared unit).
+pub fn channel_spec(model: &plantc_derive::model::Model) -> plantc_identify::ChannelSpec {
+    use plantc_derive::model::CoordinateKind;
+    use plantc_identify::Kind;
+    let mut spec = plantc_identify::ChannelSpec::new();
+    for c in &model.coordinates {
+        spec = match c.kind {
+            CoordinateKind::Angle => spec.angle(&c.name),
+            CoordinateKind::Length => spec.length(&c.name),
+        };
+    }
+    for i in &model.inputs {
+        let kind = match i.unit.replace(' ', "").as_str() {
+            "V" => Kind::Voltage,
+            "A" => Kind::Current,
+            "N" => Kind::Force,
+            "N*m" | "Nm" | "N.m" => Kind::Torque,
+            _ => Kind::Other,
+        };
+        spec = spec.input(&i.name, kind);
+    }
+    spec
+}
+
+/// Reads the measured experiments of `data` for `model`; warnings go to
+/// `err`, a bad file is bad input (exit 2) with its file:line:col message.
+pub fn read_data(
+    model: &plantc_derive::model::Model,
+    data: &crate::cli::DataArgs,
+    err: &mut dyn Write,
+) -> Result<Vec<plantc_identify::Experiment>, CliError> {
+    let spec = channel_spec(model);
+    let mut options = plantc_identify::ReadOptions::default();
+    if let Some(c) = &data.channels {
+        options.mat_channels = Some(
+            plantc_identify::parse_channel_map(c)
+                .map_err(|e| CliError::input(format!("error: {e}")))?,
+        );
+    }
+    let (exps, warnings) = plantc_identify::read_experiments(&data.data, &spec, &options)
+        .map_err(|e| CliError::input(format!("error: {e}")))?;
+    for w in warnings {
+        let _ = writeln!(err, "{w}");
+    }
+    Ok(exps)
+}
+
+/// A value in SI as a number literal in the parameter's declared unit, for
+/// the lossless editor.
+pub fn declared_value_text(p: &plantc_derive::model::Parameter, si: f64) -> String {
+    let scale = plantc_derive::lang::units::parse_unit(&p.unit)
+        .map(|u| u.scale.to_f64())
+        .unwrap_or(1.0);
+    plantc_derive::lang::edit::number_text(si / scale)
+}
+
+/// Refuses to write `out` when it exists (the input model included) unless
+/// `force`; never writes over the input model without `force` either.
+pub fn refuse_to_clobber(out: &Path, input: &Path, force: bool) -> Result<(), CliError> {
+    let same = match (out.canonicalize(), input.canonicalize()) {
+        (Ok(a), Ok(b)) => a == b,
+        _ => false,
+    };
+    if same && !force {
+        return Err(CliError::input(format!(
+            "error: `{}` is the input model; write the result to another file, or pass --force to replace it",
+            out.display()
+        )));
+    }
+    if out.exists() && !force {
+        return Err(CliError::input(format!(
+            "error: `{}` already exists; pass --force to overwrite it",
+            out.display()
+        )));
+    }
+    Ok(())
+}

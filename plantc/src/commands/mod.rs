@@ -2,13 +2,17 @@
 
 mod analyze;
 mod check;
+mod compare;
 mod derive;
 mod design;
+mod diagnose;
+mod fit;
 mod gen;
 mod linearize;
 mod run;
 mod sim;
 mod stability;
+mod synth;
 
 use std::io::Write;
 
@@ -47,6 +51,10 @@ pub fn dispatch(cli: &Cli, out: &mut dyn Write, err: &mut dyn Write) -> Result<(
         Command::Lqr { source, q, r, json } => design::lqr(source, q, r, *json, out, err),
         Command::Run(args) => run::run(args, out, err),
         Command::Sim(args) => sim::run(args, out, err),
+        Command::Synth(args) => synth::run(args, out, err),
+        Command::Compare(args) => compare::run(args, out, err),
+        Command::Fit(args) => fit::run(args, out, err),
+        Command::Diagnose(args) => diagnose::run(args, out, err),
         Command::Gen {
             model,
             controllers,

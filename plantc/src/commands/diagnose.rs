@@ -1,0 +1,219 @@
+//! `plantc diagnose`: which physical effect is the model missing? Ranks the
+//! candidates of `plantc_identify::diagnose`, prints the verdict, the evidence
+//! and the text to add; `--apply -o OUT` writes the model with the top effect
+//! added (its parameters marked `estimate`), the effect's and the model's
+//! estimated parameters at the values of the refit with the effect, so that
+//! `plantc fit OUT` starts where the diagnosis ended.
+
+use std::io::Write;
+
+use plantc_identify::{diagnose, Diagnosis, EffectInstance, FitOptions, Ranked};
+
+use crate::cli::DiagnoseArgs;
+use crate::commands::fit::with_progress;
+use plantc_derive::lang::edit::set_parameter_value;
+
+use crate::common::{
+    declared_value_text, load, read_data, refuse_to_clobber, write_json, CliError,
+};
+
+/// The candidate with its parameters at their fitted values (still marked
+/// `estimate`, so the next `plantc fit` refines them).
+fn fitted_instance(r: &Ranked) -> EffectInstance {
+    let mut inst = r.candidate.clone();
+    if let Some(f) = &r.fit {
+        for p in &mut inst.parameters {
+            if let Some(e) = f.parameters.iter().find(|e| e.name == p.name) {
+                p.value = e.value;
+            }
+        }
+    }
+    inst
+}
+
+/// One finding in the JSON shape of `plantc diagnose --json`.
+fn finding_json(r: &Ranked) -> serde_json::Value {
+    let inst = fitted_instance(r);
+    let mut params = serde_json::Map::new();
+    for p in &inst.parameters {
+        let se = r
+            .parameters
+            .iter()
+            .find(|e| e.name == p.name)
+            .map(|e| e.std_error)
+            .filter(|s| s.is_finite());
+        params.insert(
+            p.base.clone(),
+            serde_json::json!({"name": p.name, "value": p.value, "unit": p.unit, "std_error": se}),
+        );
+    }
+    let ev = &r.evidence;
+    let shares = |v: &[plantc_identify::Share]| {
+        v.iter()
+            .map(|s| serde_json::json!({"where": s.label, "share": s.share}))
+            .collect::<Vec<_>>()
+    };
+    serde_json::json!({
+        "effect": inst.effect,
+        "target": inst.target,
+        "parameters": params,
+        "evidence": {
+            "rmse_before": ev.rmse_before,
+            "rmse_after": ev.rmse_after,
+            "gain": ev.gain,
+            "residual_share": ev.residual_share,
+            "bic_gain": ev.bic_gain,
+            "equation_error_rank": ev.equation_error_rank,
+            "acts_where": ev.acts_where,
+            "by_experiment": shares(&ev.by_experiment),
+            "by_speed": shares(&ev.by_speed),
+        },
+        "snippet": inst.snippet(),
+    })
+}
+
+/// The findings, best first: the accepted candidate, then any other refitted
+/// candidate that clears the same bar (an alternative explanation).
+fn findings(d: &Diagnosis) -> Vec<&Ranked> {
+    let Some(v) = &d.verdict else {
+        return Vec::new();
+    };
+    let mut f: Vec<&Ranked> = d
+        .ranking
+        .iter()
+        .filter(|r| r.candidate.label() == v.label())
+        .take(1)
+        .collect();
+    f.extend(d.ranking.iter().filter(|r| {
+        r.candidate.label() != v.label()
+            && r.fit.is_some()
+            && r.gain >= plantc_identify::diagnose::MIN_GAIN
+    }));
+    f
+}
+
+pub fn run(args: &DiagnoseArgs, out: &mut dyn Write, err: &mut dyn Write) -> Result<(), CliError> {
+    if let (true, Some(o)) = (args.apply, &args.out) {
+        refuse_to_clobber(o, &args.model, args.force)?;
+    }
+    let loaded = load(&args.model, err)?;
+    let model = &loaded.model;
+    let measured = read_data(model, &args.data, err)?;
+    let text = std::fs::read_to_string(&args.model).map_err(|e| {
+        CliError::input(format!(
+            "error: cannot read `{}`: {e}",
+            args.model.display()
+        ))
+    })?;
+    let _ = writeln!(
+        err,
+        "refitting the model with each candidate effect on {} experiment(s)...",
+        measured.len()
+    );
+    let d = with_progress("diagnosing", || {
+        diagnose(&text, &measured, &FitOptions::default())
+    })
+    .map_err(|e| CliError::failure(format!("error: {e}")))?;
+    let findings = findings(&d);
+    if args.apply {
+        if let (Some(o), Some(top)) = (&args.out, findings.first()) {
+            let mut edited = fitted_instance(top)
+                .apply(&text)
+                .map_err(|e| CliError::failure(format!("error: {e}")))?;
+            // The model's own estimated parameters at the values refitted
+            // with the effect: `plantc fit OUT` starts where diagnose ended.
+            if let Some(f) = &top.fit {
+                for e in &f.parameters {
+                    if let Some(p) = model.parameters.iter().find(|p| p.name == e.name) {
+                        edited =
+                            set_parameter_value(&edited, &p.name, &declared_value_text(p, e.value))
+                                .map_err(|err| {
+                                    CliError::failure(format!("error: writing `{}`: {err}", p.name))
+                                })?;
+                    }
+                }
+            }
+            std::fs::write(o, edited).map_err(|e| {
+                CliError::failure(format!("error: cannot write `{}`: {e}", o.display()))
+            })?;
+            let _ = writeln!(
+                err,
+                "model with {} added -> {}",
+                top.candidate.label(),
+                o.display()
+            );
+        } else {
+            let _ = writeln!(
+                err,
+                "note: the model is adequate: nothing to apply, no file written"
+            );
+        }
+    }
+    if args.json {
+        let v = serde_json::json!({
+            "verdict": if findings.is_empty() { "adequate" } else { "missing_effect" },
+            "findings": findings.iter().map(|r| finding_json(r)).collect::<Vec<_>>(),
+            "baseline": {"rmse": d.baseline.after_rmse},
+            "candidates": d.ranking.iter().map(|r| serde_json::json!({
+                "effect": r.candidate.effect,
+                "target": r.candidate.target,
+                "rmse": r.fit.as_ref().map(|f| f.after_rmse),
+                "gain": r.gain,
+                "bic_gain": r.evidence.bic_gain,
+                "equation_error_rank": r.evidence.equation_error_rank,
+                "refitted": r.fit.is_some(),
+                "error": r.error,
+            })).collect::<Vec<_>>(),
+        });
+        write_json(out, &v);
+        return Ok(());
+    }
+    let _ = writeln!(
+        out,
+        "baseline (nominal model refitted): RMSE {:.3e}",
+        d.baseline.after_rmse
+    );
+    let _ = writeln!(
+        out,
+        "{:<20} {:<8} {:>9} {:>12} {:>8}  where",
+        "effect", "target", "eq.err BIC", "refit RMSE", "gain"
+    );
+    for r in &d.ranking {
+        let (rmse, gain) = match (&r.fit, &r.error) {
+            (Some(f), _) => (format!("{:.3e}", f.after_rmse), format!("{:.2}x", r.gain)),
+            (None, Some(_)) => ("failed".to_string(), "-".to_string()),
+            (None, None) => ("not refit".to_string(), "-".to_string()),
+        };
+        let _ = writeln!(
+            out,
+            "{:<20} {:<8} {:>9.1} {:>12} {:>8}  {}",
+            r.candidate.effect,
+            r.candidate.target,
+            r.evidence.bic_gain,
+            rmse,
+            gain,
+            r.evidence.acts_where
+        );
+    }
+    match findings.first() {
+        Some(top) => {
+            let inst = fitted_instance(top);
+            let _ = writeln!(
+                out,
+                "\nverdict: missing effect `{}` on `{}` (RMSE {:.2}x lower with it). Add to the model:\n{}",
+                inst.effect,
+                inst.target,
+                top.gain,
+                inst.snippet()
+            );
+        }
+        None => {
+            let _ = writeln!(
+                out,
+                "\nverdict: adequate: no candidate lowers the RMSE by {}x or more",
+                plantc_identify::diagnose::MIN_GAIN
+            );
+        }
+    }
+    Ok(())
+}

@@ -1,0 +1,173 @@
+//! Bad measurement files through the command line (`plantc compare`, `fit`,
+//! `diagnose` share the reader): exit code 2, a message naming
+//! file:line:column, no panic; a degrees-looking column is only a warning.
+
+use std::path::{Path, PathBuf};
+
+fn model() -> String {
+    PathBuf::from(env!("CARGO_MANIFEST_DIR"))
+        .join("../models/rotary_pendulum.plant")
+        .display()
+        .to_string()
+}
+
+fn tmp(name: &str) -> PathBuf {
+    let dir = std::env::temp_dir().join(format!("plantc-baddata-{}-{name}", std::process::id()));
+    let _ = std::fs::remove_dir_all(&dir);
+    std::fs::create_dir_all(&dir).unwrap();
+    dir
+}
+
+fn plantc(args: &[&str]) -> (i32, String, String) {
+    let mut out = Vec::new();
+    let mut err = Vec::new();
+    let mut all = vec!["plantc"];
+    all.extend_from_slice(args);
+    let code = plantc::run(all, &mut out, &mut err);
+    (
+        code,
+        String::from_utf8(out).unwrap(),
+        String::from_utf8(err).unwrap(),
+    )
+}
+
+/// A valid file body: 20 samples at 500 Hz, pendulum hanging, no input.
+fn rows(n: usize) -> Vec<String> {
+    (0..n)
+        .map(|k| format!("{:.4},0.000000000,3.141592654,0.000000", k as f64 * 0.002))
+        .collect()
+}
+
+fn write(dir: &Path, name: &str, header: &str, rows: &[String]) -> String {
+    let p = dir.join(name);
+    let mut text = format!("{header}\n");
+    for r in rows {
+        text.push_str(r);
+        text.push('\n');
+    }
+    std::fs::write(&p, text).unwrap();
+    p.display().to_string()
+}
+
+/// Runs every identification command on `file`; each must exit 2 with
+/// `needle` (a `file:line:col` location or a message) in its error.
+fn assert_rejected(file: &str, needles: &[&str]) {
+    let dir = tmp("out");
+    let out_model = dir.join("fitted.plant").display().to_string();
+    for cmd in [
+        vec!["compare", &model(), file],
+        vec!["fit", &model(), file, "-o", &out_model],
+        vec!["diagnose", &model(), file],
+    ] {
+        let (code, out, err) = plantc(&cmd);
+        assert_eq!(code, 2, "{cmd:?}: {out}{err}");
+        for n in needles {
+            assert!(err.contains(n), "{cmd:?}: `{n}` not in: {err}");
+        }
+        assert!(!err.contains("panicked"), "{err}");
+        assert!(out.is_empty(), "nothing on stdout: {out}");
+    }
+    assert!(!Path::new(&out_model).exists(), "no model written");
+}
+
+#[test]
+fn nan_cell() {
+    let dir = tmp("nan");
+    let mut r = rows(20);
+    r[3] = "0.0060,0.000000000,NaN,0.000000".into();
+    let f = write(&dir, "nan.csv", "t,theta,alpha,Vm", &r);
+    // header = line 1, so data row 4 is line 5; alpha is column 3
+    assert_rejected(
+        &f,
+        &[
+            &format!("{f}:5:3:"),
+            "non-finite value `NaN` in column `alpha`",
+        ],
+    );
+}
+
+#[test]
+fn empty_cell() {
+    let dir = tmp("empty");
+    let mut r = rows(20);
+    r[9] = "0.0180,,3.141592654,0.000000".into();
+    let f = write(&dir, "empty.csv", "t,theta,alpha,Vm", &r);
+    assert_rejected(&f, &[&format!("{f}:11:2:"), "empty cell in column `theta`"]);
+}
+
+#[test]
+fn missing_column() {
+    let dir = tmp("missing");
+    let r: Vec<String> = rows(20)
+        .iter()
+        .map(|l| l.rsplit_once(',').unwrap().0.to_string())
+        .collect();
+    let f = write(&dir, "missing.csv", "t,theta,alpha", &r);
+    assert_rejected(
+        &f,
+        &[
+            &format!("{f}: missing column `Vm`"),
+            "expected: t, theta, alpha, Vm",
+        ],
+    );
+}
+
+#[test]
+fn time_going_backwards_and_duplicate_time() {
+    let dir = tmp("time");
+    let mut r = rows(20);
+    r[6] = "0.0100,0.000000000,3.141592654,0.000000".into(); // after 0.0100 at row 5
+    let f = write(&dir, "dup.csv", "t,theta,alpha,Vm", &r);
+    assert_rejected(&f, &[&format!("{f}:8:1:"), "duplicate time 0.01 s"]);
+    let mut r = rows(20);
+    r[12] = "0.0100,0.000000000,3.141592654,0.000000".into();
+    let f = write(&dir, "back.csv", "t,theta,alpha,Vm", &r);
+    assert_rejected(
+        &f,
+        &[
+            &format!("{f}:14:1:"),
+            "time goes backwards: 0.01 s after 0.022 s",
+        ],
+    );
+}
+
+#[test]
+fn file_too_short() {
+    let dir = tmp("short");
+    let f = write(&dir, "short.csv", "t,theta,alpha,Vm", &rows(4));
+    // the reader's minimum is identify::data::MIN_SAMPLES = 10
+    assert_rejected(&f, &[&f, "file too short: 4 samples, at least 10 needed"]);
+}
+
+#[test]
+fn degrees_without_suffix_is_a_warning() {
+    let dir = tmp("deg");
+    // a hanging pendulum logged in degrees: 180, read as radians (> 40 pi)
+    let r: Vec<String> = (0..20)
+        .map(|k| format!("{:.4},0.0,180.0,0.0", k as f64 * 0.002))
+        .collect();
+    let f = write(&dir, "deg.csv", "t,theta,alpha,Vm", &r);
+    let (code, out, err) = plantc(&["compare", &model(), &f]);
+    assert_eq!(code, 0, "{out}{err}");
+    assert!(
+        err.contains(&format!("{f}: warning: angle column `alpha`"))
+            && err.contains("write `alpha[deg]`"),
+        "{err}"
+    );
+    // with the suffix the same file is read in degrees, silently
+    let f2 = write(&dir, "deg2.csv", "t,theta,alpha[deg],Vm", &r);
+    let (code, out, err) = plantc(&["compare", &model(), &f2, "--json"]);
+    assert_eq!(code, 0, "{out}{err}");
+    assert!(!err.contains("warning"), "{err}");
+    let v: serde_json::Value = serde_json::from_str(&out).unwrap();
+    assert!(v["rmse"].as_f64().unwrap() < 1e-6, "hanging at rest: {out}");
+}
+
+#[test]
+fn missing_file_and_unknown_unit() {
+    let dir = tmp("misc");
+    let f = dir.join("nope.csv").display().to_string();
+    assert_rejected(&f, &[&f, "cannot read file"]);
+    let f = write(&dir, "unit.csv", "t,theta,alpha[grad],Vm", &rows(20));
+    assert_rejected(&f, &[&format!("{f}:1:3:"), "unknown unit suffix `[grad]`"]);
+}
