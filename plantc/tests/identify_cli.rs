@@ -233,7 +233,8 @@ fn diagnose_names_a_hidden_spring_and_applies_it() {
     let top = &v["findings"][0];
     assert_eq!(top["effect"], "spring");
     assert_eq!(top["target"], "theta");
-    let k = top["parameters"]["k"].as_f64().unwrap();
+    let k = top["parameters"]["k"]["value"].as_f64().unwrap();
+    assert_eq!(top["parameters"]["k"]["name"], "k_theta");
     assert!((k / 0.03 - 1.0).abs() < 0.05, "k = {k}");
     assert!(top["evidence"].is_object());
     let snippet = top["snippet"].as_str().unwrap();
