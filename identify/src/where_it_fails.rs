@@ -397,21 +397,47 @@ fn diagnose(
         )
     });
     let (low, high) = (&speed[0], &speed[2]);
+    // A channel at rest for a third of the samples or more has a speed
+    // tertile bound of (numerically) zero: say "at rest" instead of printing it.
+    let at_rest = |c: f64| c <= 1e-9 * smax;
     compare(low, high, FindingKind::LowSpeed, &|a, b, k| {
-        format!(
-            "error grows at low speed: RMSE {}{u} at low speed (|velocity| < {}{u}/s) vs {} at high speed ({k:.1}x)",
-            sci(a),
-            sci(c1),
-            sci(b)
-        )
+        if at_rest(c1) {
+            format!(
+                "error grows at rest: RMSE {}{u} while at rest vs {} at high speed ({k:.1}x)",
+                sci(a),
+                sci(b)
+            )
+        } else {
+            format!(
+                "error grows at low speed: RMSE {}{u} at low speed (|velocity| < {}{u}/s) vs {} at high speed ({k:.1}x)",
+                sci(a),
+                sci(c1),
+                sci(b)
+            )
+        }
     });
     compare(high, low, FindingKind::HighSpeed, &|a, b, k| {
-        format!(
-            "error grows at high speed: RMSE {}{u} at high speed (|velocity| > {}{u}/s) vs {} at low speed ({k:.1}x)",
-            sci(a),
-            sci(c2),
-            sci(b)
-        )
+        if at_rest(c2) {
+            format!(
+                "error grows while it moves: RMSE {}{u} while moving vs {} at rest ({k:.1}x)",
+                sci(a),
+                sci(b)
+            )
+        } else if at_rest(c1) {
+            format!(
+                "error grows at high speed: RMSE {}{u} at high speed (|velocity| > {}{u}/s) vs {} at rest ({k:.1}x)",
+                sci(a),
+                sci(c2),
+                sci(b)
+            )
+        } else {
+            format!(
+                "error grows at high speed: RMSE {}{u} at high speed (|velocity| > {}{u}/s) vs {} at low speed ({k:.1}x)",
+                sci(a),
+                sci(c2),
+                sci(b)
+            )
+        }
     });
     let share = 100.0 * turnarounds[0].n as f64 / n as f64;
     compare(

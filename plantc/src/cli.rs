@@ -146,6 +146,29 @@ pub enum Command {
     Fit(FitArgs),
     /// Name the physical effect the model is missing, from measured experiments.
     Diagnose(DiagnoseArgs),
+    /// The whole story: compare the nominal model with the data, diagnose the
+    /// missing effect, add it to a copy of the model, fit, compare again;
+    /// before/after table, fitted model and figures under `-o DIR`.
+    Identify(IdentifyArgs),
+}
+
+/// Arguments of `plantc identify`.
+#[derive(Debug, Args, Clone)]
+pub struct IdentifyArgs {
+    /// The model file (never modified).
+    pub model: PathBuf,
+    #[command(flatten)]
+    pub data: DataArgs,
+    /// Output directory: `with_effect.plant`, `fitted.plant`, `report.json`
+    /// and the figures of each stage.
+    #[arg(short = 'o', long = "out", value_name = "DIR")]
+    pub out: PathBuf,
+    /// Write into a non-empty DIR (files of the same names are replaced).
+    #[arg(long)]
+    pub force: bool,
+    /// Print the summary as JSON instead of the story.
+    #[arg(long)]
+    pub json: bool,
 }
 
 /// Arguments of `plantc synth`.

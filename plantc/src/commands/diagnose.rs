@@ -19,12 +19,14 @@ use crate::common::{
 
 /// The candidate with its parameters at their fitted values (still marked
 /// `estimate`, so the next `plantc fit` refines them).
-fn fitted_instance(r: &Ranked) -> EffectInstance {
+pub(crate) fn fitted_instance(r: &Ranked) -> EffectInstance {
     let mut inst = r.candidate.clone();
     if let Some(f) = &r.fit {
         for p in &mut inst.parameters {
             if let Some(e) = f.parameters.iter().find(|e| e.name == p.name) {
-                p.value = e.value;
+                // six significant digits: readable in the snippet, and the
+                // next fit refines it anyway
+                p.value = format!("{:.5e}", e.value).parse().unwrap_or(e.value);
             }
         }
     }

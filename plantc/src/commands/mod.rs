@@ -8,6 +8,7 @@ mod design;
 mod diagnose;
 mod fit;
 mod gen;
+mod identify;
 mod linearize;
 mod run;
 mod sim;
@@ -55,6 +56,7 @@ pub fn dispatch(cli: &Cli, out: &mut dyn Write, err: &mut dyn Write) -> Result<(
         Command::Compare(args) => compare::run(args, out, err),
         Command::Fit(args) => fit::run(args, out, err),
         Command::Diagnose(args) => diagnose::run(args, out, err),
+        Command::Identify(args) => identify::run(args, out, err),
         Command::Gen {
             model,
             controllers,

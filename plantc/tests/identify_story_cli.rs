@@ -1,0 +1,117 @@
+//! `plantc identify`: the whole story (compare -> diagnose -> apply -> fit ->
+//! compare) on short synthetic data with a hidden pendulum-joint dry friction
+//! made by `plantc synth`; the truth is the synth command's own value.
+
+use std::path::{Path, PathBuf};
+use std::process::Command;
+
+fn repo() -> PathBuf {
+    Path::new(env!("CARGO_MANIFEST_DIR")).join("..")
+}
+
+fn plantc(args: &[&str]) -> (i32, String, String) {
+    let o = Command::new(env!("CARGO_BIN_EXE_plantc"))
+        .args(args)
+        .current_dir(repo())
+        .output()
+        .expect("runs");
+    (
+        o.status.code().unwrap_or(-1),
+        String::from_utf8_lossy(&o.stdout).into_owned(),
+        String::from_utf8_lossy(&o.stderr).into_owned(),
+    )
+}
+
+fn tmp(name: &str) -> PathBuf {
+    let d = std::env::temp_dir().join(format!("plantc-story-{}-{name}", std::process::id()));
+    let _ = std::fs::remove_dir_all(&d);
+    std::fs::create_dir_all(&d).unwrap();
+    d
+}
+
+#[test]
+fn identify_finds_the_hidden_friction_and_the_error_falls() {
+    let dir = tmp("coulomb");
+    let data = dir.join("data");
+    let model = repo().join("models/rotary_pendulum.plant");
+    let m = model.to_str().unwrap();
+    let d = data.to_str().unwrap();
+    // True rig: J1 and b2 off nominal, dry friction 1e-3 N m in the pendulum joint.
+    let (code, _, err) = plantc(&[
+        "synth",
+        m,
+        "--effect",
+        "coulomb_friction:alpha=1e-3",
+        "--set",
+        "J1=1.3e-3",
+        "--set",
+        "b2=1e-3",
+        "--experiment",
+        "free_swing:alpha0=130deg,duration=4,name=swing",
+        "--experiment",
+        "driven:alpha0=180deg,duration=4,seed=2,name=driven",
+        "-o",
+        d,
+    ]);
+    assert_eq!(code, 0, "{err}");
+    let original = std::fs::read_to_string(&model).unwrap();
+    let out = dir.join("out");
+    let o = out.to_str().unwrap();
+    let swing = data.join("swing.csv");
+    let driven = data.join("driven.csv");
+    let args = [
+        "identify",
+        m,
+        swing.to_str().unwrap(),
+        driven.to_str().unwrap(),
+        "-o",
+        o,
+        "--json",
+    ];
+    let (code, stdout, err) = plantc(&args);
+    assert_eq!(code, 0, "{err}");
+    let v: serde_json::Value = serde_json::from_str(&stdout).expect("JSON");
+    assert_eq!(v["verdict"], "missing_effect", "{stdout}");
+    assert_eq!(v["effect"]["effect"], "coulomb_friction", "{stdout}");
+    assert_eq!(v["effect"]["target"], "alpha", "{stdout}");
+    let fc = v["fit"]["parameters"]["Fc_alpha"]["value"].as_f64().unwrap();
+    assert!((fc / 1e-3 - 1.0).abs() < 0.1, "Fc_alpha = {fc} (truth 1e-3)");
+    let stages = v["stages"].as_array().unwrap();
+    assert_eq!(stages.len(), 3);
+    let rmse = |i: usize| stages[i]["report"]["rmse"].as_f64().unwrap();
+    // the bar: the error falls at least 5x from the refitted nominal
+    assert!(rmse(1) / rmse(2) >= 5.0, "{} -> {}", rmse(1), rmse(2));
+    for f in [
+        "fitted.plant",
+        "with_effect.plant",
+        "report.json",
+        "1-nominal/swing.svg",
+        "3-fitted/driven.svg",
+    ] {
+        assert!(out.join(f).is_file(), "{f} missing");
+    }
+    let fitted = std::fs::read_to_string(out.join("fitted.plant")).unwrap();
+    assert!(fitted.contains("coulomb_friction(Fc_alpha)"));
+    // the input model is untouched
+    assert_eq!(std::fs::read_to_string(&model).unwrap(), original);
+    // its own output directory may be replaced; a foreign one may not
+    let (code, _, err) = plantc(&args);
+    assert_eq!(code, 0, "{err}");
+    let foreign = dir.join("foreign");
+    std::fs::create_dir_all(&foreign).unwrap();
+    std::fs::write(foreign.join("notes.txt"), "mine").unwrap();
+    let (code, _, err) = plantc(&[
+        "identify",
+        m,
+        swing.to_str().unwrap(),
+        "-o",
+        foreign.to_str().unwrap(),
+    ]);
+    assert_eq!(code, 2, "{err}");
+    assert!(err.contains("not written by `plantc identify`"), "{err}");
+    assert_eq!(
+        std::fs::read_to_string(foreign.join("notes.txt")).unwrap(),
+        "mine"
+    );
+    let _ = std::fs::remove_dir_all(&dir);
+}
