@@ -2,9 +2,10 @@
 //! absent). Reference values come from each case's `truth.json`
 //! (`effect`, `coordinate`, `effect_parameters`, `true_parameters`).
 //!
-//! The equation-error ranking is fast and runs by default; the full
-//! diagnosis (baseline fit + three refits per case) is `#[ignore]`d:
-//! `cargo test -p plantc-identify --release --test diagnose -- --ignored --nocapture`.
+//! Everything runs by default (the three full diagnoses, baseline fit +
+//! refits of the leaders, take about 10 s together in the test profile); to
+//! see the rankings and timings:
+//! `cargo test -p plantc-identify --release --test diagnose -- --nocapture`.
 
 mod common;
 
@@ -216,13 +217,13 @@ fn hidden_effect_case(name: &str, effect: &str, target: &str, param: &str) {
 }
 
 #[test]
-#[ignore]
+
 fn coulomb_pendulum_names_coulomb_friction_on_alpha() {
     hidden_effect_case("coulomb_pendulum", "coulomb_friction", "alpha", "Fc");
 }
 
 #[test]
-#[ignore]
+
 fn spring_arm_names_spring_on_theta() {
     hidden_effect_case("spring_arm", "spring", "theta", "k");
 }
@@ -230,7 +231,7 @@ fn spring_arm_names_spring_on_theta() {
 /// Clean data: no finding (a false alarm is a failure), and the baseline
 /// fit recovers J1 and l2 within 5 % of truth.json's `true_parameters`.
 #[test]
-#[ignore]
+
 fn clean_case_is_adequate() {
     let Some((exps, truth)) = case("clean") else {
         return;

@@ -1,0 +1,226 @@
+//! The diagnosis over the whole effect vocabulary, on data made by `plantc
+//! synth` (parameters and experiments different from `../shared/data`): each
+//! case hides one effect in a rig whose base parameters are also off nominal
+//! (J1, l2, b1, b2, Fg1), records three 10 s experiments (large and small
+//! free swings, a driven run) at 500 Hz with 4096-count encoders, and runs
+//! `plantc diagnose --json`. The truth is the synth command's own effect.
+//!
+//! Targets "where it makes sense": viscous friction on either joint and dry
+//! friction on the arm are already in the model with estimated parameters
+//! (b1, b2, Fg1), so hiding them only changes parameter values (the clean
+//! cases cover that); a sensor offset on the arm angle is unobservable (theta
+//! is cyclic: the dynamics do not depend on it).
+//!
+//! Acceptance (issue 6): the right effect first in at least 90 % of the cases
+//! and no finding on clean data (with and without extra sensor noise).
+//! Measured when written (release): 10 of 11 right; the miss is Stribeck
+//! friction on the arm on top of the model's gearbox dry friction (refit gain
+//! 1.2-2.1x, under the 3x bar).
+
+use std::path::{Path, PathBuf};
+use std::process::Command;
+use std::sync::Mutex;
+
+fn repo() -> PathBuf {
+    Path::new(env!("CARGO_MANIFEST_DIR")).join("..")
+}
+
+fn plantc(args: &[String]) -> (i32, String, String) {
+    let o = Command::new(env!("CARGO_BIN_EXE_plantc"))
+        .args(args)
+        .current_dir(repo())
+        .output()
+        .expect("runs");
+    (
+        o.status.code().unwrap_or(-1),
+        String::from_utf8_lossy(&o.stdout).into_owned(),
+        String::from_utf8_lossy(&o.stderr).into_owned(),
+    )
+}
+
+/// (case name, synth effect arguments, expected `effect@target` or None
+/// for adequate, the effect's main parameter and its true value)
+type Case = (
+    &'static str,
+    &'static [&'static str],
+    Option<&'static str>,
+    Option<(&'static str, f64)>,
+);
+
+const CASES: &[Case] = &[
+    ("clean", &[], None, None),
+    ("clean_noisy", &["--noise", "3e-4"], None, None),
+    (
+        "coulomb_alpha",
+        &["--effect", "coulomb_friction:alpha=5e-4"],
+        Some("coulomb_friction@alpha"),
+        Some(("Fc", 5e-4)),
+    ),
+    (
+        "stribeck_alpha",
+        &["--effect", "stribeck_friction:alpha:Fc=4e-4,Fs=1.2e-3,vs=0.1"],
+        Some("stribeck_friction@alpha"),
+        Some(("Fs", 1.2e-3)),
+    ),
+    (
+        "stribeck_theta",
+        &["--effect", "stribeck_friction:theta:Fc=3e-3,Fs=4e-2,vs=0.3"],
+        Some("stribeck_friction@theta"),
+        Some(("Fs", 4e-2)),
+    ),
+    (
+        "drag_alpha",
+        &["--effect", "quadratic_drag:alpha=1.5e-4"],
+        Some("quadratic_drag@alpha"),
+        Some(("cd", 1.5e-4)),
+    ),
+    (
+        "drag_theta",
+        &["--effect", "quadratic_drag:theta=1e-3"],
+        Some("quadratic_drag@theta"),
+        Some(("cd", 1e-3)),
+    ),
+    (
+        "spring_theta",
+        &["--effect", "spring:theta=0.05"],
+        Some("spring@theta"),
+        Some(("k", 0.05)),
+    ),
+    (
+        "spring_alpha",
+        &["--effect", "spring:alpha=0.005"],
+        Some("spring@alpha"),
+        Some(("k", 0.005)),
+    ),
+    (
+        "sensor_offset_alpha",
+        &["--effect", "sensor_offset:alpha=0.03"],
+        Some("sensor_offset@alpha"),
+        Some(("d", 0.03)),
+    ),
+    (
+        "input_offset",
+        &["--effect", "input_offset:Vm=0.3"],
+        Some("input_offset@Vm"),
+        Some(("V0", 0.3)),
+    ),
+    (
+        "input_delay",
+        &["--effect", "input_delay:Vm=4e-3"],
+        Some("input_delay@Vm"),
+        Some(("Td", 4e-3)),
+    ),
+    (
+        "sensor_offset_negative",
+        &["--effect", "sensor_offset:alpha=-0.05"],
+        Some("sensor_offset@alpha"),
+        Some(("d", -0.05)),
+    ),
+];
+
+/// Synthesize the case and diagnose it: `effect@target` of the top finding
+/// (or `adequate`) and the named parameter's estimate.
+fn run_case(dir: &Path, case: &Case) -> (String, Option<f64>) {
+    let (name, effect, _, param) = case;
+    let data = dir.join(name);
+    let model = repo().join("models/rotary_pendulum.plant");
+    let m = model.to_str().unwrap().to_string();
+    let mut args: Vec<String> = vec!["synth".into(), m.clone()];
+    args.extend(effect.iter().map(|s| s.to_string()));
+    for s in [
+        "J1=1.3e-3",
+        "l2=0.16",
+        "b1=3.2e-3",
+        "b2=1.1e-3",
+        "Fg1=0.012",
+    ] {
+        args.push("--set".into());
+        args.push(s.into());
+    }
+    for e in [
+        "free_swing:alpha0=120deg,duration=10,name=large",
+        "free_swing:alpha0=160deg,duration=10,name=small",
+        "driven:alpha0=180deg,duration=10,seed=7,rms=1.2,name=driven",
+    ] {
+        args.push("--experiment".into());
+        args.push(e.into());
+    }
+    args.extend(["--seed", "5", "-o"].map(String::from));
+    args.push(data.to_str().unwrap().into());
+    let (code, _, err) = plantc(&args);
+    assert_eq!(code, 0, "synth {name}: {err}");
+    let mut args = vec!["diagnose".to_string(), m, "--json".into()];
+    for f in ["large", "small", "driven"] {
+        args.push(data.join(format!("{f}.csv")).to_str().unwrap().into());
+    }
+    let (code, out, err) = plantc(&args);
+    assert_eq!(code, 0, "diagnose {name}: {err}");
+    let v: serde_json::Value = serde_json::from_str(&out).expect("JSON");
+    let Some(top) = v["findings"].as_array().and_then(|f| f.first()) else {
+        assert_eq!(v["verdict"], "adequate");
+        return ("adequate".into(), None);
+    };
+    assert_eq!(v["verdict"], "missing_effect");
+    let label = format!(
+        "{}@{}",
+        top["effect"].as_str().unwrap(),
+        top["target"].as_str().unwrap()
+    );
+    let est = param.and_then(|(p, _)| top["parameters"][p]["value"].as_f64());
+    (label, est)
+}
+
+#[test]
+fn diagnosis_names_every_effect_of_the_vocabulary() {
+    let dir = std::env::temp_dir().join(format!("plantc-vocabulary-{}", std::process::id()));
+    let _ = std::fs::remove_dir_all(&dir);
+    std::fs::create_dir_all(&dir).unwrap();
+    let next = Mutex::new(0usize);
+    let results = Mutex::new(Vec::new());
+    std::thread::scope(|s| {
+        for _ in 0..2 {
+            s.spawn(|| loop {
+                let i = {
+                    let mut n = next.lock().unwrap();
+                    let i = *n;
+                    *n += 1;
+                    i
+                };
+                let Some(case) = CASES.get(i) else { break };
+                let r = run_case(&dir, case);
+                results.lock().unwrap().push((i, r));
+            });
+        }
+    });
+    let mut results = results.into_inner().unwrap();
+    results.sort_by_key(|r| r.0);
+    let (mut right, mut total) = (0, 0);
+    for (i, (found, est)) in &results {
+        let (name, _, expected, param) = CASES[*i];
+        let want = expected.unwrap_or("adequate");
+        let ok = found == want;
+        let err = match (est, param) {
+            (Some(e), Some((p, t))) => format!("{p} = {e:.4e} (true {t:.1e}, {:+.1} %)", 100.0 * (e / t - 1.0)),
+            _ => String::new(),
+        };
+        eprintln!(
+            "{:<24} expected {want:<26} found {found:<26} {} {err}",
+            name,
+            if ok { "ok" } else { "MISS" }
+        );
+        match expected {
+            // no false alarm on clean data, ever
+            None => assert!(ok, "false alarm on `{name}`: {found}"),
+            Some(_) => {
+                total += 1;
+                right += usize::from(ok);
+            }
+        }
+    }
+    eprintln!("right effect first in {right} of {total} cases");
+    assert!(
+        right * 10 >= total * 9,
+        "right effect first in only {right} of {total} cases"
+    );
+    let _ = std::fs::remove_dir_all(&dir);
+}
