@@ -58,7 +58,10 @@ const CASES: &[Case] = &[
     ),
     (
         "stribeck_alpha",
-        &["--effect", "stribeck_friction:alpha:Fc=4e-4,Fs=1.2e-3,vs=0.1"],
+        &[
+            "--effect",
+            "stribeck_friction:alpha:Fc=4e-4,Fs=1.2e-3,vs=0.1",
+        ],
         Some("stribeck_friction@alpha"),
         Some(("Fs", 1.2e-3)),
     ),
@@ -200,7 +203,10 @@ fn diagnosis_names_every_effect_of_the_vocabulary() {
         let want = expected.unwrap_or("adequate");
         let ok = found == want;
         let err = match (est, param) {
-            (Some(e), Some((p, t))) => format!("{p} = {e:.4e} (true {t:.1e}, {:+.1} %)", 100.0 * (e / t - 1.0)),
+            (Some(e), Some((p, t))) => format!(
+                "{p} = {e:.4e} (true {t:.1e}, {:+.1} %)",
+                100.0 * (e / t - 1.0)
+            ),
             _ => String::new(),
         };
         eprintln!(

@@ -74,8 +74,13 @@ fn identify_finds_the_hidden_friction_and_the_error_falls() {
     assert_eq!(v["verdict"], "missing_effect", "{stdout}");
     assert_eq!(v["effect"]["effect"], "coulomb_friction", "{stdout}");
     assert_eq!(v["effect"]["target"], "alpha", "{stdout}");
-    let fc = v["fit"]["parameters"]["Fc_alpha"]["value"].as_f64().unwrap();
-    assert!((fc / 1e-3 - 1.0).abs() < 0.1, "Fc_alpha = {fc} (truth 1e-3)");
+    let fc = v["fit"]["parameters"]["Fc_alpha"]["value"]
+        .as_f64()
+        .unwrap();
+    assert!(
+        (fc / 1e-3 - 1.0).abs() < 0.1,
+        "Fc_alpha = {fc} (truth 1e-3)"
+    );
     let stages = v["stages"].as_array().unwrap();
     assert_eq!(stages.len(), 3);
     let rmse = |i: usize| stages[i]["report"]["rmse"].as_f64().unwrap();

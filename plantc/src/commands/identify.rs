@@ -14,8 +14,8 @@ use plantc_derive::lang::edit::set_parameter_value;
 use plantc_derive::model::{Model, ParameterValues};
 use plantc_identify::diagnose::model_from_text;
 use plantc_identify::{
-    diagnose, fit, plot_comparison, where_it_fails, Experiment, FailOptions, FitOptions,
-    FitReport, FitResult,
+    diagnose, fit, plot_comparison, where_it_fails, Experiment, FailOptions, FitOptions, FitReport,
+    FitResult,
 };
 
 use crate::cli::IdentifyArgs;
@@ -36,8 +36,7 @@ fn fail(e: impl std::fmt::Display) -> CliError {
 }
 
 fn write_file(path: &Path, text: &str) -> Result<(), CliError> {
-    std::fs::write(path, text)
-        .map_err(|e| fail(format!("cannot write `{}`: {e}", path.display())))
+    std::fs::write(path, text).map_err(|e| fail(format!("cannot write `{}`: {e}", path.display())))
 }
 
 /// Simulate, compare and draw one stage.
@@ -86,10 +85,19 @@ fn table(out: &mut dyn Write, stages: &[Stage], measured: &[Experiment], channel
     let rows: Vec<(String, usize, &str)> = measured
         .iter()
         .enumerate()
-        .flat_map(|(i, m)| channels.iter().map(move |c| (format!("{} / {c}", m.name), i, *c)))
+        .flat_map(|(i, m)| {
+            channels
+                .iter()
+                .map(move |c| (format!("{} / {c}", m.name), i, *c))
+        })
         .collect();
     let lw = rows.iter().map(|r| r.0.len()).max().unwrap_or(10).max(18);
-    let cw = stages.iter().map(|s| s.label.len()).max().unwrap_or(8).max(18);
+    let cw = stages
+        .iter()
+        .map(|s| s.label.len())
+        .max()
+        .unwrap_or(8)
+        .max(18);
     let mut head = format!("{:<lw$}", "");
     for s in stages {
         head.push_str(&format!("  {:>cw$}", s.label));
@@ -109,7 +117,9 @@ fn table(out: &mut dyn Write, stages: &[Stage], measured: &[Experiment], channel
                 .get(*i)
                 .and_then(|e| e.channels.get(*c))
                 .map_or("-".to_string(), |f| {
-                    let fit = f.fit_percent.map_or("-".to_string(), |v| format!("{v:.1} %"));
+                    let fit = f
+                        .fit_percent
+                        .map_or("-".to_string(), |v| format!("{v:.1} %"));
                     format!("{fit}  {:.2e}", f.rmse)
                 });
             line.push_str(&format!("  {cell:>cw$}"));
