@@ -143,6 +143,13 @@ pub enum DataError {
     },
 }
 
+/// Whether a data file is a text (CSV) file, whose errors have lines.
+fn is_text(file: &std::path::Path) -> bool {
+    !file
+        .extension()
+        .is_some_and(|e| e.eq_ignore_ascii_case("mat"))
+}
+
 impl DataError {
     /// The file concerned, if any.
     pub fn file(&self) -> Option<&std::path::Path> {
@@ -170,6 +177,10 @@ impl DataError {
             Csv { line, .. } => *line,
             BadCell { line, .. } | TimeNotIncreasing { line, .. } => Some(*line),
             DuplicateColumn { .. } | UnknownUnit { .. } | IncompatibleUnit { .. } => Some(1),
+            // in a text file: the header lacks the column; the file ends
+            // after its last sample
+            MissingColumn { file, .. } if is_text(file) => Some(1),
+            TooShort { file, samples, .. } if is_text(file) => Some(*samples as u64 + 1),
             _ => None,
         }
     }
