@@ -38,12 +38,12 @@ fn rotary_pendulum_mass_matrix_and_bias_equal_the_reference_exactly() {
         -j2h * a.sin() * a.cos() * td.powi(2) - m2 * g * l2 * a.sin(),
     ];
     for i in 0..2 {
-        for j in 0..2 {
+        for (j, &m_ij) in m_ref[i].iter().enumerate() {
             assert!(
-                is_zero(eqs.mass_matrix[i][j] - m_ref[i][j]),
+                is_zero(eqs.mass_matrix[i][j] - m_ij),
                 "M[{i}][{j}] = {} differs from {}",
                 eqs.mass_matrix[i][j],
-                m_ref[i][j]
+                m_ij
             );
         }
         assert!(
@@ -130,13 +130,12 @@ fn control_affine_form_agrees_with_a_hand_written_evaluation() {
         }
         env.insert(vm, u);
         let want = reference_accelerations(&by_name, x, u);
-        for k in 0..2 {
+        for (k, &want_k) in want.iter().enumerate() {
             let got = ca.f[2 + k].eval_map(&env) + ca.g[2 + k][0].eval_map(&env) * u;
-            let tol = 1e-10 * (1.0 + want[k].abs());
+            let tol = 1e-10 * (1.0 + want_k.abs());
             assert!(
-                (got - want[k]).abs() < tol,
-                "state {x:?}, u {u}: a{k} = {got}, reference {}",
-                want[k]
+                (got - want_k).abs() < tol,
+                "state {x:?}, u {u}: a{k} = {got}, reference {want_k}"
             );
         }
     }
@@ -155,9 +154,9 @@ fn cart_pole_equations_match_hand_derivation() {
     ];
     let bias_ref = [-mp * l * th.sin() * thd.powi(2), -mp * g * l * th.sin()];
     for i in 0..2 {
-        for j in 0..2 {
+        for (j, &m_ij) in m_ref[i].iter().enumerate() {
             assert!(
-                is_zero(eqs.mass_matrix[i][j] - m_ref[i][j]),
+                is_zero(eqs.mass_matrix[i][j] - m_ij),
                 "M[{i}][{j}] = {}",
                 eqs.mass_matrix[i][j]
             );
@@ -194,10 +193,10 @@ fn pendubot_mass_matrix_matches_spong() {
     let d12 = m2 * (lc2.powi(2) + l1 * lc2 * q2.cos()) + i2;
     let d22 = m2 * lc2.powi(2) + i2;
     let want = [[d11, d12], [d12, d22]];
-    for i in 0..2 {
-        for j in 0..2 {
+    for (i, want_i) in want.iter().enumerate() {
+        for (j, &want_ij) in want_i.iter().enumerate() {
             assert!(
-                is_zero(eqs.mass_matrix[i][j] - want[i][j]),
+                is_zero(eqs.mass_matrix[i][j] - want_ij),
                 "M[{i}][{j}] = {}",
                 eqs.mass_matrix[i][j]
             );

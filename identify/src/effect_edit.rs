@@ -67,16 +67,16 @@ const fn pt(
     lo: f64,
     hi: f64,
 ) -> ParamTemplate {
-    ParamTemplate {
+    pt_unit(
         base,
-        unit: TemplateUnit::Coordinate {
+        TemplateUnit::Coordinate {
             angle: unit_angle,
             length: unit_length,
         },
         start,
         lo,
         hi,
-    }
+    )
 }
 
 const fn pt_unit(

@@ -1,26 +1,13 @@
 //! JSON shape of `plantc analyze` and `plantc stability`, run in process.
 
-fn model(name: &str) -> String {
-    format!("{}/../models/{name}", env!("CARGO_MANIFEST_DIR"))
-}
+mod common;
 
-fn run(args: &[&str]) -> (i32, String, String) {
-    let mut out = Vec::new();
-    let mut err = Vec::new();
-    let mut full = vec!["plantc"];
-    full.extend_from_slice(args);
-    let code = plantc::run(full, &mut out, &mut err);
-    (
-        code,
-        String::from_utf8_lossy(&out).into_owned(),
-        String::from_utf8_lossy(&err).into_owned(),
-    )
-}
+use common::{model_file, plantc};
 
 #[test]
 fn analyze_json_shape() {
-    let m = model("rotary_pendulum.plant");
-    let (code, out, err) = run(&[
+    let m = model_file("rotary_pendulum.plant");
+    let (code, out, err) = plantc(&[
         "analyze", &m, "--output", "alpha", "--set", "thesis", "--json",
     ]);
     assert_eq!(code, 0, "{err}");
@@ -54,7 +41,7 @@ fn analyze_json_shape() {
 
 #[test]
 fn analyze_text_and_pendubot() {
-    let (code, out, err) = run(&["analyze", &model("pendubot.plant")]);
+    let (code, out, err) = plantc(&["analyze", &model_file("pendubot.plant")]);
     assert_eq!(code, 0, "{err}");
     assert!(out.contains("relative degree 2"), "{out}");
     assert!(out.contains("unstable (non-minimum phase)"), "{out}");
@@ -62,9 +49,9 @@ fn analyze_text_and_pendubot() {
 
 #[test]
 fn analyze_unknown_output_is_bad_input() {
-    let (code, _, err) = run(&[
+    let (code, _, err) = plantc(&[
         "analyze",
-        &model("rotary_pendulum.plant"),
+        &model_file("rotary_pendulum.plant"),
         "--output",
         "nope",
     ]);
@@ -74,8 +61,8 @@ fn analyze_unknown_output_is_bad_input() {
 
 #[test]
 fn stability_json_interval() {
-    let m = model("rotary_pendulum.plant");
-    let (code, out, err) = run(&[
+    let m = model_file("rotary_pendulum.plant");
+    let (code, out, err) = plantc(&[
         "stability",
         &m,
         "--controller",
@@ -98,8 +85,8 @@ fn stability_json_interval() {
 
 #[test]
 fn stability_text_and_unbounded_null() {
-    let m = model("rotary_pendulum.plant");
-    let (code, out, err) = run(&[
+    let m = model_file("rotary_pendulum.plant");
+    let (code, out, err) = plantc(&[
         "stability",
         &m,
         "--controller",
@@ -112,7 +99,7 @@ fn stability_text_and_unbounded_null() {
     assert_eq!(code, 0, "{err}");
     assert!(out.contains("0 < k < 1.00"), "{out}");
     assert!(out.contains("method:"), "{out}");
-    let (code, _, err) = run(&[
+    let (code, _, err) = plantc(&[
         "stability",
         &m,
         "--controller",

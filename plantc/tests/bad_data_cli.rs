@@ -2,34 +2,11 @@
 //! `diagnose` share the reader): exit code 2, a message naming
 //! file:line:column, no panic; a degrees-looking column is only a warning.
 
-use std::path::{Path, PathBuf};
+use std::path::Path;
 
-fn model() -> String {
-    PathBuf::from(env!("CARGO_MANIFEST_DIR"))
-        .join("../models/rotary_pendulum.plant")
-        .display()
-        .to_string()
-}
+mod common;
 
-fn tmp(name: &str) -> PathBuf {
-    let dir = std::env::temp_dir().join(format!("plantc-baddata-{}-{name}", std::process::id()));
-    let _ = std::fs::remove_dir_all(&dir);
-    std::fs::create_dir_all(&dir).unwrap();
-    dir
-}
-
-fn plantc(args: &[&str]) -> (i32, String, String) {
-    let mut out = Vec::new();
-    let mut err = Vec::new();
-    let mut all = vec!["plantc"];
-    all.extend_from_slice(args);
-    let code = plantc::run(all, &mut out, &mut err);
-    (
-        code,
-        String::from_utf8(out).unwrap(),
-        String::from_utf8(err).unwrap(),
-    )
-}
+use common::{model, plantc, tmp};
 
 /// A valid file body: 20 samples at 500 Hz, pendulum hanging, no input.
 fn rows(n: usize) -> Vec<String> {

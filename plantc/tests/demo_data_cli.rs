@@ -2,11 +2,9 @@
 //! recorded in its README produces: regenerate it into a temporary directory
 //! and compare the bytes.
 
-use std::path::PathBuf;
+mod common;
 
-fn root() -> PathBuf {
-    PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("..")
-}
+use common::{plantc, repo};
 
 /// The `plantc ...` line of the README's ```sh block, split into words.
 fn recorded_command(readme: &str) -> Vec<String> {
@@ -18,7 +16,7 @@ fn recorded_command(readme: &str) -> Vec<String> {
 
 #[test]
 fn demo_coulomb_regenerates_byte_for_byte() {
-    let dir = root().join("data/demo_coulomb");
+    let dir = repo().join("data/demo_coulomb");
     let readme = std::fs::read_to_string(dir.join("README.md")).unwrap();
     let words = recorded_command(&readme);
     assert_eq!(words[0], "plantc");
@@ -33,16 +31,14 @@ fn demo_coulomb_regenerates_byte_for_byte() {
             assert_eq!(recorded, "data/demo_coulomb");
             args.push(w);
             args.push(tmp.display().to_string());
-        } else if root().join(&w).is_file() {
-            args.push(root().join(&w).display().to_string());
+        } else if repo().join(&w).is_file() {
+            args.push(repo().join(&w).display().to_string());
         } else {
             args.push(w);
         }
     }
-    let mut out = Vec::new();
-    let mut err = Vec::new();
-    let code = plantc::run(&args, &mut out, &mut err);
-    assert_eq!(code, 0, "{}", String::from_utf8_lossy(&err));
+    let (code, _, err) = plantc(&args[1..]);
+    assert_eq!(code, 0, "{err}");
     let mut names: Vec<String> = std::fs::read_dir(&tmp)
         .unwrap()
         .map(|e| e.unwrap().file_name().to_string_lossy().into_owned())

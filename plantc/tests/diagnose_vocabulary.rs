@@ -17,26 +17,12 @@
 //! friction on the arm on top of the model's gearbox dry friction (refit gain
 //! 1.2-2.1x, under the 3x bar).
 
-use std::path::{Path, PathBuf};
-use std::process::Command;
+use std::path::Path;
 use std::sync::Mutex;
 
-fn repo() -> PathBuf {
-    Path::new(env!("CARGO_MANIFEST_DIR")).join("..")
-}
+mod common;
 
-fn plantc(args: &[String]) -> (i32, String, String) {
-    let o = Command::new(env!("CARGO_BIN_EXE_plantc"))
-        .args(args)
-        .current_dir(repo())
-        .output()
-        .expect("runs");
-    (
-        o.status.code().unwrap_or(-1),
-        String::from_utf8_lossy(&o.stdout).into_owned(),
-        String::from_utf8_lossy(&o.stderr).into_owned(),
-    )
-}
+use common::{model, plantc_bin, tmp};
 
 /// (case name, synth effect arguments, expected `effect@target` or None
 /// for adequate, the effect's main parameter and its true value)
@@ -126,8 +112,7 @@ const CASES: &[Case] = &[
 fn run_case(dir: &Path, case: &Case) -> (String, Option<f64>) {
     let (name, effect, _, param) = case;
     let data = dir.join(name);
-    let model = repo().join("models/rotary_pendulum.plant");
-    let m = model.to_str().unwrap().to_string();
+    let m = model();
     let mut args: Vec<String> = vec!["synth".into(), m.clone()];
     args.extend(effect.iter().map(|s| s.to_string()));
     for s in [
@@ -150,13 +135,13 @@ fn run_case(dir: &Path, case: &Case) -> (String, Option<f64>) {
     }
     args.extend(["--seed", "5", "-o"].map(String::from));
     args.push(data.to_str().unwrap().into());
-    let (code, _, err) = plantc(&args);
+    let (code, _, err) = plantc_bin(&args);
     assert_eq!(code, 0, "synth {name}: {err}");
     let mut args = vec!["diagnose".to_string(), m, "--json".into()];
     for f in ["large", "small", "driven"] {
         args.push(data.join(format!("{f}.csv")).to_str().unwrap().into());
     }
-    let (code, out, err) = plantc(&args);
+    let (code, out, err) = plantc_bin(&args);
     assert_eq!(code, 0, "diagnose {name}: {err}");
     let v: serde_json::Value = serde_json::from_str(&out).expect("JSON");
     let Some(top) = v["findings"].as_array().and_then(|f| f.first()) else {
@@ -175,9 +160,7 @@ fn run_case(dir: &Path, case: &Case) -> (String, Option<f64>) {
 
 #[test]
 fn diagnosis_names_every_effect_of_the_vocabulary() {
-    let dir = std::env::temp_dir().join(format!("plantc-vocabulary-{}", std::process::id()));
-    let _ = std::fs::remove_dir_all(&dir);
-    std::fs::create_dir_all(&dir).unwrap();
+    let dir = tmp("vocabulary");
     let next = Mutex::new(0usize);
     let results = Mutex::new(Vec::new());
     std::thread::scope(|s| {

@@ -1,38 +1,11 @@
 //! End-to-end tests of `plantc compare`, `plantc fit` and `plantc diagnose`
 //! on data made by `plantc synth` (short experiments: debug tests are slow).
 
-use std::path::{Path, PathBuf};
+use std::path::Path;
 
-fn model() -> String {
-    PathBuf::from(env!("CARGO_MANIFEST_DIR"))
-        .join("../models/rotary_pendulum.plant")
-        .display()
-        .to_string()
-}
+mod common;
 
-fn tmp(name: &str) -> PathBuf {
-    let dir = std::env::temp_dir().join(format!("plantc-ident-{}-{name}", std::process::id()));
-    let _ = std::fs::remove_dir_all(&dir);
-    std::fs::create_dir_all(&dir).unwrap();
-    dir
-}
-
-fn plantc(args: &[&str]) -> (i32, String, String) {
-    let mut out = Vec::new();
-    let mut err = Vec::new();
-    let mut all = vec!["plantc"];
-    all.extend_from_slice(args);
-    let code = plantc::run(all, &mut out, &mut err);
-    (
-        code,
-        String::from_utf8(out).unwrap(),
-        String::from_utf8(err).unwrap(),
-    )
-}
-
-fn s(p: &Path) -> String {
-    p.display().to_string()
-}
+use common::{model, plantc, s, tmp};
 
 /// Synthesises `experiments` into `dir` with extra synth arguments.
 fn synth(dir: &Path, extra: &[&str], experiments: &[&str]) -> Vec<String> {

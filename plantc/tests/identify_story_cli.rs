@@ -2,42 +2,19 @@
 //! compare) on short synthetic data with a hidden pendulum-joint dry friction
 //! made by `plantc synth`; the truth is the synth command's own value.
 
-use std::path::{Path, PathBuf};
-use std::process::Command;
+mod common;
 
-fn repo() -> PathBuf {
-    Path::new(env!("CARGO_MANIFEST_DIR")).join("..")
-}
-
-fn plantc(args: &[&str]) -> (i32, String, String) {
-    let o = Command::new(env!("CARGO_BIN_EXE_plantc"))
-        .args(args)
-        .current_dir(repo())
-        .output()
-        .expect("runs");
-    (
-        o.status.code().unwrap_or(-1),
-        String::from_utf8_lossy(&o.stdout).into_owned(),
-        String::from_utf8_lossy(&o.stderr).into_owned(),
-    )
-}
-
-fn tmp(name: &str) -> PathBuf {
-    let d = std::env::temp_dir().join(format!("plantc-story-{}-{name}", std::process::id()));
-    let _ = std::fs::remove_dir_all(&d);
-    std::fs::create_dir_all(&d).unwrap();
-    d
-}
+use common::{model_path, plantc_bin, tmp};
 
 #[test]
 fn identify_finds_the_hidden_friction_and_the_error_falls() {
     let dir = tmp("coulomb");
     let data = dir.join("data");
-    let model = repo().join("models/rotary_pendulum.plant");
+    let model = model_path();
     let m = model.to_str().unwrap();
     let d = data.to_str().unwrap();
     // True rig: J1 and b2 off nominal, dry friction 1e-3 N m in the pendulum joint.
-    let (code, _, err) = plantc(&[
+    let (code, _, err) = plantc_bin(&[
         "synth",
         m,
         "--effect",
@@ -68,7 +45,7 @@ fn identify_finds_the_hidden_friction_and_the_error_falls() {
         o,
         "--json",
     ];
-    let (code, stdout, err) = plantc(&args);
+    let (code, stdout, err) = plantc_bin(&args);
     assert_eq!(code, 0, "{err}");
     let v: serde_json::Value = serde_json::from_str(&stdout).expect("JSON");
     assert_eq!(v["verdict"], "missing_effect", "{stdout}");
@@ -100,12 +77,12 @@ fn identify_finds_the_hidden_friction_and_the_error_falls() {
     // the input model is untouched
     assert_eq!(std::fs::read_to_string(&model).unwrap(), original);
     // its own output directory may be replaced; a foreign one may not
-    let (code, _, err) = plantc(&args);
+    let (code, _, err) = plantc_bin(&args);
     assert_eq!(code, 0, "{err}");
     let foreign = dir.join("foreign");
     std::fs::create_dir_all(&foreign).unwrap();
     std::fs::write(foreign.join("notes.txt"), "mine").unwrap();
-    let (code, _, err) = plantc(&[
+    let (code, _, err) = plantc_bin(&[
         "identify",
         m,
         swing.to_str().unwrap(),

@@ -6,25 +6,12 @@ use std::path::PathBuf;
 
 use serde_json::Value;
 
-fn root() -> PathBuf {
-    PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("..")
-}
+mod common;
 
-fn run(args: &[&str]) -> (i32, String, String) {
-    let mut out = Vec::new();
-    let mut err = Vec::new();
-    let mut argv = vec!["plantc"];
-    argv.extend_from_slice(args);
-    let code = plantc::run(argv, &mut out, &mut err);
-    (
-        code,
-        String::from_utf8(out).unwrap(),
-        String::from_utf8(err).unwrap(),
-    )
-}
+use common::{model, model_file, plantc, tmp};
 
 fn json(args: &[&str]) -> Value {
-    let (code, out, err) = run(args);
+    let (code, out, err) = plantc(args);
     assert_eq!(code, 0, "plantc {args:?} failed: {err}");
     serde_json::from_str(&out).unwrap_or_else(|e| panic!("not JSON ({e}): {out}"))
 }
@@ -51,13 +38,6 @@ const A_THESIS: [[f64; 4]; 4] = [
     [0.0, 122.0545, -44.0966, -1.3972],
 ];
 const B_THESIS: [f64; 4] = [0.0, 0.0, 83.4659, 80.3162];
-
-fn model() -> String {
-    root()
-        .join("models/rotary_pendulum.plant")
-        .display()
-        .to_string()
-}
 
 #[test]
 fn linearize_reproduces_thesis_eq_3_4() {
@@ -122,8 +102,7 @@ fn linearize_reproduces_thesis_eq_3_4() {
 }
 
 fn thesis_linear_file(name: &str) -> PathBuf {
-    let dir = std::env::temp_dir().join(format!("plantc-test-{}-{name}", std::process::id()));
-    std::fs::create_dir_all(&dir).unwrap();
+    let dir = tmp(name);
     let path = dir.join("thesis.json");
     let v = serde_json::json!({
         "A": A_THESIS,
@@ -179,7 +158,7 @@ fn place_reproduces_thesis_eq_12_and_13() {
 #[test]
 fn place_on_the_printed_linearization_round_trips() {
     // The A, B printed by `linearize --json` feed `place --linear` directly.
-    let (code, out, err) = run(&["linearize", &model(), "--set", "quanser_manual", "--json"]);
+    let (code, out, err) = plantc(&["linearize", &model(), "--set", "quanser_manual", "--json"]);
     assert_eq!(code, 0, "{err}");
     let dir = std::env::temp_dir().join(format!("plantc-test-{}-roundtrip", std::process::id()));
     std::fs::create_dir_all(&dir).unwrap();
@@ -248,23 +227,23 @@ fn lqr_matches_scipy_and_solves_the_care() {
 
 #[test]
 fn bad_inputs_give_clear_errors_with_exit_code_2() {
-    let (code, _, err) = run(&["linearize", &model(), "--set", "nope"]);
+    let (code, _, err) = plantc(&["linearize", &model(), "--set", "nope"]);
     assert_eq!(code, 2);
     assert!(
         err.contains("unknown parameter set `nope`") && err.contains("quanser_manual"),
         "{err}"
     );
-    let (code, _, err) = run(&["linearize", &model(), "--param", "l3=0.1"]);
+    let (code, _, err) = plantc(&["linearize", &model(), "--param", "l3=0.1"]);
     assert_eq!(code, 2);
     assert!(
         err.contains("unknown parameter `l3`") && err.contains("`l2`"),
         "{err}"
     );
-    let (code, _, err) = run(&["linearize", &model(), "--at", "beta=1"]);
+    let (code, _, err) = plantc(&["linearize", &model(), "--at", "beta=1"]);
     assert_eq!(code, 2);
     assert!(err.contains("`beta`") && err.contains("alpha"), "{err}");
     let f = thesis_linear_file("bad");
-    let (code, _, err) = run(&[
+    let (code, _, err) = plantc(&[
         "place",
         "--linear",
         f.to_str().unwrap(),
@@ -273,7 +252,7 @@ fn bad_inputs_give_clear_errors_with_exit_code_2() {
     ]);
     assert_ne!(code, 0);
     assert!(err.contains("pole"), "{err}");
-    let (code, _, err) = run(&["check", "does/not/exist.plant"]);
+    let (code, _, err) = plantc(&["check", "does/not/exist.plant"]);
     assert_eq!(code, 2);
     assert!(err.contains("does/not/exist.plant"), "{err}");
 }
@@ -298,7 +277,7 @@ fn derive_json_has_the_documented_shape() {
 
 #[test]
 fn linearize_reports_the_dropped_dry_friction_term() {
-    let (code, _, err) = run(&["linearize", &model()]);
+    let (code, _, err) = plantc(&["linearize", &model()]);
     assert_eq!(code, 0);
     assert!(
         err.contains("sign(theta')") && err.contains("not differentiable"),
@@ -309,7 +288,7 @@ fn linearize_reports_the_dropped_dry_friction_term() {
 #[test]
 fn other_models_linearize_and_are_controllable() {
     for m in ["cart_pole.plant", "pendubot.plant"] {
-        let path = root().join("models").join(m).display().to_string();
+        let path = model_file(m);
         let v = json(&["linearize", &path, "--json"]);
         assert_eq!(v["controllable"], true, "{m}");
         // Both are open-loop unstable upright: one pole with positive real part.

@@ -12,43 +12,13 @@ use std::time::Instant;
 
 use plantc_identify::{read_experiment, ChannelSpec, Kind};
 
+mod common;
+
+use common::{model, plantc, repo, tmp};
+
 /// The fake HIL card is a process-wide singleton configured through the
 /// environment, so q2usb runs in this binary take turns.
 static FAKE_HIL: Mutex<()> = Mutex::new(());
-
-fn workspace() -> PathBuf {
-    PathBuf::from(env!("CARGO_MANIFEST_DIR"))
-        .parent()
-        .expect("workspace")
-        .to_path_buf()
-}
-
-fn model() -> String {
-    workspace()
-        .join("models/rotary_pendulum.plant")
-        .display()
-        .to_string()
-}
-
-fn tmp(name: &str) -> PathBuf {
-    let dir = std::env::temp_dir().join(format!("plantc-run-{}-{name}", std::process::id()));
-    let _ = std::fs::remove_dir_all(&dir);
-    std::fs::create_dir_all(&dir).expect("temp dir");
-    dir
-}
-
-fn plantc(args: &[&str]) -> (i32, String, String) {
-    let mut out = Vec::new();
-    let mut err = Vec::new();
-    let mut all = vec!["plantc"];
-    all.extend_from_slice(args);
-    let code = plantc::run(all, &mut out, &mut err);
-    (
-        code,
-        String::from_utf8(out).expect("utf8"),
-        String::from_utf8(err).expect("utf8"),
-    )
-}
 
 /// Builds (once) and locates the fake HIL cdylib, as the runtime's own tests do.
 fn fake_hil_lib() -> PathBuf {
@@ -57,7 +27,7 @@ fn fake_hil_lib() -> PathBuf {
     PATH.get_or_init(|| {
         let status = std::process::Command::new(env!("CARGO"))
             .args(["build", "-p", "plantc-fake-hil"])
-            .current_dir(workspace())
+            .current_dir(repo())
             .status()
             .map_err(|e| format!("running cargo: {e}"))?;
         if !status.success() {
@@ -81,7 +51,7 @@ fn fake_hil_lib() -> PathBuf {
         if let Ok(t) = std::env::var("CARGO_TARGET_DIR") {
             candidates.push(PathBuf::from(t).join("debug").join(&name));
         }
-        candidates.push(workspace().join("target/debug").join(&name));
+        candidates.push(repo().join("target/debug").join(&name));
         candidates
             .iter()
             .find(|p| p.is_file())

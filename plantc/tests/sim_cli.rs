@@ -1,33 +1,8 @@
 //! End-to-end tests of `plantc sim` through `plantc::run`.
 
-use std::path::PathBuf;
+mod common;
 
-fn model() -> String {
-    PathBuf::from(env!("CARGO_MANIFEST_DIR"))
-        .join("../models/rotary_pendulum.plant")
-        .display()
-        .to_string()
-}
-
-fn tmp(name: &str) -> PathBuf {
-    let dir = std::env::temp_dir().join(format!("plantc-sim-{}-{name}", std::process::id()));
-    let _ = std::fs::remove_dir_all(&dir);
-    std::fs::create_dir_all(&dir).unwrap();
-    dir
-}
-
-fn plantc(args: &[&str]) -> (i32, String, String) {
-    let mut out = Vec::new();
-    let mut err = Vec::new();
-    let mut all = vec!["plantc"];
-    all.extend_from_slice(args);
-    let code = plantc::run(all, &mut out, &mut err);
-    (
-        code,
-        String::from_utf8(out).unwrap(),
-        String::from_utf8(err).unwrap(),
-    )
-}
+use common::{model, plantc, tmp};
 
 #[test]
 fn feedback_linearization_csv_plot_and_summary() {

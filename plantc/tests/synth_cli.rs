@@ -3,36 +3,9 @@
 
 use std::path::{Path, PathBuf};
 
-fn model() -> String {
-    PathBuf::from(env!("CARGO_MANIFEST_DIR"))
-        .join("../models/rotary_pendulum.plant")
-        .display()
-        .to_string()
-}
+mod common;
 
-fn tmp(name: &str) -> PathBuf {
-    let dir = std::env::temp_dir().join(format!("plantc-synth-{}-{name}", std::process::id()));
-    let _ = std::fs::remove_dir_all(&dir);
-    std::fs::create_dir_all(&dir).unwrap();
-    dir
-}
-
-fn plantc(args: &[&str]) -> (i32, String, String) {
-    let mut out = Vec::new();
-    let mut err = Vec::new();
-    let mut all = vec!["plantc"];
-    all.extend_from_slice(args);
-    let code = plantc::run(all, &mut out, &mut err);
-    (
-        code,
-        String::from_utf8(out).unwrap(),
-        String::from_utf8(err).unwrap(),
-    )
-}
-
-fn s(p: &Path) -> String {
-    p.display().to_string()
-}
+use common::{model, plantc, s, tmp};
 
 /// Synthesises the model's own (nominal) values, no hidden effect, no noise.
 /// `alpha0 = 135deg` is exactly 1536 counts of 4096 and `alpha0 = 180deg`

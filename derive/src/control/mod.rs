@@ -158,10 +158,13 @@ pub fn resolve(
         })?;
     let op = OperatingPoint::zero(model);
     let n = op.x.len();
-    let design = |f: &dyn Fn(
-        &nalgebra::DMatrix<f64>,
-        &nalgebra::DMatrix<f64>,
-    ) -> Result<nalgebra::DMatrix<f64>, LinearError>| {
+    /// A gain design from (A, B).
+    type DesignFn<'a> = dyn Fn(
+            &nalgebra::DMatrix<f64>,
+            &nalgebra::DMatrix<f64>,
+        ) -> Result<nalgebra::DMatrix<f64>, LinearError>
+        + 'a;
+    let design = |f: &DesignFn<'_>| {
         let lin = linearize(model, &derivation.equations, values, &op)
             .map_err(ControlError::Linearize)?;
         let k = f(&lin.a, &lin.b).map_err(ControlError::Design)?;

@@ -211,9 +211,9 @@ pub fn control_affine(eqs: &Equations) -> Result<ControlAffine, MechanicsError> 
     for i in 0..n {
         let num: Expr = (0..n).map(|k| adj[i][k] * drift[k]).sum();
         f.push(tidy(num / det));
-        for j in 0..eqs.inputs.len() {
+        for (j, gij) in g[n + i].iter_mut().enumerate() {
             let num: Expr = (0..n).map(|k| adj[i][k] * eqs.input_matrix[k][j]).sum();
-            g[n + i][j] = tidy(num / det);
+            *gij = tidy(num / det);
         }
     }
     Ok(ControlAffine {

@@ -58,12 +58,12 @@ pub fn adjugate(m: &[Vec<Expr>]) -> Vec<Vec<Expr>> {
     let mut memo = HashMap::new();
     let mut adj = vec![vec![Expr::zero(); n]; n];
     for i in 0..n {
-        for j in 0..n {
+        for (j, adj_j) in adj.iter_mut().enumerate() {
             let rows: Vec<usize> = (0..n).filter(|&r| r != i).collect();
             let cols: Vec<usize> = (0..n).filter(|&c| c != j).collect();
             let d = minor_det(m, &rows, &cols, &mut memo);
             // cofactor C_ij goes to adj[j][i]
-            adj[j][i] = if (i + j) % 2 == 0 { d } else { -d };
+            adj_j[i] = if (i + j) % 2 == 0 { d } else { -d };
         }
     }
     adj

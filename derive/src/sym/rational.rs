@@ -257,12 +257,9 @@ fn exact_root(n: i128, q: u32) -> Option<i128> {
         return Some(n);
     }
     let guess = (n as f64).powf(1.0 / q as f64).round() as i128;
-    for r in [guess - 1, guess, guess + 1] {
-        if r >= 0 && r.checked_pow(q) == Some(n) {
-            return Some(r);
-        }
-    }
-    None
+    [guess - 1, guess, guess + 1]
+        .into_iter()
+        .find(|&r| r >= 0 && r.checked_pow(q) == Some(n))
 }
 
 impl PartialOrd for Rational {

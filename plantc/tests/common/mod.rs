@@ -1,0 +1,78 @@
+//! Helpers shared by the `plantc` integration tests (`mod common;` in each
+//! test file). Not every test file uses every helper.
+#![allow(dead_code)]
+
+use std::ffi::OsStr;
+use std::path::{Path, PathBuf};
+use std::process::Command;
+
+/// The workspace root (the parent of the `plantc` crate).
+pub fn repo() -> PathBuf {
+    Path::new(env!("CARGO_MANIFEST_DIR"))
+        .parent()
+        .expect("the plantc crate sits in the workspace")
+        .to_path_buf()
+}
+
+/// Path of `models/<name>` as a string argument.
+pub fn model_file(name: &str) -> String {
+    s(&repo().join("models").join(name))
+}
+
+/// Path of `models/rotary_pendulum.plant`.
+pub fn model_path() -> PathBuf {
+    repo().join("models/rotary_pendulum.plant")
+}
+
+/// Path of `models/rotary_pendulum.plant` as a string argument.
+pub fn model() -> String {
+    s(&model_path())
+}
+
+/// A fresh (emptied) temporary directory, unique to this test binary
+/// (`plantc-<test file>-<pid>-<name>`).
+pub fn tmp(name: &str) -> PathBuf {
+    let dir = std::env::temp_dir().join(format!(
+        "plantc-{}-{}-{name}",
+        env!("CARGO_CRATE_NAME"),
+        std::process::id()
+    ));
+    let _ = std::fs::remove_dir_all(&dir);
+    std::fs::create_dir_all(&dir).expect("temp dir");
+    dir
+}
+
+/// A path as a command-line argument.
+pub fn s(p: &Path) -> String {
+    p.display().to_string()
+}
+
+/// Runs `plantc <args>` in this process through `plantc::run`:
+/// (exit code, stdout, stderr).
+pub fn plantc<A: AsRef<OsStr>>(args: &[A]) -> (i32, String, String) {
+    let mut out = Vec::new();
+    let mut err = Vec::new();
+    let mut all = vec![OsStr::new("plantc")];
+    all.extend(args.iter().map(AsRef::as_ref));
+    let code = plantc::run(all, &mut out, &mut err);
+    (
+        code,
+        String::from_utf8(out).expect("utf-8 stdout"),
+        String::from_utf8(err).expect("utf-8 stderr"),
+    )
+}
+
+/// Runs the built `plantc` binary with `args` in the workspace root, as a
+/// separate process: (exit code or -1, stdout, stderr).
+pub fn plantc_bin<A: AsRef<OsStr>>(args: &[A]) -> (i32, String, String) {
+    let o = Command::new(env!("CARGO_BIN_EXE_plantc"))
+        .args(args)
+        .current_dir(repo())
+        .output()
+        .expect("runs");
+    (
+        o.status.code().unwrap_or(-1),
+        String::from_utf8_lossy(&o.stdout).into_owned(),
+        String::from_utf8_lossy(&o.stderr).into_owned(),
+    )
+}
