@@ -83,7 +83,7 @@ fn missing_column() {
     assert_rejected(
         &f,
         &[
-            &format!("{f}: missing column `Vm`"),
+            &format!("{f}:1: missing column `Vm`"),
             "expected: t, theta, alpha, Vm",
         ],
     );
@@ -113,7 +113,13 @@ fn file_too_short() {
     let dir = tmp("short");
     let f = write(&dir, "short.csv", "t,theta,alpha,Vm", &rows(4));
     // the reader's minimum is identify::data::MIN_SAMPLES = 10
-    assert_rejected(&f, &[&f, "file too short: 4 samples, at least 10 needed"]);
+    // the error points at the last sample line (header + 4 samples)
+    assert_rejected(
+        &f,
+        &[&format!(
+            "{f}:5: file too short: 4 samples, at least 10 needed"
+        )],
+    );
 }
 
 #[test]
