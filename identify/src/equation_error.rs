@@ -48,7 +48,7 @@ use plantc_derive::model::{Model, ParameterValues};
 use plantc_derive::sym::{diff, Expr, Func, Node, Symbol, Tape};
 
 use crate::data::Experiment;
-use crate::experiment_sim::{Signals, SimError};
+use crate::experiment_sim::{parameters_slow, Signals, SimError};
 use crate::savitzky_golay::{apply, kernel, KernelError};
 
 /// Options of the equation-error ranking.
@@ -845,6 +845,8 @@ fn residual(y: &[f64], cols: &[&[f64]], coef: &[f64]) -> Vec<f64> {
 }
 
 /// Evaluate `tape` at every valid sample of every experiment, in row order.
+/// The parameters are fixed here, so the tape is split and its
+/// parameter-only part runs once (bit-identical to evaluating it whole).
 fn eval_rows(
     tape: &Tape,
     exps: &[Smoothed],
@@ -855,8 +857,10 @@ fn eval_rows(
 ) {
     let mut tin = vec![0.0; 3 * n + m + full.len()];
     tin[3 * n + m..].copy_from_slice(full);
-    let mut out = vec![0.0; tape.n_outputs()];
-    let mut scratch = vec![0.0; tape.scratch_len()];
+    let split = tape.split_by_inputs(&parameters_slow(3 * n + m, full.len()));
+    let mut out = vec![0.0; split.n_outputs()];
+    let mut scratch = vec![0.0; split.scratch_len()];
+    split.eval_slow(&tin, &mut scratch);
     for (e, ex) in exps.iter().enumerate() {
         for k in 0..ex.len() {
             if (0..n).all(|i| !ex.keep[i][k]) {
@@ -870,7 +874,7 @@ fn eval_rows(
             for j in 0..m {
                 tin[3 * n + j] = ex.u[j][k];
             }
-            tape.eval(&tin, &mut out, &mut scratch);
+            split.eval_fast(&tin, &mut out, &mut scratch);
             f(e, k, &out);
         }
     }

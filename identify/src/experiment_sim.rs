@@ -11,6 +11,9 @@
 //! over `(state, inputs, full parameters)`, with `r0 = Q0 - bias` the
 //! right-hand side without input; `M a = r0 + B u` is solved by a small LU
 //! with partial pivoting in preallocated buffers (no allocation per step).
+//! The tape is split ([`Tape::split_by_inputs`]) so that its parameter-only
+//! part runs once per simulation rather than at every RK4 stage (same
+//! instructions, so bit-identical results).
 //!
 //! Sensor and actuator effects of the model are honoured here (the plant
 //! equations cannot hold them; see `plantc_derive::model::Model`):
@@ -34,7 +37,7 @@ use std::fmt;
 
 use plantc_derive::mechanics::{derive_equations, flat_outputs, small_lu, smooth_signs, Equations};
 use plantc_derive::model::Model;
-use plantc_derive::sym::{diff, Expr, Symbol, Tape};
+use plantc_derive::sym::{diff, Expr, SplitTape, Symbol, Tape};
 
 use crate::data::Experiment;
 
@@ -560,9 +563,20 @@ pub struct Simulator {
     n: usize,
     m: usize,
     n_params: usize,
+    /// The dynamics over `(state, inputs, full parameters)`.
     tape: Tape,
+    /// `tape` split with the parameters as slow inputs.
+    split: SplitTape,
     signals: SignalEffects,
     opts: SimOptions,
+}
+
+/// Slow-input mask of a tape over `(state, inputs, parameters)` with
+/// `n_fast` state and input entries first: the parameters are slow.
+pub(crate) fn parameters_slow(n_fast: usize, n_params: usize) -> Vec<bool> {
+    let mut slow = vec![false; n_fast];
+    slow.resize(n_fast + n_params, true);
+    slow
 }
 
 impl Simulator {
@@ -578,11 +592,15 @@ impl Simulator {
         let (_, outs) = dynamics_outputs(model, opts.dry_friction_width)?;
         let tape =
             Tape::compile(&outs, &tape_inputs(model)).map_err(|e| SimError::Tape(e.to_string()))?;
+        let (n, m) = (model.coordinates.len(), model.inputs.len());
+        let n_params = model.parameter_symbols().len();
+        let split = tape.split_by_inputs(&parameters_slow(2 * n + m, n_params));
         Ok(Simulator {
-            n: model.coordinates.len(),
-            m: model.inputs.len(),
-            n_params: model.parameter_symbols().len(),
+            n,
+            m,
+            n_params,
             tape,
+            split,
             signals: SignalEffects::new(model, &[])?,
             opts,
         })
@@ -602,6 +620,19 @@ impl Simulator {
         params: &[f64],
         n_samples: usize,
     ) -> Result<Trajectory, SimError> {
+        self.run(sig, params, n_samples, false)
+    }
+
+    /// [`Simulator::simulate`], evaluating the dynamics with the split tape
+    /// (parameter part once per call) or, with `unsplit`, the whole tape at
+    /// every stage: the reference path the tests compare against.
+    fn run(
+        &self,
+        sig: &Signals,
+        params: &[f64],
+        n_samples: usize,
+        unsplit: bool,
+    ) -> Result<Trajectory, SimError> {
         if params.len() != self.n_params {
             return Err(SimError::ParameterCount {
                 expected: self.n_params,
@@ -620,14 +651,21 @@ impl Simulator {
         let mut tin = vec![0.0; 2 * n + m + self.n_params];
         tin[2 * n + m..].copy_from_slice(params);
         let mut out = vec![0.0; self.tape.n_outputs()];
-        let mut scratch = vec![0.0; self.tape.scratch_len()];
+        let mut scratch = vec![0.0; self.tape.scratch_len().max(self.split.scratch_len())];
+        if !unsplit {
+            self.split.eval_slow(&tin, &mut scratch);
+        }
         let mut piv = vec![0; n];
         let mut acc = vec![0.0; n];
         let mut tmp = vec![0.0; n];
         let rhs = |x: &[f64], u: &[f64], _: &Segment, dx: &mut [f64]| {
             tin[..2 * n].copy_from_slice(x);
             tin[2 * n..2 * n + m].copy_from_slice(u);
-            self.tape.eval(&tin, &mut out, &mut scratch);
+            if unsplit {
+                self.tape.eval(&tin, &mut out, &mut scratch);
+            } else {
+                self.split.eval_fast(&tin, &mut out, &mut scratch);
+            }
             let (mm, rest) = out.split_at_mut(n * n);
             let (r0, b) = rest.split_at(n);
             for i in 0..n {
@@ -665,5 +703,138 @@ impl Simulator {
             record,
         )?;
         Ok(Trajectory { q })
+    }
+}
+
+#[cfg(test)]
+pub(crate) mod tests {
+    use super::*;
+    use plantc_derive::model::{load_model_text, ParameterValues};
+
+    /// The repository's rotary pendulum, plus (with `effects`) a sensor
+    /// offset on `alpha` and an input delay on `Vm`, both estimated.
+    pub(crate) fn pendulum(effects: bool) -> Model {
+        let path = concat!(
+            env!("CARGO_MANIFEST_DIR"),
+            "/../models/rotary_pendulum.plant"
+        );
+        let mut text = std::fs::read_to_string(path).expect("model file");
+        if effects {
+            text += "\nparameter d_alpha = 0.01 [rad] estimate [-0.2, 0.2]\n\
+                     parameter Td_Vm = 1.3e-3 [s] estimate [0, 0.05]\n\
+                     sensor alpha = sensor_offset(d_alpha)\n\
+                     actuator Vm = input_delay(Td_Vm)\n";
+        }
+        load_model_text("rotary_pendulum", &text)
+            .expect("model loads")
+            .model
+    }
+
+    /// 1000 samples at 2 ms of a swinging pendulum driven by a sine plus
+    /// steps (input switches exercise the delay path); only the first
+    /// sample of `q` matters (the initial state).
+    pub(crate) fn signals(model: &Model) -> Signals {
+        let k = 1000;
+        let t: Vec<f64> = (0..k).map(|i| i as f64 * 2e-3).collect();
+        let mut q = vec![vec![0.0; k]; model.coordinates.len()];
+        for (i, qi) in q.iter_mut().enumerate() {
+            qi[0] = 0.1 + 0.3 * i as f64;
+        }
+        let u = vec![t
+            .iter()
+            .map(|&t| 2.0 * (7.0 * t).sin() + if (t * 3.0) as i64 % 2 == 0 { 1.0 } else { -1.0 })
+            .collect()];
+        Signals {
+            name: "synthetic".into(),
+            t,
+            q,
+            u,
+        }
+    }
+
+    /// Nominal parameters scaled by `1 + 0.1 k` for the k-th parameter (so
+    /// no parameter sits at a round value).
+    pub(crate) fn perturbed(model: &Model) -> Vec<f64> {
+        let base = model
+            .parameters
+            .iter()
+            .enumerate()
+            .map(|(k, p)| p.value * (1.0 + 0.01 * k as f64))
+            .collect();
+        ParameterValues::from_base(model, base).full
+    }
+
+    /// The split tape (parameter part once per simulation) reproduces the
+    /// whole-tape simulation bit for bit: the same instructions run on the
+    /// same operands.
+    #[test]
+    fn split_simulation_is_bit_identical() {
+        for effects in [false, true] {
+            let model = pendulum(effects);
+            let sim = Simulator::new(&model, SimOptions::default()).expect("compiles");
+            assert!(
+                sim.split.slow_instructions().len() > 10,
+                "the parameter part is not trivial: {:?}",
+                sim.split
+            );
+            let sig = signals(&model);
+            let p = perturbed(&model);
+            let split = sim.run(&sig, &p, sig.len(), false).expect("simulates");
+            let whole = sim.run(&sig, &p, sig.len(), true).expect("simulates");
+            assert!(split.q[0].iter().any(|v| (v - split.q[0][0]).abs() > 1e-3));
+            let bits = |tr: &Trajectory| -> Vec<Vec<u64>> {
+                tr.q.iter()
+                    .map(|qi| qi.iter().map(|v| v.to_bits()).collect())
+                    .collect()
+            };
+            assert_eq!(bits(&split), bits(&whole), "effects: {effects}");
+        }
+    }
+
+    /// Median seconds of `f` over `reps` runs.
+    pub(crate) fn median_seconds(reps: usize, mut f: impl FnMut()) -> f64 {
+        let mut t: Vec<f64> = (0..reps)
+            .map(|_| {
+                let s = std::time::Instant::now();
+                f();
+                s.elapsed().as_secs_f64()
+            })
+            .collect();
+        t.sort_by(f64::total_cmp);
+        t[reps / 2]
+    }
+
+    /// Split against whole-tape simulation time, interleaved so that machine
+    /// load affects both alike. Run with `cargo test -p plantc-identify
+    /// --release --lib split_timing -- --ignored --nocapture`.
+    #[test]
+    #[ignore]
+    fn split_timing() {
+        let model = pendulum(false);
+        let sim = Simulator::new(&model, SimOptions::default()).expect("compiles");
+        let mut sig = signals(&model);
+        let k = 10_000;
+        sig.t = (0..k).map(|i| i as f64 * 2e-3).collect();
+        sig.q = sig.q.iter().map(|q| vec![q[0]; k]).collect();
+        sig.u = vec![sig.t.iter().map(|t| 2.0 * (7.0 * t).sin()).collect()];
+        let p = perturbed(&model);
+        let (mut a, mut b) = (Vec::new(), Vec::new());
+        for _ in 0..5 {
+            a.push(median_seconds(3, || {
+                sim.run(&sig, &p, k, false).expect("simulates");
+            }));
+            b.push(median_seconds(3, || {
+                sim.run(&sig, &p, k, true).expect("simulates");
+            }));
+        }
+        a.sort_by(f64::total_cmp);
+        b.sort_by(f64::total_cmp);
+        eprintln!(
+            "plain simulation, {k} samples: split {:.4} s, whole tape {:.4} s ({} slow + {} fast instructions)",
+            a[2],
+            b[2],
+            sim.split.slow_instructions().len(),
+            sim.split.fast_instructions().len()
+        );
     }
 }

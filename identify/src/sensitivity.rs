@@ -35,14 +35,15 @@
 //! The partial derivatives are symbolic: derived quantities (`let`) are
 //! expanded into base parameters before differentiating with respect to a
 //! parameter, and everything (`M`, `r0`, `B` and their derivatives along
-//! every state component and free parameter) goes into one compiled tape.
+//! every state component and free parameter) goes into one compiled tape,
+//! split so that its parameter-only part runs once per simulation.
 
 use plantc_derive::model::Model;
-use plantc_derive::sym::{diff, Expr, Tape};
+use plantc_derive::sym::{diff, Expr, SplitTape, Tape};
 
 use crate::experiment_sim::{
-    dynamics_outputs, initial_state, integrate, lu_factor, lu_solve, substep_for, tape_inputs,
-    OnSwitch, Segment, SignalEffects, Signals, SimError, SimOptions,
+    dynamics_outputs, initial_state, integrate, lu_factor, lu_solve, parameters_slow, substep_for,
+    tape_inputs, OnSwitch, Segment, SignalEffects, Signals, SimError, SimOptions,
 };
 
 /// Simulated coordinates and their sensitivities at the sample instants.
@@ -63,7 +64,11 @@ pub struct SensitivitySimulator {
     n_params: usize,
     free: Vec<usize>,
     names: Vec<String>,
+    /// Dynamics and their partial derivatives over `(state, inputs, full
+    /// parameters)`.
     tape: Tape,
+    /// `tape` split with the parameters as slow inputs.
+    split: SplitTape,
     signals: SignalEffects,
     opts: SimOptions,
 }
@@ -118,13 +123,17 @@ impl SensitivitySimulator {
         let tape =
             Tape::compile(&outs, &tape_inputs(model)).map_err(|e| SimError::Tape(e.to_string()))?;
         let signals = SignalEffects::new(model, &idx)?;
+        let (n, m) = (model.coordinates.len(), model.inputs.len());
+        let n_params = model.parameter_symbols().len();
+        let split = tape.split_by_inputs(&parameters_slow(2 * n + m, n_params));
         Ok(SensitivitySimulator {
-            n: model.coordinates.len(),
-            m: model.inputs.len(),
-            n_params: model.parameter_symbols().len(),
+            n,
+            m,
+            n_params,
             free: idx,
             names: free.to_vec(),
             tape,
+            split,
             signals,
             opts,
         })
@@ -148,6 +157,19 @@ impl SensitivitySimulator {
         params: &[f64],
         n_samples: usize,
     ) -> Result<SensitivityTrajectory, SimError> {
+        self.run(sig, params, n_samples, false)
+    }
+
+    /// [`SensitivitySimulator::simulate`], evaluating the tape split
+    /// (parameter part once per call) or, with `unsplit`, whole at every
+    /// stage: the reference path the tests compare against.
+    fn run(
+        &self,
+        sig: &Signals,
+        params: &[f64],
+        n_samples: usize,
+        unsplit: bool,
+    ) -> Result<SensitivityTrajectory, SimError> {
         if params.len() != self.n_params {
             return Err(SimError::ParameterCount {
                 expected: self.n_params,
@@ -169,7 +191,10 @@ impl SensitivitySimulator {
         let mut tin = vec![0.0; nx + m + self.n_params];
         tin[nx + m..].copy_from_slice(params);
         let mut out = vec![0.0; self.tape.n_outputs()];
-        let mut scratch = vec![0.0; self.tape.scratch_len()];
+        let mut scratch = vec![0.0; self.tape.scratch_len().max(self.split.scratch_len())];
+        if !unsplit {
+            self.split.eval_slow(&tin, &mut scratch);
+        }
         let mut lu = vec![0.0; n * n];
         let mut piv = vec![0; n];
         let mut acc = vec![0.0; n];
@@ -181,7 +206,11 @@ impl SensitivitySimulator {
         let rhs = |z: &[f64], u: &[f64], seg: &Segment, dz: &mut [f64]| {
             tin[..nx].copy_from_slice(&z[..nx]);
             tin[nx..nx + m].copy_from_slice(u);
-            self.tape.eval(&tin, &mut out, &mut scratch);
+            if unsplit {
+                self.tape.eval(&tin, &mut out, &mut scratch);
+            } else {
+                self.split.eval_fast(&tin, &mut out, &mut scratch);
+            }
             lu.copy_from_slice(&out[..n * n]);
             let r0 = &out[n * n..n * n + n];
             let b = &out[n * n + n..bs];
@@ -288,5 +317,70 @@ impl SensitivitySimulator {
             record,
         )?;
         Ok(SensitivityTrajectory { q, dq })
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::experiment_sim::tests::{median_seconds, pendulum, perturbed, signals};
+
+    /// As for the plain simulator: split and whole-tape sensitivity
+    /// simulations agree bit for bit, with and without a delay and offset.
+    #[test]
+    fn split_sensitivities_are_bit_identical() {
+        for effects in [false, true] {
+            let model = pendulum(effects);
+            let free = estimated_parameters(&model);
+            let sim =
+                SensitivitySimulator::new(&model, &free, SimOptions::default()).expect("compiles");
+            let sig = signals(&model);
+            let p = perturbed(&model);
+            let split = sim.run(&sig, &p, sig.len(), false).expect("simulates");
+            let whole = sim.run(&sig, &p, sig.len(), true).expect("simulates");
+            let flat = |tr: &SensitivityTrajectory| -> Vec<u64> {
+                let q = tr.q.iter().flatten();
+                let dq = tr.dq.iter().flatten().flatten();
+                q.chain(dq).map(|v| v.to_bits()).collect()
+            };
+            assert!(split.dq[0].iter().any(|d| d.iter().any(|v| *v != 0.0)));
+            assert_eq!(flat(&split), flat(&whole), "effects: {effects}");
+        }
+    }
+    /// Split against whole-tape sensitivity simulation time (interleaved).
+    /// Run with `cargo test -p plantc-identify --release --lib
+    /// split_timing -- --ignored --nocapture`.
+    #[test]
+    #[ignore]
+    fn split_timing_sensitivities() {
+        let model = pendulum(false);
+        let free = estimated_parameters(&model);
+        let sim =
+            SensitivitySimulator::new(&model, &free, SimOptions::default()).expect("compiles");
+        let mut sig = signals(&model);
+        let k = 10_000;
+        sig.t = (0..k).map(|i| i as f64 * 2e-3).collect();
+        sig.q = sig.q.iter().map(|q| vec![q[0]; k]).collect();
+        sig.u = vec![sig.t.iter().map(|t| 2.0 * (7.0 * t).sin()).collect()];
+        let p = perturbed(&model);
+        let (mut a, mut b) = (Vec::new(), Vec::new());
+        for _ in 0..5 {
+            a.push(median_seconds(3, || {
+                sim.run(&sig, &p, k, false).expect("simulates");
+            }));
+            b.push(median_seconds(3, || {
+                sim.run(&sig, &p, k, true).expect("simulates");
+            }));
+        }
+        a.sort_by(f64::total_cmp);
+        b.sort_by(f64::total_cmp);
+        eprintln!(
+            "sensitivity simulation, {k} samples, {} parameters: split {:.4} s, whole tape {:.4} s ({} slow + {} fast instructions)",
+            free.len(),
+            a[2],
+            b[2],
+            sim.split.slow_instructions().len(),
+            sim.split.fast_instructions().len()
+        );
     }
 }

@@ -20,4 +20,4 @@ pub use expr::{Expr, Func, Node, Symbol};
 pub use poly::CanonError;
 pub use rational::Rational;
 pub use subst::{substitute, substitute_symbols};
-pub use tape::{Instr, Tape, TapeError};
+pub use tape::{Instr, SplitTape, Tape, TapeError};

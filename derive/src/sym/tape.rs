@@ -12,6 +12,11 @@
 //!
 //! [`Tape::eval`] then runs without allocation. The instruction list is public
 //! (read-only) so a code generator can translate it.
+//!
+//! [`Tape::split_by_inputs`] partitions a tape into the instructions that
+//! depend only on some inputs (e.g. the parameters, constant during a
+//! simulation) and the rest, so the former run once per parameter vector
+//! ([`SplitTape`]).
 
 use std::collections::{HashMap, HashSet};
 use std::fmt;
@@ -566,33 +571,9 @@ impl Tape {
         assert_eq!(inputs.len(), self.inputs.len(), "tape input length");
         assert!(out.len() >= self.outputs.len(), "tape output length");
         assert!(scratch.len() >= self.n_slots, "tape scratch length");
-        let s = scratch;
-        for ins in &self.instrs {
-            match *ins {
-                Instr::Const { dst, value } => s[dst as usize] = value,
-                Instr::Input { dst, index } => s[dst as usize] = inputs[index as usize],
-                Instr::Add { dst, a, b } => s[dst as usize] = s[a as usize] + s[b as usize],
-                Instr::Sub { dst, a, b } => s[dst as usize] = s[a as usize] - s[b as usize],
-                Instr::Mul { dst, a, b } => s[dst as usize] = s[a as usize] * s[b as usize],
-                Instr::Div { dst, a, b } => s[dst as usize] = s[a as usize] / s[b as usize],
-                Instr::Neg { dst, a } => s[dst as usize] = -s[a as usize],
-                Instr::Sqrt { dst, a } => s[dst as usize] = s[a as usize].sqrt(),
-                Instr::Pow { dst, a, b } => s[dst as usize] = s[a as usize].powf(s[b as usize]),
-                Instr::Func { dst, f, a } => s[dst as usize] = f.eval(s[a as usize]),
-                Instr::SinCos {
-                    sin_dst,
-                    cos_dst,
-                    a,
-                } => {
-                    let (sv, cv) = s[a as usize].sin_cos();
-                    s[sin_dst as usize] = sv;
-                    s[cos_dst as usize] = cv;
-                }
-                Instr::Atan2 { dst, y, x } => s[dst as usize] = s[y as usize].atan2(s[x as usize]),
-            }
-        }
+        run(&self.instrs, inputs, scratch);
         for (o, slot) in out.iter_mut().zip(&self.outputs) {
-            *o = s[*slot as usize];
+            *o = scratch[*slot as usize];
         }
     }
 
@@ -607,6 +588,25 @@ impl Tape {
 
 /// Map SSA values to slots, reusing a slot once its value is dead.
 fn allocate(instrs: Vec<Instr>, n_values: usize, outs: &[u32], inputs: Vec<Symbol>) -> Tape {
+    let (instrs, slot_of, n_slots) = assign_slots(&instrs, n_values, outs);
+    Tape {
+        inputs,
+        outputs: outs.iter().map(|o| slot_of[*o as usize]).collect(),
+        instrs,
+        n_slots,
+    }
+}
+
+/// Linear-scan slot assignment of an SSA instruction list (value ids as
+/// slots, each defined once, operands defined earlier). Values in
+/// `live_forever` keep their slot to the end and beyond: no later
+/// instruction writes it. Returns the rewritten instructions, the slot of
+/// every value and the number of slots.
+fn assign_slots(
+    instrs: &[Instr],
+    n_values: usize,
+    live_forever: &[u32],
+) -> (Vec<Instr>, Vec<u32>, usize) {
     const LIVE_FOREVER: usize = usize::MAX;
     let mut last_use = vec![0usize; n_values];
     for (i, ins) in instrs.iter().enumerate() {
@@ -617,7 +617,7 @@ fn allocate(instrs: Vec<Instr>, n_values: usize, outs: &[u32], inputs: Vec<Symbo
             last_use[a as usize] = i;
         }
     }
-    for &o in outs {
+    for &o in live_forever {
         last_use[o as usize] = LIVE_FOREVER;
     }
     let mut slot_of = vec![u32::MAX; n_values];
@@ -667,11 +667,272 @@ fn allocate(instrs: Vec<Instr>, n_values: usize, outs: &[u32], inputs: Vec<Symbo
         }
         out_instrs.push(new);
     }
-    Tape {
-        inputs,
-        outputs: outs.iter().map(|o| slot_of[*o as usize]).collect(),
-        instrs: out_instrs,
-        n_slots: n_slots as usize,
+    (out_instrs, slot_of, n_slots as usize)
+}
+
+/// Identity of an SSA instruction apart from its destinations: operation,
+/// immediate (constant bits, input index or function) and operands. Two
+/// instructions with the same key compute bit-identical values.
+fn value_key(ins: &Instr) -> (u8, u64, u32, u32) {
+    match *ins {
+        Instr::Const { value, .. } => (0, value.to_bits(), 0, 0),
+        Instr::Input { index, .. } => (1, u64::from(index), 0, 0),
+        Instr::Add { a, b, .. } => (2, 0, a, b),
+        Instr::Sub { a, b, .. } => (3, 0, a, b),
+        Instr::Mul { a, b, .. } => (4, 0, a, b),
+        Instr::Div { a, b, .. } => (5, 0, a, b),
+        Instr::Pow { a, b, .. } => (6, 0, a, b),
+        Instr::Atan2 { y, x, .. } => (7, 0, y, x),
+        Instr::Neg { a, .. } => (8, 0, a, 0),
+        Instr::Sqrt { a, .. } => (9, 0, a, 0),
+        Instr::Func { f, a, .. } => (10, f as u64, a, 0),
+        Instr::SinCos { a, .. } => (11, 0, a, 0),
+    }
+}
+
+/// Execute `instrs` on the slots `s` (no bounds beyond slice indexing).
+#[inline(always)]
+fn run(instrs: &[Instr], inputs: &[f64], s: &mut [f64]) {
+    for ins in instrs {
+        match *ins {
+            Instr::Const { dst, value } => s[dst as usize] = value,
+            Instr::Input { dst, index } => s[dst as usize] = inputs[index as usize],
+            Instr::Add { dst, a, b } => s[dst as usize] = s[a as usize] + s[b as usize],
+            Instr::Sub { dst, a, b } => s[dst as usize] = s[a as usize] - s[b as usize],
+            Instr::Mul { dst, a, b } => s[dst as usize] = s[a as usize] * s[b as usize],
+            Instr::Div { dst, a, b } => s[dst as usize] = s[a as usize] / s[b as usize],
+            Instr::Neg { dst, a } => s[dst as usize] = -s[a as usize],
+            Instr::Sqrt { dst, a } => s[dst as usize] = s[a as usize].sqrt(),
+            Instr::Pow { dst, a, b } => s[dst as usize] = s[a as usize].powf(s[b as usize]),
+            Instr::Func { dst, f, a } => s[dst as usize] = f.eval(s[a as usize]),
+            Instr::SinCos {
+                sin_dst,
+                cos_dst,
+                a,
+            } => {
+                let (sv, cv) = s[a as usize].sin_cos();
+                s[sin_dst as usize] = sv;
+                s[cos_dst as usize] = cv;
+            }
+            Instr::Atan2 { dst, y, x } => s[dst as usize] = s[y as usize].atan2(s[x as usize]),
+        }
+    }
+}
+
+/// A [`Tape`] split into a *slow* part that depends only on the inputs marked
+/// slow (and on constants) and a *fast* part for everything else, built by
+/// [`Tape::split_by_inputs`].
+///
+/// Typical use: the slow inputs are a model's parameters, constant during a
+/// simulation, and the fast ones the state and inputs that change at every
+/// integrator stage. [`SplitTape::eval_slow`] runs once per parameter vector
+/// and leaves its results in the scratch buffer; [`SplitTape::eval_fast`]
+/// then runs per stage, reading them.
+///
+/// The two parts are the instructions of the original tape (partitioned,
+/// each keeping its operands and operation; exact repeats kept once), so
+/// `eval_slow` followed by `eval_fast` yields outputs bit-identical to
+/// [`Tape::eval`] at the same inputs.
+#[derive(Clone)]
+pub struct SplitTape {
+    slow: Vec<bool>,
+    slow_instrs: Vec<Instr>,
+    fast_instrs: Vec<Instr>,
+    outputs: Vec<u32>,
+    n_slots: usize,
+}
+
+impl Tape {
+    /// Split the tape by which inputs are slow: `slow[i]` marks input `i`.
+    ///
+    /// An instruction is slow when it is a constant, reads a slow input, or
+    /// has only slow operands; the slow instructions keep their relative
+    /// order and run first, the fast ones keep theirs. An instruction that
+    /// repeats an earlier one (same operation on the same values, as product
+    /// chains of different terms often do) is kept once. Slots are reassigned
+    /// so that every slow value the fast part (or an output) reads keeps its
+    /// own slot, never written by the fast part.
+    ///
+    /// Panics if `slow.len()` differs from the number of inputs (as
+    /// [`Tape::eval`] does for a wrong input length).
+    pub fn split_by_inputs(&self, slow: &[bool]) -> SplitTape {
+        assert_eq!(slow.len(), self.inputs.len(), "slow-input mask length");
+        // Back to SSA: every destination write is a new value, except that
+        // an instruction repeating an earlier one (same operation on the same
+        // values) is dropped and its destinations alias the earlier values.
+        let mut current = vec![u32::MAX; self.n_slots];
+        let mut n_values: u32 = 0;
+        let mut seen: HashMap<(u8, u64, u32, u32), [Option<u32>; 2]> = HashMap::new();
+        let mut ssa: Vec<Instr> = Vec::with_capacity(self.instrs.len());
+        for ins in &self.instrs {
+            // Operands are read (in `operands` order) before any write.
+            let ops: Vec<u32> = ins
+                .operands()
+                .into_iter()
+                .flatten()
+                .map(|a| current[a as usize])
+                .collect();
+            let mut k = 0;
+            let probe = ins.map(
+                &mut |_| {
+                    k += 1;
+                    ops[k - 1]
+                },
+                &mut |_| 0,
+            );
+            let key = value_key(&probe);
+            let vals = match seen.get(&key) {
+                Some(&vals) => vals,
+                None => {
+                    let fresh = probe.map(&mut |a| a, &mut |_| {
+                        n_values += 1;
+                        n_values - 1
+                    });
+                    seen.insert(key, fresh.dsts());
+                    ssa.push(fresh);
+                    fresh.dsts()
+                }
+            };
+            for (slot, v) in ins
+                .dsts()
+                .into_iter()
+                .flatten()
+                .zip(vals.into_iter().flatten())
+            {
+                current[slot as usize] = v;
+            }
+        }
+        let out_vals: Vec<u32> = self.outputs.iter().map(|o| current[*o as usize]).collect();
+        // Classify values; order slow instructions before fast ones.
+        let mut is_slow = vec![false; n_values as usize];
+        let (mut slow_ssa, mut fast_ssa) = (Vec::new(), Vec::new());
+        for ins in &ssa {
+            let s = match *ins {
+                Instr::Const { .. } => true,
+                Instr::Input { index, .. } => slow[index as usize],
+                _ => ins
+                    .operands()
+                    .into_iter()
+                    .flatten()
+                    .all(|a| is_slow[a as usize]),
+            };
+            for d in ins.dsts().into_iter().flatten() {
+                is_slow[d as usize] = s;
+            }
+            if s {
+                slow_ssa.push(*ins);
+            } else {
+                fast_ssa.push(*ins);
+            }
+        }
+        // Slow values read by the fast part must survive every fast call.
+        let mut keep: Vec<u32> = out_vals.clone();
+        for ins in &fast_ssa {
+            keep.extend(
+                ins.operands()
+                    .into_iter()
+                    .flatten()
+                    .filter(|a| is_slow[*a as usize]),
+            );
+        }
+        keep.sort_unstable();
+        keep.dedup();
+        let n_slow = slow_ssa.len();
+        let mut ordered = slow_ssa;
+        ordered.extend(fast_ssa);
+        let (mut instrs, slot_of, n_slots) = assign_slots(&ordered, n_values as usize, &keep);
+        let fast_instrs = instrs.split_off(n_slow);
+        SplitTape {
+            slow: slow.to_vec(),
+            slow_instrs: instrs,
+            fast_instrs,
+            outputs: out_vals.iter().map(|v| slot_of[*v as usize]).collect(),
+            n_slots,
+        }
+    }
+}
+
+impl SplitTape {
+    /// Which inputs are slow (the mask given to [`Tape::split_by_inputs`]).
+    pub fn slow_inputs(&self) -> &[bool] {
+        &self.slow
+    }
+
+    /// Instructions run by [`SplitTape::eval_slow`].
+    pub fn slow_instructions(&self) -> &[Instr] {
+        &self.slow_instrs
+    }
+
+    /// Instructions run by [`SplitTape::eval_fast`].
+    pub fn fast_instructions(&self) -> &[Instr] {
+        &self.fast_instrs
+    }
+
+    /// Required length of the `scratch` buffer (may exceed the unsplit
+    /// tape's, since slow values stay live across fast calls).
+    pub fn scratch_len(&self) -> usize {
+        self.n_slots
+    }
+
+    /// Number of outputs.
+    pub fn n_outputs(&self) -> usize {
+        self.outputs.len()
+    }
+
+    /// Evaluate the slow part into `scratch`, reading only the slow entries
+    /// of `inputs` (the full input vector; fast entries are ignored). Call it
+    /// again whenever a slow input changes. Does not allocate. Panics if
+    /// `inputs.len()` differs from the number of inputs or `scratch` is
+    /// shorter than [`SplitTape::scratch_len`].
+    pub fn eval_slow(&self, inputs: &[f64], scratch: &mut [f64]) {
+        assert_eq!(inputs.len(), self.slow.len(), "tape input length");
+        assert!(scratch.len() >= self.n_slots, "tape scratch length");
+        run(&self.slow_instrs, inputs, scratch);
+    }
+
+    /// Evaluate the fast part and write every output (slow-only outputs are
+    /// copied from `scratch`). Reads only the fast entries of `inputs`.
+    ///
+    /// Requires a previous [`SplitTape::eval_slow`] on the same `scratch`
+    /// with the same slow input values, and no other writes to `scratch` in
+    /// between; otherwise the outputs are meaningless (this is not checked).
+    /// Does not allocate. Panics if `inputs.len()` differs from the number
+    /// of inputs, `out` is shorter than the number of outputs or `scratch`
+    /// shorter than [`SplitTape::scratch_len`].
+    pub fn eval_fast(&self, inputs: &[f64], out: &mut [f64], scratch: &mut [f64]) {
+        assert_eq!(inputs.len(), self.slow.len(), "tape input length");
+        assert!(out.len() >= self.outputs.len(), "tape output length");
+        assert!(scratch.len() >= self.n_slots, "tape scratch length");
+        run(&self.fast_instrs, inputs, scratch);
+        for (o, slot) in out.iter_mut().zip(&self.outputs) {
+            *o = scratch[*slot as usize];
+        }
+    }
+}
+
+impl fmt::Debug for SplitTape {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        writeln!(
+            f,
+            "SplitTape({} inputs, {} slow, {} slow + {} fast instructions, {} slots)",
+            self.slow.len(),
+            self.slow.iter().filter(|s| **s).count(),
+            self.slow_instrs.len(),
+            self.fast_instrs.len(),
+            self.n_slots
+        )?;
+        writeln!(f, "  slow:")?;
+        for ins in &self.slow_instrs {
+            writeln!(f, "  {ins}")?;
+        }
+        writeln!(f, "  fast:")?;
+        for ins in &self.fast_instrs {
+            writeln!(f, "  {ins}")?;
+        }
+        for (i, o) in self.outputs.iter().enumerate() {
+            writeln!(f, "  out[{i}] = s{o}")?;
+        }
+        Ok(())
     }
 }
 
@@ -737,5 +998,101 @@ mod tests {
     fn send_sync_clone() {
         fn check<T: Send + Sync + Clone>() {}
         check::<Tape>();
+        check::<SplitTape>();
+    }
+
+    /// Inputs `[x, p, q]` with `p, q` slow: the parameter-only products run
+    /// in the slow part, the fast part reads only `x`, and a parameter-only
+    /// output is still written by `eval_fast`.
+    #[test]
+    fn split_moves_parameter_work_to_slow_part() {
+        let (x, p, q) = (Expr::sym("x"), Expr::sym("p"), Expr::sym("q"));
+        let outs = [p * q * x.sin() + p.powi(3) / q, (p + q).sqrt(), x * x];
+        let syms = [Symbol::new("x"), Symbol::new("p"), Symbol::new("q")];
+        let t = Tape::compile(&outs, &syms).unwrap();
+        let split = t.split_by_inputs(&[false, true, true]);
+        let reads = |instrs: &[Instr], i: u32| {
+            instrs
+                .iter()
+                .any(|ins| matches!(ins, Instr::Input { index, .. } if *index == i))
+        };
+        assert!(!reads(split.slow_instructions(), 0), "{split:?}");
+        assert!(!reads(split.fast_instructions(), 1), "{split:?}");
+        assert!(!reads(split.fast_instructions(), 2), "{split:?}");
+        // Fast part: x, sin x, (p q) sin x, + (p^3/q), x*x: no division, no sqrt.
+        assert!(!split
+            .fast_instructions()
+            .iter()
+            .any(|i| matches!(i, Instr::Div { .. } | Instr::Sqrt { .. })));
+        let mut scratch = vec![f64::NAN; split.scratch_len()];
+        let mut out = [f64::NAN; 3];
+        let mut inp = [0.0, 1.5, -0.25];
+        split.eval_slow(&inp, &mut scratch);
+        for xv in [0.3, -2.0, 7.5] {
+            inp[0] = xv;
+            split.eval_fast(&inp, &mut out, &mut scratch);
+            let want = t.eval_vec(&inp);
+            assert_eq!(
+                out.map(f64::to_bits).to_vec(),
+                want.iter().map(|v| v.to_bits()).collect::<Vec<_>>()
+            );
+        }
+    }
+
+    /// All-fast and all-slow masks: constants still go to the slow part;
+    /// with everything slow the fast part is empty and only copies outputs.
+    #[test]
+    fn split_extreme_masks() {
+        let (x, y) = (Expr::sym("x"), Expr::sym("y"));
+        let outs = [x.cos() * 3 + y, Expr::int(2).sqrt()];
+        let t = Tape::compile(&outs, &[Symbol::new("x"), Symbol::new("y")]).unwrap();
+        let inp = [0.7, -1.1];
+        for mask in [[false, false], [true, true]] {
+            let split = t.split_by_inputs(&mask);
+            if mask[0] {
+                assert!(split.fast_instructions().is_empty(), "{split:?}");
+            } else {
+                assert!(split
+                    .fast_instructions()
+                    .iter()
+                    .all(|i| !matches!(i, Instr::Const { .. })));
+            }
+            let mut scratch = vec![f64::NAN; split.scratch_len()];
+            let mut out = [0.0; 2];
+            split.eval_slow(&inp, &mut scratch);
+            split.eval_fast(&inp, &mut out, &mut scratch);
+            assert_eq!(out.to_vec(), t.eval_vec(&inp));
+        }
+    }
+
+    /// `a b c` and `a b d` lower to two product chains both starting with
+    /// `a * b`; the split keeps that multiplication once.
+    #[test]
+    fn split_drops_repeated_instructions() {
+        let [a, b, c, d] = ["a", "b", "c", "d"].map(Expr::sym);
+        let syms = ["a", "b", "c", "d"].map(Symbol::new);
+        let t = Tape::compile(&[a * b * c, a * b * d], &syms).unwrap();
+        let muls = |instrs: &[Instr]| {
+            instrs
+                .iter()
+                .filter(|i| matches!(i, Instr::Mul { .. }))
+                .count()
+        };
+        assert_eq!(muls(t.instructions()), 4, "{t:?}");
+        let split = t.split_by_inputs(&[false; 4]);
+        assert_eq!(muls(split.fast_instructions()), 3, "{split:?}");
+        let inp = [0.1, 1.0 / 3.0, -7.0, 2.5];
+        let mut scratch = vec![f64::NAN; split.scratch_len()];
+        let mut out = [0.0; 2];
+        split.eval_slow(&inp, &mut scratch);
+        split.eval_fast(&inp, &mut out, &mut scratch);
+        assert_eq!(out.to_vec(), t.eval_vec(&inp));
+    }
+
+    #[test]
+    #[should_panic(expected = "slow-input mask length")]
+    fn split_mask_length_is_checked() {
+        let t = Tape::compile(&[Expr::sym("x")], &[Symbol::new("x")]).unwrap();
+        t.split_by_inputs(&[true, false]);
     }
 }
