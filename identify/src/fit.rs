@@ -390,11 +390,38 @@ fn cholesky_solve(a: &[f64], n: usize, b: &[f64]) -> Option<Vec<f64>> {
     Some(y)
 }
 
+/// Where a running fit is, reported once per LM iteration by
+/// [`fit_with_progress`].
+#[derive(Clone, Debug, PartialEq)]
+pub struct FitProgress {
+    /// Horizon stage (0-based) and the number of stages.
+    pub stage: usize,
+    /// Number of horizon stages.
+    pub stages: usize,
+    /// The stage's horizon in s (`INFINITY` = the whole record).
+    pub horizon: f64,
+    /// LM iterations so far, over all stages.
+    pub iteration: usize,
+    /// RMSE over the stage's horizon at the current estimates.
+    pub rmse: f64,
+}
+
 /// Fit the free parameters of `model` to `experiments` (see the module docs).
 pub fn fit(
     model: &Model,
     experiments: &[Experiment],
     opts: &FitOptions,
+) -> Result<FitResult, FitError> {
+    fit_with_progress(model, experiments, opts, &mut |_| {})
+}
+
+/// [`fit`], calling `progress` after each LM iteration's linearisation (for
+/// progress bars on long fits).
+pub fn fit_with_progress(
+    model: &Model,
+    experiments: &[Experiment],
+    opts: &FitOptions,
+    progress: &mut dyn FnMut(&FitProgress),
 ) -> Result<FitResult, FitError> {
     if experiments.is_empty() {
         return Err(FitError::NoExperiments);
@@ -493,6 +520,13 @@ pub fn fit(
                 break;
             };
             iterations += 1;
+            progress(&FitProgress {
+                stage,
+                stages: stages.len(),
+                horizon,
+                iteration: iterations,
+                rmse: (ssr / count.max(1) as f64).sqrt(),
+            });
             // short horizons only bring the parameters into the basin: a
             // loose relative tolerance there. On the whole record, stop when
             // a step gains less than a tenth of the residual variance (it

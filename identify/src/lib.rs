@@ -50,7 +50,7 @@ pub use diagnose::{
 pub use effect_edit::{EffectEditError, EffectInstance, EffectKind};
 pub use equation_error::{EquationError, EquationErrorOptions, Regressor, Score, Share};
 pub use experiment_sim::{InitialVelocity, Signals, SimError, SimOptions, Simulator, Trajectory};
-pub use fit::{fit, Estimate, FitError, FitOptions, FitResult};
+pub use fit::{fit, fit_with_progress, Estimate, FitError, FitOptions, FitProgress, FitResult};
 pub use metrics::{compare, fit_percent, rmse, ChannelFit, ExperimentFit, FitReport, MetricsError};
 pub use plot::{plot_comparison, render_comparison, PlotError};
 pub use sensitivity::{estimated_parameters, SensitivitySimulator, SensitivityTrajectory};

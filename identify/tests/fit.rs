@@ -7,7 +7,9 @@ use std::path::{Path, PathBuf};
 use std::time::Instant;
 
 use plantc_derive::model::{load_model, Model};
-use plantc_identify::{fit, read_experiments, FitError, FitOptions, ReadOptions};
+use plantc_identify::{
+    fit, fit_with_progress, read_experiments, FitError, FitOptions, FitProgress, ReadOptions,
+};
 
 fn repo() -> PathBuf {
     Path::new(env!("CARGO_MANIFEST_DIR")).join("..")
@@ -50,8 +52,21 @@ fn clean_case_recovers_j1_and_l2() {
         ..FitOptions::default()
     };
     let start = Instant::now();
-    let r = fit(&model, &exps, &opts).expect("fits");
+    let mut seen: Vec<FitProgress> = Vec::new();
+    let r = fit_with_progress(&model, &exps, &opts, &mut |p| seen.push(p.clone())).expect("fits");
     let elapsed = start.elapsed();
+    // one report per LM iteration, counting up, the last on the whole record
+    assert_eq!(seen.len(), r.iterations);
+    assert!(seen
+        .windows(2)
+        .all(|w| w[1].iteration == w[0].iteration + 1));
+    assert!(seen
+        .iter()
+        .all(|p| p.rmse.is_finite() && p.stage < p.stages));
+    let last = seen.last().expect("progress reported");
+    assert!(last.horizon.is_infinite() && last.stage + 1 == last.stages);
+    // the same fit without a callback gives the same result
+    assert_eq!(fit(&model, &exps, &opts).expect("fits"), r);
     eprintln!("{}", serde_json::to_string_pretty(&r).expect("json"));
     eprintln!("fit time {elapsed:?}");
     for e in &r.parameters {

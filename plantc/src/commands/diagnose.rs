@@ -112,7 +112,7 @@ pub fn run(args: &DiagnoseArgs, out: &mut dyn Write, err: &mut dyn Write) -> Res
         "refitting the model with each candidate effect on {} experiment(s)...",
         measured.len()
     );
-    let d = with_progress("diagnosing", || {
+    let d = with_progress("diagnosing", |_| {
         diagnose(&text, &measured, &FitOptions::default())
     })
     .map_err(|e| CliError::failure(format!("error: {e}")))?;

@@ -5,21 +5,29 @@
 
 use std::io::{IsTerminal, Write};
 use std::sync::atomic::{AtomicBool, Ordering};
+use std::sync::Mutex;
 use std::time::{Duration, Instant};
 
 use plantc_derive::lang::edit::set_parameter_value;
-use plantc_identify::{fit, FitError, FitOptions, FitResult};
+use plantc_identify::{fit_with_progress, FitError, FitOptions, FitProgress, FitResult};
 
 use crate::cli::FitArgs;
 use crate::common::{
     declared_value_text, load, read_data, refuse_to_clobber, values, write_json, CliError,
 };
 
-/// Runs `work` while showing elapsed time on the terminal's stderr (a `\r`
-/// line, only when stderr is a terminal: logs stay clean).
-pub(crate) fn with_progress<T>(what: &str, work: impl FnOnce() -> T) -> T {
+/// Runs `work` while showing elapsed time and the latest status that
+/// `work` reports through its argument (a `\r` line on stderr, only when
+/// stderr is a terminal: logs stay clean).
+pub(crate) fn with_progress<T>(what: &str, work: impl FnOnce(&dyn Fn(String)) -> T) -> T {
+    let status = Mutex::new(String::new());
+    let set = |s: String| {
+        if let Ok(mut g) = status.lock() {
+            *g = s;
+        }
+    };
     if !std::io::stderr().is_terminal() {
-        return work();
+        return work(&set);
     }
     let done = AtomicBool::new(false);
     std::thread::scope(|s| {
@@ -28,8 +36,9 @@ pub(crate) fn with_progress<T>(what: &str, work: impl FnOnce() -> T) -> T {
             let spin = ['|', '/', '-', '\\'];
             let mut k = 0;
             while !done.load(Ordering::Relaxed) {
+                let st = status.lock().map(|g| g.clone()).unwrap_or_default();
                 eprint!(
-                    "\r{} {what} {:.1} s",
+                    "\r\x1b[K{} {what} {:.1} s  {st}",
                     spin[k % 4],
                     start.elapsed().as_secs_f64()
                 );
@@ -38,10 +47,26 @@ pub(crate) fn with_progress<T>(what: &str, work: impl FnOnce() -> T) -> T {
             }
             eprint!("\r\x1b[K");
         });
-        let r = work();
+        let r = work(&set);
         done.store(true, Ordering::Relaxed);
         r
     })
+}
+
+/// A status line for [`with_progress`] from a fit's progress.
+pub(crate) fn progress_text(p: &FitProgress) -> String {
+    let h = if p.horizon.is_finite() {
+        format!("first {} s", p.horizon)
+    } else {
+        "whole record".to_string()
+    };
+    format!(
+        "stage {}/{} ({h}), iteration {}, RMSE {:.3e}",
+        p.stage + 1,
+        p.stages,
+        p.iteration,
+        p.rmse
+    )
 }
 
 fn fit_error(e: FitError) -> CliError {
@@ -120,7 +145,10 @@ pub fn run(args: &FitArgs, out: &mut dyn Write, err: &mut dyn Write) -> Result<(
         measured.len()
     );
     let started = Instant::now();
-    let result = with_progress("fitting", || fit(model, &measured, &opts)).map_err(fit_error)?;
+    let result = with_progress("fitting", |set| {
+        fit_with_progress(model, &measured, &opts, &mut |p| set(progress_text(p)))
+    })
+    .map_err(fit_error)?;
     let _ = writeln!(
         err,
         "fit done in {:.1} s: {} iterations, {} simulations",

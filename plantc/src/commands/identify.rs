@@ -14,14 +14,14 @@ use plantc_derive::lang::edit::set_parameter_value;
 use plantc_derive::model::{Model, ParameterValues};
 use plantc_identify::diagnose::model_from_text;
 use plantc_identify::{
-    diagnose, fit, plot_comparison, where_it_fails, Experiment, FailOptions, FitOptions, FitReport,
-    FitResult,
+    diagnose, fit_with_progress, plot_comparison, where_it_fails, Experiment, FailOptions,
+    FitOptions, FitReport, FitResult,
 };
 
 use crate::cli::IdentifyArgs;
 use crate::commands::compare::{report, simulate_experiments};
 use crate::commands::diagnose::fitted_instance;
-use crate::commands::fit::with_progress;
+use crate::commands::fit::{progress_text, with_progress};
 use crate::common::{channel_spec, declared_value_text, load, read_data, write_json, CliError};
 
 /// One stage of the story: its label, the model and values it used, and the
@@ -221,7 +221,7 @@ fn story(
         out,
         "\n2. diagnose: refit the nominal model, rank candidate effects by equation error, refit the leaders"
     );
-    let d = with_progress("diagnosing", || {
+    let d = with_progress("diagnosing", |_| {
         diagnose(&text, &measured, &FitOptions::default())
     })
     .map_err(fail)?;
@@ -282,14 +282,15 @@ fn story(
             // 4. fit it
             let m2 = model_from_text("with_effect", &edited).map_err(fail)?;
             let start: Vec<f64> = m2.parameters.iter().map(|p| p.value).collect();
-            let f = with_progress("fitting", || {
-                fit(
+            let f = with_progress("fitting", |set| {
+                fit_with_progress(
                     &m2,
                     &measured,
                     &FitOptions {
                         start: Some(start),
                         ..FitOptions::default()
                     },
+                    &mut |p| set(progress_text(p)),
                 )
             })
             .map_err(fail)?;
