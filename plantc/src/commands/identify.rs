@@ -181,8 +181,6 @@ fn story(
             dir.display()
         )));
     }
-    std::fs::create_dir_all(dir)
-        .map_err(|e| fail(format!("cannot create `{}`: {e}", dir.display())))?;
     let started = Instant::now();
     let loaded = load(&args.model, err)?;
     let model = &loaded.model;
@@ -193,6 +191,9 @@ fn story(
         ))
     })?;
     let measured = read_data(model, &args.data, err)?;
+    // inputs are checked before anything is written
+    std::fs::create_dir_all(dir)
+        .map_err(|e| fail(format!("cannot create `{}`: {e}", dir.display())))?;
     let channels: Vec<&str> = model.coordinates.iter().map(|c| c.name.as_str()).collect();
     let nominal = ParameterValues::new(model, None, &[]).map_err(fail)?;
 
