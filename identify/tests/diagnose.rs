@@ -328,6 +328,52 @@ fn equation_error_columns_for_sensor_offset_and_input_delay() {
     assert!((td / 2e-3 - 1.0).abs() < 0.10, "{td}");
 }
 
+/// The deadzone column on the clean recordings with a known deadzone made
+/// here: the logged voltage is replaced by `u = Vm + w sign(Vm)`, so the
+/// plant (which received the recorded `Vm`) saw exactly `dz(u)` with
+/// `w = 0.3 V`. The equation error finds `w` within 10 % (the reference is
+/// our own disturbance); the start width 0.05 V only selects the samples.
+#[test]
+fn equation_error_column_for_deadzone() {
+    let Some((clean, _)) = case("clean") else {
+        return;
+    };
+    let model = model_from_text("baseline", &pendulum_text()).expect("checks");
+    let base: Vec<f64> = model.parameters.iter().map(|p| p.value).collect();
+    let nuisance = estimated_parameters(&model);
+    let mut dz = clean.clone();
+    for e in &mut dz {
+        let ch = e
+            .channels
+            .iter_mut()
+            .find(|c| c.name == "Vm")
+            .expect("Vm column");
+        ch.values
+            .iter_mut()
+            .filter(|v| **v != 0.0)
+            .for_each(|v| *v += 0.3 * v.signum());
+    }
+    let opts = EquationErrorOptions::default();
+    let ee = EquationError::new(&model, &base, &nuisance, &dz, &opts).expect("prepares");
+    let s = ee
+        .score(&Regressor::Deadzone {
+            input: 0,
+            name: "w".into(),
+            start: 0.05,
+        })
+        .expect("scores");
+    let w = s.estimates[0].value;
+    eprintln!("deadzone: {w:.4e} V, bic {:.1}", s.bic_gain);
+    assert!((w / 0.3 - 1.0).abs() < 0.10, "{w}");
+    assert!(s.bic_gain > 0.0);
+    let bad = ee.score(&Regressor::Deadzone {
+        input: 3,
+        name: "w".into(),
+        start: 0.05,
+    });
+    assert!(bad.is_err());
+}
+
 /// Bad requests are errors with data, not panics.
 #[test]
 fn equation_error_rejects_bad_requests() {
