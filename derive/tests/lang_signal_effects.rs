@@ -256,10 +256,7 @@ fn deadzone_is_lowered_unfolded_and_widths_add() {
         .collect();
     assert_eq!(
         warned,
-        [
-            "actuator Vm = deadzone(w)",
-            "actuator Vm = deadzone(w/3)"
-        ]
+        ["actuator Vm = deadzone(w)", "actuator Vm = deadzone(w/3)"]
     );
     // printing back parses to the same line
     let file = parse_and_check("m.plant", &text).model.unwrap();

@@ -743,13 +743,7 @@ impl EquationError {
                         }
                     })
                     .collect();
-                (
-                    self.r.clone(),
-                    vec![c],
-                    vec![name.clone()],
-                    vec![0.0],
-                    -1.0,
-                )
+                (self.r.clone(), vec![c], vec![name.clone()], vec![0.0], -1.0)
             }
         };
         let mut cols: Vec<&[f64]> = self.nuisance.iter().map(Vec::as_slice).collect();

@@ -50,8 +50,8 @@ use plantc_derive::model::Model;
 use plantc_derive::sym::{diff, Expr, SplitTape, Tape};
 
 use crate::experiment_sim::{
-    dynamics_outputs, initial_state, integrate, lu_factor, lu_solve, parameters_slow, substep_for,
-    tape_inputs, apply_deadzones, OnSwitch, Segment, SignalEffects, Signals, SimError,
+    apply_deadzones, dynamics_outputs, initial_state, integrate, lu_factor, lu_solve,
+    parameters_slow, substep_for, tape_inputs, OnSwitch, Segment, SignalEffects, Signals, SimError,
     SimOptions,
 };
 

@@ -227,8 +227,8 @@ fn deadzone_candidate_template() {
     assert_eq!(c.kind, EffectKind::Actuator);
     assert_eq!(c.parameters[0].unit, "V");
     assert_eq!(c.parameters[0].estimate, Some((0.0, 2.0)));
-    let inst = EffectInstance::with_values(&m, "deadzone", "Vm", &[("w".into(), 0.4)])
-        .expect("instance");
+    let inst =
+        EffectInstance::with_values(&m, "deadzone", "Vm", &[("w".into(), 0.4)]).expect("instance");
     let e = model(&inst.apply(&text).expect("applies"));
     let values = e.parameters.iter().map(|p| (p.symbol, p.value)).collect();
     assert!((e.input_deadzone(0).eval_map(&values) - 0.4).abs() < 1e-15);
