@@ -212,3 +212,75 @@ fn consumers_of_the_plant_equations_get_warnings() {
     let plain = load_model_text("m.plant", &without_effect_lines()).unwrap();
     assert!(plain.ignored_signal_effects("`plantc sim`").is_empty());
 }
+
+/// `deadzone(w)` stays out of the forces (they must stay linear in the
+/// inputs), is listed in `Model::actuators`, widths of several lines add and
+/// plant-equation consumers are warned about it.
+#[test]
+fn deadzone_is_lowered_unfolded_and_widths_add() {
+    let text = without_effect_lines()
+        + "parameter w = 0.3 [V]\nactuator Vm = input_offset(V0)\n\
+           actuator Vm = deadzone(w)\nactuator Vm = deadzone(w/3)  # widths add\n";
+    let loaded = load_model_text("m.plant", &text).unwrap();
+    let m = &loaded.model;
+    assert_eq!(m.actuators.len(), 3);
+    assert!(matches!(
+        m.actuators[1].effect,
+        ActuatorEffectKind::Deadzone(_)
+    ));
+    assert!(m.has_deadzone());
+    let values: HashMap<Symbol, f64> = m
+        .parameters
+        .iter()
+        .map(|p| (p.symbol, p.value))
+        .chain([(Symbol::new("Vm"), 3.0)])
+        .collect();
+    // 0.3 V + 0.1 V
+    let w = m.input_deadzone(0).eval_map(&values);
+    assert!((w - 0.4).abs() < 1e-15, "{w}");
+    assert_eq!(m.input_delay(0).eval_map(&values), 0.0);
+    // the force holds only the folded offset: k*(Vm + V0), no `w`
+    let f = m.forces[0].eval_map(&values);
+    assert!((f - 0.05 * 3.1).abs() < 1e-15, "{f}");
+    assert!(!m.forces[0].contains(Symbol::new("w")));
+    assert_eq!(
+        m.ignored_signal_effects(),
+        ["actuator Vm = deadzone(w)", "actuator Vm = deadzone(w/3)"]
+            .map(String::from)
+            .to_vec()
+    );
+    let warned: Vec<&str> = loaded
+        .ignored_signal_effects("`plantc sim`")
+        .iter()
+        .map(|d| &text[d.primary.start..d.primary.end])
+        .collect();
+    assert_eq!(
+        warned,
+        ["actuator Vm = deadzone(w)", "actuator Vm = deadzone(w/3)"]
+    );
+    // printing back parses to the same line
+    let file = parse_and_check("m.plant", &text).model.unwrap();
+    assert_eq!(file.actuators[1].to_string(), "actuator Vm = deadzone(w)");
+    // a model without deadzone has none
+    let plain = load_model_text("m.plant", &without_effect_lines()).unwrap();
+    assert!(!plain.model.has_deadzone());
+    assert_eq!(plain.model.input_deadzone(0).eval_map(&values), 0.0);
+}
+
+/// A zero width is valid (the effect then does nothing); a deadzone on a
+/// coordinate or with the wrong unit is refused by the edit re-check.
+#[test]
+fn deadzone_zero_width_is_valid_and_bad_lines_are_refused() {
+    let src = without_effect_lines() + "parameter w = 0 [V]\n";
+    let out = add_actuator_effect(&src, "Vm", "deadzone(w)").unwrap();
+    assert!(out.contains("\nactuator Vm = deadzone(w)\n"), "{out}");
+    assert!(!parse_and_check("m.plant", &out).has_errors());
+    assert!(matches!(
+        add_actuator_effect(&src, "Vm", "deadzone(Td)"),
+        Err(EditError::WouldBreak(_))
+    ));
+    assert!(matches!(
+        add_sensor_effect(&src, "theta", "deadzone(w)"),
+        Err(EditError::WouldBreak(_))
+    ));
+}

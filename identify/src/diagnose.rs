@@ -38,7 +38,8 @@
 //! equation-error columns. Effects that add parameters to the equations
 //! (force effects, an input offset folded into the forces) need nothing more
 //! than their edited model; a sensor offset maps to
-//! [`Regressor::SensorOffset`], an input delay to [`Regressor::InputDelay`].
+//! [`Regressor::SensorOffset`], an input delay to [`Regressor::InputDelay`],
+//! a deadzone (not in the forces) to [`Regressor::Deadzone`].
 
 use std::fmt;
 
@@ -250,6 +251,19 @@ pub fn regressor_for(candidate: &Candidate, edited: Model) -> Regressor {
                 return Regressor::InputDelay {
                     input: j,
                     name: first_name(),
+                };
+            }
+        }
+        EffectKind::Actuator if candidate.effect == "deadzone" => {
+            if let Some(j) = edited
+                .inputs
+                .iter()
+                .position(|u| u.name == candidate.target)
+            {
+                return Regressor::Deadzone {
+                    input: j,
+                    name: first_name(),
+                    start: candidate.parameters.first().map_or(0.0, |p| p.value),
                 };
             }
         }

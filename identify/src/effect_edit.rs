@@ -144,6 +144,12 @@ pub const TEMPLATES: &[(&str, EffectKind, &[ParamTemplate])] = &[
         EffectKind::Actuator,
         &[pt_unit("Td", TemplateUnit::Fixed("s"), 1e-3, 0.0, 0.05)],
     ),
+    (
+        // a start above 0 so the first sensitivity is not at the box edge
+        "deadzone",
+        EffectKind::Actuator,
+        &[pt_unit("w", TemplateUnit::Input, 0.05, 0.0, 2.0)],
+    ),
 ];
 
 /// Kind and parameter templates of an effect, if it has templates.

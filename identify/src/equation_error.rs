@@ -32,7 +32,8 @@
 //! model's residual with respect to the new parameters at their start values
 //! (a Gauss-Newton step from there); a sensor offset on coordinate `i` uses
 //! `dr/dq_i`, an input delay `dr/du * u'` (the input rate of the ZOH-averaged,
-//! smoothed input).
+//! smoothed input), a deadzone `dr/du * (-sign(u))` where `|u| > w0` (the
+//! derivative of the received `dz(u)` with respect to the width).
 //!
 //! The equations are stacked, each weighted by the inverse RMS of its own
 //! residual, and each candidate is scored by the BIC gain
@@ -177,6 +178,21 @@ pub enum Regressor {
         /// Name given to the estimate.
         name: String,
     },
+    /// A deadzone of half-width `w` on input `input` (applied =
+    /// `sign(u) max(|u| - w, 0)`): the baseline residual is, to first order,
+    /// `-w * (d r / d u) * d dz/dw`, and `d dz/dw = -sign(u)` where
+    /// `|u| > w`, zero elsewhere; the column is `(d r / d u) (-sign(u))` on
+    /// the samples of the smoothed ZOH-averaged input with `|u| > start`
+    /// (zero on the others); estimate `w = -beta`.
+    Deadzone {
+        /// Input index.
+        input: usize,
+        /// Name given to the estimate.
+        name: String,
+        /// The width (>= 0, the input's SI unit) that selects the samples
+        /// outside the deadzone (the candidate's start value).
+        start: f64,
+    },
 }
 
 /// A parameter estimate of the equation-error regression (a linearised
@@ -264,9 +280,11 @@ pub struct EquationError {
     r: Vec<f64>,
     /// Weighted nuisance columns.
     nuisance: Vec<Vec<f64>>,
-    /// Weighted `dr/dq_j` and `dr/du_j` columns.
+    /// Weighted `dr/dq_j` and `(dr/du_j) u_j'` columns.
     dq: Vec<Vec<f64>>,
     du: Vec<Vec<f64>>,
+    /// Weighted `dr/du_j` columns.
+    dr_du: Vec<Vec<f64>>,
     /// Residual after the nuisance-only regression and its RSS.
     r0: Vec<f64>,
     rss0: f64,
@@ -580,6 +598,7 @@ impl EquationError {
         let mut raw_n: Vec<Vec<f64>> = vec![Vec::new(); np];
         let mut raw_dq: Vec<Vec<f64>> = vec![Vec::new(); n];
         let mut raw_du: Vec<Vec<f64>> = vec![Vec::new(); m];
+        let mut raw_dr_du: Vec<Vec<f64>> = vec![Vec::new(); m];
         eval_rows(&tape, &exps, n, m, &full, |e, k, out| {
             for i in 0..n {
                 if !exps[e].keep[i][k] {
@@ -596,6 +615,7 @@ impl EquationError {
                 for j in 0..m {
                     let d = out[n + np * n + n * n + j * n + i];
                     raw_du[j].push(d * exps[e].ud[j][k]);
+                    raw_dr_du[j].push(d);
                 }
             }
         });
@@ -623,6 +643,7 @@ impl EquationError {
         let nuisance_cols: Vec<Vec<f64>> = raw_n.into_iter().map(wt).collect();
         let dq: Vec<Vec<f64>> = raw_dq.into_iter().map(wt).collect();
         let du: Vec<Vec<f64>> = raw_du.into_iter().map(wt).collect();
+        let dr_du: Vec<Vec<f64>> = raw_dr_du.into_iter().map(wt).collect();
         let cols: Vec<&[f64]> = nuisance_cols.iter().map(Vec::as_slice).collect();
         let fit0 = least_squares(&cols, &r);
         let r0 = residual(&r, &cols, &fit0.coef);
@@ -646,6 +667,7 @@ impl EquationError {
             nuisance: nuisance_cols,
             dq,
             du,
+            dr_du,
             rss0: fit0.rss,
             r0,
             slow,
@@ -702,6 +724,26 @@ impl EquationError {
                     vec![0.0],
                     1.0,
                 )
+            }
+            Regressor::Deadzone { input, name, start } => {
+                let d = self
+                    .dr_du
+                    .get(*input)
+                    .ok_or(EquationErrorError::BadIndex(*input))?;
+                let c = self
+                    .rows
+                    .iter()
+                    .zip(d)
+                    .map(|((e, k, _), d)| {
+                        let u = self.exps[*e].u[*input][*k];
+                        if u.abs() > *start {
+                            -u.signum() * d
+                        } else {
+                            0.0
+                        }
+                    })
+                    .collect();
+                (self.r.clone(), vec![c], vec![name.clone()], vec![0.0], -1.0)
             }
         };
         let mut cols: Vec<&[f64]> = self.nuisance.iter().map(Vec::as_slice).collect();

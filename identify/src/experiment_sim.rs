@@ -25,7 +25,16 @@
 //!   i.e. the rig was holding it). The RK4 substeps are split at the switch
 //!   instants, so no step straddles an input change; a switch within 1e-9 of
 //!   a sample interval of a sample instant is taken at that instant.
+//! - `actuator u = deadzone(w)` (`w >= 0`): the plant receives
+//!   `dz(u[k]) = sign(u[k]) * max(|u[k]| - w, 0)`; since the input is held,
+//!   the deadzone acts per sample on the commanded value ([`deadzone`]).
 //! - `input_offset` is already folded into the model's forces.
+//!
+//! Composition order on one input, whatever the order of the lines: the
+//! deadzone acts on the commanded samples, the delay then shifts the held
+//! result in time, and the offset (in the forces) is added to what arrives:
+//! the plant receives `dz(u)(t - Td) + V0`. With `w = 0` the deadzone is
+//! skipped, so the simulation is bit-identical to the model without it.
 //!
 //! Dry friction `sign(q')` is replaced by `tanh(q'/w)` (default `w = 1e-3`
 //! rad/s, see [`SimOptions::dry_friction_width`]): RK4 cannot integrate a
@@ -113,6 +122,13 @@ pub enum SimError {
     },
     /// An option is out of range.
     BadOption(String),
+    /// A deadzone width evaluated to a negative or non-finite value.
+    BadDeadzone {
+        /// The input.
+        input: String,
+        /// The width in the input's SI unit.
+        value: f64,
+    },
     /// An input delay evaluated to a negative or non-finite value.
     BadDelay {
         /// The input.
@@ -153,6 +169,10 @@ impl fmt::Display for SimError {
                 write!(f, "the model has no parameter `{name}`")
             }
             SimError::BadOption(m) => write!(f, "bad simulation option: {m}"),
+            SimError::BadDeadzone { input, value } => write!(
+                f,
+                "the deadzone width of input `{input}` must be a finite value >= 0, got {value}"
+            ),
             SimError::BadDelay { input, value } => write!(
                 f,
                 "the delay of input `{input}` must be a finite value >= 0 s, got {value} s"
@@ -454,10 +474,45 @@ pub(crate) fn integrate(
     Ok(())
 }
 
-/// Sensor offsets and input delays of a model, compiled over the full
-/// parameter vector, with their derivatives along free base parameters.
-/// Outputs: offsets (one per coordinate), delays (one per input), then per
-/// free parameter the derivatives of the offsets and of the delays.
+/// `dz(u) = sign(u) * max(|u| - w, 0)` for `w >= 0`, computed as `u - w`
+/// above `w`, `u + w` below `-w` and `0` in between, so `w = 0` returns `u`
+/// itself (up to the sign of a zero).
+pub fn deadzone(u: f64, w: f64) -> f64 {
+    if u > w {
+        u - w
+    } else if u < -w {
+        u + w
+    } else {
+        0.0
+    }
+}
+
+/// The signals with each input `j` replaced by `deadzone(u_j[k], widths[j])`
+/// sample by sample (the input is held, so this is exact); borrowed as they
+/// are when every width is zero.
+pub(crate) fn apply_deadzones<'a>(
+    sig: &'a Signals,
+    widths: &[f64],
+) -> std::borrow::Cow<'a, Signals> {
+    if widths.iter().all(|&w| w == 0.0) {
+        return std::borrow::Cow::Borrowed(sig);
+    }
+    let mut out = sig.clone();
+    for (u, &w) in out.u.iter_mut().zip(widths) {
+        if w != 0.0 {
+            for v in u.iter_mut() {
+                *v = deadzone(*v, w);
+            }
+        }
+    }
+    std::borrow::Cow::Owned(out)
+}
+
+/// Sensor offsets, input delays and deadzone widths of a model, compiled
+/// over the full parameter vector, with their derivatives along free base
+/// parameters. Outputs: offsets (one per coordinate), delays (one per
+/// input), widths (one per input), then per free parameter the derivatives
+/// of the offsets, the delays and the widths.
 #[derive(Clone, Debug)]
 pub(crate) struct SignalEffects {
     tape: Tape,
@@ -467,6 +522,8 @@ pub(crate) struct SignalEffects {
     inputs: Vec<String>,
     /// True if some delay depends on some free parameter.
     pub(crate) delay_depends_on_free: bool,
+    /// True if some deadzone width depends on some free parameter.
+    pub(crate) deadzone_depends_on_free: bool,
 }
 
 /// Evaluated [`SignalEffects`].
@@ -479,6 +536,10 @@ pub(crate) struct SignalValues {
     pub(crate) d_offsets: Vec<f64>,
     /// `d delay_l / d theta_j` at `[j * m + l]`.
     pub(crate) d_delays: Vec<f64>,
+    /// Deadzone width per input (SI, the input's unit).
+    pub(crate) widths: Vec<f64>,
+    /// `d width_l / d theta_j` at `[j * m + l]`.
+    pub(crate) d_widths: Vec<f64>,
 }
 
 impl SignalEffects {
@@ -490,16 +551,22 @@ impl SignalEffects {
         let values: Vec<Expr> = (0..n)
             .map(|i| model.sensor_offset(i))
             .chain((0..m).map(|j| model.input_delay(j)))
+            .chain((0..m).map(|j| model.input_deadzone(j)))
             .collect();
         let expanded: Vec<Expr> = values.iter().map(|e| model.expand_derived(*e)).collect();
         let mut outs = values;
         let mut delay_depends_on_free = false;
+        let mut deadzone_depends_on_free = false;
         for &i in free {
             let p = model.parameters[i].symbol;
             for (k, e) in expanded.iter().enumerate() {
                 let d = diff(*e, p);
-                if k >= n && !d.is_zero() {
-                    delay_depends_on_free = true;
+                if !d.is_zero() {
+                    if k >= n + m {
+                        deadzone_depends_on_free = true;
+                    } else if k >= n {
+                        delay_depends_on_free = true;
+                    }
                 }
                 outs.push(d);
             }
@@ -513,11 +580,12 @@ impl SignalEffects {
             p: free.len(),
             inputs: model.inputs.iter().map(|i| i.name.clone()).collect(),
             delay_depends_on_free,
+            deadzone_depends_on_free,
         })
     }
 
     /// Evaluate at the full parameter vector; a negative or non-finite
-    /// delay is an error.
+    /// delay or deadzone width is an error.
     pub(crate) fn eval(&self, params: &[f64]) -> Result<SignalValues, SimError> {
         let out = self.tape.eval_vec(params);
         let (n, m, p) = (self.n, self.m, self.p);
@@ -530,18 +598,32 @@ impl SignalEffects {
                 });
             }
         }
+        let widths = out[n + m..n + 2 * m].to_vec();
+        for (j, &w) in widths.iter().enumerate() {
+            if !(w >= 0.0 && w.is_finite()) {
+                return Err(SimError::BadDeadzone {
+                    input: self.inputs[j].clone(),
+                    value: w,
+                });
+            }
+        }
+        let blk_len = n + 2 * m;
         let mut d_offsets = Vec::with_capacity(n * p);
         let mut d_delays = Vec::with_capacity(m * p);
+        let mut d_widths = Vec::with_capacity(m * p);
         for j in 0..p {
-            let blk = &out[(n + m) * (j + 1)..(n + m) * (j + 2)];
+            let blk = &out[blk_len * (j + 1)..blk_len * (j + 2)];
             d_offsets.extend_from_slice(&blk[..n]);
-            d_delays.extend_from_slice(&blk[n..]);
+            d_delays.extend_from_slice(&blk[n..n + m]);
+            d_widths.extend_from_slice(&blk[n + m..]);
         }
         Ok(SignalValues {
             offsets: out[..n].to_vec(),
             delays,
             d_offsets,
             d_delays,
+            widths,
+            d_widths,
         })
     }
 }
@@ -684,6 +766,7 @@ impl Simulator {
             true
         };
         let effects = self.signals.eval(params)?;
+        let sig = &*apply_deadzones(sig, &effects.widths);
         let offsets = &effects.offsets;
         let mut q = vec![vec![0.0; n_samples]; n];
         let mut z = initial_state(sig, self.opts.initial_velocity, offsets);

@@ -30,6 +30,14 @@
 //!   the segments around a switch this is the jump above as the substep goes
 //!   to zero. A switch that falls on a sample instant is not a moving
 //!   boundary: there the jump is applied as such;
+//! - a deadzone width `w(theta)` on input `l`: the simulation holds
+//!   `dz(u[k]) = sign(u[k]) max(|u[k]| - w, 0)`, whose derivative is
+//!   `-sign(u[k]) dw/dtheta` where `|u[k]| > w` and zero elsewhere, i.e.
+//!   `-sign(dz(u[k])) dw/dtheta` in terms of the held value. It enters only
+//!   through the input, so the acceleration sensitivity gains the forcing
+//!   term `M^-1 B[:, l] d dz/dtheta` (the kink at `|u[k]| = w` is a set of
+//!   measure zero in `w`; there the one-sided derivative of the `> w` test
+//!   is used);
 //! - an input offset is a parameter of the folded forces like any other.
 //!
 //! The partial derivatives are symbolic: derived quantities (`let`) are
@@ -42,8 +50,9 @@ use plantc_derive::model::Model;
 use plantc_derive::sym::{diff, Expr, SplitTape, Tape};
 
 use crate::experiment_sim::{
-    dynamics_outputs, initial_state, integrate, lu_factor, lu_solve, parameters_slow, substep_for,
-    tape_inputs, OnSwitch, Segment, SignalEffects, Signals, SimError, SimOptions,
+    apply_deadzones, dynamics_outputs, initial_state, integrate, lu_factor, lu_solve,
+    parameters_slow, substep_for, tape_inputs, OnSwitch, Segment, SignalEffects, Signals, SimError,
+    SimOptions,
 };
 
 /// Simulated coordinates and their sensitivities at the sample instants.
@@ -184,6 +193,9 @@ impl SensitivitySimulator {
         }
         let h = substep_for(sig, &self.opts)?;
         let effects = self.signals.eval(params)?;
+        let sig = &*apply_deadzones(sig, &effects.widths);
+        let d_width = &effects.d_widths;
+        let deadzone_forcing = self.signals.deadzone_depends_on_free;
         let (n, m, p) = (self.n, self.m, self.free.len());
         let nx = 2 * n;
         let bs = n * n + n + n * m;
@@ -202,6 +214,7 @@ impl SensitivitySimulator {
         let mut tmp = vec![0.0; n];
         // jd[d * n + i] = d a_i / d z_d, z = (state, free parameters)
         let mut jd = vec![0.0; (nx + p) * n];
+        let mut du = vec![0.0; m];
         let d_delay = &effects.d_delays;
         let rhs = |z: &[f64], u: &[f64], seg: &Segment, dz: &mut [f64]| {
             tin[..nx].copy_from_slice(&z[..nx]);
@@ -254,6 +267,31 @@ impl SensitivitySimulator {
                         v += jd[k * n + i] * s[k * p + j];
                     }
                     ds[(n + i) * p + j] = v;
+                }
+            }
+            // deadzone widths: M^-1 B d dz(u)/dtheta, with d dz/dw = -sign(dz)
+            if deadzone_forcing {
+                for j in 0..p {
+                    let mut any = false;
+                    for l in 0..m {
+                        let dw = d_width[j * m + l];
+                        du[l] = if dw != 0.0 && u[l] != 0.0 {
+                            any = true;
+                            -u[l].signum() * dw
+                        } else {
+                            0.0
+                        };
+                    }
+                    if !any {
+                        continue;
+                    }
+                    for i in 0..n {
+                        w[i] = (0..m).map(|l| b[i * m + l] * du[l]).sum::<f64>();
+                    }
+                    lu_solve(&lu, n, &piv, &mut w, &mut tmp);
+                    for i in 0..n {
+                        ds[(n + i) * p + j] += w[i];
+                    }
                 }
             }
             // moving segment boundaries (delayed switches): f (b' - a') / L

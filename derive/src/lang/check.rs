@@ -1206,7 +1206,7 @@ impl Checker {
             };
             let (expected, what) = match unit {
                 ArgUnit::Time => (Dim::time(), "a time".to_string()),
-                ArgUnit::Target => match target_dim {
+                ArgUnit::Target | ArgUnit::TargetNonNegative => match target_dim {
                     Some(td) => (td, format!("in the unit of `{}`", t.name)),
                     None => continue,
                 },
@@ -1219,7 +1219,7 @@ impl Checker {
                     format!("expected {expected}, found {d}"),
                 )
                 .with_help(format!("{}: {}", effect.signature(), effect.doc));
-                if *unit == ArgUnit::Target {
+                if matches!(unit, ArgUnit::Target | ArgUnit::TargetNonNegative) {
                     diag = diag.with_label(t.span, format!("`{}` is {expected}", t.name));
                 }
                 self.diags.push(diag);
@@ -1234,6 +1234,20 @@ impl Checker {
                         )
                         .with_help(
                             "a delay is a time >= 0 s by which the plant receives the input late",
+                        ),
+                    );
+                }
+            } else if *unit == ArgUnit::TargetNonNegative {
+                if let Some(v) = eval_si(a, &self.syms).filter(|v| v.is_nan() || *v < 0.0) {
+                    self.diags.push(
+                        Diagnostic::error(
+                            "plantc::negative_width",
+                            format!("the deadzone width of `{}` is negative", t.name),
+                            a.span,
+                            format!("= {} (SI)", fmt_num(v)),
+                        )
+                        .with_help(
+                            "a deadzone half-width w >= 0: inputs with |u| <= w do not reach the plant",
                         ),
                     );
                 }

@@ -12,7 +12,9 @@
 //!   of the coordinate reads; the formula is the measurement in terms of `q`.
 //! - **actuator** effects (`actuator Vm = input_offset(V0)`): what the plant
 //!   receives for the commanded input; the formula is in terms of `u`, or
-//!   empty when the effect is not algebraic (`input_delay`).
+//!   empty when the effect is not algebraic (`input_delay`) or not linear in
+//!   `u` (`deadzone`): such effects stay out of the forces, which must be
+//!   linear in the inputs.
 //!
 //! Sensor and actuator effect arguments are expressions of parameters whose
 //! units are given by [`ArgUnit`]. To add an effect, add a row to [`EFFECTS`].
@@ -59,6 +61,8 @@ pub enum ArgUnit {
     Target,
     /// Seconds.
     Time,
+    /// The unit of the target, and `>= 0` (a deadzone half-width).
+    TargetNonNegative,
 }
 
 /// One effect: name, kind, parameters, documentation and formula.
@@ -183,6 +187,16 @@ pub const EFFECTS: &[Effect] = &[
         formula: "",
         formula_full: "",
         doc: "input delay: the plant receives u(t - Td) (Td in s)",
+    },
+    Effect {
+        name: "deadzone",
+        kind: EffectKind::Actuator,
+        arg_units: &[ArgUnit::TargetNonNegative],
+        params: &["w"],
+        optional: &[],
+        formula: "",
+        formula_full: "",
+        doc: "actuator deadzone: the plant receives sign(u)*max(|u| - w, 0) (w >= 0 in the input's unit)",
     },
 ];
 

@@ -25,6 +25,7 @@
 //! sensor alpha = sensor_offset(d_alpha)         # the encoder reads alpha + d_alpha
 //! actuator Vm = input_offset(V0)                # the plant receives Vm + V0
 //! actuator Vm = input_delay(Td)                 # the plant receives Vm(t - Td)
+//! actuator Vm = deadzone(w)                     # sign(Vm)*max(|Vm| - w, 0)
 //!
 //! set quanser_manual "manual values" { l2 = 0.1685 [m]
 //!     J1 = 9.98e-4 [kg*m^2] - m1*l1^2 }
@@ -78,10 +79,12 @@
 //! ## Sensor and actuator effects
 //! `sensor q = effect(..)` (q a coordinate) and `actuator u = effect(..)` (u an
 //! input) hold exactly one effect call of their kind; several lines may target
-//! the same name and compose (offsets add, delays add; offset and delay
-//! commute). Sensor effects: `sensor_offset(d)` (d in the coordinate's unit).
-//! Actuator effects: `input_offset(V0)` (the input's unit), `input_delay(Td)`
-//! (s). Arguments are expressions of parameters and numbers. An effect of the
+//! the same name and compose (offsets add, delays add, deadzone widths add;
+//! whatever the line order, the deadzone acts on the commanded value, the
+//! delay shifts the result in time and the offset is added last). Sensor
+//! effects: `sensor_offset(d)` (d in the coordinate's unit). Actuator
+//! effects: `input_offset(V0)` (the input's unit), `input_delay(Td)` (s),
+//! `deadzone(w)` (the input's unit, `w >= 0`). Arguments are expressions of parameters and numbers. An effect of the
 //! wrong kind for its line is an error that lists the effects valid there.
 //! See [`crate::model::Model`] for which consumers honour them.
 //!

@@ -26,7 +26,7 @@ pub struct LoadedModel {
 }
 
 impl LoadedModel {
-    /// Warnings, one per `sensor_offset` and `input_delay` line, for a
+    /// Warnings, one per `sensor_offset`, `input_delay` and `deadzone` line, for a
     /// consumer (`consumer`, e.g. "`plantc sim`") that works on the plant
     /// equations and so ignores them (see [`Model`]'s docs). Empty for most
     /// models. Render them with [`crate::lang::render`] and `self.source`.
@@ -36,7 +36,7 @@ impl LoadedModel {
         let delays = file
             .actuators
             .iter()
-            .filter(|a| a.effect_name() == Some("input_delay"));
+            .filter(|a| matches!(a.effect_name(), Some("input_delay" | "deadzone")));
         let mut lines: Vec<&ast::SignalEffect> = sensors.chain(delays).collect();
         lines.sort_by_key(|l| l.span.start);
         lines
@@ -44,6 +44,8 @@ impl LoadedModel {
             .map(|line| {
                 let what = if line.kind == effects::EffectKind::Sensor {
                     "measurement effect"
+                } else if line.effect_name() == Some("deadzone") {
+                    "actuator deadzone"
                 } else {
                     "input delay"
                 };
@@ -54,7 +56,7 @@ impl LoadedModel {
                     "not part of the plant equations",
                 )
                 .with_help(
-                    "sensor offsets and input delays are honoured when comparing with measurements (compare, fit, diagnose); simulation, linearization and generated code describe the plant itself",
+                    "sensor offsets, input delays and deadzones are honoured when comparing with measurements (compare, fit, diagnose); simulation, linearization and generated code describe the plant itself",
                 )
             })
             .collect()
@@ -435,6 +437,7 @@ fn lower_signal_effects(
         let effect = match line.effect_name() {
             Some("input_offset") => ActuatorEffectKind::Offset(arg(lw, line)),
             Some("input_delay") => ActuatorEffectKind::Delay(arg(lw, line)),
+            Some("deadzone") => ActuatorEffectKind::Deadzone(arg(lw, line)),
             _ => continue,
         };
         actuators.push(ActuatorEffect { input: j, effect });

@@ -176,6 +176,11 @@ pub enum ActuatorEffectKind {
     /// `actuator u = input_delay(Td)`: the plant receives `u(t - Td)`, with
     /// `Td` (s) an expression over parameters. Not in the forces.
     Delay(Expr),
+    /// `actuator u = deadzone(w)`: the plant receives
+    /// `sign(u) * max(|u| - w, 0)`, with `w >= 0` (the input's unit) an
+    /// expression over parameters. Not in the forces (they must stay linear
+    /// in the inputs).
+    Deadzone(Expr),
 }
 
 /// An effect on one input (`actuator u = ...`).
@@ -193,12 +198,15 @@ pub struct ActuatorEffect {
 /// `actuator u = input_offset(V0)` is folded into [`Model::forces`] at
 /// lowering (every `u` becomes `u + V0`), so mechanics, linearization, code
 /// generation and simulation see it with no change. `sensor q =
-/// sensor_offset(d)` and `actuator u = input_delay(Td)` cannot be folded
-/// into the equations of motion: they are listed in [`Model::sensors`] and
-/// [`Model::actuators`], and only consumers that compare with measurements
-/// honour them (identification's experiment simulation and sensitivities in
-/// `plantc-identify`: measurement `q + d`, input `u(t - Td)` with a
-/// zero-order hold). The state-space equations, `plantc sim`, linearization
+/// sensor_offset(d)`, `actuator u = input_delay(Td)` and `actuator u =
+/// deadzone(w)` cannot be folded into the equations of motion (the forces
+/// must stay linear in the inputs): they are listed in [`Model::sensors`]
+/// and [`Model::actuators`], and only consumers that compare with
+/// measurements honour them (identification's experiment simulation and
+/// sensitivities in `plantc-identify`: measurement `q + d`, input
+/// `dz(u)(t - Td) + V0` with a zero-order hold: the deadzone acts on the
+/// commanded value, the delay then shifts it in time, the offset is in the
+/// forces). The state-space equations, `plantc sim`, linearization
 /// and code generation describe the plant itself: they ignore both, and
 /// [`Model::ignored_signal_effects`] names what they ignore so a command can
 /// warn.
@@ -300,13 +308,34 @@ impl Model {
             .filter(|a| a.input == j)
             .filter_map(|a| match &a.effect {
                 ActuatorEffectKind::Delay(d) => Some(*d),
-                ActuatorEffectKind::Offset(_) => None,
+                ActuatorEffectKind::Offset(_) | ActuatorEffectKind::Deadzone(_) => None,
             })
             .sum()
     }
 
-    /// Effects that the plant equations cannot hold (sensor offsets and
-    /// input delays), as `sensor alpha = sensor_offset(...)`-like labels:
+    /// The total deadzone half-width of input `j` (sum of its `deadzone`
+    /// lines, since `dz_w2(dz_w1(u)) = dz_(w1 + w2)(u)`; zero without any),
+    /// over parameters.
+    pub fn input_deadzone(&self, j: usize) -> Expr {
+        self.actuators
+            .iter()
+            .filter(|a| a.input == j)
+            .filter_map(|a| match &a.effect {
+                ActuatorEffectKind::Deadzone(w) => Some(*w),
+                ActuatorEffectKind::Offset(_) | ActuatorEffectKind::Delay(_) => None,
+            })
+            .sum()
+    }
+
+    /// Whether any input has a `deadzone` line.
+    pub fn has_deadzone(&self) -> bool {
+        self.actuators
+            .iter()
+            .any(|a| matches!(a.effect, ActuatorEffectKind::Deadzone(_)))
+    }
+
+    /// Effects that the plant equations cannot hold (sensor offsets, input
+    /// delays and deadzones), as `sensor alpha = sensor_offset(...)`-like labels:
     /// consumers other than identification ignore them and may warn with
     /// this list. Empty for most models.
     pub fn ignored_signal_effects(&self) -> Vec<String> {
@@ -321,8 +350,14 @@ impl Model {
         }
         for a in &self.actuators {
             let name = &self.inputs[a.input].name;
-            if let ActuatorEffectKind::Delay(d) = &a.effect {
-                v.push(format!("actuator {name} = input_delay({d})"));
+            match &a.effect {
+                ActuatorEffectKind::Delay(d) => {
+                    v.push(format!("actuator {name} = input_delay({d})"))
+                }
+                ActuatorEffectKind::Deadzone(w) => {
+                    v.push(format!("actuator {name} = deadzone({w})"))
+                }
+                ActuatorEffectKind::Offset(_) => {}
             }
         }
         v
