@@ -1,11 +1,11 @@
 //! Timing of the identification steps on one recorded case (a folder with
-//! `free_swing_large.csv`, `free_swing_small.csv`, `driven.csv` as in
-//! `../shared/data`): the nominal fit (the model's `estimate` parameters),
+//! `free_swing_large.csv`, `free_swing_small.csv`, `driven.csv`, as
+//! `data/demo_coulomb` or what `plantc synth` writes): the nominal fit (the model's `estimate` parameters),
 //! the equation-error ranking and a full diagnosis, each timed by the wall
 //! clock. Run through `bench/fit_timing.sh`, or directly:
 //!
 //! ```text
-//! cargo run --release -p plantc-identify --example fit_timing -- models/rotary_pendulum.plant ../shared/data/clean [repeats] [fit-only]
+//! cargo run --release -p plantc-identify --example fit_timing -- models/rotary_pendulum.plant data/demo_coulomb [repeats] [fit-only]
 //! ```
 //!
 //! With `fit-only` the equation-error ranking and the diagnosis are skipped.

@@ -19,10 +19,11 @@
 //!    the baseline RMSE by at least [`MIN_GAIN`]; otherwise the model is
 //!    adequate.
 //!
-//! [`MIN_GAIN`] = 3, checked on the shared recordings (`../shared/data`,
-//! `tests/diagnose.rs`, release build): with the right effect the refit
-//! divided the baseline RMSE by 16.0 (`coulomb_pendulum`) and 438
-//! (`spring_arm`, against a baseline distorted to 0.17 rad); the notes
+//! [`MIN_GAIN`] = 3, checked on the three reference recordings of the
+//! diagnosis tests (`tests/diagnose.rs`, release build): with the right
+//! effect the refit divided the baseline RMSE by 16.0 (`coulomb_pendulum`)
+//! and about 410 (`spring_arm`, against a baseline distorted to 0.16 rad);
+//! the notes
 //! measured 9.9x to 2990x on their cases. On the
 //! `clean` case the three refitted candidates gained 1.00x (the baseline
 //! already sits at the quantisation floor, 4.35e-4 rad, trap 10). 3x lies

@@ -1,9 +1,9 @@
 //! Hand-written reference model of the Quanser SRV02 + ROTPEN rotary pendulum.
 //!
 //! This is the physics of the runtime's test doubles (the simulator in the
-//! tests and the fake HIL library), written by hand from
-//! `shared/reference/rotary-pendulum.md` so the runtime has physics before
-//! the generated code exists. Convention: `x = [theta, alpha, theta_dot,
+//! tests and the fake HIL library), written by hand from the thesis'
+//! equations (the same model as `models/rotary_pendulum.plant`) so the
+//! runtime has physics of its own, independent of derive and codegen. Convention: `x = [theta, alpha, theta_dot,
 //! alpha_dot]`, `u = [Vm]`, `alpha = 0` upright (pendulum-up), hanging = ±pi.
 //!
 //! Equations (Cassolato & Prime form), with `J0h = J1 + m1 l1² + m2 L1²`,
