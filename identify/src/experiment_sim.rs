@@ -628,6 +628,35 @@ impl SignalEffects {
     }
 }
 
+/// What both simulators do before integrating: check the parameter vector
+/// and the signals against the model's sizes `(n, m, n_params)`, choose the
+/// substep, evaluate the signal effects at `params` and apply the deadzones
+/// to the inputs.
+pub(crate) fn prepare_run<'a>(
+    sig: &'a Signals,
+    params: &[f64],
+    (n, m, n_params): (usize, usize, usize),
+    opts: &SimOptions,
+    signals: &SignalEffects,
+) -> Result<(f64, SignalValues, std::borrow::Cow<'a, Signals>), SimError> {
+    if params.len() != n_params {
+        return Err(SimError::ParameterCount {
+            expected: n_params,
+            found: params.len(),
+        });
+    }
+    if sig.q.len() != n || sig.u.len() != m {
+        return Err(SimError::BadOption(format!(
+            "signals of `{}` do not match the model's coordinates and inputs",
+            sig.name
+        )));
+    }
+    let h = substep_for(sig, opts)?;
+    let effects = signals.eval(params)?;
+    let sig = apply_deadzones(sig, &effects.widths);
+    Ok((h, effects, sig))
+}
+
 /// The substep for an experiment under `opts`.
 pub(crate) fn substep_for(sig: &Signals, opts: &SimOptions) -> Result<f64, SimError> {
     match opts.substep {
@@ -715,19 +744,14 @@ impl Simulator {
         n_samples: usize,
         unsplit: bool,
     ) -> Result<Trajectory, SimError> {
-        if params.len() != self.n_params {
-            return Err(SimError::ParameterCount {
-                expected: self.n_params,
-                found: params.len(),
-            });
-        }
-        if sig.q.len() != self.n || sig.u.len() != self.m {
-            return Err(SimError::BadOption(format!(
-                "signals of `{}` do not match the model's coordinates and inputs",
-                sig.name
-            )));
-        }
-        let h = substep_for(sig, &self.opts)?;
+        let (h, effects, sig) = prepare_run(
+            sig,
+            params,
+            (self.n, self.m, self.n_params),
+            &self.opts,
+            &self.signals,
+        )?;
+        let sig = &*sig;
         let (n, m) = (self.n, self.m);
         let n_samples = n_samples.min(sig.len());
         let mut tin = vec![0.0; 2 * n + m + self.n_params];
@@ -765,8 +789,6 @@ impl Simulator {
             dx[n..2 * n].copy_from_slice(&acc);
             true
         };
-        let effects = self.signals.eval(params)?;
-        let sig = &*apply_deadzones(sig, &effects.widths);
         let offsets = &effects.offsets;
         let mut q = vec![vec![0.0; n_samples]; n];
         let mut z = initial_state(sig, self.opts.initial_velocity, offsets);

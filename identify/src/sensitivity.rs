@@ -50,9 +50,8 @@ use plantc_derive::model::Model;
 use plantc_derive::sym::{diff, Expr, SplitTape, Tape};
 
 use crate::experiment_sim::{
-    apply_deadzones, dynamics_outputs, initial_state, integrate, lu_factor, lu_solve,
-    parameters_slow, substep_for, tape_inputs, OnSwitch, Segment, SignalEffects, Signals, SimError,
-    SimOptions,
+    dynamics_outputs, initial_state, integrate, lu_factor, lu_solve, parameters_slow, prepare_run,
+    tape_inputs, OnSwitch, Segment, SignalEffects, Signals, SimError, SimOptions,
 };
 
 /// Simulated coordinates and their sensitivities at the sample instants.
@@ -179,21 +178,14 @@ impl SensitivitySimulator {
         n_samples: usize,
         unsplit: bool,
     ) -> Result<SensitivityTrajectory, SimError> {
-        if params.len() != self.n_params {
-            return Err(SimError::ParameterCount {
-                expected: self.n_params,
-                found: params.len(),
-            });
-        }
-        if sig.q.len() != self.n || sig.u.len() != self.m {
-            return Err(SimError::BadOption(format!(
-                "signals of `{}` do not match the model's coordinates and inputs",
-                sig.name
-            )));
-        }
-        let h = substep_for(sig, &self.opts)?;
-        let effects = self.signals.eval(params)?;
-        let sig = &*apply_deadzones(sig, &effects.widths);
+        let (h, effects, sig) = prepare_run(
+            sig,
+            params,
+            (self.n, self.m, self.n_params),
+            &self.opts,
+            &self.signals,
+        )?;
+        let sig = &*sig;
         let d_width = &effects.d_widths;
         let deadzone_forcing = self.signals.deadzone_depends_on_free;
         let (n, m, p) = (self.n, self.m, self.free.len());

@@ -227,6 +227,29 @@ pub fn read_data(
 
 /// A value in SI as a number literal in the parameter's declared unit, for
 /// the lossless editor.
+/// `text` with the given parameter values (SI) written in, each in its
+/// declared unit, through the lossless editor; names the model lacks are
+/// skipped.
+pub fn write_parameter_values<'a>(
+    text: &str,
+    model: &plantc_derive::model::Model,
+    values: impl IntoIterator<Item = (&'a str, f64)>,
+) -> Result<String, CliError> {
+    let mut t = text.to_string();
+    for (name, v) in values {
+        if let Some(p) = model.parameter(name) {
+            t = plantc_derive::lang::edit::set_parameter_value(
+                &t,
+                name,
+                &declared_value_text(p, v),
+            )
+            .map_err(|e| CliError::failure(format!("error: writing `{name}`: {e}")))?;
+        }
+    }
+    Ok(t)
+}
+
+/// A parameter's SI value as literal text in its declared unit.
 pub fn declared_value_text(p: &plantc_derive::model::Parameter, si: f64) -> String {
     let scale = plantc_derive::lang::units::parse_unit(&p.unit)
         .map(|u| u.scale.to_f64())

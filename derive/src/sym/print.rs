@@ -74,6 +74,38 @@ fn fmt_float(x: f64) -> String {
 }
 
 /// Writes `e` in plain form with the surrounding precedence `outer`.
+/// A sum in either notation: terms in print order, a negative coefficient
+/// written as ` - ` with its absolute value, parentheses (`parens`) when
+/// the context binds tighter than `+`.
+fn write_sum(
+    out: &mut String,
+    terms: &[Expr],
+    outer: u8,
+    parens: (&str, &str),
+    term: fn(&mut String, Expr, u8),
+    product: fn(&mut String, Rational, Expr, u8),
+) {
+    let needs = outer > PREC_ADD;
+    if needs {
+        out.push_str(parens.0);
+    }
+    for (i, t) in term_order(terms).into_iter().enumerate() {
+        let (c, rest) = t.coeff_and_rest();
+        if i == 0 {
+            term(out, t, PREC_ADD);
+        } else if c.is_negative() {
+            out.push_str(" - ");
+            product(out, c.abs(), rest, PREC_ADD + 1);
+        } else {
+            out.push_str(" + ");
+            term(out, t, PREC_ADD + 1);
+        }
+    }
+    if needs {
+        out.push_str(parens.1);
+    }
+}
+
 fn write_plain(out: &mut String, e: Expr, outer: u8) {
     match e.node() {
         Node::Rational(r) => {
@@ -99,29 +131,7 @@ fn write_plain(out: &mut String, e: Expr, outer: u8) {
             }
         }
         Node::Symbol(s) => out.push_str(s.name()),
-        Node::Add(terms) => {
-            let needs = outer > PREC_ADD;
-            if needs {
-                out.push('(');
-            }
-            for (i, t) in term_order(terms).into_iter().enumerate() {
-                let (c, rest) = t.coeff_and_rest();
-                if i > 0 {
-                    if c.is_negative() {
-                        out.push_str(" - ");
-                        write_product(out, c.abs(), rest, PREC_ADD + 1);
-                    } else {
-                        out.push_str(" + ");
-                        write_plain(out, t, PREC_ADD + 1);
-                    }
-                } else {
-                    write_plain(out, t, PREC_ADD);
-                }
-            }
-            if needs {
-                out.push(')');
-            }
-        }
+        Node::Add(terms) => write_sum(out, terms, outer, ("(", ")"), write_plain, write_product),
         Node::Mul(_) => {
             let (c, rest) = e.coeff_and_rest();
             if c.is_negative() {
@@ -313,29 +323,14 @@ fn write_latex(out: &mut String, e: Expr, outer: u8) {
         }
         Node::Float(b) => out.push_str(&fmt_float(b.value())),
         Node::Symbol(s) => out.push_str(&latex_symbol(s.name())),
-        Node::Add(terms) => {
-            let needs = outer > PREC_ADD;
-            if needs {
-                out.push_str("\\left(");
-            }
-            for (i, t) in term_order(terms).into_iter().enumerate() {
-                let (c, rest) = t.coeff_and_rest();
-                if i > 0 {
-                    if c.is_negative() {
-                        out.push_str(" - ");
-                        write_latex_product(out, c.abs(), rest, PREC_ADD + 1);
-                    } else {
-                        out.push_str(" + ");
-                        write_latex(out, t, PREC_ADD + 1);
-                    }
-                } else {
-                    write_latex(out, t, PREC_ADD);
-                }
-            }
-            if needs {
-                out.push_str("\\right)");
-            }
-        }
+        Node::Add(terms) => write_sum(
+            out,
+            terms,
+            outer,
+            ("\\left(", "\\right)"),
+            write_latex,
+            write_latex_product,
+        ),
         Node::Mul(_) => {
             let (c, rest) = e.coeff_and_rest();
             if c.is_negative() {

@@ -3,6 +3,7 @@
 //! where the model fails; optional SVG figures.
 
 use std::io::Write;
+use std::path::Path;
 
 use plantc_derive::model::Model;
 use plantc_identify::{
@@ -59,6 +60,48 @@ pub(crate) fn report(
     compare(measured, simulated, &names).map_err(|e| CliError::failure(format!("error: {e}")))
 }
 
+/// An overlay + residual SVG per experiment, `<dir>/<experiment>.svg`.
+pub(crate) fn write_figures(
+    dir: &Path,
+    model: &Model,
+    measured: &[Experiment],
+    simulated: &[Experiment],
+    err: &mut dyn Write,
+) -> Result<(), CliError> {
+    std::fs::create_dir_all(dir)
+        .map_err(|e| CliError::failure(format!("error: cannot create `{}`: {e}", dir.display())))?;
+    let names: Vec<&str> = model.coordinates.iter().map(|c| c.name.as_str()).collect();
+    for (m, s) in measured.iter().zip(simulated) {
+        let p = dir.join(format!("{}.svg", m.name));
+        plot_comparison(&p, m, s, &names).map_err(|e| CliError::failure(format!("error: {e}")))?;
+        let _ = writeln!(err, "figure -> {}", p.display());
+    }
+    Ok(())
+}
+
+/// The where-it-fails findings of every experiment and channel, one
+/// indented line each; returns how many.
+pub(crate) fn write_failures(
+    out: &mut dyn Write,
+    model: &Model,
+    measured: &[Experiment],
+    simulated: &[Experiment],
+) -> Result<usize, CliError> {
+    let spec = channel_spec(model);
+    let opts = FailOptions::for_spec(&spec);
+    let names: Vec<&str> = model.coordinates.iter().map(|c| c.name.as_str()).collect();
+    let mut n = 0;
+    for (m, s) in measured.iter().zip(simulated) {
+        let diags = where_it_fails(m, s, &names, &opts)
+            .map_err(|e| CliError::failure(format!("error: {e}")))?;
+        for f in diags.iter().flat_map(|d| &d.findings) {
+            let _ = writeln!(out, "  {f}");
+            n += 1;
+        }
+    }
+    Ok(n)
+}
+
 /// The report as a text table.
 pub(crate) fn write_table(out: &mut dyn Write, rep: &FitReport, measured: &[Experiment]) {
     let wn = measured
@@ -100,16 +143,7 @@ pub fn run(args: &CompareArgs, out: &mut dyn Write, err: &mut dyn Write) -> Resu
     let simulated = simulate_experiments(model, &vals.full, &measured)?;
     let rep = report(model, &measured, &simulated)?;
     if let Some(dir) = &args.plots {
-        std::fs::create_dir_all(dir).map_err(|e| {
-            CliError::failure(format!("error: cannot create `{}`: {e}", dir.display()))
-        })?;
-        let names: Vec<&str> = model.coordinates.iter().map(|c| c.name.as_str()).collect();
-        for (m, s) in measured.iter().zip(&simulated) {
-            let p = dir.join(format!("{}.svg", m.name));
-            plot_comparison(&p, m, s, &names)
-                .map_err(|e| CliError::failure(format!("error: {e}")))?;
-            let _ = writeln!(err, "figure -> {}", p.display());
-        }
+        write_figures(dir, model, &measured, &simulated, err)?;
     }
     if args.json {
         write_json(
@@ -126,24 +160,12 @@ pub fn run(args: &CompareArgs, out: &mut dyn Write, err: &mut dyn Write) -> Resu
     );
     write_table(out, &rep, &measured);
     // Where it fails, in plain words.
-    let spec = channel_spec(model);
-    let opts = FailOptions::for_spec(&spec);
-    let names: Vec<&str> = model.coordinates.iter().map(|c| c.name.as_str()).collect();
-    let mut said = false;
-    for (m, s) in measured.iter().zip(&simulated) {
-        let diags = where_it_fails(m, s, &names, &opts)
-            .map_err(|e| CliError::failure(format!("error: {e}")))?;
-        for d in diags {
-            for f in &d.findings {
-                if !said {
-                    let _ = writeln!(out, "\nwhere it fails:");
-                    said = true;
-                }
-                let _ = writeln!(out, "  {f}");
-            }
-        }
-    }
-    if !said {
+    let mut findings = Vec::new();
+    write_failures(&mut findings, model, &measured, &simulated)?;
+    if !findings.is_empty() {
+        let _ = writeln!(out, "\nwhere it fails:");
+        let _ = out.write_all(&findings);
+    } else {
         let _ = writeln!(
             out,
             "\nwhere it fails: no pattern in the residuals (RMSE {})",

@@ -11,10 +11,9 @@ use plantc_identify::{diagnose, Diagnosis, EffectInstance, FitOptions, Ranked};
 
 use crate::cli::DiagnoseArgs;
 use crate::commands::fit::with_progress;
-use plantc_derive::lang::edit::set_parameter_value;
 
 use crate::common::{
-    declared_value_text, load, read_data, refuse_to_clobber, write_json, CliError,
+    load, read_data, refuse_to_clobber, write_json, write_parameter_values, CliError,
 };
 
 /// The candidate with its parameters at their fitted values (still marked
@@ -125,15 +124,8 @@ pub fn run(args: &DiagnoseArgs, out: &mut dyn Write, err: &mut dyn Write) -> Res
             // The model's own estimated parameters at the values refitted
             // with the effect: `plantc fit OUT` starts where diagnose ended.
             if let Some(f) = &top.fit {
-                for e in &f.parameters {
-                    if let Some(p) = model.parameters.iter().find(|p| p.name == e.name) {
-                        edited =
-                            set_parameter_value(&edited, &p.name, &declared_value_text(p, e.value))
-                                .map_err(|err| {
-                                    CliError::failure(format!("error: writing `{}`: {err}", p.name))
-                                })?;
-                    }
-                }
+                let values = f.parameters.iter().map(|e| (e.name.as_str(), e.value));
+                edited = write_parameter_values(&edited, model, values)?;
             }
             std::fs::write(o, edited).map_err(|e| {
                 CliError::failure(format!("error: cannot write `{}`: {e}", o.display()))

@@ -8,12 +8,11 @@ use std::sync::atomic::{AtomicBool, Ordering};
 use std::sync::Mutex;
 use std::time::{Duration, Instant};
 
-use plantc_derive::lang::edit::set_parameter_value;
 use plantc_identify::{fit_with_progress, FitError, FitOptions, FitProgress, FitResult};
 
 use crate::cli::FitArgs;
 use crate::common::{
-    declared_value_text, load, read_data, refuse_to_clobber, values, write_json, CliError,
+    load, read_data, refuse_to_clobber, values, write_json, write_parameter_values, CliError,
 };
 
 /// Runs `work` while showing elapsed time and the latest status that
@@ -157,23 +156,22 @@ pub fn run(args: &FitArgs, out: &mut dyn Write, err: &mut dyn Write) -> Result<(
         result.simulations
     );
     if let Some(o) = &args.out {
-        let mut text = std::fs::read_to_string(&args.model).map_err(|e| {
+        let text = std::fs::read_to_string(&args.model).map_err(|e| {
             CliError::input(format!(
                 "error: cannot read `{}`: {e}",
                 args.model.display()
             ))
         })?;
-        for (i, p) in model.parameters.iter().enumerate() {
-            let fitted = result.parameters.iter().find(|e| e.name == p.name);
-            let v = match fitted {
-                Some(e) => e.value,
-                // values chosen with --set/--param are part of the fitted model
-                None if result.base[i] != p.value => result.base[i],
-                None => continue,
-            };
-            text = set_parameter_value(&text, &p.name, &declared_value_text(p, v))
-                .map_err(|e| CliError::failure(format!("error: writing `{}`: {e}", p.name)))?;
-        }
+        // the fitted values, and values chosen with --set/--param (part of
+        // the fitted model)
+        let values = model.parameters.iter().enumerate().filter_map(|(i, p)| {
+            match result.parameters.iter().find(|e| e.name == p.name) {
+                Some(e) => Some((p.name.as_str(), e.value)),
+                None if result.base[i] != p.value => Some((p.name.as_str(), result.base[i])),
+                None => None,
+            }
+        });
+        let text = write_parameter_values(&text, model, values)?;
         std::fs::write(o, text).map_err(|e| {
             CliError::failure(format!("error: cannot write `{}`: {e}", o.display()))
         })?;

@@ -10,22 +10,17 @@ use std::io::Write;
 use std::path::{Path, PathBuf};
 use std::time::Instant;
 
-use plantc_derive::lang::edit::set_parameter_value;
 use plantc_derive::model::{Model, ParameterValues};
 use plantc_identify::diagnose::model_from_text;
-use plantc_identify::{
-    diagnose, fit_with_progress, plot_comparison, where_it_fails, Experiment, FailOptions,
-    FitOptions, FitReport, FitResult,
-};
+use plantc_identify::{diagnose, fit_with_progress, Experiment, FitOptions, FitReport, FitResult};
 
 use crate::cli::IdentifyArgs;
-use crate::commands::compare::{report, simulate_experiments};
+use crate::commands::compare::{report, simulate_experiments, write_failures, write_figures};
 use crate::commands::diagnose::fitted_instance;
 use crate::commands::fit::{progress_text, with_progress};
-use crate::common::{channel_spec, declared_value_text, load, read_data, write_json, CliError};
+use crate::common::{load, read_data, write_json, write_parameter_values, CliError};
 
-/// One stage of the story: its label, the model and values it used, and the
-/// comparison with the data.
+/// One stage of the story: its label and its comparison with the data.
 struct Stage {
     label: String,
     report: FitReport,
@@ -50,14 +45,7 @@ fn stage(
 ) -> Result<(Stage, Vec<Experiment>), CliError> {
     let simulated = simulate_experiments(model, full, measured)?;
     let rep = report(model, measured, &simulated)?;
-    std::fs::create_dir_all(figures)
-        .map_err(|e| fail(format!("cannot create `{}`: {e}", figures.display())))?;
-    let names: Vec<&str> = model.coordinates.iter().map(|c| c.name.as_str()).collect();
-    for (m, s) in measured.iter().zip(&simulated) {
-        let p = figures.join(format!("{}.svg", m.name));
-        plot_comparison(&p, m, s, &names).map_err(fail)?;
-        let _ = writeln!(err, "figure -> {}", p.display());
-    }
+    write_figures(figures, model, measured, &simulated, err)?;
     Ok((
         Stage {
             label: label.to_string(),
@@ -69,14 +57,8 @@ fn stage(
 
 /// The model text with every fitted parameter written in (lossless).
 fn with_values(text: &str, model: &Model, r: &FitResult) -> Result<String, CliError> {
-    let mut t = text.to_string();
-    for e in &r.parameters {
-        if let Some(p) = model.parameters.iter().find(|p| p.name == e.name) {
-            t = set_parameter_value(&t, &p.name, &declared_value_text(p, e.value))
-                .map_err(|x| fail(format!("writing `{}`: {x}", p.name)))?;
-        }
-    }
-    Ok(t)
+    let values = r.parameters.iter().map(|e| (e.name.as_str(), e.value));
+    write_parameter_values(text, model, values)
 }
 
 /// Before/after table: one column per stage, one row per experiment and
@@ -130,27 +112,6 @@ fn table(out: &mut dyn Write, stages: &[Stage], measured: &[Experiment], channel
         out,
         "(cells: fit % as MATLAB's compare, then RMSE in SI units; fit % of a channel that barely moves is capped by encoder quantisation: judge it by RMSE)"
     );
-}
-
-fn where_it_fails_text(
-    out: &mut dyn Write,
-    model: &Model,
-    measured: &[Experiment],
-    simulated: &[Experiment],
-) -> Result<usize, CliError> {
-    let spec = channel_spec(model);
-    let opts = FailOptions::for_spec(&spec);
-    let names: Vec<&str> = model.coordinates.iter().map(|c| c.name.as_str()).collect();
-    let mut n = 0;
-    for (m, s) in measured.iter().zip(simulated) {
-        for d in where_it_fails(m, s, &names, &opts).map_err(fail)? {
-            for f in &d.findings {
-                let _ = writeln!(out, "  {f}");
-                n += 1;
-            }
-        }
-    }
-    Ok(n)
 }
 
 pub fn run(args: &IdentifyArgs, out: &mut dyn Write, err: &mut dyn Write) -> Result<(), CliError> {
@@ -213,7 +174,7 @@ fn story(
         err,
     )?;
     let _ = writeln!(out, "   RMSE {:.3e}; where it fails:", s1.report.rmse);
-    if where_it_fails_text(out, model, &measured, &sim1)? == 0 {
+    if write_failures(out, model, &measured, &sim1)? == 0 {
         let _ = writeln!(out, "  no pattern in the residuals");
     }
 
@@ -240,7 +201,7 @@ fn story(
         "   nominal model refitted: RMSE {:.3e}; where it still fails:",
         s2.report.rmse
     );
-    if where_it_fails_text(out, model, &measured, &sim2)? == 0 {
+    if write_failures(out, model, &measured, &sim2)? == 0 {
         let _ = writeln!(out, "  no pattern in the residuals");
     }
     for r in d.ranking.iter().filter(|r| r.fit.is_some()) {
