@@ -113,11 +113,13 @@ pub mod check;
 pub mod diagnostic;
 pub mod edit;
 pub mod effects;
+pub mod format;
 pub mod lexer;
 pub mod parser;
 pub mod source;
 pub mod span;
 pub mod units;
+pub mod visit;
 
 pub use check::{dimension_of, eval_si, parse_and_check, Checked, Symbols};
 pub use diagnostic::{render, Diagnostic, Severity};
