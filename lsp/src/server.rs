@@ -290,7 +290,18 @@ pub fn serve(connection: &Connection) -> Result<(), ServerError> {
                 if connection.handle_shutdown(&req)? {
                     return Ok(());
                 }
-                send(Message::Response(state.request(req)))?;
+                // a bug in one feature answers with an error instead of ending the session
+                let id = req.id.clone();
+                let method = req.method.clone();
+                let resp = std::panic::catch_unwind(std::panic::AssertUnwindSafe(|| state.request(req)))
+                    .unwrap_or_else(|_| {
+                        Response::new_err(
+                            id,
+                            ErrorCode::InternalError as i32,
+                            format!("plantc-lsp failed on `{method}` (a bug: please report it with the file)"),
+                        )
+                    });
+                send(Message::Response(resp))?;
             }
             Message::Notification(n) => {
                 for out in state.notify(n) {

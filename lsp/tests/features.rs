@@ -241,3 +241,81 @@ fn a_change_without_range_replaces_the_text() {
     ));
     assert!(r.response_result.is_err());
 }
+
+mod fuzz {
+    use super::*;
+    use proptest::prelude::*;
+
+    const MODEL: &str = include_str!("../../models/rotary_pendulum.plant");
+    const PIECES: &[&str] = &[
+        "(",
+        ")",
+        "[",
+        "]",
+        "{",
+        "}",
+        "'",
+        "^",
+        "*",
+        "+",
+        "-",
+        "=",
+        ",",
+        "\n",
+        "\"",
+        "#",
+        "α",
+        "1e-3",
+        "2+3i",
+        "theta",
+        "alpha'",
+        "sin(",
+        "viscous_friction(",
+        "[kg*m^2]",
+        "parameter ",
+        "let x = ",
+        "controller c {",
+        "set s {",
+        "    ",
+        "𝜃",
+    ];
+
+    proptest! {
+        #![proptest_config(ProptestConfig::with_cases(128))]
+
+        /// Edits anywhere, then every request anywhere: always an answer.
+        #[test]
+        fn every_request_answers_on_edited_files(
+            edits in prop::collection::vec((any::<prop::sample::Index>(), 0..PIECES.len(), 0usize..4), 1..6),
+            probes in prop::collection::vec((0u32..90, 0u32..120), 1..6),
+        ) {
+            let mut text = MODEL.to_string();
+            for (at, piece, del) in edits {
+                let mut i = at.index(text.len() + 1);
+                while !text.is_char_boundary(i) { i -= 1; }
+                let mut j = (i + del).min(text.len());
+                while !text.is_char_boundary(j) { j -= 1; }
+                text.replace_range(i..j.max(i), PIECES[piece]);
+            }
+            let (s, _) = open(&text);
+            for (line, character) in probes {
+                let pos = json!({"line": line, "character": character});
+                let tdp = json!({"textDocument": {"uri": URI}, "position": pos});
+                for m in ["textDocument/hover", "textDocument/definition", "textDocument/completion",
+                          "textDocument/prepareRename"] {
+                    req(&s, m, tdp.clone());
+                }
+                let range = json!({"start": {"line": 0, "character": 0}, "end": pos});
+                req(&s, "textDocument/references", json!({"textDocument": {"uri": URI}, "position": pos, "context": {"includeDeclaration": true}}));
+                req(&s, "textDocument/codeAction", json!({"textDocument": {"uri": URI}, "range": range, "context": {"diagnostics": []}}));
+                req(&s, "textDocument/inlayHint", json!({"textDocument": {"uri": URI}, "range": range}));
+                let r = s.request(Request::new(RequestId::from(1), "textDocument/rename".into(),
+                    json!({"textDocument": {"uri": URI}, "position": pos, "newName": "zz"})));
+                let _ = r;
+            }
+            req(&s, "textDocument/semanticTokens/full", json!({"textDocument": {"uri": URI}}));
+            req(&s, "textDocument/documentSymbol", json!({"textDocument": {"uri": URI}}));
+            req(&s, "textDocument/formatting", json!({"textDocument": {"uri": URI}, "options": {"tabSize": 4, "insertSpaces": true}}));
+        }
+    }
+}
