@@ -21,7 +21,7 @@
 //!   of a block; no trailing spaces; the file ends with one line end (`\r\n`
 //!   if the file used it).
 //!
-//! [`format`] refuses a file with syntax errors, and checks its own output:
+//! [`format()`] refuses a file with syntax errors, and checks its own output:
 //! the same tokens, the same comments, and the same statements and
 //! expressions after parsing again; otherwise it returns an error and the
 //! text is left as it was.

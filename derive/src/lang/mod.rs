@@ -1,5 +1,7 @@
 //! The `.plant` model language: lexer, parser, AST with spans, name
-//! resolution, dimensional analysis, diagnostics and lossless editing.
+//! resolution, dimensional analysis, diagnostics, lossless editing
+//! ([`edit`], incl. rename), the canonical layout ([`mod@format`]) and where each
+//! name is declared and used ([`visit`]).
 //!
 //! Entry point: [`parse_and_check`]; render its diagnostics with [`render`].
 //!

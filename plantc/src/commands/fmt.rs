@@ -146,6 +146,9 @@ fn first_difference(a: &str, b: &str) -> usize {
 /// permissions). A crash leaves either the old or the new file.
 // TODO(lead): switch to the shared atomic-write helper of issue 12 once merged.
 fn write_atomic(path: &Path, text: &str) -> std::io::Result<()> {
+    // through a symbolic link: replace the file it points to, keep the link
+    let resolved = std::fs::canonicalize(path).unwrap_or_else(|_| path.to_path_buf());
+    let path = resolved.as_path();
     let dir = path
         .parent()
         .filter(|d| !d.as_os_str().is_empty())
