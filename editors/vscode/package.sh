@@ -6,6 +6,7 @@
 set -euo pipefail
 cd "$(dirname "$0")"
 npm ci --no-audit --no-fund
+npm test
 version=$(node -p "require('./package.json').version")
 npx vsce package --allow-missing-repository -o "plantc-${version}.vsix"
 echo "packaged editors/vscode/plantc-${version}.vsix"
