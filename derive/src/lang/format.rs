@@ -282,7 +282,7 @@ fn cells(src: &str, toks: &[Token], mut prev: Option<Tok>) -> Vec<String> {
                 | (_, Tok::Star | Tok::Slash | Tok::Caret) => false,
                 (Tok::Ident, Tok::LParen) => false,
                 (_, Tok::Plus | Tok::Minus) => !complex,
-                (Tok::Plus | Tok::Minus, _) => last_sign_binary && !(p_is_complex_sign(toks, i)),
+                (Tok::Plus | Tok::Minus, _) => last_sign_binary,
                 _ => true,
             };
             if split {
@@ -304,11 +304,6 @@ fn cells(src: &str, toks: &[Token], mut prev: Option<Tok>) -> Vec<String> {
     }
     cells.push(cur);
     cells
-}
-
-/// True if the sign before `toks[i]` joins a complex literal (`2+3i`).
-fn p_is_complex_sign(toks: &[Token], i: usize) -> bool {
-    i >= 2 && toks[i].tok == Tok::Imag && toks[i - 2].tok == Tok::Number
 }
 
 fn is_continuing_op(t: &Tok) -> bool {
