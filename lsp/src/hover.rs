@@ -65,7 +65,12 @@ fn symbol(a: &Analysis, s: &SymbolRef, at: Span) -> Option<String> {
             Some(NameKind::Parameter) => {
                 let p = f.parameters.iter().find(|p| &p.name.name == name)?;
                 let unit = p.unit.as_ref().map_or("1".to_string(), |u| u.text.clone());
-                let mut t = code(&format!("parameter {name} = {} [{unit}]", p.value.text));
+                let mut t = match &p.unit {
+                    Some(u) => code(&format!("parameter {name} = {} [{}]", p.value.text, u.text)),
+                    None => {
+                        code(&format!("parameter {name} = {}", p.value.text)) + "\n\nDimensionless."
+                    }
+                };
                 if let Some(d) = &p.doc {
                     t.push_str(&format!("\n\n{}", d.value));
                 }
@@ -111,7 +116,10 @@ fn symbol(a: &Analysis, s: &SymbolRef, at: Span) -> Option<String> {
                 let l = f.lets.iter().find(|l| &l.name.name == name)?;
                 let mut t = code(&format!("let {name} = {}", a.slice(l.expr.span)));
                 if let Some(d) = a.dim_of_name(name) {
-                    t.push_str(&format!("\n\nDerived unit: `{}` ({d})", short_dim(d)));
+                    t.push_str(&format!("\n\nDerived unit: `{}`", short_dim(d)));
+                    if !d.is_none() && d.common_name().is_some() {
+                        t.push_str(&format!(" = {}", d.base_form()));
+                    }
                 }
                 Some(t)
             }
