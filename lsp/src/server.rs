@@ -256,16 +256,39 @@ impl State {
     }
 }
 
-/// `plantc fmt`'s layout as one edit of the whole text; no edit when the
-/// file is already formatted or has syntax errors.
+/// `plantc fmt`'s layout as one edit of the lines that change (the common
+/// first and last lines are left out, so marks and the cursor elsewhere stay);
+/// no edit when the file is already formatted or has syntax errors.
 pub fn formatting(a: &Analysis) -> Vec<TextEdit> {
-    match plantc_derive::lang::format::format(a.text()) {
-        Ok(f) if f != a.text() => vec![TextEdit {
-            range: a.doc.full_range(),
-            new_text: f,
-        }],
-        _ => Vec::new(),
+    let text = a.text();
+    let Ok(f) = plantc_derive::lang::format::format(text) else {
+        return Vec::new();
+    };
+    if f == text {
+        return Vec::new();
     }
+    // common prefix and suffix, in whole lines
+    let (t, g) = (text.as_bytes(), f.as_bytes());
+    let mut pre = t.iter().zip(g).take_while(|(x, y)| x == y).count();
+    pre = text[..pre].rfind('\n').map_or(0, |i| i + 1);
+    let max_suf = (t.len() - pre).min(g.len() - pre);
+    let mut suf = t
+        .iter()
+        .rev()
+        .zip(g.iter().rev())
+        .take(max_suf)
+        .take_while(|(x, y)| x == y)
+        .count();
+    // the suffix starts right after a line end (or is empty)
+    while suf > 0 && suf < t.len() && t[t.len() - suf - 1] != b'\n' {
+        suf -= 1;
+    }
+    vec![TextEdit {
+        range: a
+            .doc
+            .range(plantc_derive::lang::Span::new(pre, t.len() - suf)),
+        new_text: f[pre..g.len() - suf].to_string(),
+    }]
 }
 
 /// Runs the server on a connection until `shutdown` and `exit`.

@@ -319,3 +319,22 @@ mod fuzz {
         }
     }
 }
+
+#[test]
+fn formatting_edits_only_the_lines_that_change() {
+    let t = "# header\nmodel m\ncoordinate q:angle\nparameter m=1 [kg]\nkinetic T = 1/2*m*q'^2\n# footer\n";
+    let (s, _) = open(t);
+    let e = req(
+        &s,
+        "textDocument/formatting",
+        json!({"textDocument": {"uri": URI}, "options": {"tabSize": 4, "insertSpaces": true}}),
+    );
+    let e = e.as_array().unwrap();
+    assert_eq!(e.len(), 1);
+    assert_eq!(e[0]["range"]["start"], json!({"line": 2, "character": 0}));
+    assert_eq!(e[0]["range"]["end"], json!({"line": 4, "character": 0}));
+    assert_eq!(
+        e[0]["newText"],
+        "coordinate q : angle\nparameter m = 1 [kg]\n"
+    );
+}
