@@ -124,11 +124,20 @@ fn number_after(text: &str, key: &str) -> Option<f64> {
     rest[..end].parse().ok()
 }
 
-/// The interpreted observer (designed at start, as `plantc run` does) and
-/// controller (`--set thesis`) replayed over a simulator log of the rig.
-fn replay_interpreted(log: &Path, controller: &str) -> ReplayReport {
+/// The interpreted observer (designed at start, as `plantc run` does, with
+/// the `--set thesis` values the rig was generated with) and controller
+/// (`--set thesis` with `params` changed, `gains` set) replayed over a
+/// simulator log of the rig.
+fn replay_interpreted(
+    log: &Path,
+    controller: &str,
+    gains: &[(&str, f64)],
+    params: &[(&str, f64)],
+) -> ReplayReport {
     let model = load_model(Path::new(&model())).expect("model").model;
     let vals = ParameterValues::new(&model, Some("thesis"), &[]).unwrap();
+    let changed: Vec<(String, f64)> = params.iter().map(|(n, v)| (n.to_string(), *v)).collect();
+    let ctl_vals = ParameterValues::new(&model, Some("thesis"), &changed).unwrap();
     let der = Derivation::new(&model).unwrap();
     let lin = linearize(&model, &der.equations, &vals, &OperatingPoint::zero(&model)).unwrap();
     let spec = ObserverSpec::new(
@@ -138,7 +147,10 @@ fn replay_interpreted(log: &Path, controller: &str) -> ReplayReport {
     let maps = [EncoderMap::plain(4096.0); 2];
     let mut observer = VelocityObserver::design(&spec, &maps, 1e-3).unwrap();
     let resolved = resolve(&model, &der, controller, &vals).unwrap();
-    let mut ctl = ModelController::new(&model, &resolved, &vals).unwrap();
+    let mut ctl = ModelController::new(&model, &resolved, &ctl_vals).unwrap();
+    for (g, v) in gains {
+        ctl.set_gain(g, *v).unwrap();
+    }
     let text = std::fs::read_to_string(log).unwrap();
     replay_log(&text, &maps, (-10.0, 10.0), &mut observer, &mut ctl).expect("replay")
 }
@@ -366,7 +378,7 @@ fn rig_crate_on_the_fake_board_and_against_the_interpreter() {
         rargs.extend_from_slice(&["--log", &comp_log_s]);
         let (code, cout, cerr) = rig(&bin, &rargs, None);
         assert_eq!(code, 0, "{cout}{cerr}");
-        let r = replay_interpreted(&comp_log, controller);
+        let r = replay_interpreted(&comp_log, controller, &[], &[]);
         println!("{controller}: {r}");
         assert_eq!(r.rows as usize, SAMPLES_30S);
         assert_eq!(r.compared as usize, SAMPLES_30S, "engaged throughout");
@@ -414,6 +426,71 @@ fn rig_crate_on_the_fake_board_and_against_the_interpreter() {
             "{c}: estimator + controller p50 {compiled} ns generated (release rig binary), \
              {interpreted} ns interpreted (plantc run, test profile)"
         );
+    }
+
+    // ---- gains and parameters changed at start-up (values file, command line) ----
+    let values = root.join("values.txt");
+    std::fs::write(&values, "# outer-law gains\na = 0.3\nb = 0.3   # arm\nRm = 2.7\n").unwrap();
+    let log = root.join("values.csv");
+    let (code, out, err) = rig(
+        &bin,
+        &[
+            "--controller",
+            "fl_arm",
+            "--values",
+            &s(&values),
+            "--gain",
+            "wn=5",
+            "--x0",
+            "alpha=5deg",
+            "--duration",
+            "10",
+            "--log-precision",
+            "full",
+            "--log",
+            &s(&log),
+        ],
+        None,
+    );
+    assert_eq!(code, 0, "{out}{err}");
+    assert!(err.contains("note: --param changes the simulated plant"), "{err}");
+    let changed = [("a", 0.3), ("b", 0.3), ("wn", 5.0)];
+    let r = replay_interpreted(&log, "fl_arm", &changed, &[("Rm", 2.7)]);
+    println!("fl_arm with a = b = 0.3, wn = 5, Rm = 2.7: {r}");
+    assert!(r.max_volts_diff < 1e-9, "{r}");
+    // ... and they did change the law: the defaults do not replay it.
+    let r = replay_interpreted(&log, "fl_arm", &[], &[]);
+    assert!(r.max_volts_diff > 1e-3, "{r}");
+    let r = replay_interpreted(&log, "fl_arm", &changed, &[]);
+    assert!(r.max_volts_diff > 1e-6, "Rm changed nothing: {r}");
+
+    // ---- bad input: exit 2 with the cause ----
+    std::fs::write(&values, "a = 0.3\n  zz = 1\n").unwrap();
+    for (args, expected) in [
+        (
+            vec!["--controller", "fl_arm", "--values", &s(&values)],
+            format!("{}:2:3: unknown name `zz`", values.display()),
+        ),
+        (
+            vec!["--rate", "500"],
+            "the observer was designed for 1000 Hz".to_string(),
+        ),
+        (
+            vec!["--controller", "lqr_unit"],
+            "unknown controller `lqr_unit` (this binary has: pole_placement, fl_arm)".into(),
+        ),
+        (
+            vec!["--gain", "k_beta=1"],
+            "unknown gain `k_beta` of pole_placement (gains: k_theta, k_alpha, k_theta_dot, k_alpha_dot)".into(),
+        ),
+        (
+            vec!["--x0", "beta=1"],
+            "unknown state `beta`".into(),
+        ),
+    ] {
+        let (code, out, err) = rig(&bin, &args, None);
+        assert_eq!(code, 2, "{args:?}: {out}{err}");
+        assert!(err.contains(&expected), "{args:?}: {err}");
     }
 
     // ---- plantc run --compiled --compare: the same generated code from the CLI ----
