@@ -429,7 +429,7 @@ pub fn build_rig(dir: &Path, release: bool, offline: bool) -> Result<PathBuf, Er
     text.lines()
         .filter(|l| l.contains("\"reason\":\"compiler-artifact\""))
         .filter_map(json_executable)
-        .last()
+        .next_back()
         .ok_or_else(|| {
             Error::Generate(format!(
                 "`cargo build` in {} reported no executable",

@@ -218,8 +218,7 @@ fn rig_crate_snapshot() {
     insta::assert_snapshot!("rig_observer", &model[start..end]);
     // byte-for-byte deterministic
     let again = tempfile::tempdir().unwrap();
-    plantc_codegen::write_crate(&rig_options(again.path(), &["pole_placement", "fl_arm"]))
-        .unwrap();
+    plantc_codegen::write_crate(&rig_options(again.path(), &["pole_placement", "fl_arm"])).unwrap();
     for f in ["Cargo.toml", "README.md", "src/model.rs", "src/main.rs"] {
         assert_eq!(
             read(f),

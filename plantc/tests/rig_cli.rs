@@ -411,7 +411,7 @@ fn rig_crate_on_the_fake_board_and_against_the_interpreter() {
             first.map_or(30.0, |k| k as f64 * 1e-3)
         );
         assert!(
-            first.map_or(true, |k| k >= 100),
+            !matches!(first, Some(k) if k < 100),
             "diverged at sample {first:?}"
         );
         let key = "estimator + controller: p50 ";
@@ -430,7 +430,11 @@ fn rig_crate_on_the_fake_board_and_against_the_interpreter() {
 
     // ---- gains and parameters changed at start-up (values file, command line) ----
     let values = root.join("values.txt");
-    std::fs::write(&values, "# outer-law gains\na = 0.3\nb = 0.3   # arm\nRm = 2.7\n").unwrap();
+    std::fs::write(
+        &values,
+        "# outer-law gains\na = 0.3\nb = 0.3   # arm\nRm = 2.7\n",
+    )
+    .unwrap();
     let log = root.join("values.csv");
     let (code, out, err) = rig(
         &bin,
@@ -453,7 +457,10 @@ fn rig_crate_on_the_fake_board_and_against_the_interpreter() {
         None,
     );
     assert_eq!(code, 0, "{out}{err}");
-    assert!(err.contains("note: --param changes the simulated plant"), "{err}");
+    assert!(
+        err.contains("note: --param changes the simulated plant"),
+        "{err}"
+    );
     let changed = [("a", 0.3), ("b", 0.3), ("wn", 5.0)];
     let r = replay_interpreted(&log, "fl_arm", &changed, &[("Rm", 2.7)]);
     println!("fl_arm with a = b = 0.3, wn = 5, Rm = 2.7: {r}");

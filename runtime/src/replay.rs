@@ -176,8 +176,8 @@ pub fn replay_log(
             }
             report.compared += 1;
         }
-        for k in 0..nq {
-            let d = (v[k] - num(1 + nq + k)?).abs();
+        for (k, vk) in v.iter().enumerate() {
+            let d = (vk - num(1 + nq + k)?).abs();
             if d.is_nan() || d > report.max_velocity_diff {
                 report.max_velocity_diff = if d.is_nan() { f64::INFINITY } else { d };
             }

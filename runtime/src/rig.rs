@@ -214,7 +214,7 @@ fn usage(m: impl Into<String>) -> RigError {
 #[derive(Debug, Clone, PartialEq)]
 pub enum RigCommand {
     /// Run with these options.
-    Run(RigArgs),
+    Run(Box<RigArgs>),
     /// Print the help text.
     Help,
 }
@@ -436,7 +436,7 @@ impl RigArgs {
             None if bandwidth != 50.0 => Some(RigVelocity::Derivative(bandwidth)),
             None => None,
         };
-        Ok(RigCommand::Run(a))
+        Ok(RigCommand::Run(Box::new(a)))
     }
 }
 
@@ -497,13 +497,16 @@ pub fn help(model: &dyn RigModel, program: &str) -> String {
     h
 }
 
+/// Named values (`NAME`, SI value) in order.
+type Assignments = Vec<(String, f64)>;
+
 /// Reads `NAME = VALUE` lines (blank lines and `#` comments ignored) and
-/// sorts them into parameters and gains of `controller`.
+/// sorts them into (parameters, gains of `controller`).
 fn read_values(
     path: &Path,
     model: &dyn RigModel,
     controller: &str,
-) -> Result<(Vec<(String, f64)>, Vec<(String, f64)>), RigError> {
+) -> Result<(Assignments, Assignments), RigError> {
     let text = std::fs::read_to_string(path)
         .map_err(|e| usage(format!("--values {}: {e}", path.display())))?;
     let gains = model.gain_names(controller);
