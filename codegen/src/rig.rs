@@ -163,9 +163,7 @@ pub(crate) fn write_rig(
 
 mod model;
 
-use plantc_runtime::{{
-    Controller, ObserverInfo, Plant, RigInfo, RigModel, VelocityEstimator,
-}};
+use plantc_runtime::{{Controller, ObserverInfo, Plant, RigInfo, RigModel, VelocityEstimator}};
 
 /// Counts the loop's allocations (reported after the run; expected 0).
 #[global_allocator]
@@ -300,7 +298,8 @@ impl RigModel for Rig {{
         }}
     }}
     fn observer(&self) -> Option<Box<dyn VelocityEstimator>> {{
-        Some(Box::new(ObserverAdapter(model::observer::VelocityObserver::new())))
+        let observer = model::observer::VelocityObserver::new();
+        Some(Box::new(ObserverAdapter(observer)))
     }}
 }}
 
