@@ -31,6 +31,7 @@ pub use data::{
 pub use error::{CellProblem, DataError, DataWarning};
 pub use units::Kind;
 
+pub mod closed_loop;
 pub mod diagnose;
 pub mod effect_edit;
 pub mod equation_error;

@@ -49,10 +49,25 @@
 use plantc_derive::model::Model;
 use plantc_derive::sym::{diff, Expr, SplitTape, Tape};
 
+use crate::closed_loop::{LoopEval, LoopLaw, LoopSens, Replay};
 use crate::experiment_sim::{
-    dynamics_outputs, initial_state, integrate, lu_factor, lu_solve, parameters_slow, prepare_run,
-    tape_inputs, OnSwitch, Segment, SignalEffects, Signals, SimError, SimOptions,
+    check_start, deadzone, dynamics_outputs, integrate, lu_factor, lu_solve, parameters_slow,
+    prepare_run, tape_inputs, BlockStart, OnSwitch, Segment, SignalEffects, Signals, SimError,
+    SimOptions,
 };
+
+/// A sensitivity column that is not a model parameter: the derivative with
+/// respect to an initial state component or a per-experiment offset. Its
+/// variational equation has no parametric forcing; it starts at `s0`
+/// (one value per state component) and `direct` (one per coordinate) is
+/// added to the measurement sensitivities (an offset is measured as is).
+#[derive(Clone, Debug, PartialEq)]
+pub struct ExtraColumn {
+    /// `S(0)`, positions then velocities.
+    pub s0: Vec<f64>,
+    /// Direct derivative of each measured coordinate.
+    pub direct: Vec<f64>,
+}
 
 /// Simulated coordinates and their sensitivities at the sample instants.
 #[derive(Clone, Debug, PartialEq)]
@@ -60,7 +75,7 @@ pub struct SensitivityTrajectory {
     /// One vector per model coordinate.
     pub q: Vec<Vec<f64>>,
     /// `dq[i][j][k]`: derivative of coordinate `i` at sample `k` with respect
-    /// to free parameter `j`.
+    /// to column `j` (the free parameters, then any extra columns).
     pub dq: Vec<Vec<Vec<f64>>>,
 }
 
@@ -79,6 +94,7 @@ pub struct SensitivitySimulator {
     split: SplitTape,
     signals: SignalEffects,
     opts: SimOptions,
+    law: Option<LoopLaw>,
 }
 
 /// The parameters a model marks `estimate`, in declaration order.
@@ -144,6 +160,7 @@ impl SensitivitySimulator {
             split,
             signals,
             opts,
+            law: None,
         })
     }
 
@@ -158,40 +175,87 @@ impl SensitivitySimulator {
     }
 
     /// Simulate the first `n_samples` samples with sensitivities; `params` is
-    /// the full parameter vector (base then derived).
+    /// the full parameter vector (base then derived). The initial state is
+    /// the measured one (positions minus the model's sensor offsets,
+    /// velocities as the options say).
     pub fn simulate(
         &self,
         sig: &Signals,
         params: &[f64],
         n_samples: usize,
     ) -> Result<SensitivityTrajectory, SimError> {
-        self.run(sig, params, n_samples, false)
+        let offsets = self.signals.eval(params)?.offsets;
+        let mut start = BlockStart::from_data(sig, self.opts.initial_velocity, &offsets);
+        start.range = 0..n_samples.min(sig.len());
+        self.run(sig, params, &start, &vec![true; self.n], &[], false)
     }
 
-    /// [`SensitivitySimulator::simulate`], evaluating the tape split
+    /// The same simulator with a recorded controller in the loop (compile it
+    /// with [`LoopLaw::new`]); signals must then come from
+    /// [`Signals::from_experiment_closed`].
+    pub fn with_loop(mut self, law: LoopLaw) -> SensitivitySimulator {
+        self.law = Some(law);
+        self
+    }
+
+    /// Simulate one block with sensitivities to the free parameters and to
+    /// `extra` columns. `tied[i]` says that the initial position of
+    /// coordinate `i` was taken from its measurement minus the model's
+    /// sensor offset (so a parameter of that offset moves it: `S(0) =
+    /// -dd/dtheta` there). The columns of the result are the free
+    /// parameters, then the extras.
+    pub fn simulate_block(
+        &self,
+        sig: &Signals,
+        params: &[f64],
+        start: &BlockStart,
+        tied: &[bool],
+        extra: &[ExtraColumn],
+    ) -> Result<SensitivityTrajectory, SimError> {
+        self.run(sig, params, start, tied, extra, false)
+    }
+
+    /// [`SensitivitySimulator::simulate_block`], evaluating the tape split
     /// (parameter part once per call) or, with `unsplit`, whole at every
     /// stage: the reference path the tests compare against.
+    #[allow(clippy::too_many_arguments)]
     fn run(
         &self,
         sig: &Signals,
         params: &[f64],
-        n_samples: usize,
+        start: &BlockStart,
+        tied: &[bool],
+        extra: &[ExtraColumn],
         unsplit: bool,
     ) -> Result<SensitivityTrajectory, SimError> {
-        let (h, effects, sig) = prepare_run(
+        let (h, effects, mut u) = prepare_run(
             sig,
             params,
             (self.n, self.m, self.n_params),
             &self.opts,
             &self.signals,
         )?;
-        let sig = &*sig;
-        let d_width = &effects.d_widths;
-        let deadzone_forcing = self.signals.deadzone_depends_on_free;
         let (n, m, p) = (self.n, self.m, self.free.len());
+        check_start(sig, start, n)?;
         let nx = 2 * n;
+        for c in extra {
+            if c.s0.len() != nx || c.direct.len() != n {
+                return Err(SimError::BadOption(format!(
+                    "an extra sensitivity column needs {nx} initial values and {n} direct terms"
+                )));
+            }
+        }
+        let nc = p + extra.len();
+        let (k0, k1) = (start.range.start, start.range.end);
+        let d_width = &effects.d_widths;
+        let widths = &effects.widths;
+        let deadzone_forcing = self.signals.deadzone_depends_on_free;
+        let driven: Vec<usize> = self
+            .law
+            .as_ref()
+            .map_or(Vec::new(), |l| l.driven().to_vec());
+        let nd = driven.len();
         let bs = n * n + n + n * m;
-        let n_samples = n_samples.min(sig.len());
         let mut tin = vec![0.0; nx + m + self.n_params];
         tin[nx + m..].copy_from_slice(params);
         let mut out = vec![0.0; self.tape.n_outputs()];
@@ -207,8 +271,11 @@ impl SensitivitySimulator {
         // jd[d * n + i] = d a_i / d z_d, z = (state, free parameters)
         let mut jd = vec![0.0; (nx + p) * n];
         let mut du = vec![0.0; m];
+        // closed loop: du_hist[(k - k0) * nd * nc + d * nc + c], the
+        // sensitivity of driven input d held from sample k
+        let du_hist = std::cell::RefCell::new(vec![0.0; (k1 - k0) * nd * nc]);
         let d_delay = &effects.d_delays;
-        let rhs = |z: &[f64], u: &[f64], seg: &Segment, dz: &mut [f64]| {
+        let rhs = |z: &[f64], u: &[f64], held: &[usize], seg: &Segment, dz: &mut [f64]| {
             tin[..nx].copy_from_slice(&z[..nx]);
             tin[nx..nx + m].copy_from_slice(u);
             if unsplit {
@@ -248,26 +315,27 @@ impl SensitivitySimulator {
             let s = &z[nx..];
             let ds = &mut dz[nx..];
             for i in 0..n {
-                for j in 0..p {
-                    ds[i * p + j] = s[(n + i) * p + j];
+                for j in 0..nc {
+                    ds[i * nc + j] = s[(n + i) * nc + j];
                 }
             }
             for i in 0..n {
-                for j in 0..p {
-                    let mut v = jd[(nx + j) * n + i];
+                for j in 0..nc {
+                    let mut v = if j < p { jd[(nx + j) * n + i] } else { 0.0 };
                     for k in 0..nx {
-                        v += jd[k * n + i] * s[k * p + j];
+                        v += jd[k * n + i] * s[k * nc + j];
                     }
-                    ds[(n + i) * p + j] = v;
+                    ds[(n + i) * nc + j] = v;
                 }
             }
-            // deadzone widths: M^-1 B d dz(u)/dtheta, with d dz/dw = -sign(dz)
+            // deadzone widths of inputs from the data: M^-1 B d dz(u)/dtheta,
+            // with d dz/dw = -sign(dz)
             if deadzone_forcing {
                 for j in 0..p {
                     let mut any = false;
                     for l in 0..m {
                         let dw = d_width[j * m + l];
-                        du[l] = if dw != 0.0 && u[l] != 0.0 {
+                        du[l] = if dw != 0.0 && u[l] != 0.0 && !driven.contains(&l) {
                             any = true;
                             -u[l].signum() * dw
                         } else {
@@ -282,7 +350,37 @@ impl SensitivitySimulator {
                     }
                     lu_solve(&lu, n, &piv, &mut w, &mut tmp);
                     for i in 0..n {
-                        ds[(n + i) * p + j] += w[i];
+                        ds[(n + i) * nc + j] += w[i];
+                    }
+                }
+            }
+            // inputs computed in the loop: M^-1 B du/dcolumn of the held sample
+            if nd > 0 {
+                let hist = du_hist.borrow();
+                for j in 0..nc {
+                    let mut any = false;
+                    for l in 0..m {
+                        du[l] = 0.0;
+                    }
+                    for (d, &l) in driven.iter().enumerate() {
+                        let k = held[l];
+                        if k >= k0 {
+                            let v = hist[(k - k0) * nd * nc + d * nc + j];
+                            if v != 0.0 {
+                                du[l] = v;
+                                any = true;
+                            }
+                        }
+                    }
+                    if !any {
+                        continue;
+                    }
+                    for i in 0..n {
+                        w[i] = (0..m).map(|l| b[i * m + l] * du[l]).sum::<f64>();
+                    }
+                    lu_solve(&lu, n, &piv, &mut w, &mut tmp);
+                    for i in 0..n {
+                        ds[(n + i) * nc + j] += w[i];
                     }
                 }
             }
@@ -294,8 +392,8 @@ impl SensitivitySimulator {
                         / seg.len;
                     if rate != 0.0 {
                         for i in 0..n {
-                            ds[i * p + j] += z[n + i] * rate;
-                            ds[(n + i) * p + j] += acc[i] * rate;
+                            ds[i * nc + j] += z[n + i] * rate;
+                            ds[(n + i) * nc + j] += acc[i] * rate;
                         }
                     }
                 }
@@ -303,22 +401,70 @@ impl SensitivitySimulator {
             true
         };
         let (off, d_off) = (&effects.offsets, &effects.d_offsets);
-        let mut z = initial_state(sig, self.opts.initial_velocity, off);
-        z.resize(nx + nx * p, 0.0);
+        let meas_off: Vec<f64> = off.iter().zip(&start.offsets).map(|(a, b)| a + b).collect();
+        let mut z = start.x0.clone();
+        z.resize(nx + nx * nc, 0.0);
         for i in 0..n {
-            for j in 0..p {
-                z[nx + i * p + j] = -d_off[j * n + i];
-            }
-        }
-        let mut q = vec![vec![0.0; n_samples]; n];
-        let mut dq = vec![vec![vec![0.0; n_samples]; p]; n];
-        let record = |k: usize, z: &[f64]| {
-            for i in 0..n {
-                q[i][k] = z[i] + off[i];
+            if tied.get(i).copied().unwrap_or(false) {
                 for j in 0..p {
-                    dq[i][j][k] = z[nx + i * p + j] + d_off[j * n + i];
+                    z[nx + i * nc + j] = -d_off[j * n + i];
                 }
             }
+        }
+        for (e, c) in extra.iter().enumerate() {
+            for (i, v) in c.s0.iter().enumerate() {
+                z[nx + i * nc + p + e] = *v;
+            }
+        }
+        // the direct part of each column's measurement sensitivity
+        let mut direct = vec![0.0; n * nc];
+        for i in 0..n {
+            for j in 0..p {
+                direct[i * nc + j] = d_off[j * n + i];
+            }
+            for (e, c) in extra.iter().enumerate() {
+                direct[i * nc + p + e] = c.direct[i];
+            }
+        }
+        let len = k1 - k0;
+        let mut q = vec![vec![0.0; len]; n];
+        let mut dq = vec![vec![vec![0.0; len]; nc]; n];
+        let mut y = vec![0.0; n];
+        let mut dy = vec![0.0; n * nc];
+        let mut du_k = vec![0.0; nd * nc];
+        let mut closed = self.closed(sig, k0, nc)?;
+        let at_sample = |k: usize, z: &[f64], u: &mut [Vec<f64>]| {
+            let kk = k - k0;
+            for i in 0..n {
+                y[i] = z[i] + meas_off[i];
+                q[i][kk] = y[i];
+                for j in 0..nc {
+                    let v = z[nx + i * nc + j] + direct[i * nc + j];
+                    dy[i * nc + j] = v;
+                    dq[i][j][kk] = v;
+                }
+            }
+            if let Some((law, rep, ev, fstate, u_law, ls)) = closed.as_mut() {
+                ev.step(law, rep, k, &y, fstate, u_law, Some((ls, &dy, &mut du_k)));
+                let mut hist = du_hist.borrow_mut();
+                for (d, &l) in driven.iter().enumerate() {
+                    let wl = widths.get(l).copied().unwrap_or(0.0);
+                    let v = deadzone(u_law[d], wl);
+                    u[l][k] = v;
+                    for j in 0..nc {
+                        let mut g = if v == 0.0 && wl > 0.0 {
+                            0.0
+                        } else {
+                            du_k[d * nc + j]
+                        };
+                        if j < p && v != 0.0 {
+                            g -= v.signum() * d_width[j * m + l];
+                        }
+                        hist[kk * nd * nc + d * nc + j] = g;
+                    }
+                }
+            }
+            z.iter().all(|v| v.is_finite())
         };
         // jump of S at a switch of input `l`: (f_old - f_new) dTd_l/dtheta
         let mut jump = |l: usize, f_old: &[f64], f_new: &[f64], z: &mut [f64]| {
@@ -326,7 +472,7 @@ impl SensitivitySimulator {
                 let df = f_old[i] - f_new[i];
                 if df != 0.0 {
                     for j in 0..p {
-                        z[nx + i * p + j] += df * d_delay[j * m + l];
+                        z[nx + i * nc + j] += df * d_delay[j * m + l];
                     }
                 }
             }
@@ -337,16 +483,74 @@ impl SensitivitySimulator {
             None
         };
         integrate(
-            sig,
-            n_samples,
+            &sig.name,
+            &sig.t,
+            &mut u,
+            k0..k1,
             h,
             &mut z,
             &effects.delays,
             rhs,
             on_switch,
-            record,
+            at_sample,
         )?;
         Ok(SensitivityTrajectory { q, dq })
+    }
+
+    /// Loop state at a block starting at `k0` with `nc` sensitivity
+    /// columns; None in open loop.
+    #[allow(clippy::type_complexity)]
+    fn closed<'s>(
+        &'s self,
+        sig: &'s Signals,
+        k0: usize,
+        nc: usize,
+    ) -> Result<
+        Option<(
+            &'s LoopLaw,
+            &'s Replay,
+            LoopEval,
+            Vec<f64>,
+            Vec<f64>,
+            LoopSens,
+        )>,
+        SimError,
+    > {
+        let Some(law) = &self.law else {
+            return Ok(None);
+        };
+        let Some(rep) = &sig.replay else {
+            return Err(SimError::BadOption(format!(
+                "closed-loop simulation of `{}` needs its signals read for recorded controller `{}`",
+                sig.name, law.name
+            )));
+        };
+        let nf2 = rep.coeffs.len() * 2;
+        Ok(Some((
+            law,
+            rep,
+            LoopEval::new(law),
+            rep.state[k0 * nf2..(k0 + 1) * nf2].to_vec(),
+            vec![0.0; law.driven().len()],
+            LoopSens::new(law, nc),
+        )))
+    }
+}
+
+#[cfg(test)]
+impl SensitivitySimulator {
+    /// The first `n` samples from the measured state, split or not (tests).
+    fn run_n(
+        &self,
+        sig: &Signals,
+        params: &[f64],
+        n: usize,
+        unsplit: bool,
+    ) -> Result<SensitivityTrajectory, SimError> {
+        let offsets = self.signals.eval(params)?.offsets;
+        let mut start = BlockStart::from_data(sig, self.opts.initial_velocity, &offsets);
+        start.range = 0..n.min(sig.len());
+        self.run(sig, params, &start, &vec![true; self.n], &[], unsplit)
     }
 }
 
@@ -366,8 +570,8 @@ mod tests {
                 SensitivitySimulator::new(&model, &free, SimOptions::default()).expect("compiles");
             let sig = signals(&model);
             let p = perturbed(&model);
-            let split = sim.run(&sig, &p, sig.len(), false).expect("simulates");
-            let whole = sim.run(&sig, &p, sig.len(), true).expect("simulates");
+            let split = sim.run_n(&sig, &p, sig.len(), false).expect("simulates");
+            let whole = sim.run_n(&sig, &p, sig.len(), true).expect("simulates");
             let flat = |tr: &SensitivityTrajectory| -> Vec<u64> {
                 let q = tr.q.iter().flatten();
                 let dq = tr.dq.iter().flatten().flatten();
@@ -396,10 +600,10 @@ mod tests {
         let (mut a, mut b) = (Vec::new(), Vec::new());
         for _ in 0..5 {
             a.push(median_seconds(3, || {
-                sim.run(&sig, &p, k, false).expect("simulates");
+                sim.run_n(&sig, &p, k, false).expect("simulates");
             }));
             b.push(median_seconds(3, || {
-                sim.run(&sig, &p, k, true).expect("simulates");
+                sim.run_n(&sig, &p, k, true).expect("simulates");
             }));
         }
         a.sort_by(f64::total_cmp);
