@@ -49,6 +49,8 @@ pub struct LoopLaw {
     limits: Vec<Option<(f64, f64)>>,
     signal_names: Vec<String>,
     cutoffs: Vec<f64>,
+    /// Which measured coordinates the law reads.
+    reads: Vec<bool>,
     /// `[y (n), signals]` -> `[e (nf), de/dy (nf*n)]`.
     tape_e: Tape,
     /// `[y (n), signals, f (nf)]` -> `[u (nd), du/dy (nd*n), du/df (nd*nf)]`.
@@ -138,7 +140,18 @@ impl LoopLaw {
         }
         let tape_u = Tape::compile(&out_u, &in_u).map_err(tape_err)?;
         let driven: Vec<usize> = rc.laws.iter().map(|l| l.0).collect();
+        let reads = ys
+            .iter()
+            .map(|y| {
+                rc.filters
+                    .iter()
+                    .map(|f| f.input)
+                    .chain(rc.laws.iter().map(|l| l.1))
+                    .any(|e| e.contains(*y))
+            })
+            .collect();
         Ok(LoopLaw {
+            reads,
             name: rc.name.clone(),
             n,
             limits: driven.iter().map(|&j| model.inputs[j].limits).collect(),
@@ -153,6 +166,12 @@ impl LoopLaw {
     /// Indices of the inputs the law drives.
     pub fn driven(&self) -> &[usize] {
         &self.driven
+    }
+
+    /// Whether the law reads the measured coordinate `i` of `model`.
+    pub fn reads_coordinate(&self, model: &Model, i: usize) -> bool {
+        let _ = model;
+        i < self.n && self.reads[i]
     }
 
     /// Names of the data columns the law reads.

@@ -52,7 +52,7 @@ use crate::effect_edit::{all_candidates, EffectEditError, EffectInstance, Effect
 use crate::equation_error::{
     EquationError, EquationErrorError, EquationErrorOptions, Regressor, Score, Share,
 };
-use crate::fit::{fit, Estimate, FitError, FitOptions, FitResult};
+use crate::fit::{fit, Estimate, FitError, FitOptions, FitResult, Horizon};
 use crate::sensitivity::estimated_parameters;
 
 /// Smallest RMSE ratio (baseline / candidate) that counts as a found effect.
@@ -361,10 +361,11 @@ pub fn diagnose_with(
                     std_error: e.std_error,
                     start: m.parameter(&e.name).map_or(f64::NAN, |p| p.value),
                     at_bound: false,
+                    fixed: false,
                 })
                 .collect(),
             evidence: Evidence {
-                rmse_before: baseline.after_rmse,
+                rmse_before: baseline.after_cost,
                 rmse_after: None,
                 gain: None,
                 residual_share: score.residual_share,
@@ -390,7 +391,7 @@ pub fn diagnose_with(
     // refitted first, by RMSE with a per-parameter penalty
     let penalised = |r: &Ranked| match &r.fit {
         Some(f) => {
-            f.after_rmse / (1.0 - opts.per_parameter_gain).powi(r.candidate.parameters.len() as i32)
+            f.after_cost / (1.0 - opts.per_parameter_gain).powi(r.candidate.parameters.len() as i32)
         }
         None => f64::INFINITY,
     };
@@ -427,7 +428,9 @@ fn refit(
     experiments: &[Experiment],
     opts: &DiagnoseOptions,
 ) {
-    let mut outcome = refit_from(r, m, Some((model, baseline)), experiments, opts);
+    // the candidate is judged on the baseline's terms: the same horizon
+    let horizon = baseline.segments.map_or(Horizon::Whole, Horizon::Segments);
+    let mut outcome = refit_from(r, m, horizon, Some((model, baseline)), experiments, opts);
     // A baseline distorted by the missing effect can also trap the refit in
     // a local minimum (shared spring_arm case: 5.2x from the baseline, 438x
     // from the nominal values). Unless the first start already gave a
@@ -437,22 +440,22 @@ fn refit(
     // from the first start is not worth a second fit; this keeps clean data
     // cheap).
     let gain = outcome.as_ref().map_or(0.0, |f| {
-        baseline.after_rmse / f.after_rmse.max(f64::MIN_POSITIVE)
+        baseline.after_cost / f.after_cost.max(f64::MIN_POSITIVE)
     });
     let worth_it = outcome.is_err() || r.evidence.equation_error_rank == 1 || gain >= 1.2;
     if worth_it && gain < DECISIVE_GAIN {
-        let second = refit_from(r, m, None, experiments, opts);
+        let second = refit_from(r, m, horizon, None, experiments, opts);
         outcome = match (outcome, second) {
-            (Ok(a), Ok(b)) => Ok(if b.after_rmse < a.after_rmse { b } else { a }),
+            (Ok(a), Ok(b)) => Ok(if b.after_cost < a.after_cost { b } else { a }),
             (Ok(a), Err(_)) => Ok(a),
             (Err(_), second) => second,
         };
     }
     match outcome {
         Ok(f) => {
-            let gain = baseline.after_rmse / f.after_rmse.max(f64::MIN_POSITIVE);
+            let gain = baseline.after_cost / f.after_cost.max(f64::MIN_POSITIVE);
             r.gain = gain;
-            r.evidence.rmse_after = Some(f.after_rmse);
+            r.evidence.rmse_after = Some(f.after_cost);
             r.evidence.gain = Some(gain);
             r.parameters = f
                 .parameters
@@ -469,6 +472,7 @@ fn refit(
 fn refit_from(
     r: &Ranked,
     m: &Model,
+    horizon: Horizon,
     from: Option<(&Model, &FitResult)>,
     experiments: &[Experiment],
     opts: &DiagnoseOptions,
@@ -494,6 +498,7 @@ fn refit_from(
     let o = FitOptions {
         free: None,
         start: Some(start),
+        horizon,
         ..opts.fit.clone()
     };
     fit(m, experiments, &o)

@@ -377,6 +377,48 @@ pub(crate) fn initial_state(sig: &Signals, how: InitialVelocity, offsets: &[f64]
     x
 }
 
+/// The velocity of a measured coordinate at sample `k`: the slope at `t_k`
+/// of a least-squares quadratic through the samples within `half_window`
+/// s of it (one-sided at the ends of the record; at least two samples on
+/// each available side). Works on non-uniform time stamps.
+pub fn velocity_at(t: &[f64], y: &[f64], k: usize, half_window: f64) -> f64 {
+    let n = t.len().min(y.len());
+    if n < 2 || k >= n {
+        return 0.0;
+    }
+    let tk = t[k];
+    let mut a = k;
+    while a > 0 && (tk - t[a - 1] <= half_window || k - a < 2) {
+        a -= 1;
+    }
+    let mut b = k;
+    while b + 1 < n && (t[b + 1] - tk <= half_window || b - k < 2) {
+        b += 1;
+    }
+    // least squares y = c0 + c1 s + c2 s^2 with s = t - t_k
+    let mut m = [[0.0f64; 3]; 3];
+    let mut r = [0.0f64; 3];
+    for i in a..=b {
+        let s = t[i] - tk;
+        let pw = [1.0, s, s * s];
+        for (u, pu) in pw.iter().enumerate() {
+            r[u] += pu * y[i];
+            for (v, pv) in pw.iter().enumerate() {
+                m[u][v] += pu * pv;
+            }
+        }
+    }
+    let order = if b - a >= 2 { 3 } else { 2 };
+    let flat: Vec<f64> = (0..order)
+        .flat_map(|u| (0..order).map(move |v| (u, v)))
+        .map(|(u, v)| m[u][v])
+        .collect();
+    match crate::lm::solve_spd(&flat, order, &r[..order]) {
+        Some(c) => c[1],
+        None => 0.0,
+    }
+}
+
 /// Called at an input switch taken at a sample instant, with the input
 /// index `j`, the state derivative before (`f_old`) and after (`f_new`) the
 /// switch, and the state (to update sensitivities).

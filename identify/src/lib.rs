@@ -20,13 +20,17 @@
 mod csv_reader;
 pub mod data;
 pub mod error;
+pub mod identifiability;
+mod lm;
 mod mat_reader;
 pub mod plausibility;
+mod problem;
 pub mod units;
+pub mod weights;
 
 pub use data::{
-    parse_channel_map, read_experiment, read_experiment_with, read_experiments, Channel,
-    ChannelSpec, Experiment, ReadOptions,
+    parse_channel_map, parse_rename, read_experiment, read_experiment_with, read_experiments,
+    Channel, ChannelSpec, Experiment, ReadOptions,
 };
 pub use error::{CellProblem, DataError, DataWarning};
 pub use units::Kind;
@@ -39,25 +43,40 @@ pub mod experiment_sim;
 pub mod fit;
 pub mod metrics;
 pub mod plot;
+pub mod residual_tests;
 pub mod savitzky_golay;
 pub mod sensitivity;
 pub mod synth;
+pub mod validate;
 pub mod where_it_fails;
 
+pub use closed_loop::LoopLaw;
 pub use diagnose::{
     candidates, diagnose, diagnose_with, Candidate, DiagnoseError, DiagnoseOptions, Diagnosis,
     Evidence, Ranked,
 };
 pub use effect_edit::{EffectEditError, EffectInstance, EffectKind};
 pub use equation_error::{EquationError, EquationErrorOptions, Regressor, Score, Share};
-pub use experiment_sim::{InitialVelocity, Signals, SimError, SimOptions, Simulator, Trajectory};
-pub use fit::{fit, fit_with_progress, Estimate, FitError, FitOptions, FitProgress, FitResult};
+pub use experiment_sim::{
+    velocity_at, BlockStart, InitialVelocity, Signals, SimError, SimOptions, Simulator, Trajectory,
+};
+pub use fit::{
+    fit, fit_with_progress, resolve_closed_loop, signals_for, ClosedLoop, Estimate,
+    ExperimentEstimate, FitError, FitOptions, FitProgress, FitResult, Horizon, NuisanceValue,
+    Offsets,
+};
+pub use identifiability::Identifiability;
 pub use metrics::{compare, fit_percent, rmse, ChannelFit, ExperimentFit, FitReport, MetricsError};
 pub use plot::{plot_comparison, render_comparison, PlotError};
-pub use sensitivity::{estimated_parameters, SensitivitySimulator, SensitivityTrajectory};
+pub use residual_tests::{residual_test, CrossCorrelation, ResidualTest};
+pub use sensitivity::{
+    estimated_parameters, ExtraColumn, SensitivitySimulator, SensitivityTrajectory, SignalKind,
+};
 pub use synth::{
     synthesize, EffectSpec, ExperimentSpec, SynthError, SynthOptions, SynthSpec, Synthesized,
 };
+pub use validate::{validate, ChannelScore, ExperimentValidation, ValidateOptions, Validation};
+pub use weights::ChannelWeight;
 pub use where_it_fails::{
     residual_summary, where_it_fails, ChannelDiagnosis, FailOptions, Finding, FindingKind,
     GroupStats, ResidualSummary,

@@ -56,6 +56,15 @@ use crate::experiment_sim::{
     SimOptions,
 };
 
+/// What a parameter moves among the signal effects.
+#[derive(Copy, Clone, Debug, PartialEq, Eq)]
+pub enum SignalKind {
+    /// An input delay.
+    Delay,
+    /// A sensor offset.
+    Offset,
+}
+
 /// A sensitivity column that is not a model parameter: the derivative with
 /// respect to an initial state component or a per-experiment offset. Its
 /// variational equation has no parametric forcing; it starts at `s0`
@@ -162,6 +171,25 @@ impl SensitivitySimulator {
             opts,
             law: None,
         })
+    }
+
+    /// What each free parameter moves among the signal effects, at the full
+    /// parameter vector `params`: an input delay, a sensor offset, or
+    /// neither (a global scan is worth it for the first two).
+    pub fn signal_dependencies(&self, params: &[f64]) -> Result<Vec<Option<SignalKind>>, SimError> {
+        let v = self.signals.eval(params)?;
+        let (n, m) = (self.n, self.m);
+        Ok((0..self.free.len())
+            .map(|j| {
+                if v.d_delays[j * m..(j + 1) * m].iter().any(|d| *d != 0.0) {
+                    Some(SignalKind::Delay)
+                } else if v.d_offsets[j * n..(j + 1) * n].iter().any(|d| *d != 0.0) {
+                    Some(SignalKind::Offset)
+                } else {
+                    None
+                }
+            })
+            .collect())
     }
 
     /// Names of the free parameters, in sensitivity order.
