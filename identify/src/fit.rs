@@ -64,7 +64,7 @@ use crate::experiment_sim::{
     dynamics_outputs, velocity_at, InitialVelocity, Signals, SimError, SimOptions, Simulator,
 };
 use crate::identifiability::{analyse, to_fix, Fixed, Identifiability, ParamInfo};
-use crate::lm::{global_information, inverse_spd, local_variances, predicted_reduction, Damped};
+use crate::lm::{global_information, local_variances, predicted_reduction, Damped};
 use crate::problem::{BlockLayout, Point, Problem};
 use crate::sensitivity::{estimated_parameters, SensitivitySimulator};
 use crate::weights::{channel_weights, ChannelWeight};
@@ -306,6 +306,11 @@ pub struct ExperimentEstimate {
     pub rmse_before: Vec<f64>,
     /// RMSE per coordinate at the result (SI).
     pub rmse_after: Vec<f64>,
+    /// Fit % per coordinate (as MATLAB's `compare`) at the start (None
+    /// when it could not be simulated or the channel is constant).
+    pub fit_before: Vec<Option<f64>>,
+    /// Fit % per coordinate at the result.
+    pub fit_after: Vec<Option<f64>>,
 }
 
 /// The result of [`fit`].
@@ -977,9 +982,12 @@ pub fn fit_with_progress(
                 .filter(|(_, o)| o.1 == i)
                 .map(|(k, _)| p + k)
                 .collect();
+            // an offset the data cannot determine (NaN standard error, e.g.
+            // the arm's zero under a controller that regulates the measured
+            // angle) is not significant either
             let significant = idx.iter().any(|&j| {
                 let se = cov[j * ng + j].sqrt();
-                !(se.is_finite()) || pt.g[j].abs() > 2.0 * se
+                se.is_finite() && pt.g[j].abs() > 2.0 * se
             });
             if !significant {
                 for &j in &idx {
@@ -1009,7 +1017,7 @@ pub fn fit_with_progress(
                     best = (q, s2);
                     frozen = fz;
                     notes.push(format!(
-                        "per-experiment offsets on {} were not significant (within 2 standard errors of zero) and were dropped",
+                        "per-experiment offsets on {} were dropped: not significant (within 2 standard errors of zero) or not determined by the data",
                         dropped.join(", ")
                     ));
                 }
@@ -1486,24 +1494,48 @@ fn unweighted_rmse(sigs: &[Signals], sim: &[Vec<Vec<f64>>]) -> f64 {
 }
 
 /// Covariance of the globals (`ng x ng`, NaN rows/columns for frozen
-/// ones) and `sigma^2`.
+/// ones) and `sigma^2`. The information is inverted through its
+/// eigen-decomposition after scaling to a unit diagonal: directions the data
+/// do not determine (eigenvalue below 1e-14 of the largest) are left out,
+/// and the globals that load on them get NaN variances instead of the
+/// whole matrix failing.
 fn covariance(nrm: &crate::lm::Normal, frozen: &[bool], unknowns: usize) -> (Vec<f64>, f64) {
     let ng = nrm.ng;
     let sigma2 = nrm.ssr / nrm.count.saturating_sub(unknowns).max(1) as f64;
     let info = global_information(nrm);
-    let idx: Vec<usize> = (0..ng).filter(|&j| !frozen[j]).collect();
-    let nf = idx.len();
-    let sub: Vec<f64> = idx
-        .iter()
-        .flat_map(|&i| idx.iter().map(move |&j| (i, j)))
-        .map(|(i, j)| info[i * ng + j])
+    let idx: Vec<usize> = (0..ng)
+        .filter(|&j| !frozen[j] && info[j * ng + j] > 0.0 && info[j * ng + j].is_finite())
         .collect();
+    let nf = idx.len();
     let mut cov = vec![f64::NAN; ng * ng];
-    if let Some(inv) = inverse_spd(&sub, nf) {
-        for (a, &i) in idx.iter().enumerate() {
-            for (b, &j) in idx.iter().enumerate() {
-                cov[i * ng + j] = sigma2 * inv[a * nf + b];
+    if nf == 0 {
+        return (cov, sigma2);
+    }
+    let d: Vec<f64> = idx.iter().map(|&i| info[i * ng + i].sqrt()).collect();
+    let c = nalgebra::DMatrix::from_fn(nf, nf, |a, b| info[idx[a] * ng + idx[b]] / (d[a] * d[b]));
+    let eig = nalgebra::SymmetricEigen::new(c);
+    let lmax = eig.eigenvalues.iter().copied().fold(0.0f64, f64::max);
+    let mut undetermined = vec![false; nf];
+    let mut inv = nalgebra::DMatrix::<f64>::zeros(nf, nf);
+    for k in 0..nf {
+        let l = eig.eigenvalues[k];
+        let v = eig.eigenvectors.column(k);
+        if l > 1e-14 * lmax {
+            inv += (v * v.transpose()) / l;
+        } else {
+            for a in 0..nf {
+                if v[a].abs() > 0.1 {
+                    undetermined[a] = true;
+                }
             }
+        }
+    }
+    for a in 0..nf {
+        for b in 0..nf {
+            if undetermined[a] || undetermined[b] {
+                continue;
+            }
+            cov[idx[a] * ng + idx[b]] = sigma2 * inv[(a, b)] / (d[a] * d[b]);
         }
     }
     (cov, sigma2)
@@ -1620,12 +1652,24 @@ fn experiment_estimates(
                     })
                     .collect()
             };
+            let fits = |s: &Vec<Vec<f64>>| -> Vec<Option<f64>> {
+                (0..n)
+                    .map(|i| {
+                        if s[i].iter().any(|v| !v.is_finite()) {
+                            return None;
+                        }
+                        crate::metrics::fit_percent(&sig.q[i], &s[i]).ok().flatten()
+                    })
+                    .collect()
+            };
             ExperimentEstimate {
                 name: sig.name.clone(),
                 initial_state,
                 offsets,
                 rmse_before: before.map_or(vec![f64::NAN; n], |b| rmse(&b[e])),
                 rmse_after: rmse(&sim[e]),
+                fit_before: before.map_or(vec![None; n], |b| fits(&b[e])),
+                fit_after: fits(&sim[e]),
             }
         })
         .collect()

@@ -67,7 +67,9 @@ pub use fit::{
 };
 pub use identifiability::Identifiability;
 pub use metrics::{compare, fit_percent, rmse, ChannelFit, ExperimentFit, FitReport, MetricsError};
-pub use plot::{plot_comparison, render_comparison, PlotError};
+pub use plot::{
+    plot_comparison, plot_residual_tests, render_comparison, render_residual_tests, PlotError,
+};
 pub use residual_tests::{residual_test, CrossCorrelation, ResidualTest};
 pub use sensitivity::{
     estimated_parameters, ExtraColumn, SensitivitySimulator, SensitivityTrajectory, SignalKind,

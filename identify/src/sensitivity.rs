@@ -53,8 +53,20 @@ use crate::closed_loop::{LoopEval, LoopLaw, LoopSens, Replay};
 use crate::experiment_sim::{
     check_start, deadzone, dynamics_outputs, integrate, lu_factor, lu_solve, parameters_slow,
     prepare_run, tape_inputs, BlockStart, OnSwitch, Segment, SignalEffects, Signals, SimError,
-    SimOptions,
+    SimOptions, StiffnessProbe, REFINE,
 };
+
+/// `y = a x` for the row-major `n x n` matrix `a`.
+#[inline]
+fn mat_vec(a: &[f64], n: usize, x: &[f64], y: &mut [f64]) {
+    for (i, yi) in y.iter_mut().enumerate().take(n) {
+        *yi = a[i * n..(i + 1) * n]
+            .iter()
+            .zip(x)
+            .map(|(p, q)| p * q)
+            .sum();
+    }
+}
 
 /// What a parameter moves among the signal effects.
 #[derive(Copy, Clone, Debug, PartialEq, Eq)]
@@ -104,6 +116,7 @@ pub struct SensitivitySimulator {
     signals: SignalEffects,
     opts: SimOptions,
     law: Option<LoopLaw>,
+    probe: StiffnessProbe,
 }
 
 /// The parameters a model marks `estimate`, in declaration order.
@@ -156,6 +169,7 @@ impl SensitivitySimulator {
         let tape =
             Tape::compile(&outs, &tape_inputs(model)).map_err(|e| SimError::Tape(e.to_string()))?;
         let signals = SignalEffects::new(model, &idx)?;
+        let probe = StiffnessProbe::new(model, &base)?;
         let (n, m) = (model.coordinates.len(), model.inputs.len());
         let n_params = model.parameter_symbols().len();
         let split = tape.split_by_inputs(&parameters_slow(2 * n + m, n_params));
@@ -170,6 +184,7 @@ impl SensitivitySimulator {
             signals,
             opts,
             law: None,
+            probe,
         })
     }
 
@@ -256,13 +271,37 @@ impl SensitivitySimulator {
         extra: &[ExtraColumn],
         unsplit: bool,
     ) -> Result<SensitivityTrajectory, SimError> {
+        match self.run_refined(sig, params, start, tied, extra, unsplit, 1.0) {
+            Err(SimError::Diverged { .. }) if self.opts.substep.is_none() => {
+                self.run_refined(sig, params, start, tied, extra, unsplit, REFINE)
+            }
+            r => r,
+        }
+    }
+
+    /// [`SensitivitySimulator::run`] with the automatic substep divided by
+    /// `refine`.
+    #[allow(clippy::too_many_arguments)]
+    fn run_refined(
+        &self,
+        sig: &Signals,
+        params: &[f64],
+        start: &BlockStart,
+        tied: &[bool],
+        extra: &[ExtraColumn],
+        unsplit: bool,
+        refine: f64,
+    ) -> Result<SensitivityTrajectory, SimError> {
         let (h, effects, mut u) = prepare_run(
             sig,
             params,
             (self.n, self.m, self.n_params),
             &self.opts,
             &self.signals,
+            &self.probe,
+            &start.x0,
         )?;
+        let h = h / refine;
         let (n, m, p) = (self.n, self.m, self.free.len());
         check_start(sig, start, n)?;
         let nx = 2 * n;
@@ -298,6 +337,7 @@ impl SensitivitySimulator {
         let mut tmp = vec![0.0; n];
         // jd[d * n + i] = d a_i / d z_d, z = (state, free parameters)
         let mut jd = vec![0.0; (nx + p) * n];
+        let mut minv = vec![0.0; n * n];
         let mut du = vec![0.0; m];
         // closed loop: du_hist[(k - k0) * nd * nc + d * nc + c], the
         // sensitivity of driven input d held from sample k
@@ -314,13 +354,22 @@ impl SensitivitySimulator {
             lu.copy_from_slice(&out[..n * n]);
             let r0 = &out[n * n..n * n + n];
             let b = &out[n * n + n..bs];
-            for i in 0..n {
-                acc[i] = r0[i] + (0..m).map(|j| b[i * m + j] * u[j]).sum::<f64>();
-            }
             if !lu_factor(&mut lu, n, &mut piv) {
                 return false;
             }
-            lu_solve(&lu, n, &piv, &mut acc, &mut tmp);
+            // M^-1 once; every right-hand side is then a product
+            for c in 0..n {
+                w.iter_mut().for_each(|v| *v = 0.0);
+                w[c] = 1.0;
+                lu_solve(&lu, n, &piv, &mut w, &mut tmp);
+                for i in 0..n {
+                    minv[i * n + c] = w[i];
+                }
+            }
+            for i in 0..n {
+                tmp[i] = r0[i] + (0..m).map(|j| b[i * m + j] * u[j]).sum::<f64>();
+            }
+            mat_vec(&minv, n, &tmp, &mut acc);
             for d in 0..nx + p {
                 let blk = &out[bs * (d + 1)..bs * (d + 2)];
                 let (dm, rest) = blk.split_at(n * n);
@@ -330,30 +379,32 @@ impl SensitivitySimulator {
                     for j in 0..m {
                         s += db[i * m + j] * u[j];
                     }
-                    for k in 0..n {
-                        s -= dm[i * n + k] * acc[k];
+                    let row = &dm[i * n..(i + 1) * n];
+                    for (k, a) in row.iter().zip(acc.iter()) {
+                        s -= k * a;
                     }
                     w[i] = s;
                 }
-                lu_solve(&lu, n, &piv, &mut w, &mut tmp);
-                jd[d * n..d * n + n].copy_from_slice(&w);
+                mat_vec(&minv, n, &w, &mut jd[d * n..d * n + n]);
             }
             dz[..n].copy_from_slice(&z[n..nx]);
             dz[n..nx].copy_from_slice(&acc);
             let s = &z[nx..];
             let ds = &mut dz[nx..];
+            // rows of S: d/dt S_q = S_v; d/dt S_v = (da/dx) S + da/dtheta
+            ds[..n * nc].copy_from_slice(&s[n * nc..nx * nc]);
             for i in 0..n {
-                for j in 0..nc {
-                    ds[i * nc + j] = s[(n + i) * nc + j];
+                let row = &mut ds[(n + i) * nc..(n + i + 1) * nc];
+                for (j, r) in row.iter_mut().enumerate() {
+                    *r = if j < p { jd[(nx + j) * n + i] } else { 0.0 };
                 }
-            }
-            for i in 0..n {
-                for j in 0..nc {
-                    let mut v = if j < p { jd[(nx + j) * n + i] } else { 0.0 };
-                    for k in 0..nx {
-                        v += jd[k * n + i] * s[k * nc + j];
+                for k in 0..nx {
+                    let a = jd[k * n + i];
+                    if a != 0.0 {
+                        for (r, sv) in row.iter_mut().zip(&s[k * nc..(k + 1) * nc]) {
+                            *r += a * sv;
+                        }
                     }
-                    ds[(n + i) * nc + j] = v;
                 }
             }
             // deadzone widths of inputs from the data: M^-1 B d dz(u)/dtheta,
@@ -374,9 +425,9 @@ impl SensitivitySimulator {
                         continue;
                     }
                     for i in 0..n {
-                        w[i] = (0..m).map(|l| b[i * m + l] * du[l]).sum::<f64>();
+                        tmp[i] = (0..m).map(|l| b[i * m + l] * du[l]).sum::<f64>();
                     }
-                    lu_solve(&lu, n, &piv, &mut w, &mut tmp);
+                    mat_vec(&minv, n, &tmp, &mut w);
                     for i in 0..n {
                         ds[(n + i) * nc + j] += w[i];
                     }
@@ -404,9 +455,9 @@ impl SensitivitySimulator {
                         continue;
                     }
                     for i in 0..n {
-                        w[i] = (0..m).map(|l| b[i * m + l] * du[l]).sum::<f64>();
+                        tmp[i] = (0..m).map(|l| b[i * m + l] * du[l]).sum::<f64>();
                     }
-                    lu_solve(&lu, n, &piv, &mut w, &mut tmp);
+                    mat_vec(&minv, n, &tmp, &mut w);
                     for i in 0..n {
                         ds[(n + i) * nc + j] += w[i];
                     }

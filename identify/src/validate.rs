@@ -311,3 +311,31 @@ fn causal_velocity(t: &[f64], y: &[f64], k: usize, window: f64) -> f64 {
     }
     crate::experiment_sim::velocity_at(&t[a..=k], &y[a..=k], k - a, window)
 }
+
+/// Simulated (or predicted) coordinates as experiments with the measured
+/// ones' names, files and instants, for figures and where-it-fails.
+pub fn as_experiments(
+    model: &Model,
+    measured: &[Experiment],
+    sim: &[Option<&Vec<Vec<f64>>>],
+) -> Vec<Experiment> {
+    measured
+        .iter()
+        .zip(sim)
+        .map(|(m, s)| Experiment {
+            name: m.name.clone(),
+            file: m.file.clone(),
+            t: m.t.clone(),
+            channels: model
+                .coordinates
+                .iter()
+                .enumerate()
+                .map(|(i, c)| crate::data::Channel {
+                    name: c.name.clone(),
+                    unit_note: None,
+                    values: s.map_or_else(|| vec![f64::NAN; m.len()], |s| s[i].clone()),
+                })
+                .collect(),
+        })
+        .collect()
+}
