@@ -77,7 +77,9 @@ pub use sensitivity::{
 pub use synth::{
     synthesize, EffectSpec, ExperimentSpec, SynthError, SynthOptions, SynthSpec, Synthesized,
 };
-pub use validate::{validate, ChannelScore, ExperimentValidation, ValidateOptions, Validation};
+pub use validate::{
+    as_experiments, validate, ChannelScore, ExperimentValidation, ValidateOptions, Validation,
+};
 pub use weights::ChannelWeight;
 pub use where_it_fails::{
     residual_summary, where_it_fails, ChannelDiagnosis, FailOptions, Finding, FindingKind,
