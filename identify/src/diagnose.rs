@@ -495,10 +495,14 @@ fn refit_from(
             }
         }
     }
+    // a candidate's refit is a screening: no extra starts, no refit without
+    // undetermined parameters (the story's final fit does both)
     let o = FitOptions {
         free: None,
         start: Some(start),
         horizon,
+        multistart: 0,
+        act_on_identifiability: false,
         ..opts.fit.clone()
     };
     fit(m, experiments, &o)

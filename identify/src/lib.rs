@@ -46,6 +46,7 @@ pub mod plot;
 pub mod residual_tests;
 pub mod savitzky_golay;
 pub mod sensitivity;
+pub mod story;
 pub mod synth;
 pub mod validate;
 pub mod where_it_fails;
@@ -73,6 +74,9 @@ pub use plot::{
 pub use residual_tests::{residual_test, CrossCorrelation, ResidualTest};
 pub use sensitivity::{
     estimated_parameters, ExtraColumn, SensitivitySimulator, SensitivityTrajectory, SignalKind,
+};
+pub use story::{
+    fitted_instance, identify, Round, Stage, Story, StoryError, StoryOptions, StoryProgress,
 };
 pub use synth::{
     synthesize, EffectSpec, ExperimentSpec, SynthError, SynthOptions, SynthSpec, Synthesized,

@@ -8,49 +8,13 @@ use std::path::Path;
 use plantc_derive::model::Model;
 use plantc_identify::{
     as_experiments, compare, plot_comparison, plot_residual_tests, validate, where_it_fails,
-    Channel, Experiment, FailOptions, FitReport, Signals, SimOptions, Simulator, ValidateOptions,
+    Experiment, FailOptions, FitReport, ValidateOptions,
 };
 
 use crate::cli::CompareArgs;
 use crate::common::{
     channel_spec, fit_options, load, num, read_data, values, write_json, CliError,
 };
-
-/// The model simulated over each measured experiment, as experiments with the
-/// same names, files and sample instants (coordinates only).
-pub(crate) fn simulate_experiments(
-    model: &Model,
-    full: &[f64],
-    measured: &[Experiment],
-) -> Result<Vec<Experiment>, CliError> {
-    let sim = Simulator::new(model, SimOptions::default())
-        .map_err(|e| CliError::failure(format!("error: {e}")))?;
-    measured
-        .iter()
-        .map(|m| {
-            let sig = Signals::from_experiment(model, m)
-                .map_err(|e| CliError::input(format!("error: {e}")))?;
-            let tr = sim
-                .simulate(&sig, full, m.len())
-                .map_err(|e| CliError::failure(format!("error: {e}")))?;
-            Ok(Experiment {
-                name: m.name.clone(),
-                file: m.file.clone(),
-                t: m.t.clone(),
-                channels: model
-                    .coordinates
-                    .iter()
-                    .zip(tr.q)
-                    .map(|(c, q)| Channel {
-                        name: c.name.clone(),
-                        unit_note: None,
-                        values: q,
-                    })
-                    .collect(),
-            })
-        })
-        .collect()
-}
 
 /// Fit % and RMSE of the model's coordinates over the experiments.
 pub(crate) fn report(
