@@ -452,7 +452,11 @@ pub fn uniform(sig: Signals) -> Signals {
         return sig;
     }
     let dt = sig.sample_time();
-    if sig.t.windows(2).all(|w| ((w[1] - w[0]) - dt).abs() <= 0.01 * dt) {
+    if sig
+        .t
+        .windows(2)
+        .all(|w| ((w[1] - w[0]) - dt).abs() <= 0.01 * dt)
+    {
         return sig;
     }
     let (t0, t1) = (sig.t[0], sig.t[n - 1]);
@@ -460,7 +464,12 @@ pub fn uniform(sig: Signals) -> Signals {
     let t: Vec<f64> = (0..len).map(|k| t0 + k as f64 * dt).collect();
     let idx: Vec<usize> = t
         .iter()
-        .map(|&x| sig.t.partition_point(|&s| s <= x).saturating_sub(1).min(n - 1))
+        .map(|&x| {
+            sig.t
+                .partition_point(|&s| s <= x)
+                .saturating_sub(1)
+                .min(n - 1)
+        })
         .collect();
     let cubic = |y: &[f64], x: f64, i: usize| -> f64 {
         let a = i.saturating_sub(1).min(n - 4);

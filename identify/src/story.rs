@@ -163,8 +163,8 @@ fn stage(
             as_experiments(model, experiments, &sims)
         }
     };
-    let report = compare(experiments, &simulated, &names)
-        .map_err(|e| StoryError::Compare(e.to_string()))?;
+    let report =
+        compare(experiments, &simulated, &names).map_err(|e| StoryError::Compare(e.to_string()))?;
     let validation = if opts.validate.is_empty() {
         None
     } else {
@@ -216,8 +216,8 @@ pub fn identify(
     progress: &mut dyn FnMut(&StoryProgress),
 ) -> Result<Story, StoryError> {
     let model = model_from_text("model", text).map_err(StoryError::Model)?;
-    let nominal = ParameterValues::new(&model, None, &[])
-        .map_err(|e| StoryError::Compare(e.to_string()))?;
+    let nominal =
+        ParameterValues::new(&model, None, &[]).map_err(|e| StoryError::Compare(e.to_string()))?;
     progress(&StoryProgress::Step("comparing the nominal model".into()));
     let mut stages = vec![stage(
         "nominal",
@@ -278,14 +278,12 @@ pub fn identify(
             break;
         };
         let inst = fitted_instance(&top);
-        let edited = inst
-            .apply(&current_text)
-            .map_err(|error| {
-                StoryError::Diagnose(DiagnoseError::Edit {
-                    which: inst.label(),
-                    error,
-                })
-            })?;
+        let edited = inst.apply(&current_text).map_err(|error| {
+            StoryError::Diagnose(DiagnoseError::Edit {
+                which: inst.label(),
+                error,
+            })
+        })?;
         let m2 = model_from_text("with_effect", &edited).map_err(StoryError::Model)?;
         // start from the refit's values (the effect's and the model's)
         let mut start: Vec<f64> = m2.parameters.iter().map(|p| p.value).collect();
@@ -293,14 +291,21 @@ pub fn identify(
             for (i, p) in m2.parameters.iter().enumerate() {
                 if let Some(e) = f.parameters.iter().find(|e| e.name == p.name) {
                     start[i] = e.value;
-                } else if let Some(j) = current_model.parameters.iter().position(|q| q.name == p.name) {
+                } else if let Some(j) = current_model
+                    .parameters
+                    .iter()
+                    .position(|q| q.name == p.name)
+                {
                     if let Some(cf) = &current_fit {
                         start[i] = cf.base[j];
                     }
                 }
             }
         }
-        progress(&StoryProgress::Step(format!("fitting with {}", inst.label())));
+        progress(&StoryProgress::Step(format!(
+            "fitting with {}",
+            inst.label()
+        )));
         let f = fit_with_progress(
             &m2,
             experiments,

@@ -96,10 +96,8 @@ pub fn run(args: &DiagnoseArgs, out: &mut dyn Write, err: &mut dyn Write) -> Res
         "refitting the model with each candidate effect on {} experiment(s)...",
         measured.len()
     );
-    let d = with_progress("diagnosing", |_| {
-        diagnose(&text, &measured, &fit_opts)
-    })
-    .map_err(|e| CliError::failure(format!("error: {e}")))?;
+    let d = with_progress("diagnosing", |_| diagnose(&text, &measured, &fit_opts))
+        .map_err(|e| CliError::failure(format!("error: {e}")))?;
     let findings = findings(&d);
     if args.apply {
         if let (Some(o), Some(top)) = (&args.out, findings.first()) {

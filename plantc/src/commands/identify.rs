@@ -263,7 +263,11 @@ fn story(
                 let edited = with_values(&stage.text, &m2, f)?;
                 write_file(&dir.join(&file), &edited)?;
                 files.push(file.clone());
-                let _ = writeln!(err, "model with the effect -> {}", dir.join(&file).display());
+                let _ = writeln!(
+                    err,
+                    "model with the effect -> {}",
+                    dir.join(&file).display()
+                );
                 for e in &f.parameters {
                     let _ = writeln!(
                         out,
@@ -356,7 +360,8 @@ fn story(
         .stages
         .iter()
         .map(|st| {
-            let mut j = serde_json::json!({"stage": st.label, "report": st.report, "cost": st.cost});
+            let mut j =
+                serde_json::json!({"stage": st.label, "report": st.report, "cost": st.cost});
             if let Some(v) = &st.validation {
                 j["validation"] = serde_json::to_value(v).unwrap_or_default();
             }
