@@ -934,6 +934,7 @@ pub(crate) fn parameters_slow(n_fast: usize, n_params: usize) -> Vec<bool> {
 /// Evaluate a recorded law at sample `k` of a block: the measured
 /// coordinates are the state's positions plus `offsets`; writes the held
 /// value of every driven input at `k` (deadzone applied).
+#[allow(clippy::too_many_arguments)] // the loop state of one sample, passed as it is
 pub(crate) fn control_at(
     law: &LoopLaw,
     rep: &Replay,

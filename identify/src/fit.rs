@@ -822,8 +822,8 @@ impl<'a> Setup<'a> {
             .collect();
         let mut lo: Vec<f64> = self.bounds.iter().map(|b| b.0).collect();
         let mut hi: Vec<f64> = self.bounds.iter().map(|b| b.1).collect();
-        lo.extend(std::iter::repeat(f64::NEG_INFINITY).take(offsets.len()));
-        hi.extend(std::iter::repeat(f64::INFINITY).take(offsets.len()));
+        lo.extend(std::iter::repeat_n(f64::NEG_INFINITY, offsets.len()));
+        hi.extend(std::iter::repeat_n(f64::INFINITY, offsets.len()));
         Problem {
             model: self.model,
             sim: &self.sim,
@@ -845,7 +845,7 @@ impl<'a> Setup<'a> {
     pub(crate) fn start_point(&self, pb: &Problem<'_>, g_model: &[f64]) -> Point {
         let n = self.model.coordinates.len();
         let mut g = g_model.to_vec();
-        g.extend(std::iter::repeat(0.0).take(pb.offsets.len()));
+        g.extend(std::iter::repeat_n(0.0, pb.offsets.len()));
         let full = pb.full_at(&g);
         let model_off = self
             .sim
@@ -1802,7 +1802,7 @@ fn multistart(
         }
         run.simulations += 1;
         if let Ok((s, _)) = pb.cost(&q, f64::INFINITY) {
-            if found.as_ref().map_or(true, |f| s < f.1) {
+            if found.as_ref().is_none_or(|f| s < f.1) {
                 found = Some((q, s));
             }
         }

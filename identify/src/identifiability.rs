@@ -157,7 +157,7 @@ pub(crate) fn analyse(
     let top = sens.iter().copied().fold(0.0f64, f64::max);
     let dead: Vec<bool> = sens
         .iter()
-        .map(|&s| !(s > 1e-6 * top) || top == 0.0)
+        .map(|&s| s.is_nan() || s <= 1e-6 * top || top == 0.0)
         .collect();
     for (j, p) in params.iter().enumerate() {
         if dead[j] {

@@ -26,6 +26,9 @@
 //! - [`synthesize`] makes measurement-like data from a model with hidden
 //!   effects ([`synth`]).
 
+// numeric kernels index several arrays in step; index loops read better there
+#![allow(clippy::needless_range_loop)]
+
 mod csv_reader;
 pub mod data;
 pub mod error;

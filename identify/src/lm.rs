@@ -80,7 +80,7 @@ pub(crate) fn cholesky(a: &[f64], n: usize) -> Option<Vec<f64>> {
                 s -= l[i * n + k] * l[j * n + k];
             }
             if i == j {
-                if !(s > 0.0) || !s.is_finite() {
+                if s.is_nan() || s <= 0.0 || !s.is_finite() {
                     return None;
                 }
                 l[i * n + i] = s.sqrt();
@@ -113,7 +113,7 @@ pub(crate) fn cholesky_solve(l: &[f64], n: usize, x: &mut [f64]) {
 /// accurate); None if not positive definite.
 pub(crate) fn solve_spd(a: &[f64], n: usize, b: &[f64]) -> Option<Vec<f64>> {
     let s: Vec<f64> = (0..n).map(|i| a[i * n + i].max(0.0).sqrt()).collect();
-    if s.iter().any(|v| !(*v > 0.0)) {
+    if s.iter().any(|v| v.is_nan() || *v <= 0.0) {
         return None;
     }
     let scaled: Vec<f64> = (0..n * n).map(|k| a[k] / (s[k / n] * s[k % n])).collect();

@@ -324,8 +324,7 @@ fn stems(
         .iter()
         .map(|p| p.1.abs())
         .fold(band * 1.5, f64::max)
-        .min(1.05)
-        .max(1e-6);
+        .clamp(1e-6, 1.05);
     let mut chart = ChartBuilder::on(area)
         .caption(title, ("sans-serif", 13))
         .margin(6)

@@ -147,3 +147,47 @@ fn leave_one_episode_out() {
     assert!(mean(&sim.0) >= 85.0 && mean(&sim.1) >= 75.0);
     assert!(mean(&pred.0) >= 90.0 && mean(&pred.1) >= 85.0);
 }
+
+/// The issue's trap: on closed-loop data the controller used to be absorbed
+/// into the plant as a spring on alpha (k = 0.0107 N m/rad, "13x lower
+/// RMSE"). With the recorded controller simulated in the loop, no effect
+/// may be named that holds the pendulum upright by itself: a spring on alpha
+/// stiffer than the gravity torque's slope mp g lp (0.0152 N m/rad at the
+/// model's values).
+#[test]
+fn diagnosis_does_not_absorb_the_controller() {
+    let Some(exps) = episodes() else { return };
+    let text = std::fs::read_to_string(repo().join("models/qube_servo.plant")).expect("reads");
+    let model = qube_model();
+    let v = |n: &str| model.parameter(n).expect(n).value;
+    let upright = v("mp") * v("g") * v("lp");
+    let d = plantc_identify::diagnose(&text, &exps, &FitOptions::default()).expect("diagnoses");
+    for r in d.ranking.iter().filter(|r| r.fit.is_some()) {
+        eprintln!(
+            "{:<20} {:<6} gain {:.2}x {}",
+            r.candidate.effect,
+            r.candidate.target,
+            r.gain,
+            r.parameters
+                .iter()
+                .map(|p| format!("{} = {:.4e}", p.name, p.value))
+                .collect::<Vec<_>>()
+                .join(", ")
+        );
+    }
+    eprintln!(
+        "verdict: {}",
+        d.verdict
+            .as_ref()
+            .map_or("adequate".to_string(), |c| c.label())
+    );
+    if let Some(c) = &d.verdict {
+        if c.effect == "spring" && c.target == "alpha" {
+            let k = d.ranking[0].parameters[0].value;
+            assert!(
+                k < upright,
+                "a spring on alpha of {k:.4e} N m/rad (gravity slope {upright:.4e}) was named"
+            );
+        }
+    }
+}

@@ -152,13 +152,14 @@ pub fn run(args: &CompareArgs, out: &mut dyn Write, err: &mut dyn Write) -> Resu
         }
     }
     if args.json {
-        let mut j = serde_json::to_value(&v).map_err(|e| CliError::failure(e.to_string()))?;
-        if let Some(r) = &rep {
-            j["report"] = serde_json::to_value(r).map_err(|e| CliError::failure(e.to_string()))?;
-            // the report's shape at the top level, as before
-            j["experiments_report"] = j["report"]["experiments"].clone();
-            j["rmse"] = j["report"]["rmse"].clone();
-        }
+        // the report (fit % and RMSE per file and channel, pooled RMSE) at
+        // the top level as always; the validation's details (nuisance,
+        // simulation, prediction, residual tests) under `validation`
+        let mut j = match &rep {
+            Some(r) => serde_json::to_value(r).map_err(|e| CliError::failure(e.to_string()))?,
+            None => serde_json::json!({ "experiments": [], "rmse": null }),
+        };
+        j["validation"] = serde_json::to_value(&v).map_err(|e| CliError::failure(e.to_string()))?;
         write_json(out, &j);
         return Ok(());
     }
