@@ -505,10 +505,18 @@ impl EffectInstance {
     }
 }
 
+/// Effects of a drive (a motor's detent torque, a drive's speed limit):
+/// [`all_candidates`] proposes them only on coordinates whose force depends
+/// on an input (a detent on a free pendulum joint is not physical, and its
+/// period scan would fit anything periodic there). They can be written on
+/// any coordinate by hand.
+pub const DRIVE_EFFECTS: &[&str] = &["cogging", "speed_limit"];
+
 /// Every template effect on every valid target of `model`, as fit
 /// candidates (see [`EffectInstance::candidate`]): for each coordinate the
 /// force and sensor effects in table order, then for each input the actuator
 /// effects in table order.
+/// Drive effects ([`DRIVE_EFFECTS`]) only on actuated coordinates.
 pub fn all_candidates(model: &Model) -> Vec<EffectInstance> {
     let mut v = Vec::new();
     let targets = model
@@ -521,8 +529,22 @@ pub fn all_candidates(model: &Model) -> Vec<EffectInstance> {
                 .iter()
                 .map(|i| (&i.name, [EffectKind::Actuator, EffectKind::Actuator])),
         );
+    let inputs = model.input_symbols();
+    let unactuated: Vec<&String> = model
+        .coordinates
+        .iter()
+        .zip(&model.forces)
+        .filter(|(_, f)| {
+            let f = model.expand_derived(**f);
+            !inputs.iter().any(|&u| f.contains(u))
+        })
+        .map(|(c, _)| &c.name)
+        .collect();
     for (target, kinds) in targets {
         for (name, kind, _) in TEMPLATES {
+            if DRIVE_EFFECTS.contains(name) && unactuated.contains(&target) {
+                continue;
+            }
             if kinds.contains(kind) {
                 if let Ok(e) = EffectInstance::candidate(model, name, target) {
                     v.push(e);

@@ -184,6 +184,14 @@ fn templates_and_lossless_edits() {
     let l = EffectInstance::candidate(&m, "saturation", "Vm").expect("candidate");
     assert_eq!(l.line(), "actuator");
     model(&l.apply(&text).expect("applies"));
+    // drive effects are proposed on the actuated arm only, added inertia
+    // on both joints
+    let labels: Vec<String> = candidates(&m).iter().map(|c| c.label()).collect();
+    for want in ["cogging@theta", "speed_limit@theta", "added_inertia@theta"] {
+        assert!(labels.iter().any(|l| l == want), "{want} in {labels:?}");
+    }
+    assert!(labels.iter().any(|l| l == "added_inertia@alpha"));
+    assert!(!labels.iter().any(|l| l == "cogging@alpha" || l == "speed_limit@alpha"));
     // wrong targets
     assert!(EffectInstance::candidate(&m, "added_inertia", "Vm").is_err());
     assert!(EffectInstance::candidate(&m, "saturation", "theta").is_err());
