@@ -757,7 +757,9 @@ impl SignalEffects {
             m,
             p: free.len(),
             inputs: model.inputs.iter().map(|i| i.name.clone()).collect(),
-            saturated: (0..m).map(|j| model.input_saturation(j).is_some()).collect(),
+            saturated: (0..m)
+                .map(|j| model.input_saturation(j).is_some())
+                .collect(),
             delay_depends_on_free,
             deadzone_depends_on_free,
         })

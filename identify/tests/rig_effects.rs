@@ -130,7 +130,10 @@ fn sensitivities_of_the_new_effects_match_finite_differences() {
         .map(|w| (w[1] - w[0]).abs() / 0.002)
         .fold(0.0f64, f64::max);
     eprintln!("arm: largest |theta| {span:.2} rad, largest speed {speed:.2} rad/s");
-    assert!(span > 2.0 * std::f64::consts::PI / 24.0, "several cogging periods");
+    assert!(
+        span > 2.0 * std::f64::consts::PI / 24.0,
+        "several cogging periods"
+    );
     assert!(speed > 1.5, "above the speed limit");
     check_sensitivities(
         &m,
@@ -167,7 +170,9 @@ fn templates_and_lossless_edits() {
         .expect("instance");
     assert_eq!(a.kind, EffectKind::Force);
     assert_eq!(a.line(), "inertia");
-    assert!(a.snippet().ends_with("inertia alpha = added_inertia(J_alpha)\n"));
+    assert!(a
+        .snippet()
+        .ends_with("inertia alpha = added_inertia(J_alpha)\n"));
     let edited = a.apply(&text).expect("applies");
     let at = edited.find("inertia alpha").expect("line added");
     let inserted = "inertia alpha = added_inertia(J_alpha)\n";
@@ -191,7 +196,9 @@ fn templates_and_lossless_edits() {
         assert!(labels.iter().any(|l| l == want), "{want} in {labels:?}");
     }
     assert!(labels.iter().any(|l| l == "added_inertia@alpha"));
-    assert!(!labels.iter().any(|l| l == "cogging@alpha" || l == "speed_limit@alpha"));
+    assert!(!labels
+        .iter()
+        .any(|l| l == "cogging@alpha" || l == "speed_limit@alpha"));
     // wrong targets
     assert!(EffectInstance::candidate(&m, "added_inertia", "Vm").is_err());
     assert!(EffectInstance::candidate(&m, "saturation", "theta").is_err());
@@ -220,10 +227,7 @@ fn synth_case(test: &str, effect: &str) -> (String, Vec<Experiment>) {
             vec![parse_effect_spec(effect).expect("effect")]
         },
         parameter_set: None,
-        values: RIG
-            .iter()
-        .map(|(n, v)| (n.to_string(), *v))
-        .collect(),
+        values: RIG.iter().map(|(n, v)| (n.to_string(), *v)).collect(),
         experiments: [
             "free_swing:alpha0=120deg,duration=10,name=large",
             "free_swing:alpha0=160deg,duration=10,name=small",
@@ -243,7 +247,9 @@ fn synth_case(test: &str, effect: &str) -> (String, Vec<Experiment>) {
         .iter()
         .map(|f| {
             let p = common::write(test, &f.file_name, &f.text);
-            read_experiment(&p, &common::pendulum_spec()).expect("reads").0
+            read_experiment(&p, &common::pendulum_spec())
+                .expect("reads")
+                .0
         })
         .collect();
     (text, exps)

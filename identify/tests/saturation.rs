@@ -226,7 +226,8 @@ fn sensitivity_to_level_matches_finite_differences() {
             .fold(f64::INFINITY, f64::min);
         assert!(near > 1e-5, "a sample lies at the kink: {near}");
     }
-    let m = pendulum_with("parameter L = 1.2 [V] estimate [0.1, 10]\nactuator Vm = saturation(L)\n");
+    let m =
+        pendulum_with("parameter L = 1.2 [V] estimate [0.1, 10]\nactuator Vm = saturation(L)\n");
     check_sensitivities(&m, &sig, &["L", "J1"], &[1e-6, 1e-8], 1e-6, None);
     // with a deadzone, a delay and an offset on the same input, all estimated
     let m = pendulum_with(
@@ -288,8 +289,18 @@ fn closed_loop_sensitivity_with_saturation_matches_finite_differences() {
         .expect("compiles")
         .with_loop(law.clone());
     let tr = sim.simulate(&sig, &nominal(&m), n).expect("simulates");
-    assert!(tr.q[0].iter().any(|v| (v - 0.0).abs() > 0.05), "the arm moves");
-    check_sensitivities(&m, &sig, &["L", "J1", "b1"], &[1e-6, 1e-8, 1e-7], 1e-6, Some(&law));
+    assert!(
+        tr.q[0].iter().any(|v| (v - 0.0).abs() > 0.05),
+        "the arm moves"
+    );
+    check_sensitivities(
+        &m,
+        &sig,
+        &["L", "J1", "b1"],
+        &[1e-6, 1e-8, 1e-7],
+        1e-6,
+        Some(&law),
+    );
 }
 
 #[test]

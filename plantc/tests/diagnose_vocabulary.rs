@@ -112,6 +112,30 @@ const CASES: &[Case] = &[
         Some("deadzone@Vm"),
         Some(("w", 0.4)),
     ),
+    (
+        "cogging_theta",
+        &["--effect", "cogging:theta:A=0.01,N=24,phi=0.5"],
+        Some("cogging@theta"),
+        Some(("A", 0.01)),
+    ),
+    (
+        "saturation",
+        &["--effect", "saturation:Vm=1.5"],
+        Some("saturation@Vm"),
+        Some(("L", 1.5)),
+    ),
+    (
+        "speed_limit_theta",
+        &["--effect", "speed_limit:theta:vmax=1.0,c=0.1"],
+        Some("speed_limit@theta"),
+        Some(("vmax", 1.0)),
+    ),
+    (
+        "added_inertia_alpha",
+        &["--effect", "added_inertia:alpha=3e-4"],
+        Some("added_inertia@alpha"),
+        Some(("J", 3e-4)),
+    ),
 ];
 
 /// Synthesize the case and diagnose it: `effect@target` of the top finding

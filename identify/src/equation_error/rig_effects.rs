@@ -56,8 +56,7 @@ pub const REFINED: usize = 3;
 /// Quantiles of the commanded `|u|` (saturation) or measured `|q'|` (speed
 /// limit) tried as the level.
 pub const LEVEL_QUANTILES: [f64; 17] = [
-    0.3, 0.4, 0.5, 0.6, 0.65, 0.7, 0.75, 0.8, 0.84, 0.88, 0.9, 0.92, 0.94, 0.96, 0.97, 0.98,
-    0.99,
+    0.3, 0.4, 0.5, 0.6, 0.65, 0.7, 0.75, 0.8, 0.84, 0.88, 0.9, 0.92, 0.94, 0.96, 0.97, 0.98, 0.99,
 ];
 
 /// The scanned regressor a `Regressor::Parameters` stands for, when its
