@@ -667,6 +667,8 @@ pub(crate) struct Setup<'a> {
     pub(crate) sigs: Vec<Signals>,
     pub(crate) sim: Simulator,
     sens: SensitivitySimulator,
+    /// Sensitivities to the nuisance unknowns only (the parameters held).
+    sens_nuisance: SensitivitySimulator,
     weights: Vec<ChannelWeight>,
     free: Vec<usize>,
     free_names: Vec<String>,
@@ -694,9 +696,11 @@ impl<'a> Setup<'a> {
         };
         let law = resolve_closed_loop(model, experiments, &opts.closed_loop)?;
         let mut sens = SensitivitySimulator::new(model, free_names, opts.sim)?;
+        let mut sens_nuisance = SensitivitySimulator::new(model, &[], opts.sim)?;
         let mut sim = Simulator::new(model, opts.sim)?;
         if let Some(l) = &law {
             sens = sens.with_loop(l.clone());
+            sens_nuisance = sens_nuisance.with_loop(l.clone());
             sim = sim.with_loop(l.clone());
         }
         let free = sens.free_indices().to_vec();
@@ -738,6 +742,7 @@ impl<'a> Setup<'a> {
             sigs,
             sim,
             sens,
+            sens_nuisance,
             weights,
             free,
             free_names: free_names.to_vec(),
@@ -746,6 +751,15 @@ impl<'a> Setup<'a> {
             offset_coords,
             opts,
         })
+    }
+
+    /// [`Setup::problem`] with sensitivities to the nuisance unknowns only
+    /// (for stages that hold the parameters: cheaper).
+    pub(crate) fn nuisance_problem(&self, segments: Option<f64>) -> Problem<'_> {
+        Problem {
+            sens: &self.sens_nuisance,
+            ..self.problem(segments)
+        }
     }
 
     /// The problem with blocks cut at `segments` s (None: whole records).
@@ -966,10 +980,12 @@ pub fn fit_with_progress(
         l: Vec::new(),
     };
 
+    // the normal equations at the best point (reused below when the point
+    // does not move)
+    let mut nrm = pb.normal(&pt, f64::INFINITY)?;
+    run.simulations += 1;
     // 6. per-experiment offsets that are not significant are dropped
     if matches!(opts.offsets, Offsets::Auto) && !pb.offsets.is_empty() {
-        let nrm = pb.normal(&pt, f64::INFINITY)?;
-        run.simulations += 1;
         let (cov, _) = covariance(&nrm, &frozen, unknowns);
         let mut dropped = Vec::new();
         let mut q = pt.clone();
@@ -1016,6 +1032,8 @@ pub fn fit_with_progress(
                 if s2 <= REDUCED_TOLERANCE * REDUCED_TOLERANCE * best.1 && s2 <= ssr0 {
                     best = (q, s2);
                     frozen = fz;
+                    nrm = pb.normal(&best.0, f64::INFINITY)?;
+                    run.simulations += 1;
                     notes.push(format!(
                         "per-experiment offsets on {} were dropped: not significant (within 2 standard errors of zero) or not determined by the data",
                         dropped.join(", ")
@@ -1027,8 +1045,6 @@ pub fn fit_with_progress(
     }
 
     // 7. identifiability: fix what the data do not determine, refit
-    let mut nrm = pb.normal(&pt, f64::INFINITY)?;
-    run.simulations += 1;
     let mut ident = identifiability(&setup, &pb, &pt, &nrm, &frozen, unknowns);
     if opts.act_on_identifiability {
         let fix = to_fix(&ident);
@@ -1209,7 +1225,7 @@ fn carry_over(setup: &Setup<'_>, pb: &Problem<'_>, pt: &mut Point, from: &Outcom
 /// fitted at the start values, follow the data.
 fn choose_segments(setup: &Setup<'_>, g0: &[f64], run: &mut Run<'_>) -> f64 {
     for &h in &AUTO_SEGMENTS {
-        let pb = setup.problem(Some(h));
+        let pb = setup.nuisance_problem(Some(h));
         let mut pt = setup.start_point(&pb, g0);
         let frozen: Vec<bool> = (0..pb.n_globals()).map(|_| true).collect();
         let mut lambda = 1e-3;
@@ -1235,7 +1251,7 @@ fn choose_segments(setup: &Setup<'_>, g0: &[f64], run: &mut Run<'_>) -> f64 {
 /// a fit that moved to whole records (SSR infinite when it cannot be
 /// simulated).
 fn whole_before(setup: &Setup<'_>, g0: &[f64], run: &mut Run<'_>) -> (Point, (f64, usize)) {
-    let pb = setup.problem(None);
+    let pb = setup.nuisance_problem(None);
     let mut pt = setup.start_point(&pb, g0);
     let p = setup.free.len();
     let frozen: Vec<bool> = (0..pb.n_globals()).map(|j| j < p).collect();
@@ -1309,8 +1325,9 @@ fn solve<'s>(
     let mut lambda = 1e-3;
     let has_nuisance = ng > p || pb.blocks.iter().any(|b| !b.free_state.is_empty());
     if has_nuisance {
+        let pbn = setup.nuisance_problem(segments);
         let _ = lm(
-            &pb,
+            &pbn,
             &mut pt,
             f64::INFINITY,
             &nuisance_frozen,
@@ -1329,6 +1346,7 @@ fn solve<'s>(
     // growing horizons, the best point on the whole objective kept
     lambda = 1e-3;
     let mut stage_cost: Option<f64> = None;
+    let mut stage_ssr: f64;
     let mut last_stop = Stop::Converged;
     for (s, &h) in horizons.iter().enumerate() {
         run.stage = s + 1;
@@ -1354,6 +1372,7 @@ fn solve<'s>(
         ) {
             Ok((ssr, c, stop)) => {
                 stage_cost = Some(rms(ssr, c));
+                stage_ssr = ssr;
                 last_stop = stop;
             }
             Err(_) => {
@@ -1363,8 +1382,13 @@ fn solve<'s>(
                 continue;
             }
         }
-        run.simulations += 1;
-        let full = pb.cost(&pt, f64::INFINITY).map_or(f64::INFINITY, |x| x.0);
+        let full = if !h.is_finite() {
+            // the last stage's cost is the whole record's already
+            stage_ssr
+        } else {
+            run.simulations += 1;
+            pb.cost(&pt, f64::INFINITY).map_or(f64::INFINITY, |x| x.0)
+        };
         if full < best.1 {
             best = (pt.clone(), full);
         } else {

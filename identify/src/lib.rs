@@ -9,11 +9,20 @@
 //! - [`Simulator`] simulates a model over a measured experiment (ZOH input,
 //!   fixed-step RK4, one compiled tape); [`SensitivitySimulator`] adds exact
 //!   forward sensitivities to the free parameters.
-//! - [`fit()`] estimates bounded parameters by Levenberg-Marquardt on the
-//!   simulation error, with standard errors and correlated pairs.
+//! - [`fit()`] estimates bounded parameters by simulation error on a block
+//!   problem: per-experiment initial states and sensor zeros as nuisance,
+//!   weighted channels, segments when the replay diverges, a recorded
+//!   controller simulated in the loop for closed-loop data ([`LoopLaw`]),
+//!   growing horizons, scans and extra starts; the result is the best point
+//!   on the whole records, with standard errors and [`Identifiability`]
+//!   findings (a degenerate fit says so).
+//! - [`validate()`] checks a fitted model on held-out files: simulation,
+//!   k-step-ahead prediction and residual tests ([`residual_test`]).
 //! - [`EquationError`] ranks candidate effects by equation error (smoothed
 //!   derivatives, BIC gain); [`diagnose()`] confirms the leaders by
 //!   simulation-error refits and names the missing effect or says "adequate".
+//! - [`identify()`] is the whole story (rounds of diagnose -> add the effect
+//!   -> refit, then validation), for the CLI, tests and editors alike.
 //! - [`synthesize`] makes measurement-like data from a model with hidden
 //!   effects ([`synth`]).
 
@@ -46,6 +55,7 @@ pub mod plot;
 pub mod residual_tests;
 pub mod savitzky_golay;
 pub mod sensitivity;
+pub mod story;
 pub mod synth;
 pub mod validate;
 pub mod where_it_fails;
@@ -74,10 +84,15 @@ pub use residual_tests::{residual_test, CrossCorrelation, ResidualTest};
 pub use sensitivity::{
     estimated_parameters, ExtraColumn, SensitivitySimulator, SensitivityTrajectory, SignalKind,
 };
+pub use story::{
+    fitted_instance, identify, Round, Stage, Story, StoryError, StoryOptions, StoryProgress,
+};
 pub use synth::{
     synthesize, EffectSpec, ExperimentSpec, SynthError, SynthOptions, SynthSpec, Synthesized,
 };
-pub use validate::{validate, ChannelScore, ExperimentValidation, ValidateOptions, Validation};
+pub use validate::{
+    as_experiments, validate, ChannelScore, ExperimentValidation, ValidateOptions, Validation,
+};
 pub use weights::ChannelWeight;
 pub use where_it_fails::{
     residual_summary, where_it_fails, ChannelDiagnosis, FailOptions, Finding, FindingKind,

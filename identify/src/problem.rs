@@ -272,7 +272,13 @@ impl Problem<'_> {
     pub fn normal(&self, pt: &Point, horizon: f64) -> Result<Normal, SimError> {
         let full = self.full_at(&pt.g);
         let model_off = self.sim.model_offsets(&full)?;
-        let (p, ng, n) = (self.free.len(), self.n_globals(), self.n());
+        let (ng, n) = (self.n_globals(), self.n());
+        // the sensitivity simulator has columns for every free parameter
+        // (in `free` order), or none (nuisance-only stages: the parameters'
+        // rows stay zero and the caller holds them)
+        let p = self.sens.free_indices().len();
+        debug_assert!(p == 0 || p == self.free.len());
+        let p_glob = self.free.len();
         let parts = par_each(self.blocks.len(), |b| {
             let blk = &self.blocks[b];
             let sig = &self.sigs[blk.exp];
@@ -293,7 +299,7 @@ impl Problem<'_> {
                 let mut direct = vec![0.0; n];
                 direct[i] = 1.0;
                 extra.push(ExtraColumn { s0, direct });
-                map.push(Col::Global(p + o));
+                map.push(Col::Global(p_glob + o));
             }
             for (j, &c) in blk.free_state.iter().enumerate() {
                 let mut s0 = vec![0.0; 2 * n];

@@ -189,7 +189,7 @@ pub fn validate(
     let setup = Setup::new(model, experiments, &fo, &[])?;
     let n = model.coordinates.len();
     let names: Vec<&str> = model.coordinates.iter().map(|c| c.name.as_str()).collect();
-    let pb = setup.problem(None);
+    let pb = setup.nuisance_problem(None);
     let mut pt = setup.start_point(&pb, &[]);
     // nuisance: per experiment (independent), whole records
     let fitted = lm_nuisance(&setup, &pb, &mut pt);

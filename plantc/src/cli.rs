@@ -166,6 +166,9 @@ pub struct IdentifyArgs {
     /// segment starts from its own estimated state).
     #[arg(long, value_name = "auto|whole|SECONDS", default_value = "auto")]
     pub horizon: String,
+    /// Most effects added in turn (diagnose -> add -> refit rounds).
+    #[arg(long = "max-effects", value_name = "N", default_value_t = 3)]
+    pub max_effects: usize,
     /// Held-out experiments the model is judged on at each stage.
     #[arg(long, value_name = "FILE", num_args = 1..)]
     pub validate: Vec<PathBuf>,
