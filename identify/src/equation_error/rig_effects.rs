@@ -5,8 +5,12 @@
 //!
 //! - **Cogging** `-A sin(N q + phase)` on coordinate `i`: for a given integer
 //!   `N` the force is linear in `(A cos phase, A sin phase)`, with columns
-//!   `sin(N q)`, `cos(N q)` in equation `i`. `N` runs over `2..=N_max` (one
-//!   period per revolution is not a detent: gravity or an unbalance), with
+//!   `sin(N q)`, `cos(N q)` in equation `i`. `N` runs over `N_min..=N_max`:
+//!   `N_min` is [`MIN_PERIODS`] (a motor's detent count is the least common
+//!   multiple of its poles and slots, at least 4; one or two periods per
+//!   revolution are gravity, an unbalance or a spring), raised so that one
+//!   period fits in the coordinate's measured range (a longer one is
+//!   indistinguishable from a smooth position-dependent force), with
 //!   `N_max` set by the encoder: a period must span at least
 //!   [`COUNTS_PER_PERIOD`] of the smallest position step in the data (a
 //!   finer detent is not resolved), and at most [`MAX_PERIODS`]. The whole
@@ -46,6 +50,8 @@ use super::{
 };
 use crate::effect_edit::label_of;
 
+/// Smallest cogging period count scanned.
+pub const MIN_PERIODS: usize = 4;
 /// Largest cogging period count scanned.
 pub const MAX_PERIODS: usize = 360;
 /// A cogging period must span at least this many of the smallest position
@@ -319,6 +325,13 @@ impl EquationError {
                 self.exps[e].q[i][k]
             })
             .collect();
+        let range = q.iter().fold(f64::NEG_INFINITY, |a, &v| a.max(v))
+            - q.iter().fold(f64::INFINITY, |a, &v| a.min(v));
+        let n_min = if range > 0.0 {
+            ((2.0 * std::f64::consts::PI / range).ceil() as usize).max(MIN_PERIODS)
+        } else {
+            usize::MAX
+        };
         let (s1, c1): (Vec<f64>, Vec<f64>) = q.iter().map(|x| x.sin_cos()).unzip();
         let (mut sn, mut cn) = (s1.clone(), c1.clone());
         let mut coarse: Vec<(f64, usize)> = Vec::new();
@@ -328,6 +341,9 @@ impl EquationError {
                 let (s, c) = (sn[r], cn[r]);
                 sn[r] = s * c1[r] + c * s1[r];
                 cn[r] = c * c1[r] - s * s1[r];
+            }
+            if nper < n_min {
+                continue;
             }
             let cols = [
                 sn.iter().map(|v| v * w).collect::<Vec<f64>>(),
