@@ -258,7 +258,10 @@ fn synth_case(test: &str, effect: &str) -> (String, Vec<Experiment>) {
 /// The equation-error ranking of every candidate as the diagnosis does it,
 /// at the rig's base parameters (standing for a converged baseline fit):
 /// `(label, bic gain, estimates)`, best first.
-fn rank(text: &str, exps: &[Experiment]) -> Vec<(String, f64, Vec<(String, f64)>)> {
+/// `(label, bic gain, estimates)` of one candidate.
+type Ranked = (String, f64, Vec<(String, f64)>);
+
+fn rank(text: &str, exps: &[Experiment]) -> Vec<Ranked> {
     let m = model(text);
     let base: Vec<f64> = m
         .parameters
@@ -272,7 +275,7 @@ fn rank(text: &str, exps: &[Experiment]) -> Vec<(String, f64, Vec<(String, f64)>
     let nuisance = plantc_identify::sensitivity::estimated_parameters(&m);
     let ee = EquationError::new(&m, &base, &nuisance, exps, &EquationErrorOptions::default())
         .expect("equation error");
-    let mut v: Vec<(String, f64, Vec<(String, f64)>)> = candidates(&m)
+    let mut v: Vec<Ranked> = candidates(&m)
         .into_iter()
         .map(|c| {
             let edited = model_from_text(&c.label(), &c.apply(text).expect("applies"))

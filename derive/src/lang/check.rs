@@ -1447,7 +1447,9 @@ impl Checker {
                     );
                 }
             } else if *unit == ArgUnit::TargetPositive {
-                if let Some(v) = eval_si(a, &self.syms).filter(|v| !(*v > 0.0)) {
+                if let Some(v) = eval_si(a, &self.syms)
+                    .filter(|v| v.partial_cmp(&0.0) != Some(std::cmp::Ordering::Greater))
+                {
                     self.diags.push(
                         Diagnostic::error(
                             "plantc::nonpositive_level",

@@ -332,7 +332,7 @@ pub fn lower(file: &ast::ModelFile, symbols: Option<&Symbols>) -> Model {
     // `inertia q = added_inertia(J)`: `1/2*J*q'^2` added to T
     for line in &file.inertias {
         if let Ok(term) = effects::expand(&line.call, &line.target) {
-            kinetic = kinetic + lw.expr(&term);
+            kinetic += lw.expr(&term);
         }
     }
     let potential = file
