@@ -6,8 +6,11 @@
 //! effects), with its new parameters named `<base>_<target>` (e.g.
 //! `Fc_alpha`, `d_alpha`, `Td_Vm`). [`EffectInstance::apply`] edits the
 //! model text losslessly (`lang::edit`): it appends the parameter
-//! declarations and the effect call (a force term, or a `sensor`/`actuator`
-//! line), and touches nothing else.
+//! declarations and the effect call (a force term, or a `sensor`,
+//! `actuator` or `inertia` line), and touches nothing else. Each new
+//! parameter's description is the instance's label (`cogging@theta`), which
+//! [`label_of`] reads back from a model (the equation-error ranking uses it
+//! to recognise effects whose columns need a scan).
 //!
 //! The parameter templates (units, start values, bounds) live in
 //! [`templates`]; an effect without a template cannot be instantiated.
@@ -15,12 +18,16 @@
 use std::fmt;
 
 use plantc_derive::lang::edit;
+use plantc_derive::lang::effects as lang_effects;
 use plantc_derive::model::{CoordinateKind, Model};
 
 /// Where an effect acts.
 #[derive(Copy, Clone, Debug, PartialEq, Eq)]
 pub enum EffectKind {
-    /// A generalised force on a coordinate (`force q = ... + effect(..)`).
+    /// On a coordinate through the equations of motion: a generalised force
+    /// (`force q = ... + effect(..)`) or, for `added_inertia`, a
+    /// kinetic-energy term (`inertia q = added_inertia(..)`, see
+    /// [`EffectInstance::line`]). Both add parameters to the equations.
     Force,
     /// A measurement effect on a coordinate (`sensor q = effect(..)`).
     Sensor,
@@ -45,6 +52,10 @@ pub enum TemplateUnit {
 }
 
 /// One parameter of an effect: base name, unit, start value and bounds.
+/// Start values matter for effects whose equation-error columns are a
+/// Gauss-Newton step from them; effects whose columns come from a scan
+/// (cogging's period count, a saturation level, a speed limit: see
+/// [`crate::equation_error::Regressor`]) get their start from the data.
 #[derive(Copy, Clone, Debug, PartialEq)]
 pub struct ParamTemplate {
     /// Base name; the model parameter is `<base>_<target>`.
@@ -128,6 +139,35 @@ pub const TEMPLATES: &[(&str, EffectKind, &[ParamTemplate])] = &[
         &[pt("k", "N*m/rad", "N/m", 1e-3, 0.0, 1.0)],
     ),
     (
+        // the period count N is found by a scan in the equation-error
+        // ranking and refined by the fit; the phase is relative to the
+        // encoder's zero, so it is estimated too
+        "cogging",
+        EffectKind::Force,
+        &[
+            pt("A", "N*m", "N", 1e-4, 0.0, 1.0),
+            pt("N", "1", "1/m", 12.0, 1.0, 1000.0),
+            pt("phi", "1", "1", 0.0, -7.0, 7.0),
+        ],
+    ),
+    (
+        // vmax found by a scan in the equation-error ranking
+        "speed_limit",
+        EffectKind::Force,
+        &[
+            pt("vmax", "rad/s", "m/s", 10.0, 0.0, 1000.0),
+            pt("c", "N*m*s/rad", "N*s/m", 1e-2, 0.0, 100.0),
+        ],
+    ),
+    (
+        // a kinetic-energy term (`inertia` line), in the equations like a
+        // force; a start above 0 so the first sensitivity is not at the
+        // box edge
+        "added_inertia",
+        EffectKind::Force,
+        &[pt("J", "kg*m^2", "kg", 1e-5, 0.0, 1.0)],
+    ),
+    (
         // an encoder offset is small but may have either sign
         "sensor_offset",
         EffectKind::Sensor,
@@ -149,6 +189,12 @@ pub const TEMPLATES: &[(&str, EffectKind, &[ParamTemplate])] = &[
         "deadzone",
         EffectKind::Actuator,
         &[pt_unit("w", TemplateUnit::Input, 0.05, 0.0, 2.0)],
+    ),
+    (
+        // the level found by a scan in the equation-error ranking
+        "saturation",
+        EffectKind::Actuator,
+        &[pt_unit("L", TemplateUnit::Input, 5.0, 1e-3, 1e3)],
     ),
 ];
 
@@ -386,6 +432,20 @@ impl EffectInstance {
         format!("{}@{}", self.effect, self.target)
     }
 
+    /// The keyword of the line that holds the effect: `force`, `sensor`,
+    /// `actuator` or `inertia` (an `added_inertia`, of kind
+    /// [`EffectKind::Force`], is written on an `inertia` line).
+    pub fn line(&self) -> &'static str {
+        match lang_effects::lookup(&self.effect).map(|e| e.kind) {
+            Some(k) => k.keyword(),
+            None => match self.kind {
+                EffectKind::Force => "force",
+                EffectKind::Sensor => "sensor",
+                EffectKind::Actuator => "actuator",
+            },
+        }
+    }
+
     /// The effect call, e.g. `coulomb_friction(Fc_alpha)`.
     pub fn call(&self) -> String {
         let args: Vec<&str> = self.parameters.iter().map(|p| p.name.as_str()).collect();
@@ -414,23 +474,16 @@ impl EffectInstance {
     /// The text a user adds to the model file by hand: the parameter lines
     /// and the line that holds the effect (for force effects, the term to
     /// append to the `force <target> = ...` line; for the others, the whole
-    /// `sensor`/`actuator` line).
+    /// `sensor`/`actuator`/`inertia` line).
     pub fn snippet(&self) -> String {
         let mut s = String::new();
         for p in &self.parameters {
             s.push_str(&self.declaration(p));
             s.push('\n');
         }
-        match self.kind {
-            EffectKind::Force => {
-                s.push_str(&format!("force {} = ... + {}\n", self.target, self.call()))
-            }
-            EffectKind::Sensor => {
-                s.push_str(&format!("sensor {} = {}\n", self.target, self.call()))
-            }
-            EffectKind::Actuator => {
-                s.push_str(&format!("actuator {} = {}\n", self.target, self.call()))
-            }
+        match self.line() {
+            "force" => s.push_str(&format!("force {} = ... + {}\n", self.target, self.call())),
+            kw => s.push_str(&format!("{kw} {} = {}\n", self.target, self.call())),
         }
         s
     }
@@ -443,22 +496,27 @@ impl EffectInstance {
         for p in &self.parameters {
             t = edit::add_parameter(&t, &self.declaration(p)).map_err(err)?;
         }
-        match self.kind {
-            EffectKind::Force => edit::add_force_term(&t, &self.target, &self.call()).map_err(err),
-            EffectKind::Sensor => {
-                edit::add_sensor_effect(&t, &self.target, &self.call()).map_err(err)
-            }
-            EffectKind::Actuator => {
-                edit::add_actuator_effect(&t, &self.target, &self.call()).map_err(err)
-            }
+        match self.line() {
+            "inertia" => edit::add_inertia_effect(&t, &self.target, &self.call()).map_err(err),
+            "sensor" => edit::add_sensor_effect(&t, &self.target, &self.call()).map_err(err),
+            "actuator" => edit::add_actuator_effect(&t, &self.target, &self.call()).map_err(err),
+            _ => edit::add_force_term(&t, &self.target, &self.call()).map_err(err),
         }
     }
 }
+
+/// Effects of a drive (a motor's detent torque, a drive's speed limit):
+/// [`all_candidates`] proposes them only on coordinates whose force depends
+/// on an input (a detent on a free pendulum joint is not physical, and its
+/// period scan would fit anything periodic there). They can be written on
+/// any coordinate by hand.
+pub const DRIVE_EFFECTS: &[&str] = &["cogging", "speed_limit"];
 
 /// Every template effect on every valid target of `model`, as fit
 /// candidates (see [`EffectInstance::candidate`]): for each coordinate the
 /// force and sensor effects in table order, then for each input the actuator
 /// effects in table order.
+/// Drive effects ([`DRIVE_EFFECTS`]) only on actuated coordinates.
 pub fn all_candidates(model: &Model) -> Vec<EffectInstance> {
     let mut v = Vec::new();
     let targets = model
@@ -471,8 +529,22 @@ pub fn all_candidates(model: &Model) -> Vec<EffectInstance> {
                 .iter()
                 .map(|i| (&i.name, [EffectKind::Actuator, EffectKind::Actuator])),
         );
+    let inputs = model.input_symbols();
+    let unactuated: Vec<&String> = model
+        .coordinates
+        .iter()
+        .zip(&model.forces)
+        .filter(|(_, f)| {
+            let f = model.expand_derived(**f);
+            !inputs.iter().any(|&u| f.contains(u))
+        })
+        .map(|(c, _)| &c.name)
+        .collect();
     for (target, kinds) in targets {
         for (name, kind, _) in TEMPLATES {
+            if DRIVE_EFFECTS.contains(name) && unactuated.contains(&target) {
+                continue;
+            }
             if kinds.contains(kind) {
                 if let Ok(e) = EffectInstance::candidate(model, name, target) {
                     v.push(e);
@@ -481,4 +553,14 @@ pub fn all_candidates(model: &Model) -> Vec<EffectInstance> {
         }
     }
     v
+}
+
+/// The `effect@target` label of an effect instance whose parameter `name`
+/// was added by [`EffectInstance::apply`] (its description), split into
+/// effect and target; None for any other parameter.
+pub fn label_of(model: &Model, name: &str) -> Option<(String, String)> {
+    let d = model.parameter(name)?.description.as_deref()?;
+    let (effect, target) = d.split_once('@')?;
+    templates(effect)?;
+    Some((effect.to_string(), target.to_string()))
 }

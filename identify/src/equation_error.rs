@@ -33,7 +33,11 @@
 //! (a Gauss-Newton step from there); a sensor offset on coordinate `i` uses
 //! `dr/dq_i`, an input delay `dr/du * u'` (the input rate of the ZOH-averaged,
 //! smoothed input), a deadzone `dr/du * (-sign(u))` where `|u| > w0` (the
-//! derivative of the received `dz(u)` with respect to the width).
+//! derivative of the received `dz(u)` with respect to the width). Effects
+//! whose residual is far from linear in a parameter get their columns from a
+//! scan over it ([`rig_effects`]): cogging (the period count), saturation
+//! (the level), speed limit (the speed); `Regressor::Parameters` of a model
+//! edited by `effect_edit` with one of them is scored that way too.
 //!
 //! The equations are stacked, each weighted by the inverse RMS of its own
 //! residual, and each candidate is scored by the BIC gain
@@ -51,6 +55,8 @@ use plantc_derive::sym::{diff, Expr, Func, Node, Symbol, Tape};
 use crate::data::Experiment;
 use crate::experiment_sim::{parameters_slow, Signals, SimError};
 use crate::savitzky_golay::{apply, kernel, KernelError};
+
+mod rig_effects;
 
 /// Options of the equation-error ranking.
 #[derive(Clone, Debug, PartialEq)]
@@ -184,6 +190,40 @@ pub enum Regressor {
         /// outside the deadzone (the candidate's start value).
         start: f64,
     },
+    /// A cogging torque `-A sin(N q + phase)` on coordinate `coordinate`:
+    /// for each integer `N` of a scan, columns `sin(N q)` and `cos(N q)`
+    /// (smoothed like the states) in the coordinate's equation; the best `N`
+    /// wins, `A` and `phase` follow from the two coefficients. Counts one
+    /// parameter more than its columns (the scanned `N`).
+    Cogging {
+        /// Coordinate index.
+        coordinate: usize,
+        /// Names given to the estimates of `A`, `N` and `phase`.
+        names: [String; 3],
+    },
+    /// A saturation of input `input` at level `L`: the plant received
+    /// `sat(u)` where the model assumes `u`, so the residual holds
+    /// `(d r/d u) (u - sat(u))` (each held sample clipped, then averaged and
+    /// smoothed like the input). For each level of a scan over the
+    /// commanded `|u|` that term is removed from the residual (coefficient
+    /// 1: no free scale) and the nuisance regression redone; the best level
+    /// wins. One parameter, no column.
+    Saturation {
+        /// Input index.
+        input: usize,
+        /// Name given to the estimate of `L`.
+        name: String,
+    },
+    /// A speed limit `-c dz(q', vmax)` (rounded as in the language) on
+    /// coordinate `coordinate`: for each `vmax` of a scan over the measured
+    /// speeds, the column `dz(q', vmax)` in the coordinate's equation, whose
+    /// coefficient is `c` (only `c > 0` counts); the best `vmax` wins.
+    SpeedLimit {
+        /// Coordinate index.
+        coordinate: usize,
+        /// Names given to the estimates of `vmax` and `c`.
+        names: [String; 2],
+    },
 }
 
 /// A parameter estimate of the equation-error regression (a linearised
@@ -244,6 +284,13 @@ struct Smoothed {
     ud: Vec<Vec<f64>>,
     /// `keep[i][k]`: sample `k` is used in equation `i`.
     keep: Vec<Vec<bool>>,
+    /// The measured coordinates and commanded inputs over the whole record
+    /// (sample `k` of the smoothed signals is sample `k + h` here) and the
+    /// smoothing kernel, for columns that are nonlinear functions of them
+    /// (smoothed after the function, like the states).
+    raw_q: Vec<Vec<f64>>,
+    raw_u: Vec<Vec<f64>>,
+    k0: Vec<f64>,
 }
 
 impl Smoothed {
@@ -571,6 +618,9 @@ impl EquationError {
                 })
                 .collect();
             exps.push(Smoothed {
+                raw_q: sig.q.clone(),
+                raw_u: sig.u.clone(),
+                k0: k0.clone(),
                 name: sig.name.clone(),
                 qd: sig.q.iter().map(|y| apply(&k1, y)).collect(),
                 qdd: sig.q.iter().map(|y| apply(&k2, y)).collect(),
@@ -742,6 +792,9 @@ impl EquationError {
         type Columns = (Vec<f64>, Vec<Vec<f64>>, Vec<String>, Vec<f64>, f64);
         let (target, cand, names, p0, sign): Columns = match reg {
             Regressor::Parameters { model, names } => {
+                if let Some(r) = rig_effects::recognise(model, names, self.n, self.m) {
+                    return self.score(&r);
+                }
                 let (t, c, p0) = self.parameter_columns(model, names)?;
                 (t, c, names.clone(), p0, -1.0)
             }
@@ -791,6 +844,15 @@ impl EquationError {
                     .collect();
                 (self.r.clone(), vec![c], vec![name.clone()], vec![0.0], -1.0)
             }
+            Regressor::Cogging { coordinate, names } => {
+                return self.score_cogging(*coordinate, names);
+            }
+            Regressor::Saturation { input, name } => {
+                return self.score_saturation(*input, name);
+            }
+            Regressor::SpeedLimit { coordinate, names } => {
+                return self.score_speed_limit(*coordinate, names);
+            }
         };
         let mut cols: Vec<&[f64]> = self.nuisance.iter().map(Vec::as_slice).collect();
         let nn = cols.len();
@@ -816,7 +878,20 @@ impl EquationError {
             })
             .collect();
         let r1 = residual(&target, &cols, &fit.coef);
-        // where the reduction of the squared residual lies
+        let (by_experiment, by_speed) = self.shares(&r1);
+        Ok(Score {
+            bic_gain,
+            residual_share: ((self.rss0 - rss1) / self.rss0).max(0.0),
+            columns: k,
+            estimates,
+            by_experiment,
+            by_speed,
+        })
+    }
+
+    /// Where the reduction of the squared residual from the nuisance-only
+    /// residual to `r1` lies: by experiment (largest first) and by speed.
+    fn shares(&self, r1: &[f64]) -> (Vec<Share>, Vec<Share>) {
         let mut by_exp = vec![0.0; self.exps.len()];
         let mut by_speed = vec![0.0; 2];
         for (row, (e, kk, i)) in self.rows.iter().enumerate() {
@@ -853,14 +928,7 @@ impl EquationError {
                 share: sp[1],
             },
         ];
-        Ok(Score {
-            bic_gain,
-            residual_share: ((self.rss0 - rss1) / self.rss0).max(0.0),
-            columns: k,
-            estimates,
-            by_experiment,
-            by_speed,
-        })
+        (by_experiment, by_speed)
     }
 
     /// Target (edited residual at the start values) and columns

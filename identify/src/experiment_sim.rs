@@ -28,13 +28,17 @@
 //! - `actuator u = deadzone(w)` (`w >= 0`): the plant receives
 //!   `dz(u[k]) = sign(u[k]) * max(|u[k]| - w, 0)`; since the input is held,
 //!   the deadzone acts per sample on the commanded value ([`deadzone`]).
+//! - `actuator u = saturation(L)` (`L > 0`): the plant receives
+//!   `sat(u[k]) = min(max(u[k], -L), L)`, per held sample like the deadzone
+//!   ([`saturation`]): a drive's voltage or current limit.
 //! - `input_offset` is already folded into the model's forces.
 //!
 //! Composition order on one input, whatever the order of the lines: the
-//! deadzone acts on the commanded samples, the delay then shifts the held
-//! result in time, and the offset (in the forces) is added to what arrives:
-//! the plant receives `dz(u)(t - Td) + V0`. With `w = 0` the deadzone is
-//! skipped, so the simulation is bit-identical to the model without it.
+//! deadzone acts on the commanded samples, the saturation on its result, the
+//! delay then shifts the held result in time, and the offset (in the forces)
+//! is added to what arrives: the plant receives `sat(dz(u))(t - Td) + V0`.
+//! With `w = 0` and no saturation the held input is the commanded one, so
+//! the simulation is bit-identical to the model without them.
 //!
 //! Dry friction `sign(q')` is replaced by `tanh(q'/w)` (default `w = 1e-3`
 //! rad/s, see [`SimOptions::dry_friction_width`]): RK4 cannot integrate a
@@ -123,6 +127,13 @@ pub enum SimError {
     },
     /// An option is out of range.
     BadOption(String),
+    /// A saturation level evaluated to a non-positive or non-finite value.
+    BadSaturation {
+        /// The input.
+        input: String,
+        /// The level in the input's SI unit.
+        value: f64,
+    },
     /// A deadzone width evaluated to a negative or non-finite value.
     BadDeadzone {
         /// The input.
@@ -173,6 +184,10 @@ impl fmt::Display for SimError {
             SimError::BadDeadzone { input, value } => write!(
                 f,
                 "the deadzone width of input `{input}` must be a finite value >= 0, got {value}"
+            ),
+            SimError::BadSaturation { input, value } => write!(
+                f,
+                "the saturation level of input `{input}` must be a finite value > 0, got {value}"
             ),
             SimError::BadDelay { input, value } => write!(
                 f,
@@ -614,29 +629,59 @@ pub fn deadzone(u: f64, w: f64) -> f64 {
     }
 }
 
+/// `sat(u) = min(max(u, -l), l)` for `l > 0` (`l = inf`: no saturation,
+/// `u` itself).
+pub fn saturation(u: f64, l: f64) -> f64 {
+    u.clamp(-l, l)
+}
+
+/// What the plant receives for the commanded held value `u` of an input
+/// with deadzone half-width `w` and saturation level `l`: `sat(dz(u))`.
+pub fn received(u: f64, w: f64, l: f64) -> f64 {
+    saturation(deadzone(u, w), l)
+}
+
+/// `d received / d(w, l)` at a received held value `v` of an input with
+/// saturation level `l`: `(0, sign(v))` where the saturation clips (`|v| =
+/// l`), `(-sign(v), 0)` elsewhere (zero inside the deadzone, where `v = 0`).
+/// At the kinks (`|dz(u)| = l`, `|u| = w`) the one-sided derivative of the
+/// clipped and of the outside branch is used.
+pub(crate) fn received_derivatives(v: f64, l: f64) -> (f64, f64) {
+    if v.abs() >= l {
+        (0.0, v.signum())
+    } else if v != 0.0 {
+        (-v.signum(), 0.0)
+    } else {
+        (0.0, 0.0)
+    }
+}
+
 /// The held input samples with each input `j` passed through
-/// `deadzone(u, widths[j])` sample by sample (the input is held, so this is
-/// exact): the working copy an integration reads (and, in closed loop,
-/// writes).
-pub(crate) fn held_inputs(sig: &Signals, widths: &[f64]) -> Vec<Vec<f64>> {
+/// `received(u, widths[j], levels[j])` sample by sample (the input is held,
+/// so this is exact): the working copy an integration reads (and, in closed
+/// loop, writes).
+pub(crate) fn held_inputs(sig: &Signals, widths: &[f64], levels: &[f64]) -> Vec<Vec<f64>> {
     sig.u
         .iter()
-        .zip(widths.iter().chain(std::iter::repeat(&0.0)))
-        .map(|(u, &w)| {
-            if w == 0.0 {
+        .enumerate()
+        .map(|(j, u)| {
+            let w = widths.get(j).copied().unwrap_or(0.0);
+            let l = levels.get(j).copied().unwrap_or(f64::INFINITY);
+            if w == 0.0 && l == f64::INFINITY {
                 u.clone()
             } else {
-                u.iter().map(|&v| deadzone(v, w)).collect()
+                u.iter().map(|&v| received(v, w, l)).collect()
             }
         })
         .collect()
 }
 
-/// Sensor offsets, input delays and deadzone widths of a model, compiled
-/// over the full parameter vector, with their derivatives along free base
-/// parameters. Outputs: offsets (one per coordinate), delays (one per
-/// input), widths (one per input), then per free parameter the derivatives
-/// of the offsets, the delays and the widths.
+/// Sensor offsets, input delays, deadzone widths and saturation levels of a
+/// model, compiled over the full parameter vector, with their derivatives
+/// along free base parameters. Outputs: offsets (one per coordinate), delays
+/// (one per input), widths (one per input), levels (one per input, 0 where
+/// the input has none), then per free parameter the derivatives of the
+/// offsets, the delays, the widths and the levels.
 #[derive(Clone, Debug)]
 pub(crate) struct SignalEffects {
     tape: Tape,
@@ -644,9 +689,12 @@ pub(crate) struct SignalEffects {
     m: usize,
     p: usize,
     inputs: Vec<String>,
+    /// Whether each input has a saturation.
+    saturated: Vec<bool>,
     /// True if some delay depends on some free parameter.
     pub(crate) delay_depends_on_free: bool,
-    /// True if some deadzone width depends on some free parameter.
+    /// True if some deadzone width or saturation level depends on some free
+    /// parameter.
     pub(crate) deadzone_depends_on_free: bool,
 }
 
@@ -664,6 +712,11 @@ pub(crate) struct SignalValues {
     pub(crate) widths: Vec<f64>,
     /// `d width_l / d theta_j` at `[j * m + l]`.
     pub(crate) d_widths: Vec<f64>,
+    /// Saturation level per input (SI, the input's unit; infinite without
+    /// a saturation).
+    pub(crate) levels: Vec<f64>,
+    /// `d level_l / d theta_j` at `[j * m + l]`.
+    pub(crate) d_levels: Vec<f64>,
 }
 
 impl SignalEffects {
@@ -676,6 +729,7 @@ impl SignalEffects {
             .map(|i| model.sensor_offset(i))
             .chain((0..m).map(|j| model.input_delay(j)))
             .chain((0..m).map(|j| model.input_deadzone(j)))
+            .chain((0..m).map(|j| model.input_saturation(j).unwrap_or_else(Expr::zero)))
             .collect();
         let expanded: Vec<Expr> = values.iter().map(|e| model.expand_derived(*e)).collect();
         let mut outs = values;
@@ -703,13 +757,17 @@ impl SignalEffects {
             m,
             p: free.len(),
             inputs: model.inputs.iter().map(|i| i.name.clone()).collect(),
+            saturated: (0..m)
+                .map(|j| model.input_saturation(j).is_some())
+                .collect(),
             delay_depends_on_free,
             deadzone_depends_on_free,
         })
     }
 
     /// Evaluate at the full parameter vector; a negative or non-finite
-    /// delay or deadzone width is an error.
+    /// delay or deadzone width, or a saturation level that is not positive
+    /// and finite, is an error.
     pub(crate) fn eval(&self, params: &[f64]) -> Result<SignalValues, SimError> {
         if params.len() != self.tape.inputs().len() {
             return Err(SimError::ParameterCount {
@@ -737,15 +795,28 @@ impl SignalEffects {
                 });
             }
         }
-        let blk_len = n + 2 * m;
+        let mut levels = out[n + 2 * m..n + 3 * m].to_vec();
+        for (j, l) in levels.iter_mut().enumerate() {
+            if !self.saturated[j] {
+                *l = f64::INFINITY;
+            } else if !(*l > 0.0 && l.is_finite()) {
+                return Err(SimError::BadSaturation {
+                    input: self.inputs[j].clone(),
+                    value: *l,
+                });
+            }
+        }
+        let blk_len = n + 3 * m;
         let mut d_offsets = Vec::with_capacity(n * p);
         let mut d_delays = Vec::with_capacity(m * p);
         let mut d_widths = Vec::with_capacity(m * p);
+        let mut d_levels = Vec::with_capacity(m * p);
         for j in 0..p {
             let blk = &out[blk_len * (j + 1)..blk_len * (j + 2)];
             d_offsets.extend_from_slice(&blk[..n]);
             d_delays.extend_from_slice(&blk[n..n + m]);
-            d_widths.extend_from_slice(&blk[n + m..]);
+            d_widths.extend_from_slice(&blk[n + m..n + 2 * m]);
+            d_levels.extend_from_slice(&blk[n + 2 * m..]);
         }
         Ok(SignalValues {
             offsets: out[..n].to_vec(),
@@ -754,6 +825,8 @@ impl SignalEffects {
             d_delays,
             widths,
             d_widths,
+            levels,
+            d_levels,
         })
     }
 }
@@ -826,7 +899,7 @@ impl StiffnessProbe {
 /// What both simulators do before integrating: check the parameter vector
 /// and the signals against the model's sizes `(n, m, n_params)`, choose the
 /// substep, evaluate the signal effects at `params` and make the working
-/// copy of the held inputs with the deadzones applied.
+/// copy of the held inputs with the deadzones and saturations applied.
 pub(crate) fn prepare_run(
     sig: &Signals,
     params: &[f64],
@@ -850,7 +923,7 @@ pub(crate) fn prepare_run(
     }
     let mut h = substep_for(sig, opts)?;
     let effects = signals.eval(params)?;
-    let u = held_inputs(sig, &effects.widths);
+    let u = held_inputs(sig, &effects.widths, &effects.levels);
     if opts.substep.is_none() && x0.len() >= n {
         let u0: Vec<f64> = u
             .iter()
@@ -933,7 +1006,7 @@ pub(crate) fn parameters_slow(n_fast: usize, n_params: usize) -> Vec<bool> {
 
 /// Evaluate a recorded law at sample `k` of a block: the measured
 /// coordinates are the state's positions plus `offsets`; writes the held
-/// value of every driven input at `k` (deadzone applied).
+/// value of every driven input at `k` (deadzone and saturation applied).
 #[allow(clippy::too_many_arguments)] // the loop state of one sample, passed as it is
 pub(crate) fn control_at(
     law: &LoopLaw,
@@ -943,12 +1016,16 @@ pub(crate) fn control_at(
     y: &[f64],
     fstate: &mut [f64],
     u_law: &mut [f64],
-    widths: &[f64],
+    (widths, levels): (&[f64], &[f64]),
     u: &mut [Vec<f64>],
 ) {
     ev.step(law, rep, k, y, fstate, u_law, None);
     for (d, &j) in law.driven().iter().enumerate() {
-        u[j][k] = deadzone(u_law[d], widths.get(j).copied().unwrap_or(0.0));
+        u[j][k] = received(
+            u_law[d],
+            widths.get(j).copied().unwrap_or(0.0),
+            levels.get(j).copied().unwrap_or(f64::INFINITY),
+        );
     }
 }
 
@@ -1119,14 +1196,14 @@ impl Simulator {
         let mut z = start.x0.clone();
         let mut y = vec![0.0; n];
         let mut closed = self.closed(sig, k0)?;
-        let widths = &effects.widths;
+        let (widths, levels) = (&effects.widths, &effects.levels);
         let at_sample = |k: usize, z: &[f64], u: &mut [Vec<f64>]| {
             for i in 0..n {
                 y[i] = z[i] + meas_off[i];
                 q[i][k - k0] = y[i];
             }
             if let Some((law, rep, ev, fstate, u_law)) = closed.as_mut() {
-                control_at(law, rep, ev, k, &y, fstate, u_law, widths, u);
+                control_at(law, rep, ev, k, &y, fstate, u_law, (widths, levels), u);
             }
             z.iter().all(|v| v.is_finite())
         };

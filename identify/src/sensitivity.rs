@@ -38,6 +38,13 @@
 //!   term `M^-1 B[:, l] d dz/dtheta` (the kink at `|u[k]| = w` is a set of
 //!   measure zero in `w`; there the one-sided derivative of the `> w` test
 //!   is used);
+//! - a saturation level `L(theta)` on input `l`: the simulation holds
+//!   `sat(dz(u[k]))`, whose derivative is `sign(u[k]) dL/dtheta` on the
+//!   samples the saturation clips (`|held| = L`; there the deadzone width no
+//!   longer matters) and the deadzone's elsewhere; the forcing term is the
+//!   same `M^-1 B[:, l] d held/dtheta`. In closed loop the law's own
+//!   sensitivity passes only where the held value is not clipped and not in
+//!   the deadzone;
 //! - an input offset is a parameter of the folded forces like any other.
 //!
 //! The partial derivatives are symbolic: derived quantities (`let`) are
@@ -51,9 +58,9 @@ use plantc_derive::sym::{diff, Expr, SplitTape, Tape};
 
 use crate::closed_loop::{LoopEval, LoopLaw, LoopSens, Replay};
 use crate::experiment_sim::{
-    check_start, deadzone, dynamics_outputs, integrate, lu_factor, lu_solve, parameters_slow,
-    prepare_run, tape_inputs, BlockStart, OnSwitch, Segment, SignalEffects, Signals, SimError,
-    SimOptions, StiffnessProbe, REFINE,
+    check_start, dynamics_outputs, integrate, lu_factor, lu_solve, parameters_slow, prepare_run,
+    received, received_derivatives, tape_inputs, BlockStart, OnSwitch, Segment, SignalEffects,
+    Signals, SimError, SimOptions, StiffnessProbe, REFINE,
 };
 
 /// `y = a x` for the row-major `n x n` matrix `a`.
@@ -314,8 +321,8 @@ impl SensitivitySimulator {
         }
         let nc = p + extra.len();
         let (k0, k1) = (start.range.start, start.range.end);
-        let d_width = &effects.d_widths;
-        let widths = &effects.widths;
+        let (d_width, d_level) = (&effects.d_widths, &effects.d_levels);
+        let (widths, levels) = (&effects.widths, &effects.levels);
         let deadzone_forcing = self.signals.deadzone_depends_on_free;
         let driven: Vec<usize> = self
             .law
@@ -407,16 +414,17 @@ impl SensitivitySimulator {
                     }
                 }
             }
-            // deadzone widths of inputs from the data: M^-1 B d dz(u)/dtheta,
-            // with d dz/dw = -sign(dz)
+            // deadzone widths and saturation levels of inputs from the data:
+            // M^-1 B d held/dtheta, with d held/d(w, L) from the held value
             if deadzone_forcing {
                 for j in 0..p {
                     let mut any = false;
                     for l in 0..m {
-                        let dw = d_width[j * m + l];
-                        du[l] = if dw != 0.0 && u[l] != 0.0 && !driven.contains(&l) {
+                        let (gw, gl) = received_derivatives(u[l], levels[l]);
+                        let g = gw * d_width[j * m + l] + gl * d_level[j * m + l];
+                        du[l] = if g != 0.0 && !driven.contains(&l) {
                             any = true;
-                            -u[l].signum() * dw
+                            g
                         } else {
                             0.0
                         };
@@ -527,17 +535,17 @@ impl SensitivitySimulator {
                 ev.step(law, rep, k, &y, fstate, u_law, Some((ls, &dy, &mut du_k)));
                 let mut hist = du_hist.borrow_mut();
                 for (d, &l) in driven.iter().enumerate() {
-                    let wl = widths.get(l).copied().unwrap_or(0.0);
-                    let v = deadzone(u_law[d], wl);
+                    let (wl, ll) = (widths[l], levels[l]);
+                    let v = received(u_law[d], wl, ll);
                     u[l][k] = v;
+                    let (gw, gl) = received_derivatives(v, ll);
+                    // the law's value passes where neither clipped nor in
+                    // the deadzone
+                    let passes = v.abs() < ll && (v != 0.0 || wl == 0.0);
                     for j in 0..nc {
-                        let mut g = if v == 0.0 && wl > 0.0 {
-                            0.0
-                        } else {
-                            du_k[d * nc + j]
-                        };
-                        if j < p && v != 0.0 {
-                            g -= v.signum() * d_width[j * m + l];
+                        let mut g = if passes { du_k[d * nc + j] } else { 0.0 };
+                        if j < p {
+                            g += gw * d_width[j * m + l] + gl * d_level[j * m + l];
                         }
                         hist[kk * nd * nc + d * nc + j] = g;
                     }

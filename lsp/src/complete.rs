@@ -66,8 +66,13 @@ const STATEMENTS: &[(&str, &str, &str)] = &[
     ),
     (
         "actuator",
-        "actuator ${1:u} = ${2|input_offset,input_delay,deadzone|}(${3:p})",
+        "actuator ${1:u} = ${2|input_offset,input_delay,deadzone,saturation|}(${3:p})",
         "an input effect",
+    ),
+    (
+        "inertia",
+        "inertia ${1:q} = added_inertia(${2:J})",
+        "an added inertia on a coordinate (a kinetic-energy term)",
     ),
     (
         "set",
@@ -318,13 +323,13 @@ pub fn completion(a: &Analysis, offset: usize) -> Vec<CompletionItem> {
             v
         }
         (None, "force") => coordinates(a),
-        (None, "sensor") if !has_eq => coordinates(a),
+        (None, "sensor" | "inertia") if !has_eq => coordinates(a),
         (None, "actuator") if !has_eq => names(a, |k| k == NameKind::Input),
-        (None, "sensor" | "actuator") => {
-            let kind = if kw == "sensor" {
-                EffectKind::Sensor
-            } else {
-                EffectKind::Actuator
+        (None, "sensor" | "actuator" | "inertia") => {
+            let kind = match kw {
+                "sensor" => EffectKind::Sensor,
+                "inertia" => EffectKind::Inertia,
+                _ => EffectKind::Actuator,
             };
             let mut v: Vec<CompletionItem> = effects::of_kind(kind).map(effect_item).collect();
             v.extend(names(a, |k| k == NameKind::Parameter));

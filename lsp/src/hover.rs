@@ -201,6 +201,7 @@ fn symbol(a: &Analysis, s: &SymbolRef, at: Span) -> Option<String> {
                 EffectKind::Force => "a force term, in `force q = ...` lines",
                 EffectKind::Sensor => "a sensor effect, in `sensor q = ...` lines",
                 EffectKind::Actuator => "an actuator effect, in `actuator u = ...` lines",
+                EffectKind::Inertia => "a kinetic-energy term, in `inertia q = ...` lines",
             };
             t.push_str(&format!("\n\n{}\n\nEffect: {line}.", e.doc));
             if !e.formula.is_empty() {

@@ -178,15 +178,17 @@ pub struct Force {
     pub span: Span,
 }
 
-/// `sensor q = sensor_offset(d)` or `actuator u = input_delay(Td)`: one
-/// measurement or input effect on a coordinate or an input. Several lines may
-/// target the same name; their effects compose.
+/// `sensor q = sensor_offset(d)`, `actuator u = input_delay(Td)` or
+/// `inertia q = added_inertia(J)`: one measurement, input or kinetic-energy
+/// effect on a coordinate or an input. Several lines may target the same
+/// name; their effects compose.
 #[derive(Debug, Clone, PartialEq)]
 pub struct SignalEffect {
     /// [`EffectKind::Sensor`](super::effects::EffectKind::Sensor) for a
-    /// `sensor` line, `Actuator` for an `actuator` line.
+    /// `sensor` line, `Actuator` for an `actuator` line, `Inertia` for an
+    /// `inertia` line.
     pub kind: super::effects::EffectKind,
-    /// The coordinate (sensor lines) or input (actuator lines).
+    /// The coordinate (sensor and inertia lines) or input (actuator lines).
     pub target: Ident,
     /// The effect call as written.
     pub call: Expr,
@@ -450,6 +452,8 @@ pub struct ModelFile {
     pub sensors: Vec<SignalEffect>,
     /// `actuator` lines (effects on inputs).
     pub actuators: Vec<SignalEffect>,
+    /// `inertia` lines (kinetic-energy terms on coordinates).
+    pub inertias: Vec<SignalEffect>,
     /// Parameter sets.
     pub sets: Vec<ParamSet>,
     /// Controllers.

@@ -549,6 +549,10 @@ impl Infer<'_> {
                     "an actuator effect is written on its own line, e.g. `actuator Vm = {}`",
                     eff.signature()
                 ),
+                EffectKind::Inertia => format!(
+                    "an inertia effect is written on its own line, e.g. `inertia theta = {}`",
+                    eff.signature()
+                ),
             };
             self.diags.push(
                 Diagnostic::error(
@@ -680,6 +684,67 @@ fn capital(article: &str) -> &'static str {
     }
 }
 
+/// The unit an effect argument must have on `target` (of unit `target_dim`,
+/// a coordinate of kind `coord_kind`) and how to say it; None when the
+/// target is unknown.
+fn arg_expectation(
+    unit: ArgUnit,
+    target: &Ident,
+    target_dim: Option<Dim>,
+    coord_kind: Option<CoordKind>,
+) -> Option<(Dim, String)> {
+    let t = &target.name;
+    let on = |k: CoordKind| match k {
+        CoordKind::Angle => format!("`{t}` is an angle"),
+        CoordKind::Length => format!("`{t}` is a length"),
+    };
+    let by_kind = |angle: (Dim, &str), length: (Dim, &str)| -> Option<(Dim, String)> {
+        let k = coord_kind?;
+        let (d, what) = match k {
+            CoordKind::Angle => angle,
+            CoordKind::Length => length,
+        };
+        Some((d, format!("{what} ({})", on(k))))
+    };
+    let force_dim = |k: CoordKind| match k {
+        CoordKind::Angle => Dim::energy(),
+        CoordKind::Length => Dim::force(),
+    };
+    match unit {
+        ArgUnit::Time => Some((Dim::time(), "a time".to_string())),
+        ArgUnit::Dimensionless => Some((Dim::NONE, "dimensionless".to_string())),
+        ArgUnit::Target | ArgUnit::TargetNonNegative | ArgUnit::TargetPositive => {
+            target_dim.map(|td| (td, format!("in the unit of `{t}`")))
+        }
+        ArgUnit::Inertia => by_kind(
+            (Dim::mass() * Dim::length().powi(2), "an inertia, kg*m^2"),
+            (Dim::mass(), "a mass, kg"),
+        ),
+        ArgUnit::Force => by_kind(
+            (force_dim(CoordKind::Angle), "a torque, N*m"),
+            (force_dim(CoordKind::Length), "a force, N"),
+        ),
+        ArgUnit::PerTarget => by_kind(
+            (Dim::NONE, "dimensionless, periods per revolution"),
+            (Dim::length().powi(-1), "a spatial frequency, 1/m"),
+        ),
+        ArgUnit::TargetRate => by_kind(
+            (Dim::time().powi(-1), "a rate, rad/s"),
+            (Dim::length() / Dim::time(), "a speed, m/s"),
+        ),
+        ArgUnit::Damping => by_kind(
+            (
+                force_dim(CoordKind::Angle) * Dim::time(),
+                "a damping, N*m*s/rad",
+            ),
+            (
+                force_dim(CoordKind::Length) * Dim::time() / Dim::length(),
+                "a damping, N*s/m",
+            ),
+        ),
+    }
+}
+
 /// A number 0 standing in for an effect call that was reported as an error.
 fn zero_at(span: Span) -> Expr {
     Expr::new(
@@ -719,6 +784,10 @@ fn wrong_kind(
         EffectKind::Actuator => {
             format!("actuator effects act on an input: `actuator <input> = {effect}({args})`")
         }
+        EffectKind::Inertia => format!(
+            "inertia effects add kinetic energy to a coordinate: `inertia {} = {effect}({args})`",
+            target.name
+        ),
     };
     Diagnostic::error(
         "plantc::effect_kind",
@@ -1030,6 +1099,12 @@ impl Checker {
         }
         // forces
         let mut forced: BTreeMap<String, Span> = BTreeMap::new();
+        let estimated: std::collections::HashSet<String> = file
+            .parameters
+            .iter()
+            .filter(|p| p.estimate.is_some())
+            .map(|p| p.name.name.clone())
+            .collect();
         for f in file.forces.iter_mut() {
             let q = f.coordinate.clone();
             let kind = match self.syms.names.get(&q.name) {
@@ -1080,6 +1155,9 @@ impl Checker {
             let errors_before = self.diags.iter().filter(|d| d.is_error()).count();
             f.expr = self.expand_effects(&f.written, &q);
             let effect_error = self.diags.iter().filter(|d| d.is_error()).count() > errors_before;
+            if kind == Some(CoordKind::Angle) {
+                self.check_cogging_periods(&f.written, &q, &estimated);
+            }
             let dim = if effect_error {
                 None
             } else {
@@ -1108,30 +1186,110 @@ impl Checker {
                 }
             }
         }
-        for line in file.sensors.iter().chain(file.actuators.iter()) {
+        for line in file
+            .sensors
+            .iter()
+            .chain(file.actuators.iter())
+            .chain(file.inertias.iter())
+        {
             self.check_signal_effect(line);
         }
+        self.check_saturations(&file);
         self.check_sets(&file);
         self.check_controllers(&file);
         self.check_recorded(&file);
         file
     }
 
-    /// A `sensor` or `actuator` line: its target, its one effect call (of the
-    /// line's kind, right arity) and the units of the arguments.
+    /// `cogging(A, N[, phase])` on an angle is periodic over a revolution
+    /// only with an integer `N`: a warning when `N` evaluates to another
+    /// number (unless `N` is a parameter being estimated, whose fitted value
+    /// is a real number near the integer).
+    fn check_cogging_periods(
+        &mut self,
+        written: &Expr,
+        q: &Ident,
+        estimated: &std::collections::HashSet<String>,
+    ) {
+        let mut found = Vec::new();
+        written.walk(&mut |x| {
+            if let ExprKind::Call(f, args) = &x.kind {
+                if f.name == "cogging" && args.len() >= 2 {
+                    found.push(args[1].clone());
+                }
+            }
+        });
+        for n in found {
+            if matches!(&n.kind, ExprKind::Name(p) if estimated.contains(p)) {
+                continue;
+            }
+            let Some(v) = eval_si(&n, &self.syms) else {
+                continue;
+            };
+            if v.is_finite() && (v - v.round()).abs() > 1e-9 * v.abs().max(1.0) {
+                self.diags.push(
+                    Diagnostic::warning(
+                        "plantc::cogging_period",
+                        format!(
+                            "the cogging torque on `{}` is not periodic over a revolution",
+                            q.name
+                        ),
+                        n.span,
+                        format!("N = {} is not an integer", fmt_num(v)),
+                    )
+                    .with_help(
+                        "N is the number of detent periods per revolution (teeth, poles or slots seen at this coordinate)",
+                    ),
+                );
+            }
+        }
+    }
+
+    /// At most one `saturation` line per input (two limits in a row are the
+    /// smaller one: write that one).
+    fn check_saturations(&mut self, file: &ModelFile) {
+        let mut seen: HashMap<&str, Span> = HashMap::new();
+        for line in &file.actuators {
+            if line.effect_name() != Some("saturation") {
+                continue;
+            }
+            match seen.get(line.target.name.as_str()) {
+                Some(first) => self.diags.push(
+                    Diagnostic::error(
+                        "plantc::duplicate_saturation",
+                        format!("input `{}` has two `saturation` lines", line.target.name),
+                        line.span,
+                        "second saturation",
+                    )
+                    .with_label(*first, "first saturation")
+                    .with_help("two limits in a row act as the smaller one: keep one line with it"),
+                ),
+                None => {
+                    seen.insert(&line.target.name, line.span);
+                }
+            }
+        }
+    }
+
+    /// A `sensor`, `actuator` or `inertia` line: its target, its one effect
+    /// call (of the line's kind, right arity) and the units of the arguments.
     fn check_signal_effect(&mut self, line: &SignalEffect) {
         let kind = line.kind;
         let kw = kind.keyword();
         let t = &line.target;
-        // the target and its unit
+        // the target's kind (coordinates) and unit
+        let mut coord_kind = None;
         let target_dim = match (kind, self.syms.names.get(&t.name)) {
             (
-                EffectKind::Sensor,
+                EffectKind::Sensor | EffectKind::Inertia,
                 Some(Symbol {
                     kind: SymbolKind::Coordinate(k),
                     ..
                 }),
-            ) => Some(coord_dim(*k)),
+            ) => {
+                coord_kind = Some(*k);
+                Some(coord_dim(*k))
+            }
             (EffectKind::Actuator, Some(s)) if s.kind == SymbolKind::Input => {
                 Some(s.dim.unwrap_or(Dim::NONE))
             }
@@ -1242,12 +1400,8 @@ impl Checker {
             let Some(d) = self.infer(a, Ctx::Constant) else {
                 continue;
             };
-            let (expected, what) = match unit {
-                ArgUnit::Time => (Dim::time(), "a time".to_string()),
-                ArgUnit::Target | ArgUnit::TargetNonNegative => match target_dim {
-                    Some(td) => (td, format!("in the unit of `{}`", t.name)),
-                    None => continue,
-                },
+            let Some((expected, what)) = arg_expectation(*unit, t, target_dim, coord_kind) else {
+                continue;
             };
             if d != expected {
                 let mut diag = Diagnostic::error(
@@ -1257,7 +1411,10 @@ impl Checker {
                     format!("expected {expected}, found {d}"),
                 )
                 .with_help(format!("{}: {}", effect.signature(), effect.doc));
-                if matches!(unit, ArgUnit::Target | ArgUnit::TargetNonNegative) {
+                if matches!(
+                    unit,
+                    ArgUnit::Target | ArgUnit::TargetNonNegative | ArgUnit::TargetPositive
+                ) {
                     diag = diag.with_label(t.span, format!("`{}` is {expected}", t.name));
                 }
                 self.diags.push(diag);
@@ -1289,17 +1446,111 @@ impl Checker {
                         ),
                     );
                 }
+            } else if *unit == ArgUnit::TargetPositive {
+                if let Some(v) = eval_si(a, &self.syms)
+                    .filter(|v| v.partial_cmp(&0.0) != Some(std::cmp::Ordering::Greater))
+                {
+                    self.diags.push(
+                        Diagnostic::error(
+                            "plantc::nonpositive_level",
+                            format!("the saturation level of `{}` is not positive", t.name),
+                            a.span,
+                            format!("= {} (SI)", fmt_num(v)),
+                        )
+                        .with_help(
+                            "a saturation level L > 0: the plant receives the input clipped to [-L, L]",
+                        ),
+                    );
+                }
+            } else if *unit == ArgUnit::Inertia {
+                if let Some(v) = eval_si(a, &self.syms).filter(|v| v.is_nan() || *v < 0.0) {
+                    self.diags.push(
+                        Diagnostic::error(
+                            "plantc::negative_inertia",
+                            format!("the added inertia of `{}` is negative", t.name),
+                            a.span,
+                            format!("= {} (SI)", fmt_num(v)),
+                        )
+                        .with_help(
+                            "an added inertia J >= 0 adds 1/2*J*q'^2 to the kinetic energy; to lower an inertia, change the parameter that holds it",
+                        ),
+                    );
+                }
             }
         }
+    }
+
+    /// The arguments of a force effect that lists their units, each checked
+    /// on its own (so a wrong unit is reported once, naming the argument);
+    /// false (with the errors pushed) when one is wrong. Arguments whose
+    /// dimension cannot be inferred are left to the check of the whole force.
+    fn force_effect_args_ok(&mut self, call: &Expr, q: &Ident) -> bool {
+        let ExprKind::Call(f, args) = &call.kind else {
+            return true;
+        };
+        let Some(effect) = effects::lookup(&f.name) else {
+            return true;
+        };
+        let coord_kind = match self.syms.names.get(&q.name) {
+            Some(Symbol {
+                kind: SymbolKind::Coordinate(k),
+                ..
+            }) => Some(*k),
+            _ => None,
+        };
+        let target_dim = coord_kind.map(coord_dim);
+        let names: Vec<&str> = effect
+            .params
+            .iter()
+            .chain(effect.optional.iter())
+            .copied()
+            .collect();
+        let mut ok = true;
+        for (i, (a, unit)) in args.iter().zip(effect.arg_units.iter()).enumerate() {
+            let Ok(d) = dimension_of(a, &self.syms) else {
+                continue;
+            };
+            let Some((expected, what)) = arg_expectation(*unit, q, target_dim, coord_kind) else {
+                continue;
+            };
+            if d != expected {
+                ok = false;
+                self.diags.push(
+                    Diagnostic::error(
+                        "plantc::unit_mismatch",
+                        format!(
+                            "`{}` of `{}` must be {what}",
+                            names.get(i).copied().unwrap_or("the argument"),
+                            f.name
+                        ),
+                        a.span,
+                        format!("expected {expected}, found {d}"),
+                    )
+                    .with_label(q.span, format!("the force acts on `{}`", q.name))
+                    .with_help(format!(
+                        "{}: {}",
+                        effect.signature(),
+                        effect.doc
+                    )),
+                );
+            }
+        }
+        ok
     }
 
     fn expand_effects(&mut self, e: &Expr, q: &Ident) -> Expr {
         let kind = match &e.kind {
             ExprKind::Call(f, _) if effects::lookup(&f.name).is_some() => {
                 let eff = effects::lookup(&f.name).map(|x| x.kind);
-                if let Some(kind @ (EffectKind::Sensor | EffectKind::Actuator)) = eff {
+                if let Some(
+                    kind @ (EffectKind::Sensor | EffectKind::Actuator | EffectKind::Inertia),
+                ) = eff
+                {
                     self.diags
                         .push(wrong_kind(e, &f.name, kind, EffectKind::Force, q));
+                    return zero_at(e.span);
+                }
+                if !self.force_effect_args_ok(e, q) {
                     return zero_at(e.span);
                 }
                 return match effects::expand(e, q) {

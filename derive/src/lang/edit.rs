@@ -335,14 +335,15 @@ fn check_call(call_text: &str) -> Result<String, EditError> {
     }
 }
 
-/// Where a new `force`/`sensor`/`actuator` line goes: after the last of
-/// those lines, or after the energies when there is none.
+/// Where a new `force`/`sensor`/`actuator`/`inertia` line goes: after the
+/// last of those lines, or after the energies when there is none.
 fn effect_anchor(m: &ModelFile, text: &str) -> usize {
     m.forces
         .iter()
         .map(|f| f.span.end)
         .chain(m.sensors.iter().map(|s| s.span.end))
         .chain(m.actuators.iter().map(|a| a.span.end))
+        .chain(m.inertias.iter().map(|a| a.span.end))
         .max()
         .or_else(|| {
             m.kinetic
@@ -483,4 +484,29 @@ pub fn rename(text: &str, symbol: &SymbolRef, new_name: &str) -> Result<String, 
         out.replace_range(s.start..s.end, &r);
     }
     Ok(out)
+}
+
+/// Adds the line `inertia <coordinate> = <call>` (e.g.
+/// `added_inertia(J_theta)`) after the last force, sensor, actuator or
+/// inertia line. The result must check: the call must be an inertia effect
+/// whose arguments exist, with the right units.
+pub fn add_inertia_effect(
+    text: &str,
+    coordinate: &str,
+    call_text: &str,
+) -> Result<String, EditError> {
+    let call = check_call(call_text)?;
+    let (m, before) = parse_ok(text)?;
+    if !m.coordinates.iter().any(|c| c.name.name == coordinate) {
+        return Err(EditError::UnknownCoordinate {
+            name: coordinate.to_string(),
+            suggestions: suggest(
+                coordinate,
+                m.coordinates.iter().map(|c| c.name.name.as_str()),
+            ),
+        });
+    }
+    let anchor = effect_anchor(&m, text);
+    let edit = insert_line(text, anchor, &format!("inertia {coordinate} = {call}"));
+    apply(text, &before, vec![edit])
 }

@@ -13,11 +13,15 @@
 //! - **actuator** effects (`actuator Vm = input_offset(V0)`): what the plant
 //!   receives for the commanded input; the formula is in terms of `u`, or
 //!   empty when the effect is not algebraic (`input_delay`) or not linear in
-//!   `u` (`deadzone`): such effects stay out of the forces, which must be
-//!   linear in the inputs.
+//!   `u` (`deadzone`, `saturation`): such effects stay out of the forces,
+//!   which must be linear in the inputs.
+//! - **inertia** effects (`inertia theta = added_inertia(J)`): a term added
+//!   to the kinetic energy `T` (in `q'`), so the mass matrix gains it and
+//!   every consumer of the equations sees it.
 //!
-//! Sensor and actuator effect arguments are expressions of parameters whose
-//! units are given by [`ArgUnit`]. To add an effect, add a row to [`EFFECTS`].
+//! Sensor, actuator and inertia effect arguments are expressions of
+//! parameters whose units are given by [`ArgUnit`]. To add an effect, add a
+//! row to [`EFFECTS`].
 
 use super::ast::{Expr, ExprKind, Ident};
 use super::diagnostic::Diagnostic;
@@ -33,6 +37,9 @@ pub enum EffectKind {
     Sensor,
     /// An input effect in an `actuator u = ...` line (`u` an input).
     Actuator,
+    /// A kinetic-energy term in an `inertia q = ...` line (`q` a
+    /// coordinate): the formula is added to `T`.
+    Inertia,
 }
 
 impl EffectKind {
@@ -42,13 +49,14 @@ impl EffectKind {
             EffectKind::Force => "force",
             EffectKind::Sensor => "sensor",
             EffectKind::Actuator => "actuator",
+            EffectKind::Inertia => "inertia",
         }
     }
 
     /// What the target of such a line is (`a coordinate`, `an input`).
     pub fn target(self) -> &'static str {
         match self {
-            EffectKind::Force | EffectKind::Sensor => "a coordinate",
+            EffectKind::Force | EffectKind::Sensor | EffectKind::Inertia => "a coordinate",
             EffectKind::Actuator => "an input",
         }
     }
@@ -63,6 +71,24 @@ pub enum ArgUnit {
     Time,
     /// The unit of the target, and `>= 0` (a deadzone half-width).
     TargetNonNegative,
+    /// The unit of the target, and `> 0` (a saturation level).
+    TargetPositive,
+    /// An inertia of the target coordinate, `>= 0`: kg*m^2 on an angle, kg
+    /// on a length (so that `1/2*J*q'^2` is an energy).
+    Inertia,
+    /// A generalised force on the target coordinate: N*m on an angle, N on
+    /// a length.
+    Force,
+    /// The inverse of the target's unit (dimensionless on an angle, 1/m on
+    /// a length): a spatial frequency.
+    PerTarget,
+    /// Dimensionless (an angle in rad).
+    Dimensionless,
+    /// The unit of the target's rate (1/s on an angle, m/s on a length).
+    TargetRate,
+    /// A generalised force per rate of the target: N*m*s/rad on an angle,
+    /// N*s/m on a length (a viscous coefficient).
+    Damping,
 }
 
 /// One effect: name, kind, parameters, documentation and formula.
@@ -72,16 +98,19 @@ pub struct Effect {
     pub name: &'static str,
     /// Which line may hold it.
     pub kind: EffectKind,
-    /// Units of the arguments of sensor and actuator effects, in call order
-    /// (empty for force effects, whose units are checked on the whole force).
+    /// Units of the arguments, in call order. Sensor, actuator and inertia
+    /// effects list all of theirs; a force effect may list them (each
+    /// argument is then checked on its own, with a message naming it) or
+    /// leave this empty (its units are checked on the whole force).
     pub arg_units: &'static [ArgUnit],
     /// Required parameter names, in call order.
     pub params: &'static [&'static str],
     /// Optional trailing parameters (may be omitted), in call order.
     pub optional: &'static [&'static str],
     /// Formula used when the optional parameters are omitted: the force (in
-    /// `q`, `q'`), the measurement (in `q`) or the received input (in `u`);
-    /// empty for an effect that is not algebraic (`input_delay`).
+    /// `q`, `q'`), the measurement (in `q`), the received input (in `u`) or
+    /// the kinetic-energy term (in `q'`); empty for an effect that is not
+    /// algebraic (`input_delay`, `deadzone`, `saturation`).
     pub formula: &'static str,
     /// Formula used when all optional parameters are given.
     pub formula_full: &'static str,
@@ -159,6 +188,28 @@ pub const EFFECTS: &[Effect] = &[
         doc: "linear spring: -k*q, or -k*(q - q0) with rest position q0",
     },
     Effect {
+        name: "cogging",
+        kind: EffectKind::Force,
+        arg_units: &[ArgUnit::Force, ArgUnit::PerTarget, ArgUnit::Dimensionless],
+        params: &["A", "N"],
+        optional: &["phase"],
+        formula: "-A*sin(N*q)",
+        formula_full: "-A*sin(N*q + phase)",
+        doc: "detent/cogging torque: -A*sin(N*q + phase), periodic in q with N periods per revolution (an integer on an angle; 1/m on a length)",
+    },
+    Effect {
+        name: "speed_limit",
+        kind: EffectKind::Force,
+        arg_units: &[ArgUnit::TargetRate, ArgUnit::Damping],
+        params: &["vmax", "c"],
+        optional: &[],
+        // -c*dz(q', vmax) with the kinks rounded over vmax/50: odd, smooth,
+        // zero at q' = 0, -c*(q' - vmax) well above vmax
+        formula: "-c/2*(2*q' + sqrt((q' - vmax)^2 + (vmax/50)^2) - sqrt((q' + vmax)^2 + (vmax/50)^2))",
+        formula_full: "-c/2*(2*q' + sqrt((q' - vmax)^2 + (vmax/50)^2) - sqrt((q' + vmax)^2 + (vmax/50)^2))",
+        doc: "a drive's speed limit: a steep viscous force -c*(q' - vmax) above vmax (and -c*(q' + vmax) below -vmax), zero in between, the kinks rounded over vmax/50",
+    },
+    Effect {
         name: "sensor_offset",
         kind: EffectKind::Sensor,
         arg_units: &[ArgUnit::Target],
@@ -198,6 +249,26 @@ pub const EFFECTS: &[Effect] = &[
         formula_full: "",
         doc: "actuator deadzone: the plant receives sign(u)*max(|u| - w, 0) (w >= 0 in the input's unit)",
     },
+    Effect {
+        name: "saturation",
+        kind: EffectKind::Actuator,
+        arg_units: &[ArgUnit::TargetPositive],
+        params: &["L"],
+        optional: &[],
+        formula: "",
+        formula_full: "",
+        doc: "actuator saturation (a drive's voltage or current limit): the plant receives min(max(u, -L), L) (L > 0 in the input's unit)",
+    },
+    Effect {
+        name: "added_inertia",
+        kind: EffectKind::Inertia,
+        arg_units: &[ArgUnit::Inertia],
+        params: &["J"],
+        optional: &[],
+        formula: "1/2*J*q'^2",
+        formula_full: "1/2*J*q'^2",
+        doc: "added inertia (e.g. a rotor's reflected inertia Kg^2*Jm): adds 1/2*J*q'^2 to the kinetic energy (J >= 0, kg*m^2 on an angle, kg on a length)",
+    },
 ];
 
 /// The effects of one kind, in table order.
@@ -224,8 +295,8 @@ pub fn lookup(name: &str) -> Option<&'static Effect> {
 /// result gets the call's span, except substituted arguments, which keep theirs.
 /// For a sensor effect the result is the measurement of the coordinate, for an
 /// actuator effect (with `coordinate` naming the input) the input the plant
-/// receives; an effect without a formula (`input_delay`) expands to the
-/// target itself.
+/// receives, for an inertia effect the kinetic-energy term; an effect without
+/// a formula (`input_delay`) expands to the target itself.
 #[allow(clippy::result_large_err)] // cold path; Diagnostic is plain data
 pub fn expand(call: &Expr, coordinate: &Ident) -> Result<Expr, Diagnostic> {
     let (effect, args) = resolve_call(call)?;

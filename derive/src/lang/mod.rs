@@ -28,6 +28,8 @@
 //! actuator Vm = input_offset(V0)                # the plant receives Vm + V0
 //! actuator Vm = input_delay(Td)                 # the plant receives Vm(t - Td)
 //! actuator Vm = deadzone(w)                     # sign(Vm)*max(|Vm| - w, 0)
+//! actuator Vm = saturation(Vmax)                # min(max(Vm, -Vmax), Vmax)
+//! inertia theta = added_inertia(Jr)             # T gains 1/2*Jr*theta'^2
 //!
 //! set quanser_manual "manual values" { l2 = 0.1685 [m]
 //!     J1 = 9.98e-4 [kg*m^2] - m1*l1^2 }
@@ -75,20 +77,33 @@
 //! Built-in functions: `sin cos tan sqrt exp ln abs sign tanh atan2(y, x)`,
 //! constant `pi`. Effects (only in `force` lines, see [`effects::EFFECTS`]):
 //! `viscous_friction(b)`, `coulomb_friction(Fc)`, `stribeck_friction(Fc, Fs, vs)`,
-//! `quadratic_drag(cd)`, `spring(k)`, `spring(k, q0)`; each is the force on the
-//! coordinate of its line and already carries the minus sign.
+//! `quadratic_drag(cd)`, `spring(k)`, `spring(k, q0)`, `cogging(A, N)`,
+//! `cogging(A, N, phase)` (`-A*sin(N*q + phase)`, N periods per revolution:
+//! a warning when a known N on an angle is not an integer), `speed_limit(vmax,
+//! c)` (a drive's velocity limit: `-c*(q' - vmax)` above `vmax`, mirrored
+//! below `-vmax`, zero between, kinks rounded over `vmax/50`); each is the
+//! force on the coordinate of its line and already carries the minus sign.
 //!
 //! ## Sensor and actuator effects
 //! `sensor q = effect(..)` (q a coordinate) and `actuator u = effect(..)` (u an
 //! input) hold exactly one effect call of their kind; several lines may target
 //! the same name and compose (offsets add, delays add, deadzone widths add;
-//! whatever the line order, the deadzone acts on the commanded value, the
-//! delay shifts the result in time and the offset is added last). Sensor
-//! effects: `sensor_offset(d)` (d in the coordinate's unit). Actuator
-//! effects: `input_offset(V0)` (the input's unit), `input_delay(Td)` (s),
-//! `deadzone(w)` (the input's unit, `w >= 0`). Arguments are expressions of parameters and numbers. An effect of the
-//! wrong kind for its line is an error that lists the effects valid there.
-//! See [`crate::model::Model`] for which consumers honour them.
+//! one saturation per input; whatever the line order, the deadzone acts on
+//! the commanded value, the saturation on its result, the delay shifts that
+//! in time and the offset is added last). Sensor effects: `sensor_offset(d)`
+//! (d in the coordinate's unit). Actuator effects: `input_offset(V0)` (the
+//! input's unit), `input_delay(Td)` (s), `deadzone(w)` (the input's unit,
+//! `w >= 0`), `saturation(L)` (the input's unit, `L > 0`). Arguments are
+//! expressions of parameters and numbers. An effect of the wrong kind for its
+//! line is an error that lists the effects valid there. See
+//! [`crate::model::Model`] for which consumers honour them.
+//!
+//! ## Inertia lines
+//! `inertia q = added_inertia(J)` (q a coordinate, `J >= 0` in kg*m^2 on an
+//! angle, kg on a length) adds `1/2*J*q'^2` to the kinetic energy: an inertia
+//! the written `T` lacks, e.g. a rotor's reflected inertia `Kg^2*Jm`. Unlike
+//! sensor and actuator effects it is part of the plant equations, so every
+//! consumer sees it.
 //!
 //! ## Units
 //! Known units are listed in [`units::UNITS`]; combine with `*`, `/`, `^n`,

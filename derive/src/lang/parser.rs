@@ -24,6 +24,7 @@ pub const KEYWORDS: &[&str] = &[
     "force",
     "sensor",
     "actuator",
+    "inertia",
     "set",
     "controller",
     "recorded",
@@ -480,30 +481,32 @@ impl<'a> Parser<'a> {
                     span: Span::new(start, self.prev_end()),
                 });
             }
-            "sensor" | "actuator" => {
+            "sensor" | "actuator" | "inertia" => {
+                use super::effects::EffectKind;
                 self.bump();
-                let target = if kw == "sensor" {
-                    self.ident("a coordinate name")?
-                } else {
+                let target = if kw == "actuator" {
                     self.ident("an input name")?
+                } else {
+                    self.ident("a coordinate name")?
                 };
                 self.expect(Tok::Eq, "`=`")?;
                 self.skip_newlines();
                 let call = self.expr()?;
+                let kind = match kw {
+                    "sensor" => EffectKind::Sensor,
+                    "actuator" => EffectKind::Actuator,
+                    _ => EffectKind::Inertia,
+                };
                 let line = SignalEffect {
-                    kind: if kw == "sensor" {
-                        super::effects::EffectKind::Sensor
-                    } else {
-                        super::effects::EffectKind::Actuator
-                    },
+                    kind,
                     target,
                     call,
                     span: Span::new(start, self.prev_end()),
                 };
-                if kw == "sensor" {
-                    file.sensors.push(line);
-                } else {
-                    file.actuators.push(line);
+                match kind {
+                    EffectKind::Sensor => file.sensors.push(line),
+                    EffectKind::Actuator => file.actuators.push(line),
+                    _ => file.inertias.push(line),
                 }
             }
             "set" => {

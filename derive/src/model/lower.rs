@@ -28,17 +28,20 @@ pub struct LoadedModel {
 }
 
 impl LoadedModel {
-    /// Warnings, one per `sensor_offset`, `input_delay` and `deadzone` line, for a
+    /// Warnings, one per `sensor_offset`, `input_delay`, `deadzone` and
+    /// `saturation` line, for a
     /// consumer (`consumer`, e.g. "`plantc sim`") that works on the plant
     /// equations and so ignores them (see [`Model`]'s docs). Empty for most
     /// models. Render them with [`crate::lang::render`] and `self.source`.
     pub fn ignored_signal_effects(&self, consumer: &str) -> Vec<Diagnostic> {
         let (file, _) = crate::lang::parser::parse(&self.source.text);
         let sensors = file.sensors.iter();
-        let delays = file
-            .actuators
-            .iter()
-            .filter(|a| matches!(a.effect_name(), Some("input_delay" | "deadzone")));
+        let delays = file.actuators.iter().filter(|a| {
+            matches!(
+                a.effect_name(),
+                Some("input_delay" | "deadzone" | "saturation")
+            )
+        });
         let mut lines: Vec<&ast::SignalEffect> = sensors.chain(delays).collect();
         lines.sort_by_key(|l| l.span.start);
         lines
@@ -48,6 +51,8 @@ impl LoadedModel {
                     "measurement effect"
                 } else if line.effect_name() == Some("deadzone") {
                     "actuator deadzone"
+                } else if line.effect_name() == Some("saturation") {
+                    "actuator saturation"
                 } else {
                     "input delay"
                 };
@@ -58,7 +63,7 @@ impl LoadedModel {
                     "not part of the plant equations",
                 )
                 .with_help(
-                    "sensor offsets, input delays and deadzones are honoured when comparing with measurements (compare, fit, diagnose); simulation, linearization and generated code describe the plant itself",
+                    "sensor offsets, input delays, deadzones and saturations are honoured when comparing with measurements (compare, fit, diagnose); simulation, linearization and generated code describe the plant itself",
                 )
             })
             .collect()
@@ -320,10 +325,16 @@ pub fn lower(file: &ast::ModelFile, symbols: Option<&Symbols>) -> Model {
             },
         })
         .collect();
-    let kinetic = file
+    let mut kinetic = file
         .kinetic
         .first()
         .map_or(Expr::zero(), |k| lw.expr(&k.expr));
+    // `inertia q = added_inertia(J)`: `1/2*J*q'^2` added to T
+    for line in &file.inertias {
+        if let Ok(term) = effects::expand(&line.call, &line.target) {
+            kinetic += lw.expr(&term);
+        }
+    }
     let potential = file
         .potential
         .first()
@@ -446,6 +457,7 @@ fn lower_signal_effects(
             Some("input_offset") => ActuatorEffectKind::Offset(arg(lw, line)),
             Some("input_delay") => ActuatorEffectKind::Delay(arg(lw, line)),
             Some("deadzone") => ActuatorEffectKind::Deadzone(arg(lw, line)),
+            Some("saturation") => ActuatorEffectKind::Saturation(arg(lw, line)),
             _ => continue,
         };
         actuators.push(ActuatorEffect { input: j, effect });

@@ -230,6 +230,11 @@ pub enum ActuatorEffectKind {
     /// expression over parameters. Not in the forces (they must stay linear
     /// in the inputs).
     Deadzone(Expr),
+    /// `actuator u = saturation(L)`: the plant receives `min(max(u, -L), L)`,
+    /// with `L > 0` (the input's unit) an expression over parameters (a
+    /// drive's voltage or current limit). Not in the forces. At most one per
+    /// input (the checker refuses a second).
+    Saturation(Expr),
 }
 
 /// An effect on one input (`actuator u = ...`).
@@ -246,16 +251,18 @@ pub struct ActuatorEffect {
 /// # Sensor and actuator effects
 /// `actuator u = input_offset(V0)` is folded into [`Model::forces`] at
 /// lowering (every `u` becomes `u + V0`), so mechanics, linearization, code
-/// generation and simulation see it with no change. `sensor q =
-/// sensor_offset(d)`, `actuator u = input_delay(Td)` and `actuator u =
-/// deadzone(w)` cannot be folded into the equations of motion (the forces
-/// must stay linear in the inputs): they are listed in [`Model::sensors`]
-/// and [`Model::actuators`], and only consumers that compare with
-/// measurements honour them (identification's experiment simulation and
-/// sensitivities in `plantc-identify`: measurement `q + d`, input
-/// `dz(u)(t - Td) + V0` with a zero-order hold: the deadzone acts on the
-/// commanded value, the delay then shifts it in time, the offset is in the
-/// forces). The state-space equations, `plantc sim`, linearization
+/// generation and simulation see it with no change; so is `inertia q =
+/// added_inertia(J)`, whose `1/2*J*q'^2` is added to [`Model::kinetic`].
+/// `sensor q = sensor_offset(d)`, `actuator u = input_delay(Td)`,
+/// `actuator u = deadzone(w)` and `actuator u = saturation(L)` cannot be
+/// folded into the equations of motion (the forces must stay linear in the
+/// inputs): they are listed in [`Model::sensors`] and [`Model::actuators`],
+/// and only consumers that compare with measurements honour them
+/// (identification's experiment simulation and sensitivities in
+/// `plantc-identify`: measurement `q + d`, input `sat(dz(u))(t - Td) + V0`
+/// with a zero-order hold: the deadzone acts on the commanded value, the
+/// saturation on its result, the delay then shifts it in time, the offset is
+/// in the forces). The state-space equations, `plantc sim`, linearization
 /// and code generation describe the plant itself: they ignore both, and
 /// [`Model::ignored_signal_effects`] names what they ignore so a command can
 /// warn.
@@ -278,7 +285,8 @@ pub struct Model {
     pub derived: Vec<Derived>,
     /// Named parameter sets.
     pub sets: Vec<ParameterSet>,
-    /// Kinetic energy `T(q, q')`.
+    /// Kinetic energy `T(q, q')` (with the `added_inertia` terms of the
+    /// `inertia` lines).
     pub kinetic: Expr,
     /// Potential energy `V(q)`.
     pub potential: Expr,
@@ -359,7 +367,9 @@ impl Model {
             .filter(|a| a.input == j)
             .filter_map(|a| match &a.effect {
                 ActuatorEffectKind::Delay(d) => Some(*d),
-                ActuatorEffectKind::Offset(_) | ActuatorEffectKind::Deadzone(_) => None,
+                ActuatorEffectKind::Offset(_)
+                | ActuatorEffectKind::Deadzone(_)
+                | ActuatorEffectKind::Saturation(_) => None,
             })
             .sum()
     }
@@ -373,9 +383,23 @@ impl Model {
             .filter(|a| a.input == j)
             .filter_map(|a| match &a.effect {
                 ActuatorEffectKind::Deadzone(w) => Some(*w),
-                ActuatorEffectKind::Offset(_) | ActuatorEffectKind::Delay(_) => None,
+                ActuatorEffectKind::Offset(_)
+                | ActuatorEffectKind::Delay(_)
+                | ActuatorEffectKind::Saturation(_) => None,
             })
             .sum()
+    }
+
+    /// The saturation level of input `j` (its `saturation` line), if any,
+    /// over parameters.
+    pub fn input_saturation(&self, j: usize) -> Option<Expr> {
+        self.actuators
+            .iter()
+            .filter(|a| a.input == j)
+            .find_map(|a| match &a.effect {
+                ActuatorEffectKind::Saturation(l) => Some(*l),
+                _ => None,
+            })
     }
 
     /// Whether any input has a `deadzone` line.
@@ -386,7 +410,7 @@ impl Model {
     }
 
     /// Effects that the plant equations cannot hold (sensor offsets, input
-    /// delays and deadzones), as `sensor alpha = sensor_offset(...)`-like labels:
+    /// delays, deadzones and saturations), as `sensor alpha = sensor_offset(...)`-like labels:
     /// consumers other than identification ignore them and may warn with
     /// this list. Empty for most models.
     pub fn ignored_signal_effects(&self) -> Vec<String> {
@@ -407,6 +431,9 @@ impl Model {
                 }
                 ActuatorEffectKind::Deadzone(w) => {
                     v.push(format!("actuator {name} = deadzone({w})"))
+                }
+                ActuatorEffectKind::Saturation(l) => {
+                    v.push(format!("actuator {name} = saturation({l})"))
                 }
                 ActuatorEffectKind::Offset(_) => {}
             }
