@@ -357,17 +357,34 @@ pub struct RunArgs {
     /// (the SRV02 arm has no hard stop; cables limit it).
     #[arg(long, value_name = "ANGLE", default_value = "180deg")]
     pub arm_limit: String,
+    /// Engage a balancing controller once the pendulum is within this of upright.
+    #[arg(long, value_name = "ANGLE", default_value = "10deg")]
+    pub catch_window: String,
     /// Fault once the pendulum is this far from upright after engaging.
     #[arg(long, value_name = "ANGLE", default_value = "30deg")]
     pub fall_angle: String,
     /// How velocities are estimated from the encoder angles: a Kalman
     /// observer on the model linearized about upright, or Quanser's filtered
-    /// derivative (see --velocity-bandwidth).
-    #[arg(long, value_enum, default_value_t = VelocityKind::Observer)]
-    pub velocity: VelocityKind,
-    /// Bandwidth of the filtered derivative (rad/s; with --velocity derivative).
-    #[arg(long, value_name = "RAD_PER_S", default_value_t = 50.0)]
-    pub velocity_bandwidth: f64,
+    /// derivative (see --velocity-bandwidth). Default: the observer, or the
+    /// derivative for a controller with a swing-up mode (the observer's
+    /// model only holds near upright).
+    #[arg(long, value_enum)]
+    pub velocity: Option<VelocityKind>,
+    /// Swing-up (a hybrid controller's `swing_up` mode) starts only with the
+    /// pendulum within this of hanging.
+    #[arg(long, value_name = "ANGLE", default_value = "20deg")]
+    pub hanging_window: String,
+    /// Fault during swing-up once |arm speed| exceeds this (rad/s).
+    #[arg(long, value_name = "RAD_PER_S", default_value_t = 30.0)]
+    pub max_arm_speed: f64,
+    /// Fault during swing-up once |pendulum speed| exceeds this (rad/s).
+    #[arg(long, value_name = "RAD_PER_S", default_value_t = 25.0)]
+    pub max_pendulum_speed: f64,
+    /// Bandwidth of the filtered derivative (rad/s; with --velocity
+    /// derivative). Default 50 (Quanser's examples), 200 for a controller
+    /// with a swing-up mode (at 50 the energy pump's lag loses the catch).
+    #[arg(long, value_name = "RAD_PER_S")]
+    pub velocity_bandwidth: Option<f64>,
     /// Observer process noise: unmodelled angular acceleration (rad/s^2;
     /// larger = faster, noisier observer).
     #[arg(long, value_name = "RAD_PER_S2", default_value_t = 30.0)]

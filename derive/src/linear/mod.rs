@@ -5,6 +5,7 @@
 //! - [`controllability`]: controllability matrix and SVD rank.
 //! - [`place`]: single-input pole placement (`u = -K x`).
 //! - [`lqr`]: continuous-time LQR via the CARE.
+//! - [`sliding_surface`], [`reduced_dynamics`]: linear sliding surfaces.
 //! - [`AnalysisReport`], [`PlaceReport`], [`LqrReport`]: the CLI's JSON shapes.
 //!
 //! All functions return [`LinearError`] on bad input instead of panicking.
@@ -16,6 +17,7 @@ mod lqr;
 mod place;
 mod poles;
 mod report;
+mod sliding;
 
 pub use controllability::{
     controllability, controllability_matrix, numerical_rank, Controllability,
@@ -26,3 +28,4 @@ pub use lqr::{care_residual, lqr, Lqr};
 pub use place::{char_poly, check_desired_poles, place, pole_match_error, Placement};
 pub use poles::{canonicalize_poles, format_pole, parse_poles, poles, Pole};
 pub use report::{analyze, to_json, AnalysisReport, LqrReport, PlaceReport};
+pub use sliding::{reduced_dynamics, sliding_surface, ReducedDynamics, SlidingSurface};
