@@ -635,6 +635,7 @@ fn law_controller(
     Ok(quote! {
         #d
         #[derive(Clone, Copy, Debug, PartialEq)]
+        #[allow(non_snake_case)]
         pub struct #sname {
             params: Params,
             #(#gfields)*
@@ -647,6 +648,7 @@ fn law_controller(
             }
         }
 
+        #[allow(non_snake_case)]
         impl #sname {
             #new_doc
             pub fn new(params: Params, #(#gparams),*) -> Self {
@@ -855,6 +857,7 @@ fn hybrid_controller(
     Ok(quote! {
         #d
         #[derive(Clone, Copy, Debug, PartialEq)]
+        #[allow(non_snake_case)]
         pub struct #sname {
             params: Params,
             mode: usize,
@@ -868,6 +871,7 @@ fn hybrid_controller(
             }
         }
 
+        #[allow(non_snake_case)]
         impl #sname {
             /// Mode names, in mode order.
             pub const MODES: [&'static str; #nm] = [#(#names),*];

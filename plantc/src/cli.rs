@@ -61,13 +61,18 @@ pub enum Command {
         json: bool,
     },
     /// Lie derivatives, relative degree, linearizing law, normal form and zero
-    /// dynamics of an output.
+    /// dynamics of an output; or, with --controller, a sliding-mode
+    /// controller's equivalent control and reduced dynamics on its surface.
     Analyze {
         /// The model file.
         model: PathBuf,
         /// The output to analyse (default: the model's first output).
         #[arg(long)]
         output: Option<String>,
+        /// Analyse this controller: a `surface` (sliding-mode) controller, or
+        /// a `linearize output` controller (its output).
+        #[arg(long, conflicts_with = "output")]
+        controller: Option<String>,
         #[command(flatten)]
         params: ParamArgs,
         /// Print JSON.

@@ -34,6 +34,17 @@ pub fn dispatch(cli: &Cli, out: &mut dyn Write, err: &mut dyn Write) -> Result<(
         Command::Analyze {
             model,
             output,
+            controller: Some(c),
+            params,
+            json,
+        } => {
+            let _ = output;
+            analyze::controller(model, c, params, *json, out, err)
+        }
+        Command::Analyze {
+            model,
+            output,
+            controller: None,
             params,
             json,
         } => analyze::run(model, output.as_deref(), params, *json, out, err),
