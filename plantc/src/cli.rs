@@ -142,6 +142,10 @@ pub enum Command {
     /// Run a controller in the real-time loop on the simulator or a Quanser
     /// Q2-USB board, with the safety supervisor and a CSV log.
     Run(RunArgs),
+    /// Robustness study: controllers designed on the model's values (or
+    /// --set) against plants whose parameters differ; which hold, and the
+    /// chattering (total variation of the input). Cases run in parallel.
+    Robustness(RobustnessArgs),
     /// Make measurement-like CSV data from the model with hidden effects
     /// (true parameter values, encoder quantisation, optional noise).
     Synth(SynthArgs),
@@ -403,6 +407,60 @@ pub struct RunArgs {
     /// Overwrite an existing log.
     #[arg(long)]
     pub force: bool,
+}
+
+/// Arguments of `plantc robustness`.
+#[derive(Debug, Args, Clone)]
+pub struct RobustnessArgs {
+    /// The model file.
+    pub model: PathBuf,
+    /// Design values of the controllers (the plants differ from them).
+    #[command(flatten)]
+    pub params: ParamArgs,
+    /// A controller of the model (repeatable; default: every controller
+    /// without modes or direct laws).
+    #[arg(long = "controller", value_name = "NAME")]
+    pub controllers: Vec<String>,
+    /// Parameters varied one at a time by -/+ --by, e.g. `J1,l2,b1`.
+    #[arg(long, value_name = "NAME,...")]
+    pub vary: Option<String>,
+    /// Relative change of each varied parameter, e.g. `20%` or `0.2`.
+    #[arg(long, value_name = "FRACTION", default_value = "20%")]
+    pub by: String,
+    /// A plant with a parameter set to a value the design lacks, e.g.
+    /// `Fg1=0.01` (repeatable).
+    #[arg(long = "add", value_name = "NAME=VALUE")]
+    pub add: Vec<String>,
+    /// Initial state, e.g. `--x0 alpha=10deg`.
+    #[arg(long, value_name = "NAME=VALUE,...", allow_hyphen_values = true)]
+    pub x0: Option<String>,
+    /// Simulated time per case (s).
+    #[arg(long, value_name = "S", default_value_t = 10.0)]
+    pub duration: f64,
+    /// Controller rate (Hz, zero-order hold).
+    #[arg(long, value_name = "HZ", default_value_t = 1000.0)]
+    pub rate: f64,
+    /// The coordinate that must stay up (default: the second coordinate).
+    #[arg(long, value_name = "NAME")]
+    pub pendulum: Option<String>,
+    /// The coordinate with an angle limit (default: the first coordinate).
+    #[arg(long, value_name = "NAME")]
+    pub arm: Option<String>,
+    /// The pendulum must stay within this of upright.
+    #[arg(long, value_name = "ANGLE", default_value = "30deg")]
+    pub fall_angle: String,
+    /// The arm must stay within this of 0.
+    #[arg(long, value_name = "ANGLE", default_value = "180deg")]
+    pub arm_limit: String,
+    /// Settled: largest |pendulum| over the last 2 s below this.
+    #[arg(long, value_name = "ANGLE", default_value = "1deg")]
+    pub settle: String,
+    /// Worker threads (default: the available parallelism).
+    #[arg(long, value_name = "N")]
+    pub threads: Option<usize>,
+    /// Print JSON.
+    #[arg(long)]
+    pub json: bool,
 }
 
 /// Arguments of `plantc sim`.

@@ -128,6 +128,10 @@ pub struct SimProblem {
     pub input_names: Vec<String>,
     /// Output names (model outputs).
     pub output_names: Vec<String>,
+    /// Parameter values the controller was designed with, when they differ
+    /// from the plant's [`SimProblem::params`] (a robustness study); `None`:
+    /// the plant's.
+    pub controller_params: Option<Vec<f64>>,
     output_tape: Tape,
     has_sign: bool,
 }
@@ -159,6 +163,7 @@ impl SimProblem {
             state_names: model.state_names(),
             input_names: model.inputs.iter().map(|i| i.name.clone()).collect(),
             output_names: model.outputs.iter().map(|o| o.name.clone()).collect(),
+            controller_params: None,
             output_tape,
             has_sign: has_sign(equations),
         };
@@ -173,6 +178,14 @@ impl SimProblem {
                 "the initial state needs {} finite values",
                 d.n_states()
             )));
+        }
+        if let Some(c) = &self.controller_params {
+            if c.len() != d.n_params() || c.iter().any(|v| !v.is_finite()) {
+                return Err(SimError::Setup(format!(
+                    "the controller's parameter vector needs {} finite values",
+                    d.n_params()
+                )));
+            }
         }
         if self.params.len() != d.n_params() {
             return Err(SimError::Setup(format!(
@@ -326,7 +339,12 @@ impl Plant<'_> {
             return Ok(());
         };
         let cws = self.cws.as_mut().expect("controller workspace");
-        c.eval(x, &self.p.params, &mut self.u_raw, cws);
+        let params = self
+            .p
+            .controller_params
+            .as_deref()
+            .unwrap_or(&self.p.params);
+        c.eval(x, params, &mut self.u_raw, cws);
         if let Some(i) = self.u_raw.iter().position(|v| !v.is_finite()) {
             return Err(SimError::NonFiniteControl {
                 t,
@@ -343,7 +361,12 @@ impl Plant<'_> {
             return false;
         };
         let cws = self.cws.as_mut().expect("controller workspace");
-        match c.update_mode(x, &self.p.params, cws) {
+        let params = self
+            .p
+            .controller_params
+            .as_deref()
+            .unwrap_or(&self.p.params);
+        match c.update_mode(x, params, cws) {
             Some((from, to)) => {
                 switches.push((t, from, to));
                 true

@@ -10,6 +10,7 @@ mod fit;
 mod gen;
 mod identify;
 mod linearize;
+mod robustness;
 mod run;
 mod sim;
 mod stability;
@@ -62,6 +63,7 @@ pub fn dispatch(cli: &Cli, out: &mut dyn Write, err: &mut dyn Write) -> Result<(
         } => design::place(source, poles, *json, out, err),
         Command::Lqr { source, q, r, json } => design::lqr(source, q, r, *json, out, err),
         Command::Run(args) => run::run(args, out, err),
+        Command::Robustness(args) => robustness::run(args, out, err),
         Command::Sim(args) => sim::run(args, out, err),
         Command::Synth(args) => synth::run(args, out, err),
         Command::Compare(args) => compare::run(args, out, err),

@@ -154,7 +154,10 @@ impl Checker {
                     }
                 }
             }
-            if designs.is_empty() {
+            let bad_law = c.body.iter().any(
+                |s| matches!(s, ControllerStmt::Law { target, .. } if target.name != "v" && !inputs.contains(&target.name.as_str())),
+            );
+            if designs.is_empty() && !bad_law {
                 self.diags.push(
                     Diagnostic::error(
                         "plantc::controller_kind",
@@ -251,10 +254,9 @@ impl Checker {
                         }
                     }
                     ControllerStmt::Gain { name, value, span } => {
-                        if !matches!(
-                            design,
-                            Some(Design::Linearize | Design::Surface | Design::Direct)
-                        ) {
+                        if design.is_some_and(|d| {
+                            !matches!(d, Design::Linearize | Design::Surface | Design::Direct)
+                        }) {
                             self.diags.push(Diagnostic::error(
                                 "plantc::controller_kind",
                                 "`gain` lines belong to a `linearize output`, `surface` or direct-law controller",
@@ -308,6 +310,7 @@ impl Checker {
                                 inputs.iter().map(|i| format!("`{i} = ...`")).collect::<Vec<_>>().join(", ")
                             )));
                             self.diags.push(d);
+                            self.check_law(expr, &gains, LawNames::Direct);
                             continue;
                         }
                         match design {
@@ -667,7 +670,8 @@ impl Checker {
                                 .map(|(n, _)| n.as_str()),
                         )
                         .collect();
-                    let mut d = Diagnostic::error("plantc::unknown_name", format!("unknown name `{n}` in the law"), x.span, format!("not {what}"));
+                    let place = if kind == LawNames::SurfaceDef { "surface" } else { "law" };
+                    let mut d = Diagnostic::error("plantc::unknown_name", format!("unknown name `{n}` in the {place}"), x.span, format!("not {what}"));
                     d.help = did_you_mean(&suggest(n, cands)).or(Some("declare gains with `gain name = value`".into()));
                     errs.push(d);
                 }
