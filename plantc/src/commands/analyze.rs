@@ -189,7 +189,18 @@ pub fn controller(
         .reduced
         .poles
         .iter()
-        .map(|p| complex_text(p.re, p.im))
+        .map(|p| {
+            // eigenvalues to 9 significant digits (the rest is rounding)
+            let r = |x: f64| {
+                if x == 0.0 {
+                    0.0
+                } else {
+                    let scale = 10f64.powi(8 - p.abs().log10().floor() as i32);
+                    (x * scale).round() / scale
+                }
+            };
+            complex_text(r(p.re), r(p.im))
+        })
         .collect();
     let stable = a.reduced.asymptotically_stable();
     let verdict = if stable {
