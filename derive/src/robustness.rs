@@ -386,10 +386,10 @@ fn run_case(
         let a = wrap_angle(x[o.pendulum]).abs();
         let th = x[o.arm].abs();
         arm = arm.max(th);
-        if fell.is_none() && !(a <= o.fall_angle) {
+        if fell.is_none() && (a > o.fall_angle || a.is_nan()) {
             fell = Some(traj.t[k]);
         }
-        if arm_at.is_none() && !(th <= o.arm_limit) {
+        if arm_at.is_none() && (th > o.arm_limit || th.is_nan()) {
             arm_at = Some(traj.t[k]);
         }
         if traj.t[k] >= tail_from {
@@ -415,7 +415,7 @@ fn run_case(
         (Some(t), Some(u)) if u < t => Outcome::ArmLimit { t: u },
         (Some(t), _) => Outcome::Fell { t },
         (None, Some(t)) => Outcome::ArmLimit { t },
-        (None, None) if !(tail <= o.settle_angle) => Outcome::NotSettled,
+        (None, None) if tail > o.settle_angle || tail.is_nan() => Outcome::NotSettled,
         (None, None) => Outcome::Holds,
     };
     result

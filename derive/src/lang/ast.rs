@@ -428,7 +428,7 @@ pub struct Guard {
 #[derive(Debug, Clone, PartialEq)]
 pub enum GuardKind {
     /// `lhs op rhs`.
-    Cmp(CmpOp, Expr, Expr),
+    Cmp(CmpOp, Box<Expr>, Box<Expr>),
     /// Both hold.
     And(Box<Guard>, Box<Guard>),
     /// Either holds.
@@ -439,7 +439,7 @@ impl Guard {
     /// The comparisons, left to right.
     pub fn comparisons(&self) -> Vec<(CmpOp, &Expr, &Expr)> {
         match &self.kind {
-            GuardKind::Cmp(op, a, b) => vec![(*op, a, b)],
+            GuardKind::Cmp(op, a, b) => vec![(*op, &**a, &**b)],
             GuardKind::And(a, b) | GuardKind::Or(a, b) => {
                 let mut v = a.comparisons();
                 v.extend(b.comparisons());

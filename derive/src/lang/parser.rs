@@ -802,7 +802,7 @@ impl<'a> Parser<'a> {
         let b = self.expr()?;
         let span = a.span.to(b.span);
         Ok(Guard {
-            kind: GuardKind::Cmp(op, a, b),
+            kind: GuardKind::Cmp(op, Box::new(a), Box::new(b)),
             span,
         })
     }

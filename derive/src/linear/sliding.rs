@@ -106,7 +106,7 @@ pub fn reduced_dynamics(
     let cr = DMatrix::from_row_slice(1, n, c);
     let cb = (&cr * b)[(0, 0)];
     let scale = c.iter().fold(0.0f64, |m, v| m.max(v.abs())) * b.amax();
-    if !(cb.abs() > 1e-12 * scale) || !cb.is_finite() {
+    if cb.abs() <= 1e-12 * scale || !cb.is_finite() {
         return Err(LinearError::SingularSystem {
             what: "c B = 0: the input does not reach the surface (relative degree above 1)",
         });

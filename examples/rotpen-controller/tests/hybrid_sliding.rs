@@ -75,7 +75,7 @@ fn sliding_mode_and_energy_pump_laws_match_at_10000_states() {
     };
     let (pump_tape, mut pump_buf) = law_tape(&model, &values, laws, gains);
     let mut g_smc = gen::SlidingMode::default();
-    let mut g_pump = gen::EnergyPump::default();
+    let g_pump = gen::EnergyPump::default();
     let mut r = rng(7);
     let mut saturated = 0;
     for k in 0..10_000 {

@@ -75,12 +75,13 @@ impl Infer<'_> {
             return Some(None);
         }
         if f.name == "energy" {
-            return Some(
-                energy_argument(&args[0], self.syms)
-                    .map_err(|d| self.diags.push(d))
-                    .ok()
-                    .map(|_| Dim::energy()),
-            );
+            return Some(match energy_argument(&args[0], self.syms) {
+                None => Some(Dim::energy()),
+                Some(d) => {
+                    self.diags.push(d);
+                    None
+                }
+            });
         }
         let d = self.infer(&args[0])?;
         if !d.is_none() {
@@ -99,14 +100,14 @@ impl Infer<'_> {
     }
 }
 
-/// The argument of `energy(q)` must be a coordinate's name.
-fn energy_argument(arg: &Expr, syms: &super::Symbols) -> Result<(), Diagnostic> {
+/// The argument of `energy(q)` must be a coordinate's name: the error if not.
+fn energy_argument(arg: &Expr, syms: &super::Symbols) -> Option<Diagnostic> {
     if let ExprKind::Name(n) = &arg.kind {
         if matches!(
             syms.names.get(n).map(|s| s.kind),
             Some(SymbolKind::Coordinate(_))
         ) {
-            return Ok(());
+            return None;
         }
     }
     let coords: Vec<&str> = syms
@@ -115,7 +116,7 @@ fn energy_argument(arg: &Expr, syms: &super::Symbols) -> Result<(), Diagnostic> 
         .filter(|(_, s)| matches!(s.kind, SymbolKind::Coordinate(_)))
         .map(|(n, _)| n.as_str())
         .collect();
-    Err(Diagnostic::error(
+    Some(Diagnostic::error(
         "plantc::bad_energy",
         "`energy` takes a coordinate's name",
         arg.span,
@@ -695,7 +696,7 @@ impl Checker {
                     if args.len() != *arity {
                         errs.push(Diagnostic::error("plantc::wrong_arity", format!("`{}` takes {arity} argument(s), found {}", f.name, args.len()), x.span, "wrong number of arguments"));
                     } else if f.name == "energy" {
-                        if let Err(d) = energy_argument(&args[0], &self.syms) {
+                        if let Some(d) = energy_argument(&args[0], &self.syms) {
                             errs.push(d);
                         }
                     }
