@@ -44,6 +44,8 @@ enum Kind {
     /// `u = u0 - K (x - x0)`, `k` row-major `m x n`.
     StateFeedback {
         k: Vec<f64>,
+        /// `k_<state>` (see [`crate::control::state_feedback_gain_name`]), row-major like `k`.
+        k_names: Vec<String>,
         x0: Vec<f64>,
         u0: Vec<f64>,
     },
@@ -135,7 +137,7 @@ pub fn gain_names(controller: &ResolvedController) -> Vec<String> {
 /// Override named gains of a resolved controller (feedback linearization,
 /// sliding mode, direct laws: `wn`, `zeta`, `kE`, ...). State feedback has no
 /// named gains. For a hybrid controller a gain is `mode.gain`, or a bare
-/// `gain` that sets it in every mode that has it.
+/// `gain` when only one mode has it.
 pub fn set_gains(
     controller: &mut ResolvedController,
     gains: &[(String, f64)],
@@ -166,26 +168,35 @@ pub fn set_gains(
         }
         ResolvedController::Hybrid { name, modes, .. } => {
             for (g, v) in gains {
-                let mut found = false;
-                for m in modes.iter_mut() {
-                    let own = gain_names(&m.controller);
+                let mut targets = Vec::new();
+                for (i, m) in modes.iter().enumerate() {
                     let bare = match g.split_once('.') {
                         Some((mode, gain)) if mode == m.name => gain,
                         Some(_) => continue,
                         None => g.as_str(),
                     };
-                    if own.iter().any(|k| k == bare) {
-                        set_gains(&mut m.controller, &[(bare.to_string(), *v)])?;
-                        found = true;
+                    if gain_names(&m.controller).iter().any(|k| k == bare) {
+                        targets.push((i, bare.to_string()));
                     }
                 }
-                if !found {
+                if targets.len() > 1 {
+                    return Err(SimError::Setup(format!(
+                        "controller `{name}`: gain `{g}` is in several modes; write {}",
+                        targets
+                            .iter()
+                            .map(|(i, k)| format!("`{}.{k}`", modes[*i].name))
+                            .collect::<Vec<_>>()
+                            .join(" or ")
+                    )));
+                }
+                let Some((i, bare)) = targets.pop() else {
                     return Err(SimError::UnknownGain {
                         controller: name.clone(),
                         name: g.clone(),
                         known,
                     });
-                }
+                };
+                set_gains(&mut modes[i].controller, &[(bare, *v)])?;
             }
             Ok(())
         }
@@ -242,6 +253,12 @@ impl ControllerEval {
                 }
                 Kind::StateFeedback {
                     k: k.iter().flatten().copied().collect(),
+                    k_names: (0..m)
+                        .flat_map(|i| {
+                            (0..n)
+                                .map(move |j| crate::control::state_feedback_gain_name(model, i, j))
+                        })
+                        .collect(),
                     x0: x0.clone(),
                     u0: u0.clone(),
                 }
@@ -327,11 +344,14 @@ impl ControllerEval {
         &self.modes
     }
 
-    /// Named gains and their values (empty for state feedback; `mode.gain`
-    /// for a hybrid controller).
+    /// Named gains and their values (state feedback: the entries of `K`,
+    /// named by [`crate::control::state_feedback_gain_name`]; a hybrid
+    /// controller: `mode.gain`).
     pub fn gains(&self) -> Vec<(String, f64)> {
         match &self.kind {
-            Kind::StateFeedback { .. } => Vec::new(),
+            Kind::StateFeedback { k, k_names, .. } => {
+                k_names.iter().cloned().zip(k.iter().copied()).collect()
+            }
             Kind::Law {
                 gain_names, gains, ..
             } => gain_names
@@ -351,8 +371,8 @@ impl ControllerEval {
         }
     }
 
-    /// Change a named gain (`mode.gain`, or a bare `gain` in every mode that
-    /// has it, for a hybrid controller).
+    /// Change a named gain (`mode.gain`, or a bare `gain` that only one mode
+    /// has, for a hybrid controller).
     pub fn set_gain(&mut self, name: &str, value: f64) -> Result<(), SimError> {
         let known = self.gains().into_iter().map(|(n, _)| n).collect::<Vec<_>>();
         match &mut self.kind {
@@ -365,23 +385,38 @@ impl ControllerEval {
                 }
             }
             Kind::Hybrid { modes, .. } => {
-                let mut found = false;
-                for (c, info) in modes.iter_mut().zip(&self.modes) {
+                let mut targets = Vec::new();
+                for (i, (c, info)) in modes.iter().zip(&self.modes).enumerate() {
                     let bare = match name.split_once('.') {
                         Some((mode, gain)) if mode == info.name => gain,
                         Some(_) => continue,
                         None => name,
                     };
                     if c.gains().iter().any(|(g, _)| g == bare) {
-                        c.set_gain(bare, value)?;
-                        found = true;
+                        targets.push((i, bare.to_string()));
                     }
                 }
-                if found {
+                if targets.len() > 1 {
+                    return Err(SimError::Setup(format!(
+                        "controller `{}`: gain `{name}` is in several modes; write {}",
+                        self.name,
+                        targets
+                            .iter()
+                            .map(|(i, g)| format!("`{}.{g}`", self.modes[*i].name))
+                            .collect::<Vec<_>>()
+                            .join(" or ")
+                    )));
+                }
+                if let Some((i, bare)) = targets.pop() {
+                    return modes[i].set_gain(&bare, value);
+                }
+            }
+            Kind::StateFeedback { k, k_names, .. } => {
+                if let Some(i) = k_names.iter().position(|g| g == name) {
+                    k[i] = value;
                     return Ok(());
                 }
             }
-            Kind::StateFeedback { .. } => {}
         }
         Err(SimError::UnknownGain {
             controller: self.name.clone(),
@@ -481,7 +516,7 @@ impl ControllerEval {
     ) {
         debug_assert_eq!(u.len(), self.n_inputs);
         match &self.kind {
-            Kind::StateFeedback { k, x0, u0 } => {
+            Kind::StateFeedback { k, x0, u0, .. } => {
                 let n = self.n_states;
                 for (i, ui) in u.iter_mut().enumerate() {
                     let mut acc = u0[i];
