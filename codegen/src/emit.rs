@@ -340,6 +340,18 @@ pub(crate) fn generate_body(spec: &Spec) -> Result<String, Error> {
             /// The input to apply at time `t` (s) for the measured state `x`,
             /// saturated at the input limits.
             fn step(&mut self, t: f64, x: &[f64; N_STATES]) -> [f64; N_INPUTS];
+            /// A hybrid controller's mode names, in mode order (empty otherwise).
+            fn modes(&self) -> &'static [&'static str] {
+                &[]
+            }
+            /// Whether each mode swings the pendulum up (empty unless hybrid).
+            fn swing_up_modes(&self) -> &'static [bool] {
+                &[]
+            }
+            /// The current mode (index into [`Control::modes`]; 0 unless hybrid).
+            fn mode(&self) -> usize {
+                0
+            }
         }
 
         #(#ctrl_items)*
@@ -1003,7 +1015,8 @@ fn hybrid_controller(
         let own: Vec<String> = match &m.controller {
             ResolvedController::StateFeedback { k, .. } => (0..k.len())
                 .flat_map(|i| {
-                    (0..nx).map(move |j| plantc_derive::control::state_feedback_gain_name(model, i, j))
+                    (0..nx)
+                        .map(move |j| plantc_derive::control::state_feedback_gain_name(model, i, j))
                 })
                 .collect(),
             ResolvedController::FeedbackLinearization { gains, .. }
@@ -1213,6 +1226,16 @@ fn hybrid_controller(
             }
             fn reset(&mut self) {
                 #sname::reset(self)
+            }
+            fn modes(&self) -> &'static [&'static str] {
+                &Self::MODES
+            }
+            fn swing_up_modes(&self) -> &'static [bool] {
+                &Self::SWING_UP
+            }
+            #[inline]
+            fn mode(&self) -> usize {
+                self.mode
             }
             #[inline]
             fn step(&mut self, _t: f64, x: &[f64; N_STATES]) -> [f64; N_INPUTS] {

@@ -104,7 +104,43 @@ fn with_fake_hil<T>(spec: &str, dir: &Path, f: impl FnOnce() -> T) -> T {
     f()
 }
 
-fn swing_up(name: &str, backend: &[&str], fake: Option<&str>) {
+/// Runs `plantc <args> --compiled <rig> --compare` as a process: the rig
+/// crate is built into `target/rig-tests` (shared with `rig_cli.rs`), the
+/// fake HIL configured through the child's environment.
+fn plantc_compiled(
+    args: &[&str],
+    rig: &Path,
+    fake: Option<(&str, &Path)>,
+) -> (i32, String, String) {
+    let mut cmd = std::process::Command::new(env!("CARGO_BIN_EXE_plantc"));
+    cmd.args(args)
+        .args(["--compiled", rig.to_str().expect("utf8"), "--compare"])
+        .env("CARGO_TARGET_DIR", repo().join("target/rig-tests"))
+        .env("CARGO_NET_OFFLINE", "true");
+    if let Some((spec, dir)) = fake {
+        cmd.env("PLANTC_FAKE_HIL", spec)
+            .env("PLANTC_FAKE_HIL_TRACE", dir.join("trace.txt"));
+    }
+    let o = cmd.output().expect("plantc runs");
+    (
+        o.status.code().unwrap_or(-1),
+        String::from_utf8_lossy(&o.stdout).into_owned(),
+        String::from_utf8_lossy(&o.stderr).into_owned(),
+    )
+}
+
+/// The number after `key` in `text`.
+fn number_after(text: &str, key: &str) -> Option<f64> {
+    let rest = &text[text.find(key)? + key.len()..];
+    let end = rest
+        .find(|c: char| !(c.is_ascii_digit() || "+-.e".contains(c)))
+        .unwrap_or(rest.len());
+    rest[..end].parse().ok()
+}
+
+/// The swing-up acceptance run; with `compiled`, the generated controller in
+/// a rig crate (`run --compiled`), the interpreted path replayed over its log.
+fn swing_up(name: &str, backend: &[&str], fake: Option<&str>, compiled: Option<&Path>) {
     let dir = tmp(name);
     let log = dir.join("out.csv");
     let model = model();
@@ -112,9 +148,10 @@ fn swing_up(name: &str, backend: &[&str], fake: Option<&str>) {
     args.extend_from_slice(backend);
     let log_s = log.to_str().expect("utf8");
     args.extend_from_slice(&["--duration", "15", "--log", log_s]);
-    let (code, out, err) = match fake {
-        Some(spec) => with_fake_hil(spec, &dir, || plantc(&args)),
-        None => plantc(&args),
+    let (code, out, err) = match (fake, compiled) {
+        (_, Some(rig)) => plantc_compiled(&args, rig, fake.map(|f| (f, dir.as_path()))),
+        (Some(spec), None) => with_fake_hil(spec, &dir, || plantc(&args)),
+        (None, None) => plantc(&args),
     };
     println!("{name}:\n{out}{err}");
     assert_eq!(code, 0, "{out}{err}");
@@ -163,6 +200,15 @@ fn swing_up(name: &str, backend: &[&str], fake: Option<&str>) {
         theta.to_degrees()
     );
     assert_eq!(last.3, "engaged");
+    if compiled.is_some() {
+        assert!(out.contains("`swing_up` (generated code)"), "{out}");
+        assert!(out.contains("loop allocations: 0 in 15000 cycles"), "{out}");
+        // the interpreted hybrid controller replayed over what the generated
+        // one measured: the same inputs up to rounding
+        let diff = number_after(&out, "max |Vm difference| ").expect("compare line");
+        println!("{name}: max |Vm difference| to the interpreted path {diff:e} V");
+        assert!(diff < 1e-9, "{out}");
+    }
 }
 
 #[test]
@@ -170,6 +216,7 @@ fn sim_swing_up_catches_and_balances() {
     swing_up(
         "sim_swing_up",
         &["--backend", "sim", "--x0", "alpha=3.0915926535897933"],
+        None,
         None,
     );
 }
@@ -182,10 +229,47 @@ fn q2usb_fake_hil_swing_up_catches_and_balances() {
         "q2_swing_up",
         &["--backend", "q2usb", "--hil-lib", lib],
         Some("alpha0=3.0915926535897933rad"),
+        None,
     );
 }
 
-fn sliding_30s(name: &str, backend: &[&str], fake: Option<&str>) {
+#[test]
+fn compiled_swing_up_and_sliding_mode_on_the_rig() {
+    if std::process::Command::new(env!("CARGO"))
+        .arg("--version")
+        .output()
+        .is_err()
+    {
+        eprintln!("skipped: cargo not available");
+        return;
+    }
+    // one rig crate for both runs (the second reuses the build)
+    let rig = tmp("compiled_rig").join("rig");
+    swing_up(
+        "compiled_sim_swing_up",
+        &["--backend", "sim", "--x0", "alpha=3.0915926535897933"],
+        None,
+        Some(&rig),
+    );
+    let lib = fake_hil_lib();
+    let lib = lib.to_str().expect("utf8");
+    swing_up(
+        "compiled_q2_swing_up",
+        &["--backend", "q2usb", "--hil-lib", lib],
+        Some("alpha0=3.0915926535897933rad"),
+        Some(&rig),
+    );
+    // the sliding-mode controller's rig (generated observer) on the simulator
+    let rig = tmp("compiled_smc_rig").join("rig");
+    sliding_30s(
+        "compiled_sim_smc",
+        &["--backend", "sim", "--x0", "alpha=10deg"],
+        None,
+        Some(&rig),
+    );
+}
+
+fn sliding_30s(name: &str, backend: &[&str], fake: Option<&str>, compiled: Option<&Path>) {
     let dir = tmp(name);
     let log = dir.join("out.csv");
     let model = model();
@@ -201,9 +285,10 @@ fn sliding_30s(name: &str, backend: &[&str], fake: Option<&str>) {
         "--log",
         log_s,
     ]);
-    let (code, out, err) = match fake {
-        Some(spec) => with_fake_hil(spec, &dir, || plantc(&args)),
-        None => plantc(&args),
+    let (code, out, err) = match (fake, compiled) {
+        (_, Some(rig)) => plantc_compiled(&args, rig, fake.map(|f| (f, dir.as_path()))),
+        (Some(spec), None) => with_fake_hil(spec, &dir, || plantc(&args)),
+        (None, None) => plantc(&args),
     };
     println!("{name}:\n{out}{err}");
     assert_eq!(code, 0, "{out}{err}");
@@ -230,6 +315,12 @@ fn sliding_30s(name: &str, backend: &[&str], fake: Option<&str>) {
         tail.to_degrees()
     );
     assert!(tail.to_degrees() < 1.0, "{}", tail.to_degrees());
+    if compiled.is_some() {
+        assert!(out.contains("loop allocations: 0 in 30000 cycles"), "{out}");
+        let diff = number_after(&out, "max |Vm difference| ").expect("compare line");
+        println!("{name}: max |Vm difference| to the interpreted path {diff:e} V");
+        assert!(diff < 1e-9, "{out}");
+    }
 }
 
 #[test]
@@ -237,6 +328,7 @@ fn sim_sliding_mode_balances_from_10_degrees_for_30_s() {
     sliding_30s(
         "sim_smc",
         &["--backend", "sim", "--x0", "alpha=10deg"],
+        None,
         None,
     );
 }
@@ -249,6 +341,7 @@ fn q2usb_fake_hil_sliding_mode_balances_from_10_degrees_for_30_s() {
         "q2_smc",
         &["--backend", "q2usb", "--hil-lib", lib],
         Some("alpha0=10deg"),
+        None,
     );
 }
 
@@ -267,6 +360,21 @@ fn swing_up_refuses_the_observer_and_a_balancing_controller_never_engages_hangin
     ]);
     assert_ne!(code, 0, "{out}{err}");
     assert!(err.contains("use --velocity derivative"), "{err}");
+    // the same through the rig crate, refused before anything is generated
+    let rig = tmp("refused_rig").join("rig");
+    let (code, out, err) = plantc(&[
+        "run",
+        &model,
+        "--controller",
+        "swing_up",
+        "--velocity",
+        "observer",
+        "--compiled",
+        rig.to_str().unwrap(),
+    ]);
+    assert_ne!(code, 0, "{out}{err}");
+    assert!(err.contains("use --velocity derivative"), "{err}");
+    assert!(!rig.exists());
     // pole placement alone from hanging: the supervisor stays armed (0 V)
     let (code, out, err) = plantc(&[
         "run",

@@ -21,6 +21,12 @@ pub trait Controller {
     fn mode(&self) -> Option<Mode> {
         None
     }
+    /// Whether one of a hybrid controller's modes swings the pendulum up
+    /// (a runner then lets the supervisor allow `SwingUp`). Called once
+    /// before the loop starts.
+    fn has_swing_up_mode(&self) -> bool {
+        false
+    }
 }
 
 /// The current mode of a hybrid controller.

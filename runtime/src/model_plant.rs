@@ -127,6 +127,10 @@ impl Controller for ModelController {
         self.eval.modes().iter().map(|m| m.name.clone()).collect()
     }
 
+    fn has_swing_up_mode(&self) -> bool {
+        self.eval.modes().iter().any(|m| m.swing_up)
+    }
+
     fn mode(&self) -> Option<Mode> {
         let modes = self.eval.modes();
         let index = self.eval.mode(&self.workspace);
