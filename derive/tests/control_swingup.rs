@@ -374,3 +374,55 @@ fn a_surface_without_velocities_or_nonlinear_is_refused() {
     }
     let _ = Expr::zero();
 }
+
+/// The names of the hybrid and sliding-mode syntax are in `lang::visit`, so
+/// editors' rename (and references, hover) follow them: renaming a
+/// controller used as a mode, a coordinate in switch conditions and `wrap`,
+/// a mode, or a surface gives a file that still checks and means the same.
+#[test]
+fn rename_follows_modes_switches_wraps_and_surfaces() {
+    use plantc_derive::lang::edit::rename;
+    use plantc_derive::lang::visit::{occurrences, Role, SymbolRef};
+    let path = Path::new(env!("CARGO_MANIFEST_DIR")).join("../models/rotary_pendulum.plant");
+    let src = std::fs::read_to_string(path).unwrap();
+    let (file, _) = plantc_derive::lang::parser::parse(&src);
+    let index = |name: &str| {
+        file.controllers
+            .iter()
+            .position(|c| c.name.name == name)
+            .unwrap()
+    };
+    let loads = |text: &str, what: &str| {
+        let m = load_model_text("renamed.plant", text)
+            .unwrap_or_else(|e| panic!("{what}: {e:?}"))
+            .model;
+        let d = Derivation::new(&m).unwrap();
+        let v = ParameterValues::new(&m, Some("thesis"), &[]).unwrap();
+        for c in ["swing_up", "sliding_mode"] {
+            resolve(&m, &d, c, &v).unwrap_or_else(|e| panic!("{what}: {c}: {e}"));
+        }
+    };
+    let out = rename(&src, &SymbolRef::Block("pole_placement".into()), "pp").unwrap();
+    assert!(out.contains("mode catch = pp\n"), "{out}");
+    loads(&out, "controller");
+    let out = rename(&src, &SymbolRef::Model("alpha".into()), "phi_p").unwrap();
+    assert!(out.contains("wrap phi_p\n"));
+    assert!(out.contains("switch pump -> catch when abs(phi_p) < 15 [deg]"));
+    loads(&out, "coordinate");
+    let su = index("swing_up");
+    let out = rename(&src, &SymbolRef::Mode(su, "catch".into()), "balance").unwrap();
+    assert!(out.contains("mode balance = pole_placement"));
+    assert!(out.contains("switch pump -> balance when") && out.contains("switch balance -> pump"));
+    loads(&out, "mode");
+    let smc = index("sliding_mode");
+    let out = rename(&src, &SymbolRef::Surface(smc, "s".into()), "sigma").unwrap();
+    assert!(out.contains("surface sigma poles") && out.contains("v = -k*sat(sigma/phi)"));
+    loads(&out, "surface");
+    // a direct law's left-hand side is a use of the input
+    let occ = occurrences(&file);
+    let vm_uses = occ
+        .iter()
+        .filter(|o| o.symbol == SymbolRef::Model("Vm".into()) && o.role == Role::Reference)
+        .count();
+    assert!(vm_uses >= 1);
+}
