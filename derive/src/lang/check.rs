@@ -12,6 +12,8 @@ use std::ops::{Add, Div, Mul, Neg};
 
 mod controllers;
 pub use controllers::CONTROLLER_FUNCTIONS;
+#[path = "check_recorded.rs"]
+mod recorded;
 
 /// Result of [`parse_and_check`].
 #[derive(Debug, Clone)]
@@ -296,6 +298,9 @@ enum Ctx {
     /// a hybrid controller's switch condition: no inputs; `energy(q)` and
     /// `sat(x)` are available.
     Controller,
+    /// a recorded controller's law: measured coordinates (no velocities),
+    /// its signals, gains and lets, parameters, `derivative(x, wc)`.
+    Recorded,
 }
 
 struct Infer<'a> {
@@ -401,6 +406,22 @@ impl Infer<'_> {
                         );
                         None
                     }
+                    _ if self.ctx == Ctx::Recorded && !recorded::readable_in_recorded(s) => {
+                        self.diags.push(
+                            Diagnostic::error(
+                                "plantc::not_measured",
+                                format!(
+                                    "`{n}` is {}; a recorded controller computes inputs, it cannot read them",
+                                    s.kind.describe()
+                                ),
+                                e.span,
+                                "not a measurement",
+                            )
+                            .with_label(s.span, "declared here")
+                            .with_help("the law may read coordinates, its `signal` columns, gains and parameters"),
+                        );
+                        None
+                    }
                     _ if self.ctx == Ctx::Constant => {
                         self.diags.push(
                             Diagnostic::error(
@@ -425,6 +446,18 @@ impl Infer<'_> {
                     return None;
                 };
                 match s.kind {
+                    SymbolKind::Coordinate(_) if self.ctx == Ctx::Recorded => {
+                        self.diags.push(
+                            Diagnostic::error(
+                                "plantc::not_measured",
+                                format!("a recorded controller does not see `{n}{}`: it reads measured positions", "'".repeat(*k as usize)),
+                                e.span,
+                                "not measured",
+                            )
+                            .with_help(format!("use the filtered difference the rig computed, e.g. `derivative({n}, 50 [rad/s])`")),
+                        );
+                        None
+                    }
                     SymbolKind::Coordinate(kind) if self.ctx != Ctx::Constant => {
                         Some(coord_dim(kind).div(Dim::time().powi(*k as i64)))
                     }
@@ -520,6 +553,9 @@ impl Infer<'_> {
             if let Some(d) = self.controller_call(e, f, args) {
                 return d;
             }
+        }
+        if self.ctx == Ctx::Recorded && f.name == "derivative" {
+            return self.derivative_call(e, args);
         }
         if let Some(eff) = effects::lookup(&f.name) {
             let kw = eff.kind.keyword();
@@ -1100,6 +1136,7 @@ impl Checker {
         }
         self.check_sets(&file);
         self.check_controllers(&file);
+        self.check_recorded(&file);
         file
     }
 
