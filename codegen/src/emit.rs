@@ -5,8 +5,11 @@ use proc_macro2::TokenStream;
 use quote::{format_ident, quote};
 
 use plantc_derive::analysis::{linearize, OperatingPoint};
-use plantc_derive::control::{resolve, Derivation, ResolvedController};
-use plantc_derive::model::{CoordinateKind, Model, ParameterValues};
+use plantc_derive::control::{resolve, Derivation, ResolvedController, ResolvedMode};
+use plantc_derive::lang::ast::CmpOp;
+use plantc_derive::model::{
+    ControllerSpec, CoordinateKind, Guard, Model, ParameterValues, SwitchSpec,
+};
 use plantc_derive::sym::{Expr, Symbol};
 
 use crate::ir::{Graph, Level};
@@ -209,10 +212,23 @@ pub(crate) fn generate_body(spec: &Spec) -> Result<String, Error> {
     };
 
     // ---- controllers ----
+    // a hybrid controller's modes are generated too (each type once)
     let mut ctrl_items = Vec::new();
+    let mut emitted: Vec<String> = Vec::new();
     for cname in spec.controllers {
         let rc = resolve(model, &der, cname, &values).map_err(Error::Control)?;
-        ctrl_items.push(controller(model, &rc)?);
+        if let ResolvedController::Hybrid { modes, .. } = &rc {
+            for m in modes {
+                if !emitted.iter().any(|e| e == m.controller.name()) {
+                    emitted.push(m.controller.name().to_string());
+                    ctrl_items.push(controller(model, &m.controller)?);
+                }
+            }
+        }
+        if !emitted.iter().any(|e| e == rc.name()) {
+            emitted.push(rc.name().to_string());
+            ctrl_items.push(controller(model, &rc)?);
+        }
     }
 
     let set_doc = doc(&format!(
@@ -324,6 +340,18 @@ pub(crate) fn generate_body(spec: &Spec) -> Result<String, Error> {
             /// The input to apply at time `t` (s) for the measured state `x`,
             /// saturated at the input limits.
             fn step(&mut self, t: f64, x: &[f64; N_STATES]) -> [f64; N_INPUTS];
+            /// A hybrid controller's mode names, in mode order (empty otherwise).
+            fn modes(&self) -> &'static [&'static str] {
+                &[]
+            }
+            /// Whether each mode swings the pendulum up (empty unless hybrid).
+            fn swing_up_modes(&self) -> &'static [bool] {
+                &[]
+            }
+            /// The current mode (index into [`Control::modes`]; 0 unless hybrid).
+            fn mode(&self) -> usize {
+                0
+            }
         }
 
         #(#ctrl_items)*
@@ -346,6 +374,7 @@ pub(crate) fn generate_body(spec: &Spec) -> Result<String, Error> {
                 #[inline(always)] pub fn powf(x: f64, y: f64) -> f64 { x.powf(y) }
                 #[inline(always)] pub fn atan2(y: f64, x: f64) -> f64 { y.atan2(x) }
                 #[inline(always)] pub fn round(x: f64) -> f64 { x.round() }
+                #[inline(always)] pub fn floor(x: f64) -> f64 { x.floor() }
             }
             #[cfg(feature = "libm")]
             mod imp {
@@ -360,6 +389,7 @@ pub(crate) fn generate_body(spec: &Spec) -> Result<String, Error> {
                 #[inline(always)] pub fn powf(x: f64, y: f64) -> f64 { libm::pow(x, y) }
                 #[inline(always)] pub fn atan2(y: f64, x: f64) -> f64 { libm::atan2(y, x) }
                 #[inline(always)] pub fn round(x: f64) -> f64 { libm::round(x) }
+                #[inline(always)] pub fn floor(x: f64) -> f64 { libm::floor(x) }
             }
             pub use imp::*;
 
@@ -397,6 +427,13 @@ pub(crate) fn generate_body(spec: &Spec) -> Result<String, Error> {
             #[inline(always)]
             pub fn sign(x: f64) -> f64 {
                 if x > 0.0 { 1.0 } else if x < 0.0 { -1.0 } else { 0.0 }
+            }
+
+            /// An angle wrapped into `[-pi, pi)`: `a - 2 pi floor((a + pi) / (2 pi))`.
+            #[inline(always)]
+            pub fn wrap_angle(a: f64) -> f64 {
+                let tau = core::f64::consts::TAU;
+                a - tau * floor((a + core::f64::consts::PI) / tau)
             }
 
             /// Clamp to `[lo, hi]`; NaN (a singular control law) gives 0.
@@ -582,206 +619,630 @@ fn controller(model: &Model, rc: &ResolvedController) -> Result<TokenStream, Err
             gains,
             chain,
         } => {
-            let nx = 2 * model.coordinates.len();
-            let mut g = Graph::new();
-            let xs: Vec<_> = (0..nx)
-                .map(|i| {
-                    let i = idx(i);
-                    g.input(quote!(x[#i]), Level::Call)
-                })
-                .collect();
-            let ps = crate::plant::param_inputs(&mut g, model, &quote!(self.params));
-            let mut env = crate::plant::env(&mut g, model, &xs, &[], &ps)?;
-            // gain accessors: `wn()` / `set_wn()`, prefixed `gain_` where a
-            // name would clash with the controller's own methods
-            let reserved = [
-                "new",
-                "params",
-                "set_params",
-                "law",
-                "control",
-                "coeffs",
-                "k",
-                "name",
-                "gain",
-                "gain_names",
-                "set_gain",
-                "reset",
-                "step",
-            ];
-            let mut gfields = Vec::new();
-            let mut gparams = Vec::new();
-            let mut ginit = Vec::new();
-            let mut gacc = Vec::new();
-            let mut gdefault = Vec::new();
-            let mut gnames = Vec::new();
-            let mut gget = Vec::new();
-            let mut gset = Vec::new();
-            for (sym, val) in gains {
-                let gname = sym.name();
-                let field = if reserved.contains(&gname) {
-                    ident(&format!("gain_{gname}"))
-                } else {
-                    ident(gname)
-                };
-                let setter = format_ident!("set_{}", field.to_string().trim_start_matches("r#"));
-                let v = g.input(quote!(self.#field), Level::Param);
-                env.bind(*sym, v);
-                gnames.push(gname.to_string());
-                gget.push(quote!(#gname => Some(self.#field),));
-                gset.push(quote!(#gname => self.#setter(value),));
-                let d = doc(&format!("outer-law gain `{gname}`"));
-                gfields.push(quote!(#field: f64,));
-                gparams.push(quote!(#field: f64));
-                ginit.push(quote!(#field,));
-                let dv = lit(*val)?;
-                gdefault.push(dv);
-                let dset = doc(&format!(
-                    "Set the outer-law gain `{gname}` (recomputes the coefficients)."
-                ));
-                gacc.push(quote! {
-                    #d
-                    #[inline]
-                    pub fn #field(&self) -> f64 { self.#field }
-                    #dset
-                    #[inline]
-                    pub fn #setter(&mut self, value: f64) {
-                        self.#field = value;
-                        self.k = self.coeffs();
-                    }
-                });
-            }
-            let n_gains = idx(gnames.len());
-            let set_gain_body = if gset.is_empty() {
-                quote!(let _ = (name, value); false)
-            } else {
-                quote!(match name { #(#gset)* _ => return false, } true)
-            };
-            let lv = g.expr(&mut env, *law)?;
-            let plan = g.plan(&[lv])?;
-            let f = g.function(&[lv], &plan, &quote!(self.k))?;
-            let stmts = &f.stmts;
-            let outs = &f.outputs;
-            let cstmts = &plan.stmts;
-            let cvals = &plan.values;
-            let nk = idx(plan.len());
-            let sat_u = sat(vec![quote!(u[0])])?;
             let v = match model.controller(name) {
-                Some(plantc_derive::model::ControllerSpec::FeedbackLinearization { v, .. }) => {
-                    v.to_string()
-                }
+                Some(ControllerSpec::FeedbackLinearization { v, .. }) => v.to_string(),
                 _ => String::new(),
             };
-            let gain_list = gains
-                .iter()
-                .map(|(s, _)| format!("`{}`", s.name()))
-                .collect::<Vec<_>>()
-                .join(", ");
-            let d = doc(&format!(
+            let about = format!(
                 "Controller `{name}` of the model: input-output feedback linearization of \
                  `{output}` (relative degree {}), `u = (v - L_f^r h) / (L_g L_f^(r-1) h)` with \
                  the outer law `v = {v}`. Singular where {}. Saturates at {limits_doc} \
-                 (a NaN law gives 0).\n\n\
-                 Parameter-only and gain-only subexpressions of the law are computed once \
-                 (when the parameters or a gain change), so the parameters and gains \
-                 ({gain_list}) are set through methods, never directly.",
+                 (a NaN law gives 0).",
                 chain.relative_degree,
                 chain.singular_set()
-            ));
-            let new_doc = doc(&format!(
-                "A controller for the plant parameters `params` with the gains {gain_list} (in this order)."
-            ));
-            Ok(quote! {
-                #d
-                #[derive(Clone, Copy, Debug, PartialEq)]
-                pub struct #sname {
-                    params: Params,
-                    #(#gfields)*
-                    k: [f64; #nk],
+            );
+            law_controller(model, name, &sname, &about, &[*law], gains)
+        }
+        ResolvedController::SlidingMode {
+            name,
+            surface,
+            gains,
+            law,
+            chain,
+        } => {
+            let v = match model.controller(name) {
+                Some(ControllerSpec::SlidingMode { v, .. }) => v.to_string(),
+                _ => String::new(),
+            };
+            let about = format!(
+                "Controller `{name}` of the model: sliding mode on the surface `s = {surface}`, \
+                 `u = (v - L_f s) / L_g s` (the equivalent control plus the reaching law \
+                 `s' = v`, `v = {v}`). Singular where {}. Saturates at {limits_doc} \
+                 (a NaN law gives 0).",
+                chain.singular_set()
+            );
+            law_controller(model, name, &sname, &about, &[*law], gains)
+        }
+        ResolvedController::Direct { name, laws, gains } => {
+            let text = model
+                .inputs
+                .iter()
+                .zip(laws)
+                .map(|(i, l)| format!("`{} = {l}`", i.name))
+                .collect::<Vec<_>>()
+                .join(", ");
+            let about = format!(
+                "Controller `{name}` of the model: the law {text} as written in the model file. \
+                 Saturates at {limits_doc} (a NaN law gives 0)."
+            );
+            law_controller(model, name, &sname, &about, laws, gains)
+        }
+        ResolvedController::Hybrid {
+            name,
+            modes,
+            switches,
+            wrap,
+        } => hybrid_controller(model, &sname, name, modes, switches, wrap, &limits_doc),
+    }
+}
+
+/// Saturation of each input at its limits.
+fn saturated(model: &Model, u: Vec<TokenStream>) -> Result<Vec<TokenStream>, Error> {
+    u.into_iter()
+        .zip(&model.inputs)
+        .map(|(v, inp)| {
+            Ok(match inp.limits {
+                Some((lo, hi)) => {
+                    let (lo, hi) = (lit(lo)?, lit(hi)?);
+                    quote!(math::saturate(#v, #lo, #hi))
                 }
-
-                impl Default for #sname {
-                    fn default() -> Self {
-                        #sname::new(Params::DEFAULT, #(#gdefault),*)
-                    }
-                }
-
-                impl #sname {
-                    #new_doc
-                    pub fn new(params: Params, #(#gparams),*) -> Self {
-                        let mut c = #sname { params, #(#ginit)* k: [0.0; #nk] };
-                        c.k = c.coeffs();
-                        c
-                    }
-
-                    /// The plant parameters used by the law.
-                    #[inline]
-                    pub fn params(&self) -> &Params {
-                        &self.params
-                    }
-
-                    /// Change the plant parameters used by the law (recomputes the coefficients).
-                    #[inline]
-                    pub fn set_params(&mut self, params: Params) {
-                        self.params = params;
-                        self.k = self.coeffs();
-                    }
-
-                    #(#gacc)*
-
-                    fn coeffs(&self) -> [f64; #nk] {
-                        #(#cstmts)*
-                        [#(#cvals),*]
-                    }
-
-                    /// The unsaturated law.
-                    #[inline]
-                    pub fn law(&self, x: &[f64; N_STATES]) -> [f64; N_INPUTS] {
-                        #(#stmts)*
-                        [#(#outs),*]
-                    }
-
-                    /// The input to apply, saturated at the input limits.
-                    #[inline]
-                    pub fn control(&mut self, x: &[f64; N_STATES]) -> [f64; N_INPUTS] {
-                        let u = self.law(x);
-                        [#(#sat_u),*]
-                    }
-                }
-
-                impl #sname {
-                    /// Names of the outer-law gains, as [`Control::set_gain`] takes them.
-                    pub const GAIN_NAMES: [&'static str; #n_gains] = [#(#gnames),*];
-                }
-
-                impl Control for #sname {
-                    fn name(&self) -> &'static str {
-                        #name
-                    }
-                    fn gain_names(&self) -> &'static [&'static str] {
-                        &Self::GAIN_NAMES
-                    }
-                    fn gain(&self, name: &str) -> Option<f64> {
-                        match name {
-                            #(#gget)*
-                            _ => None,
-                        }
-                    }
-                    fn set_gain(&mut self, name: &str, value: f64) -> bool {
-                        #set_gain_body
-                    }
-                    fn set_params(&mut self, params: Params) {
-                        #sname::set_params(self, params)
-                    }
-                    fn reset(&mut self) {}
-                    #[inline]
-                    fn step(&mut self, _t: f64, x: &[f64; N_STATES]) -> [f64; N_INPUTS] {
-                        self.control(x)
-                    }
-                }
+                None => v,
             })
+        })
+        .collect()
+}
+
+/// A controller given by laws over the state, parameters and named gains:
+/// parameter- and gain-only subexpressions live in `k`, recomputed by the setters.
+fn law_controller(
+    model: &Model,
+    name: &str,
+    sname: &proc_macro2::Ident,
+    about: &str,
+    laws: &[Expr],
+    gains: &[(Symbol, f64)],
+) -> Result<TokenStream, Error> {
+    let nx = 2 * model.coordinates.len();
+    let mut g = Graph::new();
+    let xs: Vec<_> = (0..nx)
+        .map(|i| {
+            let i = idx(i);
+            g.input(quote!(x[#i]), Level::Call)
+        })
+        .collect();
+    let ps = crate::plant::param_inputs(&mut g, model, &quote!(self.params));
+    let mut env = crate::plant::env(&mut g, model, &xs, &[], &ps)?;
+    // gain accessors: `wn()` / `set_wn()`, prefixed `gain_` where a
+    // name would clash with the controller's own methods
+    let reserved = [
+        "new",
+        "params",
+        "set_params",
+        "law",
+        "control",
+        "coeffs",
+        "k",
+        "name",
+        "gain",
+        "gain_names",
+        "set_gain",
+        "reset",
+        "step",
+    ];
+    let mut gfields = Vec::new();
+    let mut gparams = Vec::new();
+    let mut ginit = Vec::new();
+    let mut gacc = Vec::new();
+    let mut gdefault = Vec::new();
+    let mut gnames = Vec::new();
+    let mut gget = Vec::new();
+    let mut gset = Vec::new();
+    for (sym, val) in gains {
+        let gname = sym.name();
+        let field = if reserved.contains(&gname) {
+            ident(&format!("gain_{gname}"))
+        } else {
+            ident(gname)
+        };
+        let setter = format_ident!("set_{}", field.to_string().trim_start_matches("r#"));
+        let v = g.input(quote!(self.#field), Level::Param);
+        env.bind(*sym, v);
+        gnames.push(gname.to_string());
+        gget.push(quote!(#gname => Some(self.#field),));
+        gset.push(quote!(#gname => self.#setter(value),));
+        let d = doc(&format!("gain `{gname}`"));
+        gfields.push(quote!(#field: f64,));
+        gparams.push(quote!(#field: f64));
+        ginit.push(quote!(#field,));
+        let dv = lit(*val)?;
+        gdefault.push(dv);
+        let dset = doc(&format!(
+            "Set the gain `{gname}` (recomputes the coefficients)."
+        ));
+        gacc.push(quote! {
+            #d
+            #[inline]
+            pub fn #field(&self) -> f64 { self.#field }
+            #dset
+            #[inline]
+            pub fn #setter(&mut self, value: f64) {
+                self.#field = value;
+                self.k = self.coeffs();
+            }
+        });
+    }
+    let n_gains = idx(gnames.len());
+    let set_gain_body = if gset.is_empty() {
+        quote!(let _ = (name, value); false)
+    } else {
+        quote!(match name { #(#gset)* _ => return false, } true)
+    };
+    let mut lvs = Vec::new();
+    for law in laws {
+        lvs.push(g.expr(&mut env, *law)?);
+    }
+    let plan = g.plan(&lvs)?;
+    let f = g.function(&lvs, &plan, &quote!(self.k))?;
+    let stmts = &f.stmts;
+    let outs = &f.outputs;
+    let cstmts = &plan.stmts;
+    let cvals = &plan.values;
+    let nk = idx(plan.len());
+    let sat_u = saturated(
+        model,
+        (0..laws.len())
+            .map(|i| {
+                let i = idx(i);
+                quote!(u[#i])
+            })
+            .collect(),
+    )?;
+    let gain_list = gains
+        .iter()
+        .map(|(s, _)| format!("`{}`", s.name()))
+        .collect::<Vec<_>>()
+        .join(", ");
+    let d = doc(&format!(
+        "{about}\n\n\
+         Parameter-only and gain-only subexpressions of the law are computed once \
+         (when the parameters or a gain change), so the parameters and gains \
+         ({gain_list}) are set through methods, never directly."
+    ));
+    let new_doc = doc(&format!(
+        "A controller for the plant parameters `params` with the gains {gain_list} (in this order)."
+    ));
+    Ok(quote! {
+        #d
+        #[derive(Clone, Copy, Debug, PartialEq)]
+        #[allow(non_snake_case)]
+        pub struct #sname {
+            params: Params,
+            #(#gfields)*
+            k: [f64; #nk],
+        }
+
+        impl Default for #sname {
+            fn default() -> Self {
+                #sname::new(Params::DEFAULT, #(#gdefault),*)
+            }
+        }
+
+        #[allow(non_snake_case)]
+        impl #sname {
+            #new_doc
+            pub fn new(params: Params, #(#gparams),*) -> Self {
+                let mut c = #sname { params, #(#ginit)* k: [0.0; #nk] };
+                c.k = c.coeffs();
+                c
+            }
+
+            /// The plant parameters used by the law.
+            #[inline]
+            pub fn params(&self) -> &Params {
+                &self.params
+            }
+
+            /// Change the plant parameters used by the law (recomputes the coefficients).
+            #[inline]
+            pub fn set_params(&mut self, params: Params) {
+                self.params = params;
+                self.k = self.coeffs();
+            }
+
+            #(#gacc)*
+
+            fn coeffs(&self) -> [f64; #nk] {
+                #(#cstmts)*
+                [#(#cvals),*]
+            }
+
+            /// The unsaturated law.
+            #[inline]
+            pub fn law(&self, x: &[f64; N_STATES]) -> [f64; N_INPUTS] {
+                #(#stmts)*
+                [#(#outs),*]
+            }
+
+            /// The input to apply, saturated at the input limits.
+            #[inline]
+            pub fn control(&mut self, x: &[f64; N_STATES]) -> [f64; N_INPUTS] {
+                let u = self.law(x);
+                [#(#sat_u),*]
+            }
+        }
+
+        impl #sname {
+            /// Names of the gains, as [`Control::set_gain`] takes them.
+            pub const GAIN_NAMES: [&'static str; #n_gains] = [#(#gnames),*];
+        }
+
+        impl Control for #sname {
+            fn name(&self) -> &'static str {
+                #name
+            }
+            fn gain_names(&self) -> &'static [&'static str] {
+                &Self::GAIN_NAMES
+            }
+            fn gain(&self, name: &str) -> Option<f64> {
+                match name {
+                    #(#gget)*
+                    _ => None,
+                }
+            }
+            fn set_gain(&mut self, name: &str, value: f64) -> bool {
+                #set_gain_body
+            }
+            fn set_params(&mut self, params: Params) {
+                #sname::set_params(self, params)
+            }
+            fn reset(&mut self) {}
+            #[inline]
+            fn step(&mut self, _t: f64, x: &[f64; N_STATES]) -> [f64; N_INPUTS] {
+                self.control(x)
+            }
+        }
+    })
+}
+
+/// Emits `cond` over the margins `m[..]`, advancing `next`.
+fn guard_tokens(g: &Guard, next: &mut usize) -> TokenStream {
+    match g {
+        Guard::Cmp { op, .. } => {
+            let i = idx(*next);
+            *next += 1;
+            match op {
+                CmpOp::Lt => quote!((m[#i] < 0.0)),
+                CmpOp::Le => quote!((m[#i] <= 0.0)),
+                CmpOp::Gt => quote!((m[#i] > 0.0)),
+                CmpOp::Ge => quote!((m[#i] >= 0.0)),
+            }
+        }
+        // `&` / `|` on bool: every comparison is evaluated, as in the interpreter
+        Guard::And(a, b) => {
+            let (a, b) = (guard_tokens(a, next), guard_tokens(b, next));
+            quote!((#a & #b))
+        }
+        Guard::Or(a, b) => {
+            let (a, b) = (guard_tokens(a, next), guard_tokens(b, next));
+            quote!((#a | #b))
         }
     }
+}
+
+/// A hybrid controller: its modes' controllers as fields, the switch
+/// conditions' margins `lhs - rhs` through the graph, the switch logic as a
+/// `match` in file order.
+fn hybrid_controller(
+    model: &Model,
+    sname: &proc_macro2::Ident,
+    name: &str,
+    modes: &[ResolvedMode],
+    switches: &[SwitchSpec],
+    wrap: &[usize],
+    limits_doc: &str,
+) -> Result<TokenStream, Error> {
+    let nx = 2 * model.coordinates.len();
+    let nm = idx(modes.len());
+    // margins of every comparison, in switch order
+    let mut g = Graph::new();
+    let xs: Vec<_> = (0..nx)
+        .map(|i| {
+            let i = idx(i);
+            g.input(quote!(x[#i]), Level::Call)
+        })
+        .collect();
+    let ps = crate::plant::param_inputs(&mut g, model, &quote!(self.params));
+    let mut env = crate::plant::env(&mut g, model, &xs, &[], &ps)?;
+    let mut mvs = Vec::new();
+    for s in switches {
+        for (_, e) in s.when.margins() {
+            mvs.push(g.expr(&mut env, e)?);
+        }
+    }
+    let n_margins = idx(mvs.len());
+    let plan = g.plan(&mvs)?;
+    let f = g.function(&mvs, &plan, &quote!(self.k))?;
+    let (mstmts, mouts) = (&f.stmts, &f.outputs);
+    let (cstmts, cvals) = (&plan.stmts, &plan.values);
+    let nk = idx(plan.len());
+    // the switch logic
+    let mut next = 0usize;
+    let mut arms = Vec::new();
+    for s in switches {
+        let cond = guard_tokens(&s.when, &mut next);
+        let (from, to) = (idx(s.from), idx(s.to));
+        arms.push(quote!(#from if #cond => #to,));
+    }
+    // the modes
+    let mut fields = Vec::new();
+    let mut inits = Vec::new();
+    let mut set_params = Vec::new();
+    let mut accessors = Vec::new();
+    let mut law_arms = Vec::new();
+    let mut control_arms = Vec::new();
+    let mut resets = Vec::new();
+    let mut gain_get = Vec::new();
+    let mut gain_set = Vec::new();
+    let mut qualified: Vec<String> = Vec::new();
+    for (i, m) in modes.iter().enumerate() {
+        let field = format_ident!("mode_{}", m.name);
+        let field_mut = format_ident!("mode_{}_mut", m.name);
+        let ty = format_ident!("{}", camel(m.controller.name()));
+        fields.push(quote!(#field: #ty,));
+        match &m.controller {
+            ResolvedController::StateFeedback { .. } => inits.push(quote!(#field: #ty::new(),)),
+            ResolvedController::Hybrid { .. } => {
+                return Err(Error::Generate(format!(
+                    "controller `{name}`: mode `{}` is itself hybrid",
+                    m.name
+                )))
+            }
+            ResolvedController::FeedbackLinearization { gains, .. }
+            | ResolvedController::SlidingMode { gains, .. }
+            | ResolvedController::Direct { gains, .. } => {
+                let mut gv = Vec::new();
+                for (_, v) in gains {
+                    gv.push(lit(*v)?);
+                }
+                inits.push(quote!(#field: #ty::new(params, #(#gv),*),));
+            }
+        }
+        set_params.push(quote!(Control::set_params(&mut self.#field, params);));
+        resets.push(quote!(Control::reset(&mut self.#field);));
+        let mode_name = m.name.as_str();
+        gain_get.push(quote!(#mode_name => Control::gain(&self.#field, gain),));
+        gain_set.push(quote!(#mode_name => Control::set_gain(&mut self.#field, gain, value),));
+        let own: Vec<String> = match &m.controller {
+            ResolvedController::StateFeedback { k, .. } => (0..k.len())
+                .flat_map(|i| {
+                    (0..nx)
+                        .map(move |j| plantc_derive::control::state_feedback_gain_name(model, i, j))
+                })
+                .collect(),
+            ResolvedController::FeedbackLinearization { gains, .. }
+            | ResolvedController::SlidingMode { gains, .. }
+            | ResolvedController::Direct { gains, .. } => {
+                gains.iter().map(|(g, _)| g.name().to_string()).collect()
+            }
+            ResolvedController::Hybrid { .. } => Vec::new(),
+        };
+        qualified.extend(own.into_iter().map(|g| format!("{}.{g}", m.name)));
+        let d = doc(&format!(
+            "The controller of mode `{}` (`{}`).",
+            m.name,
+            m.controller.name()
+        ));
+        let dm = doc(&format!(
+            "The controller of mode `{}`, to change its gains.",
+            m.name
+        ));
+        accessors.push(quote! {
+            #d
+            #[inline]
+            pub fn #field(&self) -> &#ty { &self.#field }
+            #dm
+            #[inline]
+            pub fn #field_mut(&mut self) -> &mut #ty { &mut self.#field }
+        });
+        let il = idx(i);
+        law_arms.push(quote!(#il => self.#field.law(&xw),));
+        control_arms.push(quote!(#il => self.#field.control(&xw),));
+    }
+    let names = modes.iter().map(|m| m.name.as_str());
+    let n_qualified = idx(qualified.len());
+    let swing = modes.iter().map(|m| m.swing_up);
+    let wraps = wrap.iter().map(|&i| {
+        let i = idx(i);
+        quote!(xw[#i] = math::wrap_angle(xw[#i]);)
+    });
+    let mut about = format!(
+        "Controller `{name}` of the model: hybrid, with modes {}; starts in `{}`. \
+         Switches, checked by [`{sname}::control`] before the law (the first that holds \
+         from the current mode, in this order, then again from the new mode):\n",
+        modes
+            .iter()
+            .map(|m| format!(
+                "`{}` = `{}`{}",
+                m.name,
+                m.controller.name(),
+                if m.swing_up { " (swing-up)" } else { "" }
+            ))
+            .collect::<Vec<_>>()
+            .join(", "),
+        modes.first().map_or("", |m| m.name.as_str())
+    );
+    for s in switches {
+        about.push_str(&format!(
+            "- `{}` -> `{}` when `{}`\n",
+            modes[s.from].name, modes[s.to].name, s.text
+        ));
+    }
+    if !wrap.is_empty() {
+        about.push_str(&format!(
+            "\nThe modes and conditions see {} wrapped into [-pi, pi).",
+            wrap.iter()
+                .map(|&i| format!("`{}`", model.coordinates[i].name))
+                .collect::<Vec<_>>()
+                .join(", ")
+        ));
+    }
+    about.push_str(&format!("\n\nSaturates at {limits_doc}."));
+    let d = doc(&about);
+    Ok(quote! {
+        #d
+        #[derive(Clone, Copy, Debug, PartialEq)]
+        #[allow(non_snake_case)]
+        pub struct #sname {
+            params: Params,
+            mode: usize,
+            #(#fields)*
+            k: [f64; #nk],
+        }
+
+        impl Default for #sname {
+            fn default() -> Self {
+                #sname::new(Params::DEFAULT)
+            }
+        }
+
+        #[allow(non_snake_case)]
+        impl #sname {
+            /// Mode names, in mode order.
+            pub const MODES: [&'static str; #nm] = [#(#names),*];
+            /// Whether each mode is a swing-up mode (the pendulum anywhere).
+            pub const SWING_UP: [bool; #nm] = [#(#swing),*];
+
+            /// A controller in its first mode, the modes with their default gains.
+            pub fn new(params: Params) -> Self {
+                let mut c = #sname { params, mode: 0, #(#inits)* k: [0.0; #nk] };
+                c.k = c.coeffs();
+                c
+            }
+
+            /// Change the plant parameters of the conditions and every mode.
+            pub fn set_params(&mut self, params: Params) {
+                self.params = params;
+                #(#set_params)*
+                self.k = self.coeffs();
+            }
+
+            /// The gains of every mode, as `mode.gain`.
+            pub const GAIN_NAMES: [&'static str; #n_qualified] = [#(#qualified),*];
+
+            #(#accessors)*
+
+            /// The current mode (index into [`Self::MODES`]).
+            #[inline]
+            pub fn mode(&self) -> usize { self.mode }
+
+            /// Back to the first mode (the modes' controllers reset too).
+            #[inline]
+            pub fn reset(&mut self) {
+                self.mode = 0;
+                #(#resets)*
+            }
+
+            fn coeffs(&self) -> [f64; #nk] {
+                #(#cstmts)*
+                [#(#cvals),*]
+            }
+
+            #[inline]
+            fn wrapped(x: &[f64; N_STATES]) -> [f64; N_STATES] {
+                #[allow(unused_mut)]
+                let mut xw = *x;
+                #(#wraps)*
+                xw
+            }
+
+            /// `lhs - rhs` of every comparison of the switch conditions.
+            #[inline]
+            pub fn margins(&self, x: &[f64; N_STATES]) -> [f64; #n_margins] {
+                let x = &Self::wrapped(x);
+                #(#mstmts)*
+                [#(#mouts),*]
+            }
+
+            /// Applies the switches at `x`; `Some((from, to))` if the mode changed.
+            pub fn update_mode(&mut self, x: &[f64; N_STATES]) -> Option<(usize, usize)> {
+                let m = self.margins(x);
+                let start = self.mode;
+                for _ in 0..#nm {
+                    self.mode = match self.mode {
+                        #(#arms)*
+                        _ => break,
+                    };
+                }
+                if self.mode != start { Some((start, self.mode)) } else { None }
+            }
+
+            /// The current mode's unsaturated law (no switching).
+            #[inline]
+            pub fn law(&self, x: &[f64; N_STATES]) -> [f64; N_INPUTS] {
+                let xw = Self::wrapped(x);
+                match self.mode {
+                    #(#law_arms)*
+                    _ => [0.0; N_INPUTS],
+                }
+            }
+
+            /// Applies the switches, then the current mode's saturated input.
+            #[inline]
+            pub fn control(&mut self, x: &[f64; N_STATES]) -> [f64; N_INPUTS] {
+                self.update_mode(x);
+                let xw = Self::wrapped(x);
+                match self.mode {
+                    #(#control_arms)*
+                    _ => [0.0; N_INPUTS],
+                }
+            }
+        }
+
+        impl Control for #sname {
+            fn name(&self) -> &'static str {
+                #name
+            }
+            fn gain_names(&self) -> &'static [&'static str] {
+                &Self::GAIN_NAMES
+            }
+            fn gain(&self, name: &str) -> Option<f64> {
+                let (mode, gain) = name.split_once('.')?;
+                match mode {
+                    #(#gain_get)*
+                    _ => None,
+                }
+            }
+            fn set_gain(&mut self, name: &str, value: f64) -> bool {
+                let Some((mode, gain)) = name.split_once('.') else {
+                    return false;
+                };
+                match mode {
+                    #(#gain_set)*
+                    _ => false,
+                }
+            }
+            fn set_params(&mut self, params: Params) {
+                #sname::set_params(self, params)
+            }
+            fn reset(&mut self) {
+                #sname::reset(self)
+            }
+            fn modes(&self) -> &'static [&'static str] {
+                &Self::MODES
+            }
+            fn swing_up_modes(&self) -> &'static [bool] {
+                &Self::SWING_UP
+            }
+            #[inline]
+            fn mode(&self) -> usize {
+                self.mode
+            }
+            #[inline]
+            fn step(&mut self, _t: f64, x: &[f64; N_STATES]) -> [f64; N_INPUTS] {
+                self.control(x)
+            }
+        }
+    })
 }
 
 /// `mod observer`: the steady-state Kalman velocity observer of the rig,

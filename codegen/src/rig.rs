@@ -163,7 +163,7 @@ pub(crate) fn write_rig(
 
 mod model;
 
-use plantc_runtime::{{Controller, ObserverInfo, Plant, RigInfo, RigModel, VelocityEstimator}};
+use plantc_runtime::{{Controller, Mode, ObserverInfo, Plant, RigInfo, RigModel, VelocityEstimator}};
 
 /// Counts the loop's allocations (reported after the run; expected 0).
 #[global_allocator]
@@ -205,6 +205,17 @@ impl<C: model::Control> Controller for ControllerAdapter<C> {{
     }}
     fn reset(&mut self) {{
         self.0.reset()
+    }}
+    fn mode_names(&self) -> Vec<String> {{
+        self.0.modes().iter().map(|m| m.to_string()).collect()
+    }}
+    #[inline]
+    fn mode(&self) -> Option<Mode> {{
+        let index = self.0.mode();
+        self.0.swing_up_modes().get(index).map(|&swing_up| Mode {{ index, swing_up }})
+    }}
+    fn has_swing_up_mode(&self) -> bool {{
+        self.0.swing_up_modes().contains(&true)
     }}
 }}
 

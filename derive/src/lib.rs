@@ -9,7 +9,8 @@
 //! - [`model`]: lowering of a checked AST into a symbolic [`model::Model`].
 //! - [`mechanics`]: Euler-Lagrange equations, mass matrix, control-affine form.
 //! - [`linear`]: numeric linear analysis and design (controllability, poles,
-//!   pole placement, LQR).
+//!   pole placement, LQR, sliding surfaces).
+//! - [`robustness`]: controllers against plants with mismatched parameters.
 
 pub mod analysis;
 pub mod control;
@@ -17,5 +18,6 @@ pub mod lang;
 pub mod linear;
 pub mod mechanics;
 pub mod model;
+pub mod robustness;
 pub mod simulate;
 pub mod sym;

@@ -158,6 +158,36 @@ fn symbol(a: &Analysis, s: &SymbolRef, at: Span) -> Option<String> {
                 c.name.name
             ))
         }
+        SymbolRef::Surface(ci, name) => {
+            let c = f.controllers.get(*ci)?;
+            Some(format!(
+                "{}\n\nThe sliding surface of controller `{}`, usable in its law.",
+                code(&format!("surface {name}")),
+                c.name.name
+            ))
+        }
+        SymbolRef::Mode(ci, name) => {
+            let c = f.controllers.get(*ci)?;
+            let (drives, swing) = c.body.iter().find_map(|s| match s {
+                plantc_derive::lang::ast::ControllerStmt::Mode {
+                    name: n,
+                    controller,
+                    swing_up,
+                    ..
+                } if &n.name == name => Some((controller.name.clone(), swing_up.is_some())),
+                _ => None,
+            })?;
+            Some(format!(
+                "{}\n\nA mode of the hybrid controller `{}`, driven by `{drives}`{}.",
+                code(&format!("mode {name}")),
+                c.name.name,
+                if swing {
+                    " (swing-up: the pendulum anywhere)"
+                } else {
+                    ""
+                }
+            ))
+        }
         SymbolRef::LawOutput(ci) => {
             let c = f.controllers.get(*ci)?;
             let out = c.body.iter().find_map(|s| match s {

@@ -28,7 +28,11 @@ pub fn references(a: &Analysis, uri: &Uri, offset: usize, with_decl: bool) -> Ve
 fn renamable(s: &SymbolRef) -> bool {
     matches!(
         s,
-        SymbolRef::Model(_) | SymbolRef::Gain(..) | SymbolRef::Block(_)
+        SymbolRef::Model(_)
+            | SymbolRef::Gain(..)
+            | SymbolRef::Block(_)
+            | SymbolRef::Surface(..)
+            | SymbolRef::Mode(..)
     )
 }
 

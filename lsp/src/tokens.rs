@@ -61,6 +61,14 @@ pub const CLAUSE_KEYWORDS: &[&str] = &[
     "gains",
     "linearize",
     "gain",
+    "surface",
+    "mode",
+    "swing_up",
+    "switch",
+    "when",
+    "and",
+    "or",
+    "wrap",
 ];
 
 /// The legend announced in the server capabilities.
@@ -113,6 +121,8 @@ pub fn semantic_tokens(a: &Analysis) -> SemanticTokens {
                                 None => (VARIABLE, 0),
                             },
                             SymbolRef::Gain(..) => (PARAMETER, READONLY),
+                            SymbolRef::Surface(..) => (VARIABLE, READONLY),
+                            SymbolRef::Mode(..) => (VARIABLE, 0),
                             SymbolRef::LawOutput(_) => (VARIABLE, 0),
                             SymbolRef::Block(_) => (NAMESPACE, 0),
                             SymbolRef::Builtin(_) => (FUNCTION, DEFAULT_LIBRARY),

@@ -76,13 +76,18 @@ pub enum Command {
         json: bool,
     },
     /// Lie derivatives, relative degree, linearizing law, normal form and zero
-    /// dynamics of an output.
+    /// dynamics of an output; or, with --controller, a sliding-mode
+    /// controller's equivalent control and reduced dynamics on its surface.
     Analyze {
         /// The model file.
         model: PathBuf,
         /// The output to analyse (default: the model's first output).
         #[arg(long)]
         output: Option<String>,
+        /// Analyse this controller: a `surface` (sliding-mode) controller, or
+        /// a `linearize output` controller (its output).
+        #[arg(long, conflicts_with = "output")]
+        controller: Option<String>,
         #[command(flatten)]
         params: ParamArgs,
         /// Print JSON.
@@ -139,6 +144,10 @@ pub enum Command {
     /// Run a controller in the real-time loop on the simulator or a Quanser
     /// Q2-USB board, with the safety supervisor and a CSV log.
     Run(RunArgs),
+    /// Robustness study: controllers designed on the model's values (or
+    /// --set) against plants whose parameters differ; which hold, and the
+    /// chattering (total variation of the input). Cases run in parallel.
+    Robustness(RobustnessArgs),
     /// Make measurement-like CSV data from the model with hidden effects
     /// (true parameter values, encoder quantisation, optional noise).
     Synth(SynthArgs),
@@ -494,17 +503,34 @@ pub struct RunArgs {
     /// (the SRV02 arm has no hard stop; cables limit it).
     #[arg(long, value_name = "ANGLE", default_value = "180deg")]
     pub arm_limit: String,
+    /// Engage a balancing controller once the pendulum is within this of upright.
+    #[arg(long, value_name = "ANGLE", default_value = "10deg")]
+    pub catch_window: String,
     /// Fault once the pendulum is this far from upright after engaging.
     #[arg(long, value_name = "ANGLE", default_value = "30deg")]
     pub fall_angle: String,
     /// How velocities are estimated from the encoder angles: a Kalman
     /// observer on the model linearized about upright, or Quanser's filtered
-    /// derivative (see --velocity-bandwidth).
-    #[arg(long, value_enum, default_value_t = VelocityKind::Observer)]
-    pub velocity: VelocityKind,
-    /// Bandwidth of the filtered derivative (rad/s; with --velocity derivative).
-    #[arg(long, value_name = "RAD_PER_S", default_value_t = 50.0)]
-    pub velocity_bandwidth: f64,
+    /// derivative (see --velocity-bandwidth). Default: the observer, or the
+    /// derivative for a controller with a swing-up mode (the observer's
+    /// model only holds near upright).
+    #[arg(long, value_enum)]
+    pub velocity: Option<VelocityKind>,
+    /// Swing-up (a hybrid controller's `swing_up` mode) starts only with the
+    /// pendulum within this of hanging.
+    #[arg(long, value_name = "ANGLE", default_value = "20deg")]
+    pub hanging_window: String,
+    /// Fault during swing-up once |arm speed| exceeds this (rad/s).
+    #[arg(long, value_name = "RAD_PER_S", default_value_t = 30.0)]
+    pub max_arm_speed: f64,
+    /// Fault during swing-up once |pendulum speed| exceeds this (rad/s).
+    #[arg(long, value_name = "RAD_PER_S", default_value_t = 25.0)]
+    pub max_pendulum_speed: f64,
+    /// Bandwidth of the filtered derivative (rad/s; with --velocity
+    /// derivative). Default 50 (Quanser's examples), 200 for a controller
+    /// with a swing-up mode (at 50 the energy pump's lag loses the catch).
+    #[arg(long, value_name = "RAD_PER_S")]
+    pub velocity_bandwidth: Option<f64>,
     /// Observer process noise: unmodelled angular acceleration (rad/s^2;
     /// larger = faster, noisier observer).
     #[arg(long, value_name = "RAD_PER_S2", default_value_t = 30.0)]
@@ -551,6 +577,60 @@ pub enum LogPrecision {
     Fixed,
     /// Round-trip numbers.
     Full,
+}
+
+/// Arguments of `plantc robustness`.
+#[derive(Debug, Args, Clone)]
+pub struct RobustnessArgs {
+    /// The model file.
+    pub model: PathBuf,
+    /// Design values of the controllers (the plants differ from them).
+    #[command(flatten)]
+    pub params: ParamArgs,
+    /// A controller of the model (repeatable; default: every controller
+    /// without modes or direct laws).
+    #[arg(long = "controller", value_name = "NAME")]
+    pub controllers: Vec<String>,
+    /// Parameters varied one at a time by -/+ --by, e.g. `J1,l2,b1`.
+    #[arg(long, value_name = "NAME,...")]
+    pub vary: Option<String>,
+    /// Relative change of each varied parameter, e.g. `20%` or `0.2`.
+    #[arg(long, value_name = "FRACTION", default_value = "20%")]
+    pub by: String,
+    /// A plant with a parameter set to a value the design lacks, e.g.
+    /// `Fg1=0.01` (repeatable).
+    #[arg(long = "add", value_name = "NAME=VALUE")]
+    pub add: Vec<String>,
+    /// Initial state, e.g. `--x0 alpha=10deg`.
+    #[arg(long, value_name = "NAME=VALUE,...", allow_hyphen_values = true)]
+    pub x0: Option<String>,
+    /// Simulated time per case (s).
+    #[arg(long, value_name = "S", default_value_t = 10.0)]
+    pub duration: f64,
+    /// Controller rate (Hz, zero-order hold).
+    #[arg(long, value_name = "HZ", default_value_t = 1000.0)]
+    pub rate: f64,
+    /// The coordinate that must stay up (default: the second coordinate).
+    #[arg(long, value_name = "NAME")]
+    pub pendulum: Option<String>,
+    /// The coordinate with an angle limit (default: the first coordinate).
+    #[arg(long, value_name = "NAME")]
+    pub arm: Option<String>,
+    /// The pendulum must stay within this of upright.
+    #[arg(long, value_name = "ANGLE", default_value = "30deg")]
+    pub fall_angle: String,
+    /// The arm must stay within this of 0.
+    #[arg(long, value_name = "ANGLE", default_value = "180deg")]
+    pub arm_limit: String,
+    /// Settled: largest |pendulum| over the last 2 s below this.
+    #[arg(long, value_name = "ANGLE", default_value = "1deg")]
+    pub settle: String,
+    /// Worker threads (default: the available parallelism).
+    #[arg(long, value_name = "N")]
+    pub threads: Option<usize>,
+    /// Print JSON.
+    #[arg(long)]
+    pub json: bool,
 }
 
 /// Arguments of `plantc sim`.

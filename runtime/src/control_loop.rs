@@ -9,7 +9,7 @@ use crate::histogram::Histogram;
 use crate::log::LogWriter;
 use crate::plant::Plant;
 use crate::reference_pendulum::RotaryPendulumReference;
-use crate::report::{Percentiles, RunReport};
+use crate::report::{ModeSwitch, Percentiles, RunReport};
 use crate::rt_os::try_realtime;
 use crate::supervisor::{FaultKind, Supervisor, SupervisorConfig, Transition};
 use crate::velocity_observer::ObserverSpec;
@@ -179,6 +179,12 @@ pub fn run_with_events(
     run_with_estimator(config, backend, controller, None, log, on_event)
 }
 
+/// A hybrid controller's mode names and the switches seen so far.
+struct Modes<'a> {
+    names: &'a [String],
+    switches: &'a mut Vec<ModeSwitch>,
+}
+
 /// Runs the control loop until the duration elapses, the stop flag is set or
 /// a fault occurs, calling `on_event` for every supervisor transition.
 /// `estimator` replaces the one `config` describes (`observer`,
@@ -216,7 +222,12 @@ pub fn run_with_estimator(
         },
     };
     notes.push(estimator.describe());
+    let mode_names = controller.mode_names();
+    let mut mode_switches: Vec<ModeSwitch> = Vec::with_capacity(4096);
     if let Some(l) = log.as_deref_mut() {
+        if !mode_names.is_empty() {
+            l.with_mode_column();
+        }
         if let Err(e) = l.begin(&config.state_names, nq, &config.input_names) {
             let _ = backend.close();
             return Err(e.into());
@@ -267,6 +278,10 @@ pub fn run_with_estimator(
             &mut transitions,
             &mut stats,
             on_event,
+            Modes {
+                names: &mode_names,
+                switches: &mut mode_switches,
+            },
         )
     }));
     // Every exit path: close (writes 0 V) and flush the log.
@@ -314,6 +329,8 @@ pub fn run_with_estimator(
         control_path_ns: pct(&stats.path),
         cycle_work_ns: pct(&stats.work),
         notes,
+        mode_names,
+        mode_switches,
     })
 }
 
@@ -330,6 +347,7 @@ fn cycle_loop(
     transitions: &mut Vec<Transition>,
     stats: &mut Stats,
     on_event: &mut dyn FnMut(&Transition),
+    modes: Modes<'_>,
 ) -> Outcome {
     let nq = maps.len();
     let n = 2 * nq;
@@ -346,6 +364,8 @@ fn cycle_loop(
     let period_ns = (period * 1e9) as u64;
     let mut fault_detail = None;
     let mut prev_wake: Option<Instant> = None;
+    // a hybrid controller starts (reset) in its first mode
+    let mut last_mode: Option<usize> = None;
 
     let mut emit = |tr: Option<Transition>, transitions: &mut Vec<Transition>| {
         if let Some(tr) = tr {
@@ -413,6 +433,7 @@ fn cycle_loop(
         if sup.output_enabled() {
             if !was_engaged {
                 controller.reset();
+                last_mode = controller.mode().map(|m| m.index);
             }
             let c0 = Instant::now();
             let r = catch_unwind(AssertUnwindSafe(|| controller.control(t, &x, &mut u_cmd)));
@@ -423,6 +444,22 @@ fn cycle_loop(
                 emit(sup.fault(t, FaultKind::ControllerPanic), transitions);
             } else if !u_cmd.iter().all(|v| v.is_finite()) {
                 emit(sup.fault(t, FaultKind::NonFiniteOutput), transitions);
+            } else {
+                let mode = controller.mode();
+                if let (Some(m), Some(prev)) = (mode, last_mode) {
+                    if m.index != prev && modes.switches.len() < modes.switches.capacity() {
+                        modes.switches.push(ModeSwitch {
+                            t,
+                            from: prev,
+                            to: m.index,
+                        });
+                    }
+                }
+                last_mode = mode.map(|m| m.index);
+                emit(
+                    sup.follow_mode(t, mode.is_some_and(|m| m.swing_up)),
+                    transitions,
+                );
             }
         }
 
@@ -467,7 +504,19 @@ fn cycle_loop(
             }
         }
         if let Some(l) = log.as_deref_mut() {
-            l.row(t, &x, &counts, &u_out, &u_cmd, sup.state().label(), overran);
+            let mode = last_mode
+                .and_then(|i| modes.names.get(i))
+                .map_or("", String::as_str);
+            l.row_with_mode(
+                t,
+                &x,
+                &counts,
+                &u_out,
+                &u_cmd,
+                sup.state().label(),
+                overran,
+                mode,
+            );
         }
         if sup.state().is_fault() {
             break;

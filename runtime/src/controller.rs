@@ -1,4 +1,5 @@
-//! The controller interface and a plain state-feedback controller.
+//! The controller interface (with the modes of hybrid controllers) and a
+//! plain state-feedback controller.
 
 /// A discrete-time controller called once per sample by the control loop.
 ///
@@ -10,6 +11,33 @@ pub trait Controller {
     fn control(&mut self, t: f64, x: &[f64], u: &mut [f64]);
     /// Clears internal state; called when the supervisor engages the controller.
     fn reset(&mut self) {}
+    /// Names of a hybrid controller's modes, in mode order (empty for other
+    /// controllers). Called once before the loop starts.
+    fn mode_names(&self) -> Vec<String> {
+        Vec::new()
+    }
+    /// The mode a hybrid controller is in after the last [`Controller::control`]
+    /// call (`None` for other controllers). Must not allocate.
+    fn mode(&self) -> Option<Mode> {
+        None
+    }
+    /// Whether one of a hybrid controller's modes swings the pendulum up
+    /// (a runner then lets the supervisor allow `SwingUp`). Called once
+    /// before the loop starts.
+    fn has_swing_up_mode(&self) -> bool {
+        false
+    }
+}
+
+/// The current mode of a hybrid controller.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct Mode {
+    /// Index into [`Controller::mode_names`].
+    pub index: usize,
+    /// Whether this mode swings the pendulum up (it may drive the motor with
+    /// the pendulum anywhere: the supervisor's `SwingUp` state); other modes
+    /// balance it (the supervisor's `Engaged` state, with the fall check).
+    pub swing_up: bool,
 }
 
 /// Single-input linear state feedback `u[0] = -K x`.

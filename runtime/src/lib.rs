@@ -5,7 +5,8 @@
 //!   (virtual or real) time; [`Q2Usb`] drives a Quanser Q2-USB through the HIL C
 //!   library loaded at run time.
 //! - [`run`] executes the fixed-rate loop under the safety [`Supervisor`]
-//!   (Idle -> Armed -> Engaged -> Fault), logs every sample as CSV through a
+//!   (Idle -> Armed -> Engaged / SwingUp -> Fault; SwingUp only for hybrid
+//!   controllers' swing-up modes), logs every sample as CSV through a
 //!   [`LogWriter`] and returns a [`RunReport`]. On every exit path the last
 //!   voltage written is 0 V.
 //!
@@ -63,7 +64,7 @@ pub mod velocity_observer;
 pub use alloc_count::CountingAllocator;
 pub use backend::{Backend, BackendError, EncoderMap, Tick};
 pub use control_loop::{run, run_with_estimator, run_with_events, RunConfig, MAX_RATE_HZ};
-pub use controller::{Controller, StateFeedback};
+pub use controller::{Controller, Mode, StateFeedback};
 pub use error::RuntimeError;
 pub use estimator::{DerivativeEstimator, VelocityEstimator};
 pub use interrupt::stop_on_ctrl_c;
@@ -74,8 +75,10 @@ pub use plant::Plant;
 pub use q2usb::{EncoderChannel, Q2Usb, Q2UsbConfig};
 pub use reference_pendulum::{PendulumParams, RotaryPendulumReference};
 pub use replay::{replay_log, ReplayError, ReplayReport};
-pub use report::{Percentiles, RunReport};
+pub use report::{ModeSwitch, Percentiles, RunReport};
 pub use rig::{rig_main, ObserverInfo, RigInfo, RigModel};
 pub use sim::{SimBackend, SimConfig, SimNoise};
-pub use supervisor::{FaultKind, Supervisor, SupervisorConfig, SupervisorState, Transition};
+pub use supervisor::{
+    FaultKind, Supervisor, SupervisorConfig, SupervisorState, SwingUpLimits, Transition,
+};
 pub use velocity_observer::{ObserverSpec, VelocityObserver};

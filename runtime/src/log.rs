@@ -45,7 +45,8 @@ impl std::error::Error for LogError {}
 pub const DEFAULT_BUFFER_BYTES: usize = 1 << 20;
 
 /// The CSV log of a run: one row per sample, header
-/// `t,<states>,<positions>_counts,<input>,<input>_cmd,state,overrun`.
+/// `t,<states>,<positions>_counts,<input>,<input>_cmd,state,overrun` and,
+/// for a hybrid controller ([`LogWriter::with_mode_column`]), `,mode`.
 pub struct LogWriter {
     out: Box<dyn Write + Send>,
     buf: Vec<u8>,
@@ -53,6 +54,7 @@ pub struct LogWriter {
     last_flush_t: f64,
     rows: u64,
     error: Option<LogError>,
+    mode_column: bool,
     full_precision: bool,
 }
 
@@ -72,8 +74,15 @@ impl LogWriter {
             last_flush_t: 0.0,
             rows: 0,
             error: None,
+            mode_column: false,
             full_precision: false,
         }
+    }
+
+    /// Adds a last column `mode` (a hybrid controller's mode name, see
+    /// [`LogWriter::row_with_mode`]); call before [`LogWriter::begin`].
+    pub fn with_mode_column(&mut self) {
+        self.mode_column = true;
     }
 
     /// Sets the flush interval in loop time (default and maximum 0.1 s).
@@ -118,7 +127,11 @@ impl LogWriter {
             h.push_str(s);
             h.push_str("_cmd");
         }
-        h.push_str(",state,overrun\n");
+        h.push_str(",state,overrun");
+        if self.mode_column {
+            h.push_str(",mode");
+        }
+        h.push('\n');
         self.out.write_all(h.as_bytes())?;
         self.out.flush()?;
         self.last_flush_t = 0.0;
@@ -138,6 +151,23 @@ impl LogWriter {
         u_cmd: &[f64],
         state: &str,
         overrun: bool,
+    ) {
+        self.row_with_mode(t, x, counts, u, u_cmd, state, overrun, "");
+    }
+
+    /// [`LogWriter::row`] with the mode column's value (ignored without
+    /// [`LogWriter::with_mode_column`]). Never allocates.
+    #[allow(clippy::too_many_arguments)]
+    pub fn row_with_mode(
+        &mut self,
+        t: f64,
+        x: &[f64],
+        counts: &[i32],
+        u: &[f64],
+        u_cmd: &[f64],
+        state: &str,
+        overrun: bool,
+        mode: &str,
     ) {
         if self.error.is_some() {
             return;
@@ -166,7 +196,11 @@ impl LogWriter {
                 let _ = write!(b, ",{v:.4}");
             }
         }
-        let _ = writeln!(b, ",{state},{}", u8::from(overrun));
+        let _ = write!(b, ",{state},{}", u8::from(overrun));
+        if self.mode_column {
+            let _ = write!(b, ",{mode}");
+        }
+        let _ = writeln!(b);
         self.rows += 1;
         if t - self.last_flush_t >= self.flush_interval_s
             || self.buf.len() + 4096 > self.buf.capacity()

@@ -9,7 +9,7 @@ use plantc_derive::mechanics::{NumericDynamics, Workspace};
 use plantc_derive::model::{Model, ParameterValues};
 use plantc_derive::simulate::{ControllerEval, ControllerWorkspace};
 
-use crate::controller::Controller;
+use crate::controller::{Controller, Mode};
 use crate::plant::Plant;
 
 fn leak_names(names: Vec<String>) -> Vec<&'static str> {
@@ -79,8 +79,8 @@ impl Plant for ModelPlant {
     }
 }
 
-/// A resolved model controller (state feedback or feedback-linearizing law)
-/// evaluated through its compiled tape.
+/// A resolved model controller (state feedback, a law, or a hybrid
+/// controller's modes and switches) evaluated through its compiled tapes.
 pub struct ModelController {
     eval: ControllerEval,
     params: Vec<f64>,
@@ -103,7 +103,7 @@ impl ModelController {
         })
     }
 
-    /// Override a gain of a feedback-linearizing controller.
+    /// Override a named gain (`mode.gain` or a bare gain for a hybrid controller).
     pub fn set_gain(
         &mut self,
         name: &str,
@@ -115,6 +115,28 @@ impl ModelController {
 
 impl Controller for ModelController {
     fn control(&mut self, _t: f64, x: &[f64], u: &mut [f64]) {
+        self.eval.update_mode(x, &self.params, &mut self.workspace);
         self.eval.eval(x, &self.params, u, &mut self.workspace);
+    }
+
+    fn reset(&mut self) {
+        self.eval.reset(&mut self.workspace);
+    }
+
+    fn mode_names(&self) -> Vec<String> {
+        self.eval.modes().iter().map(|m| m.name.clone()).collect()
+    }
+
+    fn has_swing_up_mode(&self) -> bool {
+        self.eval.modes().iter().any(|m| m.swing_up)
+    }
+
+    fn mode(&self) -> Option<Mode> {
+        let modes = self.eval.modes();
+        let index = self.eval.mode(&self.workspace);
+        modes.get(index).map(|m| Mode {
+            index,
+            swing_up: m.swing_up,
+        })
     }
 }

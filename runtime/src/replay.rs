@@ -6,8 +6,9 @@
 //! The replay performs the loop's steps in the loop's order for every row:
 //! angles from the logged encoder counts through the backend's encoder maps,
 //! the estimator fed with the voltage applied in the previous row, and, in
-//! rows where the supervisor was engaged, the controller (reset when it
-//! engages) with its output clamped to the input limits like the loop does.
+//! rows where the supervisor let the controller drive (engaged, or swinging
+//! up for a hybrid controller; a trailing `mode` column is accepted), the
+//! controller (reset when it starts driving) with its output clamped to the input limits like the loop does.
 //! Compare logs written with full precision ([`crate::LogWriter::set_full_precision`]).
 
 use std::fmt;
@@ -103,11 +104,18 @@ pub fn replay_log(
     let counts_ok = cols
         .get(1 + n..1 + n + nq)
         .is_some_and(|c| c.iter().all(|s| s.ends_with("_counts")));
-    if cols.len() != width || cols[0] != "t" || !counts_ok || cols[width - 2] != "state" {
+    // a hybrid controller's log ends with its `mode`
+    let fields = if cols.len() == width + 1 && cols[width] == "mode" {
+        width + 1
+    } else {
+        width
+    };
+    if cols.len() != fields || cols[0] != "t" || !counts_ok || cols[width - 2] != "state" {
         return Err(ReplayError::Header {
             found: header.to_string(),
             expected: format!(
-                "t, {n} states, {nq} `_counts` columns, the input, its `_cmd`, state, overrun"
+                "t, {n} states, {nq} `_counts` columns, the input, its `_cmd`, state, overrun \
+                 (and mode)"
             ),
         });
     }
@@ -136,8 +144,8 @@ pub fn replay_log(
             line: i + 1,
             reason,
         };
-        if f.len() != width {
-            return Err(bad(format!("{} fields, expected {width}", f.len())));
+        if f.len() != fields {
+            return Err(bad(format!("{} fields, expected {fields}", f.len())));
         }
         let num = |j: usize| {
             f[j].parse::<f64>()
@@ -152,7 +160,8 @@ pub fn replay_log(
             qu[k] = maps[k].angle_unwrapped(c);
         }
         let applied = num(1 + n + nq)?;
-        let engaged = f[width - 2] == "engaged";
+        // the loop runs the controller when engaged or swinging up
+        let engaged = matches!(f[width - 2], "engaged" | "swing_up");
         let t0 = Instant::now();
         estimator.update(&q, &qu, u_prev, &mut v);
         x[..nq].copy_from_slice(&q);
@@ -234,6 +243,38 @@ mod tests {
         assert!(matches!(
             replay_log("t,x\n", &maps, (-10.0, 10.0), &mut est, &mut ctl),
             Err(ReplayError::Header { .. })
+        ));
+    }
+
+    #[test]
+    fn a_hybrid_log_with_its_mode_column_and_swing_up_rows_replays() {
+        let maps = [EncoderMap::plain(4096.0); 2];
+        let mut text = String::from(
+            "t,theta,alpha,theta_dot,alpha_dot,theta_counts,alpha_counts,Vm,Vm_cmd,state,overrun,mode\n",
+        );
+        let alpha = 3.0 * 2.0 * std::f64::consts::PI / 4096.0;
+        let vm = -10.0 * alpha;
+        text.push_str(&format!(
+            "0.0,0.0,{alpha:?},0.0,0.0,0,3,0.0,0.0,armed,0,pump\n"
+        ));
+        text.push_str(&format!(
+            "0.001,0.0,{alpha:?},0.0,0.0,0,3,{vm:?},{vm:?},swing_up,0,pump\n"
+        ));
+        text.push_str(&format!(
+            "0.002,0.0,{alpha:?},0.0,0.0,0,3,{vm:?},{vm:?},engaged,0,catch\n"
+        ));
+        let mut est = DerivativeEstimator::new(2, 50.0, 1e-3);
+        let mut ctl = StateFeedback::new(vec![0.0, 10.0, 0.0, 0.0]);
+        let r = replay_log(&text, &maps, (-10.0, 10.0), &mut est, &mut ctl).unwrap();
+        // the controller drives in the swing-up and the engaged rows
+        assert_eq!((r.rows, r.compared), (3, 2));
+        assert_eq!(r.max_volts_diff, 0.0, "{r}");
+        // a row without its mode is an error
+        let short = text.replace(",0,catch", ",0");
+        let mut est = DerivativeEstimator::new(2, 50.0, 1e-3);
+        assert!(matches!(
+            replay_log(&short, &maps, (-10.0, 10.0), &mut est, &mut ctl),
+            Err(ReplayError::Row { line: 4, .. })
         ));
     }
 }

@@ -16,6 +16,17 @@ pub struct Percentiles {
     pub count: u64,
 }
 
+/// A hybrid controller's mode change.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct ModeSwitch {
+    /// Loop time of the sample whose control call changed the mode (s).
+    pub t: f64,
+    /// Previous mode (index into [`RunReport::mode_names`]).
+    pub from: usize,
+    /// New mode.
+    pub to: usize,
+}
+
 /// What happened in a run.
 #[derive(Debug, Clone, PartialEq)]
 pub struct RunReport {
@@ -49,6 +60,10 @@ pub struct RunReport {
     pub cycle_work_ns: Percentiles,
     /// Notes (real-time setup, watchdog, log errors, fallbacks).
     pub notes: Vec<String>,
+    /// A hybrid controller's mode names (empty for other controllers).
+    pub mode_names: Vec<String>,
+    /// Its mode changes in order (the first 4096).
+    pub mode_switches: Vec<ModeSwitch>,
 }
 
 fn us(ns: u64) -> f64 {
@@ -72,6 +87,10 @@ impl fmt::Display for RunReport {
         )?;
         for t in &self.transitions {
             writeln!(f, "  {t}")?;
+        }
+        for m in &self.mode_switches {
+            let name = |i: usize| self.mode_names.get(i).map_or("?", String::as_str);
+            writeln!(f, "  t={:.3}s mode {} -> {}", m.t, name(m.from), name(m.to))?;
         }
         if let Some(d) = &self.fault_detail {
             writeln!(f, "  fault detail: {d}")?;

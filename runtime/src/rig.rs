@@ -20,14 +20,14 @@ use std::path::{Path, PathBuf};
 use crate::alloc_count;
 use crate::backend::Backend;
 use crate::control_loop::{run_with_estimator, RunConfig};
-use crate::controller::Controller;
+use crate::controller::{Controller, Mode};
 use crate::estimator::{DerivativeEstimator, VelocityEstimator};
 use crate::log::LogWriter;
 use crate::plant::Plant;
 use crate::q2usb::{Q2Usb, Q2UsbConfig};
 use crate::report::RunReport;
 use crate::sim::{SimBackend, SimConfig, SimNoise};
-use crate::supervisor::{FaultKind, SupervisorState};
+use crate::supervisor::{FaultKind, SupervisorConfig, SupervisorState, SwingUpLimits};
 
 /// How the generated observer was designed (at generation time).
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -130,6 +130,10 @@ pub struct RigArgs {
     pub arm_limit: f64,
     /// Fall angle (rad).
     pub fall_angle: f64,
+    /// Engage a balancing controller within this of upright (rad).
+    pub catch_window: f64,
+    /// Swing-up limits, used when the controller has a swing-up mode.
+    pub swing_up: SwingUpLimits,
     /// Velocity estimation; `None`: the observer if generated, else the derivative at 50 rad/s.
     pub velocity: Option<RigVelocity>,
     /// Simulator in real time.
@@ -160,6 +164,8 @@ impl Default for RigArgs {
             duration: 10.0,
             arm_limit: PI,
             fall_angle: 30f64.to_radians(),
+            catch_window: SupervisorConfig::default().catch_window_rad,
+            swing_up: SwingUpLimits::default(),
             velocity: None,
             realtime: false,
             sim_noise: None,
@@ -392,6 +398,24 @@ impl RigArgs {
                         }
                         "--arm-limit" => a.arm_limit = positive_angle("--arm-limit", &value)?,
                         "--fall-angle" => a.fall_angle = positive_angle("--fall-angle", &value)?,
+                        "--catch-window" => {
+                            a.catch_window = positive_angle("--catch-window", &value)?
+                        }
+                        "--hanging-window" => {
+                            a.swing_up.hanging_window_rad =
+                                positive_angle("--hanging-window", &value)?
+                        }
+                        "--max-arm-speed" => {
+                            a.swing_up.max_arm_speed =
+                                positive("--max-arm-speed", &value, "a positive speed in rad/s")?
+                        }
+                        "--max-pendulum-speed" => {
+                            a.swing_up.max_pendulum_speed = positive(
+                                "--max-pendulum-speed",
+                                &value,
+                                "a positive speed in rad/s",
+                            )?
+                        }
                         "--velocity" => match value.as_str() {
                             "observer" | "derivative" => velocity_kind = Some(value),
                             o => {
@@ -487,7 +511,13 @@ pub fn help(model: &dyn RigModel, program: &str) -> String {
          \x20 --duration S               run length (default 10)\n\
          \x20 --arm-limit ANGLE          fault once |theta| exceeds it (default 180deg)\n\
          \x20 --fall-angle ANGLE         fault once the pendulum is this far from upright (default 30deg)\n\
-         \x20 --velocity observer|derivative, --velocity-bandwidth RAD_PER_S (default 50)\n\
+         \x20 --catch-window ANGLE       engage within this of upright (default 10deg)\n\
+         \x20 --hanging-window ANGLE, --max-arm-speed RAD_PER_S, --max-pendulum-speed RAD_PER_S\n\
+         \x20                            swing-up limits of a controller with a swing-up mode:\n\
+         \x20                            start within this of hanging, fault above these speeds\n\
+         \x20                            (defaults 20deg, 30, 25)\n\
+         \x20 --velocity observer|derivative, --velocity-bandwidth RAD_PER_S (default 50;\n\
+         \x20                            with a swing-up mode: derivative at 200)\n\
          \x20 --realtime                 run the simulator in real time\n\
          \x20 --log FILE.csv             CSV log of every sample (never overwritten unless --force)\n\
          \x20 --log-precision fixed|full fixed decimals (default) or round-trip numbers\n\
@@ -599,6 +629,18 @@ impl Controller for AllocProbe<'_> {
     fn reset(&mut self) {
         self.inner.reset();
     }
+
+    fn mode_names(&self) -> Vec<String> {
+        self.inner.mode_names()
+    }
+
+    fn mode(&self) -> Option<Mode> {
+        self.inner.mode()
+    }
+
+    fn has_swing_up_mode(&self) -> bool {
+        self.inner.has_swing_up_mode()
+    }
 }
 
 /// Runs the rig with parsed options, writing progress to `err` and the
@@ -664,10 +706,31 @@ pub fn execute(
         .rate
         .or(info.observer.map(|o| o.rate_hz))
         .unwrap_or(1000.0);
-    let velocity = args.velocity.unwrap_or(match info.observer {
-        Some(_) => RigVelocity::Observer,
-        None => RigVelocity::Derivative(50.0),
-    });
+    // A swing-up mode drives the pendulum far from upright, where the
+    // observer's linear model does not hold: the filtered derivative, faster.
+    let swing_up = controller.has_swing_up_mode();
+    let velocity = match (args.velocity, swing_up) {
+        (Some(RigVelocity::Observer), true) => {
+            return Err(usage(format!(
+                "`{controller_name}` has a swing-up mode; the velocity observer's model is \
+                 linearized about upright and does not hold while the pendulum swings: \
+                 use --velocity derivative"
+            )))
+        }
+        (Some(v), _) => v,
+        (None, true) => RigVelocity::Derivative(200.0),
+        (None, false) => match info.observer {
+            Some(_) => RigVelocity::Observer,
+            None => RigVelocity::Derivative(50.0),
+        },
+    };
+    if args.catch_window >= args.fall_angle {
+        return Err(usage(format!(
+            "--catch-window {:.1}deg must be smaller than --fall-angle {:.1}deg",
+            args.catch_window.to_degrees(),
+            args.fall_angle.to_degrees()
+        )));
+    }
     let mut estimator: Box<dyn VelocityEstimator> = match velocity {
         RigVelocity::Observer => {
             let Some(o) = info.observer else {
@@ -705,6 +768,20 @@ pub fn execute(
     };
     config.supervisor.arm_limit_rad = args.arm_limit;
     config.supervisor.fall_angle_rad = args.fall_angle;
+    config.supervisor.catch_window_rad = args.catch_window;
+    if swing_up {
+        let l = args.swing_up;
+        config.supervisor.swing_up = Some(l);
+        let _ = writeln!(
+            err,
+            "note: `{controller_name}` has a swing-up mode: swing-up allowed from hanging \
+             (within {:.1} deg), arm limit {:.1} deg, speeds up to {} rad/s (arm) and {} rad/s (pendulum)",
+            l.hanging_window_rad.to_degrees(),
+            args.arm_limit.to_degrees(),
+            l.max_arm_speed,
+            l.max_pendulum_speed
+        );
+    }
 
     let mut backend: Box<dyn Backend> = match args.backend {
         RigBackend::Sim => {
@@ -897,6 +974,37 @@ mod tests {
     }
 
     #[test]
+    fn parses_the_catch_window_and_swing_up_limits() {
+        let cmd = RigArgs::parse([
+            "--catch-window",
+            "12deg",
+            "--hanging-window=0.5rad",
+            "--max-arm-speed",
+            "20",
+            "--max-pendulum-speed",
+            "15",
+        ])
+        .unwrap();
+        let RigCommand::Run(a) = cmd else {
+            panic!("{cmd:?}")
+        };
+        assert!((a.catch_window - 12f64.to_radians()).abs() < 1e-15);
+        assert_eq!(
+            a.swing_up,
+            SwingUpLimits {
+                hanging_window_rad: 0.5,
+                max_arm_speed: 20.0,
+                max_pendulum_speed: 15.0
+            }
+        );
+        let RigCommand::Run(d) = RigArgs::parse(Vec::<String>::new()).unwrap() else {
+            panic!()
+        };
+        assert_eq!(d.catch_window, SupervisorConfig::default().catch_window_rad);
+        assert_eq!(d.swing_up, SwingUpLimits::default());
+    }
+
+    #[test]
     fn bad_options_are_usage_errors() {
         for bad in [
             &["--rate", "-3"][..],
@@ -908,6 +1016,8 @@ mod tests {
             &["stray"],
             &["--force=yes"],
             &["--sim-noise", "counts=-1"],
+            &["--catch-window", "-1deg"],
+            &["--max-arm-speed", "0"],
         ] {
             let e = RigArgs::parse(bad.iter().copied()).unwrap_err();
             assert_eq!(e.exit_code(), 2, "{bad:?}: {e}");

@@ -1,7 +1,13 @@
-//! The safety supervisor: an explicit state machine Idle -> Armed -> Engaged -> Fault.
+//! The safety supervisor: an explicit state machine
+//! Idle -> Armed -> Engaged / SwingUp -> Fault.
 //!
-//! Only `Engaged` lets the controller drive the motor; in every other state the
-//! loop writes 0 V. `Fault` is terminal for a run.
+//! Only `Engaged` (balancing near upright) and `SwingUp` (a hybrid
+//! controller's swing-up mode, the pendulum anywhere) let the controller
+//! drive the motor; in every other state the loop writes 0 V. `SwingUp` is
+//! entered from `Armed` with the pendulum hanging, or from `Engaged` when the
+//! controller switches to a swing-up mode, and only if
+//! [`SupervisorConfig::swing_up`] allows it; it is watched by the arm-angle
+//! and speed limits instead of the fall angle. `Fault` is terminal for a run.
 
 use crate::backend::wrap_pi;
 use std::f64::consts::PI;
@@ -32,6 +38,10 @@ pub enum FaultKind {
     EncoderStuck,
     /// The stop flag (Ctrl-C) was set.
     Stopped,
+    /// An arm or pendulum speed passed its swing-up limit.
+    SpeedLimit,
+    /// The controller entered a swing-up mode, but swing-up is not allowed.
+    SwingUpNotAllowed,
 }
 
 impl FaultKind {
@@ -49,6 +59,8 @@ impl FaultKind {
             FaultKind::WatchdogExpired => "watchdog_expired",
             FaultKind::EncoderStuck => "encoder_stuck",
             FaultKind::Stopped => "stopped",
+            FaultKind::SpeedLimit => "speed_limit",
+            FaultKind::SwingUpNotAllowed => "swing_up_not_allowed",
         }
     }
 }
@@ -60,8 +72,11 @@ pub enum SupervisorState {
     Idle,
     /// Running, output held at 0 V, waiting for the pendulum to enter the catch window.
     Armed,
-    /// The controller drives the motor.
+    /// The controller drives the motor (balancing: the fall check applies).
     Engaged,
+    /// A hybrid controller's swing-up mode drives the motor (arm-angle and
+    /// speed limits apply, not the fall check).
+    SwingUp,
     /// Stopped for the given reason; output 0 V.
     Fault(FaultKind),
 }
@@ -73,6 +88,7 @@ impl SupervisorState {
             SupervisorState::Idle => "idle",
             SupervisorState::Armed => "armed",
             SupervisorState::Engaged => "engaged",
+            SupervisorState::SwingUp => "swing_up",
             SupervisorState::Fault(k) => match k {
                 FaultKind::PendulumFell => "fault:pendulum_fell",
                 FaultKind::ArmLimit => "fault:arm_limit",
@@ -85,6 +101,8 @@ impl SupervisorState {
                 FaultKind::WatchdogExpired => "fault:watchdog_expired",
                 FaultKind::EncoderStuck => "fault:encoder_stuck",
                 FaultKind::Stopped => "fault:stopped",
+                FaultKind::SpeedLimit => "fault:speed_limit",
+                FaultKind::SwingUpNotAllowed => "fault:swing_up_not_allowed",
             },
         }
     }
@@ -137,6 +155,34 @@ pub struct SupervisorConfig {
     /// An upright pendulum is unstable, so its encoders cannot be still for
     /// long; `None` disables the check. Default 2 s.
     pub encoder_stuck_s: Option<f64>,
+    /// Allow swing-up (state `SwingUp`) with these limits; `None` (default)
+    /// forbids it.
+    pub swing_up: Option<SwingUpLimits>,
+}
+
+/// When and how a swing-up may drive the motor. The arm-angle limit is
+/// [`SupervisorConfig::arm_limit_rad`].
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct SwingUpLimits {
+    /// From `Armed`, swing-up starts only with the pendulum within this of
+    /// hanging (default 20 deg) and both speeds within their limits.
+    pub hanging_window_rad: f64,
+    /// Fault in `SwingUp` once |arm speed| exceeds this (rad/s, default 30).
+    pub max_arm_speed: f64,
+    /// Fault in `SwingUp` once |pendulum speed| exceeds this (rad/s, default
+    /// 25; a pendulum falling from upright reaches about 13.5 rad/s at the
+    /// bottom with the Table 3 values).
+    pub max_pendulum_speed: f64,
+}
+
+impl Default for SwingUpLimits {
+    fn default() -> Self {
+        Self {
+            hanging_window_rad: 20f64.to_radians(),
+            max_arm_speed: 30.0,
+            max_pendulum_speed: 25.0,
+        }
+    }
 }
 
 impl Default for SupervisorConfig {
@@ -149,6 +195,7 @@ impl Default for SupervisorConfig {
             arm_limit_rad: PI,
             max_consecutive_overruns: 5,
             encoder_stuck_s: Some(2.0),
+            swing_up: None,
         }
     }
 }
@@ -187,7 +234,10 @@ impl Supervisor {
 
     /// Whether the controller may drive the output.
     pub fn output_enabled(&self) -> bool {
-        self.state == SupervisorState::Engaged
+        matches!(
+            self.state,
+            SupervisorState::Engaged | SupervisorState::SwingUp
+        )
     }
 
     fn go(&mut self, t: f64, to: SupervisorState) -> Option<Transition> {
@@ -213,6 +263,23 @@ impl Supervisor {
         self.go(t, SupervisorState::Fault(kind))
     }
 
+    /// Follows the controller's mode after its call: a swing-up mode moves
+    /// `Engaged` to `SwingUp` (or faults if swing-up is not allowed), a
+    /// balancing mode (or no mode) moves `SwingUp` to `Engaged`.
+    pub fn follow_mode(&mut self, t: f64, swing_up: bool) -> Option<Transition> {
+        match (self.state, swing_up) {
+            (SupervisorState::Engaged, true) => {
+                if self.config.swing_up.is_some() {
+                    self.go(t, SupervisorState::SwingUp)
+                } else {
+                    self.fault(t, FaultKind::SwingUpNotAllowed)
+                }
+            }
+            (SupervisorState::SwingUp, false) => self.go(t, SupervisorState::Engaged),
+            _ => None,
+        }
+    }
+
     /// Checks the measured state and encoder counts of one sample.
     pub fn check(&mut self, t: f64, x: &[f64], counts: &[i32]) -> Option<Transition> {
         let theta = x.get(self.config.arm_index).copied().unwrap_or(f64::NAN);
@@ -221,6 +288,15 @@ impl Supervisor {
                 .copied()
                 .unwrap_or(f64::NAN),
         );
+        let nq = x.len() / 2;
+        let speed = |i: usize| x.get(nq + i).copied().unwrap_or(f64::NAN).abs();
+        let (arm_speed, pendulum_speed) = (
+            speed(self.config.arm_index),
+            speed(self.config.pendulum_index),
+        );
+        let speeds_ok = |l: &SwingUpLimits| {
+            arm_speed <= l.max_arm_speed && pendulum_speed <= l.max_pendulum_speed
+        };
         let changed = counts != self.last_counts.as_slice();
         if changed {
             for (d, s) in self.last_counts.iter_mut().zip(counts) {
@@ -235,6 +311,30 @@ impl Supervisor {
                 {
                     self.counts_changed_at = t;
                     return self.go(t, SupervisorState::Engaged);
+                }
+                if let Some(l) = self.config.swing_up {
+                    if alpha.abs() >= PI - l.hanging_window_rad
+                        && theta.abs() < self.config.arm_limit_rad
+                        && speeds_ok(&l)
+                    {
+                        self.counts_changed_at = t;
+                        return self.go(t, SupervisorState::SwingUp);
+                    }
+                }
+                None
+            }
+            SupervisorState::SwingUp => {
+                if theta.is_nan() || theta.abs() > self.config.arm_limit_rad {
+                    return self.fault(t, FaultKind::ArmLimit);
+                }
+                let ok = self.config.swing_up.is_some_and(|l| speeds_ok(&l));
+                if !ok {
+                    return self.fault(t, FaultKind::SpeedLimit);
+                }
+                if let Some(limit) = self.config.encoder_stuck_s {
+                    if t - self.counts_changed_at > limit {
+                        return self.fault(t, FaultKind::EncoderStuck);
+                    }
                 }
                 None
             }
@@ -287,6 +387,56 @@ mod tests {
         // Fault is terminal.
         assert!(s.fault(0.3, FaultKind::Stopped).is_none());
         assert_eq!(s.state().label(), "fault:pendulum_fell");
+    }
+
+    #[test]
+    fn swing_up_from_hanging_and_back() {
+        let cfg = SupervisorConfig {
+            swing_up: Some(SwingUpLimits::default()),
+            ..SupervisorConfig::default()
+        };
+        let mut s = Supervisor::new(cfg, 2);
+        s.arm(0.0);
+        // pendulum half way up: neither window
+        assert!(s.check(0.0, &[0.0, 1.5, 0.0, 0.0], &[0, 1]).is_none());
+        // hanging but swinging too fast to start
+        assert!(s.check(0.0, &[0.0, 3.1, 0.0, 26.0], &[0, 2]).is_none());
+        let tr = s.check(0.1, &[0.0, -3.1, 0.0, 0.5], &[0, 3]).unwrap();
+        assert_eq!(tr.to, SupervisorState::SwingUp);
+        assert!(s.output_enabled());
+        // no fall check while swinging up
+        assert!(s.check(0.2, &[1.0, 1.5, 5.0, 10.0], &[1, 4]).is_none());
+        // the controller catches: balancing, fall check back on
+        assert_eq!(
+            s.follow_mode(0.3, false).unwrap().to,
+            SupervisorState::Engaged
+        );
+        assert!(s.follow_mode(0.3, false).is_none());
+        assert_eq!(
+            s.follow_mode(0.4, true).unwrap().to,
+            SupervisorState::SwingUp
+        );
+        let tr = s.check(0.5, &[1.0, 2.0, 31.0, 0.0], &[2, 5]).unwrap();
+        assert_eq!(tr.to, SupervisorState::Fault(FaultKind::SpeedLimit));
+    }
+
+    #[test]
+    fn swing_up_needs_permission_and_respects_the_arm_limit() {
+        let mut s = Supervisor::new(SupervisorConfig::default(), 2);
+        s.arm(0.0);
+        assert!(s.check(0.0, &[0.0, 3.1, 0.0, 0.0], &[0, 1]).is_none());
+        s.check(0.1, &[0.0, 0.1, 0.0, 0.0], &[0, 2]);
+        let tr = s.follow_mode(0.1, true).unwrap();
+        assert_eq!(tr.to, SupervisorState::Fault(FaultKind::SwingUpNotAllowed));
+        let cfg = SupervisorConfig {
+            swing_up: Some(SwingUpLimits::default()),
+            ..SupervisorConfig::default()
+        };
+        let mut s = Supervisor::new(cfg, 2);
+        s.arm(0.0);
+        s.check(0.0, &[0.0, 3.1, 0.0, 0.0], &[0, 1]);
+        let tr = s.check(0.1, &[3.2, 1.0, 0.0, 0.0], &[1, 1]).unwrap();
+        assert_eq!(tr.to, SupervisorState::Fault(FaultKind::ArmLimit));
     }
 
     #[test]

@@ -1,16 +1,19 @@
 //! Analysis of derived equations: linearization about an equilibrium, Lie
 //! derivatives and relative degree, normal form, zero dynamics and exact
-//! stability intervals of feedback-linearizing controllers.
+//! stability intervals of feedback-linearizing controllers, and the sliding
+//! dynamics of sliding-mode controllers.
 
 mod lie;
 mod linearize;
 mod normal_form;
+mod sliding;
 mod stability_interval;
 mod zero_dynamics;
 
 pub use lie::{lie_chain, lie_derivative, AnalysisError, LieChain};
 pub use linearize::{linearize, Linearization, LinearizeError, OperatingPoint};
 pub use normal_form::{candidates, normal_form, NormalForm, NormalFormError};
+pub use sliding::{sliding_analysis, SlidingAnalysis, SlidingError};
 pub use stability_interval::{
     stability_interval, KPoly, StabilityError, StabilityInterval, METHOD as STABILITY_METHOD,
 };

@@ -5,6 +5,11 @@
 //!   `K` designed on the linearization about the operating point (all zero).
 //! - `linearize output y` becomes the feedback-linearizing law
 //!   `u = (v - L_f^r h) / (L_g L_f^(r-1) h)` with the outer law `v` inlined.
+//! - `surface s ...` becomes the sliding-mode law `u = (v - L_f s) / L_g s`
+//!   (equivalent control plus reaching law), the surface designed by
+//!   Ackermann's formula when given by its poles.
+//! - direct laws `u = ...` stay as written.
+//! - `mode` / `switch` controllers resolve every mode's controller.
 
 use std::fmt;
 
@@ -15,8 +20,8 @@ use crate::linear::{lqr, place, LinearError, Pole};
 use crate::mechanics::{
     control_affine, derive_equations, ControlAffine, Equations, MechanicsError,
 };
-use crate::model::{ControllerSpec, Model, ParameterValues};
-use crate::sym::{Expr, Symbol};
+use crate::model::{ControllerSpec, Model, ParameterValues, SurfaceSpec, SwitchSpec};
+use crate::sym::{diff, is_zero, Expr, Symbol};
 
 /// Why a controller could not be resolved.
 #[derive(Clone, Debug, PartialEq)]
@@ -43,6 +48,13 @@ pub enum ControlError {
         /// Given.
         found: usize,
     },
+    /// A sliding surface that cannot be used.
+    Surface {
+        /// The controller.
+        controller: String,
+        /// Why.
+        reason: String,
+    },
 }
 
 impl fmt::Display for ControlError {
@@ -62,6 +74,9 @@ impl fmt::Display for ControlError {
             ControlError::Analysis(e) => write!(f, "{e}"),
             ControlError::GainSize { expected, found } => {
                 write!(f, "the gain has {found} entries, the state has {expected}")
+            }
+            ControlError::Surface { controller, reason } => {
+                write!(f, "controller `{controller}`: {reason}")
             }
         }
     }
@@ -96,6 +111,50 @@ pub enum ResolvedController {
         /// The Lie chain of the output.
         chain: Box<LieChain>,
     },
+    /// Laws for every input written directly in the model file.
+    Direct {
+        /// Controller name.
+        name: String,
+        /// One law per input, over state symbols, parameters and gain symbols.
+        laws: Vec<Expr>,
+        /// Gain symbols and their values.
+        gains: Vec<(Symbol, f64)>,
+    },
+    /// Sliding mode `u = (v - L_f s) / L_g s` on a surface `s` (single input).
+    SlidingMode {
+        /// Controller name.
+        name: String,
+        /// The surface over state symbols, parameters and gain symbols.
+        surface: Expr,
+        /// The law, with the surface and the reaching law `v` inlined.
+        law: Expr,
+        /// Gain symbols and their values.
+        gains: Vec<(Symbol, f64)>,
+        /// The Lie chain of the surface (relative degree 1).
+        chain: Box<LieChain>,
+    },
+    /// Modes (resolved controllers) with switch conditions.
+    Hybrid {
+        /// Controller name.
+        name: String,
+        /// Modes in file order; the first is the initial mode.
+        modes: Vec<ResolvedMode>,
+        /// Switches in file order.
+        switches: Vec<SwitchSpec>,
+        /// Coordinates (indices) wrapped into (-pi, pi] for modes and conditions.
+        wrap: Vec<usize>,
+    },
+}
+
+/// A mode of a hybrid controller.
+#[derive(Clone, Debug)]
+pub struct ResolvedMode {
+    /// Mode name.
+    pub name: String,
+    /// Whether the mode is a swing-up mode (pendulum anywhere).
+    pub swing_up: bool,
+    /// The controller driving the input in this mode.
+    pub controller: ResolvedController,
 }
 
 impl ResolvedController {
@@ -103,7 +162,10 @@ impl ResolvedController {
     pub fn name(&self) -> &str {
         match self {
             ResolvedController::StateFeedback { name, .. }
-            | ResolvedController::FeedbackLinearization { name, .. } => name,
+            | ResolvedController::FeedbackLinearization { name, .. }
+            | ResolvedController::Direct { name, .. }
+            | ResolvedController::SlidingMode { name, .. }
+            | ResolvedController::Hybrid { name, .. } => name,
         }
     }
 }
@@ -207,6 +269,94 @@ pub fn resolve(
             let qm = nalgebra::DMatrix::from_diagonal(&nalgebra::DVector::from_vec(q.clone()));
             let rm = nalgebra::DMatrix::from_diagonal(&nalgebra::DVector::from_vec(r.clone()));
             design(&|a, b| lqr(a, b, &qm, &rm).map(|l| l.k))?
+        }
+        ControllerSpec::Direct { gains, laws, .. } => {
+            return Ok(ResolvedController::Direct {
+                name: name.to_string(),
+                laws: laws.clone(),
+                gains: gains.iter().map(|(g, x)| (Symbol::new(g), *x)).collect(),
+            });
+        }
+        ControllerSpec::SlidingMode {
+            surface_name,
+            surface,
+            gains,
+            v,
+            ..
+        } => {
+            let bad = |reason: String| ControlError::Surface {
+                controller: name.to_string(),
+                reason,
+            };
+            let state = model.state_symbols();
+            let s = match surface {
+                SurfaceSpec::Expr(e) => {
+                    for x in &state {
+                        let dx = diff(*e, *x);
+                        if let Some(y) = state.iter().find(|y| !is_zero(diff(dx, **y))) {
+                            return Err(bad(format!(
+                                "the surface must be linear in the state; it is not in `{}` and `{}`",
+                                x.name(),
+                                y.name()
+                            )));
+                        }
+                    }
+                    *e
+                }
+                SurfaceSpec::Poles(p) => {
+                    let desired: Vec<Pole> = p.iter().map(|(re, im)| Pole::new(*re, *im)).collect();
+                    let lin = linearize(model, &derivation.equations, values, &op)
+                        .map_err(ControlError::Linearize)?;
+                    let surf = crate::linear::sliding_surface(&lin.a, &lin.b, &desired)
+                        .map_err(ControlError::Design)?;
+                    Expr::add_all(
+                        surf.c
+                            .iter()
+                            .zip(&state)
+                            .map(|(c, x)| Expr::float(*c) * Expr::symbol(*x)),
+                    )
+                }
+            };
+            let chain = lie_chain(&derivation.affine, s).map_err(ControlError::Analysis)?;
+            if chain.relative_degree != 1 {
+                return Err(bad(format!(
+                    "the input reaches the surface only in derivative {} (relative degree {}); \
+                     a sliding surface needs relative degree 1: include the velocities",
+                    chain.relative_degree, chain.relative_degree
+                )));
+            }
+            let map = [(Expr::sym(surface_name), s)].into_iter().collect();
+            let law = chain.law(crate::sym::substitute(*v, &map));
+            return Ok(ResolvedController::SlidingMode {
+                name: name.to_string(),
+                surface: s,
+                law,
+                gains: gains.iter().map(|(g, x)| (Symbol::new(g), *x)).collect(),
+                chain: Box::new(chain),
+            });
+        }
+        ControllerSpec::Hybrid {
+            modes,
+            switches,
+            wrap,
+            ..
+        } => {
+            let modes = modes
+                .iter()
+                .map(|m| {
+                    Ok(ResolvedMode {
+                        name: m.name.clone(),
+                        swing_up: m.swing_up,
+                        controller: resolve(model, derivation, &m.controller, values)?,
+                    })
+                })
+                .collect::<Result<Vec<_>, ControlError>>()?;
+            return Ok(ResolvedController::Hybrid {
+                name: name.to_string(),
+                modes,
+                switches: switches.clone(),
+                wrap: wrap.clone(),
+            });
         }
         ControllerSpec::FeedbackLinearization {
             output, gains, v, ..

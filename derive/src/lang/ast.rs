@@ -318,15 +318,147 @@ pub enum ControllerStmt {
         /// Statement span.
         span: Span,
     },
-    /// `v = expr`: the outer law (`y`, `y'` are the output and its derivative).
+    /// `v = expr`: the outer law (`y`, `y'` are the output and its
+    /// derivative; `s` the sliding surface), or `Vm = expr` with an input
+    /// on the left: a direct law for that input.
     Law {
-        /// Left-hand side (must be `v`).
+        /// Left-hand side (`v` or an input).
         target: Ident,
         /// Right-hand side.
         expr: Expr,
         /// Statement span.
         span: Span,
     },
+    /// `surface s = expr` or `surface s poles [..]`: the sliding surface of a
+    /// sliding-mode controller.
+    Surface {
+        /// The surface's name (usable in the law).
+        name: Ident,
+        /// Its definition.
+        def: SurfaceDef,
+        /// Statement span.
+        span: Span,
+    },
+    /// `mode name = controller [swing_up]`: one mode of a hybrid controller.
+    Mode {
+        /// Mode name.
+        name: Ident,
+        /// The controller (declared in the same file) that drives this mode.
+        controller: Ident,
+        /// Where `swing_up` is written, if it is: the mode may drive the motor
+        /// with the pendulum anywhere (the supervisor's swing-up state).
+        swing_up: Option<Span>,
+        /// Statement span.
+        span: Span,
+    },
+    /// `switch from -> to when condition`.
+    Switch {
+        /// Mode switched from.
+        from: Ident,
+        /// Mode switched to.
+        to: Ident,
+        /// When to switch.
+        when: Guard,
+        /// Statement span.
+        span: Span,
+    },
+    /// `wrap alpha`: the modes and conditions of a hybrid controller see this
+    /// angle wrapped into (-pi, pi].
+    Wrap {
+        /// The coordinate.
+        coordinate: Ident,
+        /// Statement span.
+        span: Span,
+    },
+}
+
+/// Definition of a sliding surface.
+#[derive(Debug, Clone, PartialEq)]
+pub enum SurfaceDef {
+    /// `s = expr`, linear in the state.
+    Expr(Expr),
+    /// `s poles [..]`: `s = c x` with `c` placing the sliding dynamics' poles
+    /// (one fewer than the states) on the linearization about 0.
+    Poles(Vec<ComplexLit>),
+}
+
+/// Comparison operators of switch conditions.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum CmpOp {
+    /// `<`
+    Lt,
+    /// `<=`
+    Le,
+    /// `>`
+    Gt,
+    /// `>=`
+    Ge,
+}
+
+impl CmpOp {
+    /// The operator symbol.
+    pub fn symbol(self) -> &'static str {
+        match self {
+            CmpOp::Lt => "<",
+            CmpOp::Le => "<=",
+            CmpOp::Gt => ">",
+            CmpOp::Ge => ">=",
+        }
+    }
+
+    /// `lhs op rhs` given `lhs - rhs` (NaN is false).
+    pub fn holds(self, margin: f64) -> bool {
+        match self {
+            CmpOp::Lt => margin < 0.0,
+            CmpOp::Le => margin <= 0.0,
+            CmpOp::Gt => margin > 0.0,
+            CmpOp::Ge => margin >= 0.0,
+        }
+    }
+}
+
+/// A switch condition: comparisons joined by `and` (binding tighter) and `or`.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Guard {
+    /// What it is.
+    pub kind: GuardKind,
+    /// Where it is.
+    pub span: Span,
+}
+
+/// Switch condition forms.
+#[derive(Debug, Clone, PartialEq)]
+pub enum GuardKind {
+    /// `lhs op rhs`.
+    Cmp(CmpOp, Box<Expr>, Box<Expr>),
+    /// Both hold.
+    And(Box<Guard>, Box<Guard>),
+    /// Either holds.
+    Or(Box<Guard>, Box<Guard>),
+}
+
+impl Guard {
+    /// The comparisons, left to right.
+    pub fn comparisons(&self) -> Vec<(CmpOp, &Expr, &Expr)> {
+        match &self.kind {
+            GuardKind::Cmp(op, a, b) => vec![(*op, &**a, &**b)],
+            GuardKind::And(a, b) | GuardKind::Or(a, b) => {
+                let mut v = a.comparisons();
+                v.extend(b.comparisons());
+                v
+            }
+        }
+    }
+}
+
+impl std::fmt::Display for Guard {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        match &self.kind {
+            GuardKind::Cmp(op, a, b) => write!(f, "{a} {} {b}", op.symbol()),
+            GuardKind::And(a, b) => write!(f, "({a} and {b})"),
+            GuardKind::Or(a, b) => write!(f, "({a} or {b})"),
+        }
+    }
 }
 
 impl ControllerStmt {
@@ -338,7 +470,11 @@ impl ControllerStmt {
             | ControllerStmt::Gains { span, .. }
             | ControllerStmt::Linearize { span, .. }
             | ControllerStmt::Gain { span, .. }
-            | ControllerStmt::Law { span, .. } => *span,
+            | ControllerStmt::Law { span, .. }
+            | ControllerStmt::Surface { span, .. }
+            | ControllerStmt::Mode { span, .. }
+            | ControllerStmt::Switch { span, .. }
+            | ControllerStmt::Wrap { span, .. } => *span,
         }
     }
 }

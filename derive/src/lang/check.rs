@@ -10,6 +10,8 @@ use super::units::{parse_unit, Dim, Ratio, Unit};
 use std::collections::{BTreeMap, HashMap};
 use std::ops::{Add, Div, Mul, Neg};
 
+mod controllers;
+pub use controllers::CONTROLLER_FUNCTIONS;
 #[path = "check_recorded.rs"]
 mod recorded;
 
@@ -293,6 +295,9 @@ enum Ctx {
     Force,
     /// set value or controller gain: parameters and constants only.
     Constant,
+    /// a hybrid controller's switch condition: no inputs; `energy(q)` and
+    /// `sat(x)` are available.
+    Controller,
     /// a recorded controller's law: measured coordinates (no velocities),
     /// its signals, gains and lets, parameters, `derivative(x, wc)`.
     Recorded,
@@ -388,6 +393,19 @@ impl Infer<'_> {
                         None
                     }
                     SymbolKind::Parameter => s.dim,
+                    SymbolKind::Input if self.ctx == Ctx::Controller => {
+                        self.diags.push(
+                            Diagnostic::error(
+                                "plantc::not_a_state",
+                                format!("`{n}` is an input; a switch condition depends on the state"),
+                                e.span,
+                                "an input",
+                            )
+                            .with_label(s.span, "declared here")
+                            .with_help("compare coordinates, their derivatives, `energy(q)`, parameters and numbers"),
+                        );
+                        None
+                    }
                     _ if self.ctx == Ctx::Recorded && !recorded::readable_in_recorded(s) => {
                         self.diags.push(
                             Diagnostic::error(
@@ -531,6 +549,11 @@ impl Infer<'_> {
     }
 
     fn call(&mut self, e: &Expr, f: &Ident, args: &[Expr]) -> Option<Dim> {
+        if self.ctx == Ctx::Controller {
+            if let Some(d) = self.controller_call(e, f, args) {
+                return d;
+            }
+        }
         if self.ctx == Ctx::Recorded && f.name == "derivative" {
             return self.derivative_call(e, args);
         }
@@ -1781,245 +1804,5 @@ impl Checker {
                 }
             }
         }
-    }
-
-    fn check_controllers(&mut self, file: &ModelFile) {
-        let n_states = 2 * file.coordinates.len();
-        let n_inputs = file.inputs.len();
-        for c in &file.controllers {
-            let designs: Vec<&ControllerStmt> = c
-                .body
-                .iter()
-                .filter(|s| {
-                    matches!(
-                        s,
-                        ControllerStmt::Place { .. }
-                            | ControllerStmt::Lqr { .. }
-                            | ControllerStmt::Gains { .. }
-                            | ControllerStmt::Linearize { .. }
-                    )
-                })
-                .collect();
-            if designs.is_empty() {
-                self.diags.push(
-                    Diagnostic::error(
-                        "plantc::controller_kind",
-                        format!("controller `{}` has no design statement", c.name.name),
-                        c.name.span,
-                        "what kind of controller is this?",
-                    )
-                    .with_help("add one of `place poles [...]`, `lqr Q [...] R [...]`, `gains K [...]`, `linearize output y`"),
-                );
-            }
-            for extra in designs.iter().skip(1) {
-                self.diags.push(
-                    Diagnostic::error(
-                        "plantc::controller_kind",
-                        format!(
-                            "controller `{}` has more than one design statement",
-                            c.name.name
-                        ),
-                        extra.span(),
-                        "second design statement",
-                    )
-                    .with_label(designs[0].span(), "first one")
-                    .with_help("declare each design as its own controller"),
-                );
-            }
-            let linearize = c.body.iter().find_map(|s| match s {
-                ControllerStmt::Linearize { output, .. } => Some(output),
-                _ => None,
-            });
-            let mut gains: BTreeMap<String, Span> = BTreeMap::new();
-            let mut has_law = false;
-            for s in &c.body {
-                match s {
-                    ControllerStmt::Place { poles, span } => {
-                        if poles.len() != n_states {
-                            self.diags.push(
-                                Diagnostic::error(
-                                    "plantc::pole_count",
-                                    format!(
-                                        "expected {n_states} poles (two per coordinate), found {}",
-                                        poles.len()
-                                    ),
-                                    *span,
-                                    format!("{} poles", poles.len()),
-                                )
-                                .with_help(format!(
-                                    "the model has {} coordinate(s), so {n_states} states",
-                                    file.coordinates.len()
-                                )),
-                            );
-                        }
-                        for p in poles {
-                            let (re, im) = p.value();
-                            if im != 0.0 && !poles.iter().any(|o| o.value() == (re, -im)) {
-                                self.diags.push(
-                                    Diagnostic::error(
-                                        "plantc::pole_conjugate",
-                                        "a complex pole needs its conjugate in the list",
-                                        p.span,
-                                        "no conjugate partner",
-                                    )
-                                    .with_help(
-                                        "a real system's poles come in pairs `a+bi`, `a-bi`",
-                                    ),
-                                );
-                            }
-                        }
-                    }
-                    ControllerStmt::Lqr { q, r, span } => {
-                        if q.len() != n_states || r.len() != n_inputs {
-                            self.diags.push(Diagnostic::error(
-                                "plantc::weight_count",
-                                format!(
-                                    "expected {n_states} state weights and {n_inputs} input weight(s), found {} and {}",
-                                    q.len(),
-                                    r.len()
-                                ),
-                                *span,
-                                "wrong number of weights",
-                            ).with_help("Q and R are the diagonals of the LQR weight matrices"));
-                        }
-                        for w in q
-                            .iter()
-                            .filter(|w| w.value().is_nan() || w.value() < 0.0)
-                            .chain(r.iter().filter(|w| w.value().is_nan() || w.value() <= 0.0))
-                        {
-                            self.diags.push(Diagnostic::error(
-                                "plantc::bad_weight",
-                                "LQR weights must be >= 0 for Q and > 0 for R",
-                                w.span,
-                                "invalid weight",
-                            ));
-                        }
-                    }
-                    ControllerStmt::Gains { values, span, .. } => {
-                        if values.len() != n_states * n_inputs {
-                            self.diags.push(Diagnostic::error(
-                                "plantc::gain_count",
-                                format!("expected {} gains ({n_states} states x {n_inputs} inputs), found {}", n_states * n_inputs, values.len()),
-                                *span,
-                                "wrong number of gains",
-                            ));
-                        }
-                    }
-                    ControllerStmt::Linearize { output, .. } => {
-                        if !file.outputs.iter().any(|o| o.name.name == output.name) {
-                            let cands: Vec<&str> =
-                                file.outputs.iter().map(|o| o.name.name.as_str()).collect();
-                            let mut d = Diagnostic::error(
-                                "plantc::unknown_output",
-                                format!("`{}` is not a declared output", output.name),
-                                output.span,
-                                "not an output",
-                            );
-                            d.help = did_you_mean(&suggest(&output.name, cands))
-                                .or(Some(format!("declare it with `output {}`", output.name)));
-                            self.diags.push(d);
-                        }
-                    }
-                    ControllerStmt::Gain { name, value, span } => {
-                        if linearize.is_none() {
-                            self.diags.push(Diagnostic::error(
-                                "plantc::controller_kind",
-                                "`gain` lines belong to a `linearize output` controller",
-                                *span,
-                                "no `linearize output` in this controller",
-                            ));
-                        }
-                        if let Some(prev) = gains.get(&name.name) {
-                            self.diags.push(
-                                Diagnostic::error(
-                                    "plantc::duplicate_definition",
-                                    format!("gain `{}` is declared twice", name.name),
-                                    name.span,
-                                    "declared again here",
-                                )
-                                .with_label(*prev, "first declared here"),
-                            );
-                        }
-                        gains.insert(name.name.clone(), name.span);
-                        self.infer(value, Ctx::Constant);
-                    }
-                    ControllerStmt::Law { target, expr, span } => {
-                        has_law = true;
-                        if linearize.is_none() {
-                            self.diags.push(Diagnostic::error(
-                                "plantc::controller_kind",
-                                "a law `v = ...` belongs to a `linearize output` controller",
-                                *span,
-                                "no `linearize output` in this controller",
-                            ));
-                        }
-                        if target.name != "v" {
-                            self.diags.push(
-                                Diagnostic::error("plantc::bad_law", format!("unknown controller statement `{} = ...`", target.name), target.span, "expected `v`")
-                                    .with_help("the outer law of feedback linearization is written `v = ...` (y'' = v)"),
-                            );
-                        }
-                        self.check_law(expr, &gains);
-                    }
-                }
-            }
-            if linearize.is_some() && !has_law {
-                self.diags.push(
-                    Diagnostic::error(
-                        "plantc::missing_law",
-                        format!("controller `{}` has no law `v = ...`", c.name.name),
-                        c.name.span,
-                        "feedback linearization needs an outer law",
-                    )
-                    .with_help("e.g. `v = -wn^2*y - 2*zeta*wn*y'`"),
-                );
-            }
-        }
-    }
-
-    /// Law names: gains, `y`, `y'`, coordinates (and derivatives), parameters.
-    fn check_law(&mut self, e: &Expr, gains: &BTreeMap<String, Span>) {
-        let mut errs = Vec::new();
-        e.walk(&mut |x| match &x.kind {
-            ExprKind::Name(n) => {
-                let ok = n == "y"
-                    || gains.contains_key(n)
-                    || matches!(
-                        self.syms.names.get(n).map(|s| s.kind),
-                        Some(SymbolKind::Coordinate(_)) | Some(SymbolKind::Parameter)
-                    );
-                if !ok {
-                    let cands: Vec<&str> = gains
-                        .keys()
-                        .map(|s| s.as_str())
-                        .chain(std::iter::once("y"))
-                        .chain(
-                            self.syms
-                                .names
-                                .iter()
-                                .filter(|(_, s)| matches!(s.kind, SymbolKind::Coordinate(_) | SymbolKind::Parameter))
-                                .map(|(n, _)| n.as_str()),
-                        )
-                        .collect();
-                    let mut d = Diagnostic::error("plantc::unknown_name", format!("unknown name `{n}` in the law"), x.span, "not a gain, `y`, a coordinate or a parameter");
-                    d.help = did_you_mean(&suggest(n, cands)).or(Some("declare gains with `gain name = value`".into()));
-                    errs.push(d);
-                }
-            }
-            ExprKind::Deriv(n, k) => {
-                let ok = (n == "y" && *k == 1) || matches!(self.syms.names.get(n).map(|s| s.kind), Some(SymbolKind::Coordinate(_)));
-                if !ok {
-                    errs.push(
-                        Diagnostic::error("plantc::bad_derivative", format!("`{n}{}` is not available in the law", "'".repeat(*k as usize)), x.span, "not allowed here")
-                            .with_help("the law may use `y`, `y'` (output and its derivative), coordinates and their derivatives"),
-                    );
-                }
-            }
-            ExprKind::Call(f, _) if !BUILTINS.iter().any(|(b, _)| *b == f.name) => {
-                errs.push(Diagnostic::error("plantc::unknown_function", format!("unknown function `{}`", f.name), f.span, "not a built-in function"));
-            }
-            _ => {}
-        });
-        self.diags.extend(errs);
     }
 }

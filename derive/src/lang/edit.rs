@@ -428,16 +428,19 @@ pub fn rename_edits(
                 n.as_str(),
                 // model names, and gains/`y` that would shadow it in a law
                 names_of(&|s| match s {
-                    SymbolRef::Model(x) | SymbolRef::Gain(_, x) => Some(x.clone()),
+                    SymbolRef::Model(x) | SymbolRef::Gain(_, x) | SymbolRef::Surface(_, x) => {
+                        Some(x.clone())
+                    }
                     SymbolRef::LawOutput(_) => Some("y".into()),
                     _ => None,
                 }),
             ),
-            SymbolRef::Gain(ci, n) => (
+            // a controller's gains and surfaces share its law's namespace
+            SymbolRef::Gain(ci, n) | SymbolRef::Surface(ci, n) => (
                 n.as_str(),
                 names_of(&|s| match s {
                     SymbolRef::Model(x) => Some(x.clone()),
-                    SymbolRef::Gain(c, x) if c == ci => Some(x.clone()),
+                    SymbolRef::Gain(c, x) | SymbolRef::Surface(c, x) if c == ci => Some(x.clone()),
                     SymbolRef::LawOutput(c) if c == ci => Some("y".into()),
                     _ => None,
                 }),
@@ -446,6 +449,13 @@ pub fn rename_edits(
                 n.as_str(),
                 names_of(&|s| match s {
                     SymbolRef::Block(x) => Some(x.clone()),
+                    _ => None,
+                }),
+            ),
+            SymbolRef::Mode(ci, n) => (
+                n.as_str(),
+                names_of(&|s| match s {
+                    SymbolRef::Mode(c, x) if c == ci => Some(x.clone()),
                     _ => None,
                 }),
             ),

@@ -49,6 +49,16 @@ pub enum Tok {
     Prime,
     /// `:`
     Colon,
+    /// `<` (controller switch conditions)
+    Lt,
+    /// `<=`
+    Le,
+    /// `>`
+    Gt,
+    /// `>=`
+    Ge,
+    /// `->` (controller mode switches)
+    Arrow,
     /// End of input.
     Eof,
 }
@@ -77,6 +87,11 @@ impl Tok {
             Tok::Caret => "`^`",
             Tok::Prime => "`'`",
             Tok::Colon => "`:`",
+            Tok::Lt => "`<`",
+            Tok::Le => "`<=`",
+            Tok::Gt => "`>`",
+            Tok::Ge => "`>=`",
+            Tok::Arrow => "`->`",
             Tok::Eof => "end of file",
         }
     }
@@ -111,6 +126,21 @@ pub fn lex(text: &str, diags: &mut Vec<Diagnostic>) -> Vec<Token> {
         let c = at(i);
         let start = i;
         let single = |t: Tok| Some(t);
+        let next = if i + 1 < n { bytes[i + 1] } else { 0 };
+        let two = match (c, next) {
+            ('<', b'=') => Some(Tok::Le),
+            ('>', b'=') => Some(Tok::Ge),
+            ('-', b'>') => Some(Tok::Arrow),
+            _ => None,
+        };
+        if let Some(t) = two {
+            i += 2;
+            toks.push(Token {
+                tok: t,
+                span: Span::new(start, i),
+            });
+            continue;
+        }
         let kind = match c {
             ' ' | '\t' | '\r' => {
                 i += 1;
@@ -138,6 +168,8 @@ pub fn lex(text: &str, diags: &mut Vec<Diagnostic>) -> Vec<Token> {
             '^' => single(Tok::Caret),
             '\'' => single(Tok::Prime),
             ':' => single(Tok::Colon),
+            '<' => single(Tok::Lt),
+            '>' => single(Tok::Gt),
             _ => None,
         };
         if let Some(t) = kind {

@@ -40,6 +40,20 @@
 //! controller fl { linearize output alpha
 //!                 gain wn = 4
 //!                 v = -wn^2*y - 2*0.7*wn*y' }
+//! controller pump {                             # a direct law for an input
+//!     gain kE = 200
+//!     Vm = 10*sat((kE*(0 - energy(alpha))*sign(alpha'*cos(alpha)) - 2*theta)/10) }
+//! controller smc {                              # sliding mode
+//!     surface s poles [-3+2i, -3-2i, -6]        # or: surface s = alpha' + 8*alpha + ...
+//!     gain k = 2
+//!     gain phi = 0.05
+//!     v = -k*sat(s/phi) }                       # s' = v
+//! controller swing {                            # hybrid: modes and switches
+//!     wrap alpha
+//!     mode pump = pump swing_up
+//!     mode catch = pp
+//!     switch pump -> catch when abs(alpha) < 15 [deg]
+//!     switch catch -> pump when abs(alpha) > 25 [deg] }
 //! ```
 //!
 //! ## Lines
@@ -75,7 +89,8 @@
 //! literals (`-2+3.464i`) exist only in `place poles [...]`.
 //!
 //! Built-in functions: `sin cos tan sqrt exp ln abs sign tanh atan2(y, x)`,
-//! constant `pi`. Effects (only in `force` lines, see [`effects::EFFECTS`]):
+//! constant `pi` (controllers add `sat` and `energy`, below). Effects (only
+//! in `force` lines, see [`effects::EFFECTS`]):
 //! `viscous_friction(b)`, `coulomb_friction(Fc)`, `stribeck_friction(Fc, Fs, vs)`,
 //! `quadratic_drag(cd)`, `spring(k)`, `spring(k, q0)`, `cogging(A, N)`,
 //! `cogging(A, N, phase)` (`-A*sin(N*q + phase)`, N periods per revolution:
@@ -121,9 +136,35 @@
 //! A controller has exactly one design statement: `place poles` (2 per
 //! coordinate; complex poles in conjugate pairs), `lqr Q [..] R [..]`
 //! (diagonals: 2 per coordinate, 1 per input), `gains K [..]`
-//! (2 per coordinate per input), or `linearize output y` with `gain` lines and
+//! (2 per coordinate per input), `linearize output y` with `gain` lines and
 //! a law `v = ...` using the gains, `y`, `y'`, coordinates (and derivatives)
-//! and parameters.
+//! and parameters, or one of:
+//! - a direct law per input, `Vm = expr` (the input's name on the left), with
+//!   `gain` lines; the actuation level is the input itself (e.g. the motor
+//!   voltage);
+//! - `surface s = expr` (linear in the state, with a velocity the input
+//!   reaches: relative degree 1) or `surface s poles [..]` (one fewer than
+//!   the states: `s = c x` whose sliding dynamics linearized about 0 have
+//!   these poles, by Ackermann and Utkin's formula), with `gain` lines and a
+//!   reaching law `v = ...` using `s`: sliding mode `u = (v - L_f s)/L_g s`,
+//!   the equivalent control plus `v / L_g s`. Two surfaces combined (Khanesar
+//!   et al.) are one linear surface, e.g. `s = (alpha' + 8*alpha) - 0.1*(theta' + 2*theta)`;
+//! - `mode name = controller` lines (another controller of the file, not
+//!   itself hybrid; `swing_up` after it marks a mode that drives the input
+//!   with the pendulum anywhere), `switch a -> b when condition` lines and
+//!   optional `wrap q` lines (the modes and conditions see angle `q`
+//!   wrapped into [-pi, pi)). The first mode is the initial one; at every
+//!   sample the first switch from the current mode whose condition holds is
+//!   taken (then again from the new mode). A condition compares two
+//!   expressions (`<`, `<=`, `>`, `>=`, both sides of one unit) of
+//!   coordinates, their derivatives, parameters, numbers and quantities,
+//!   joined by `and` (binding tighter) and `or`; inputs are not allowed.
+//!
+//! Laws and conditions may also call `sat(x)` (`x` clamped to [-1, 1],
+//! dimensionless) and `energy(q)`: the kinetic energy with the other
+//! coordinates' velocities at 0 plus `V - V|q=0` (for the rotary pendulum,
+//! `energy(alpha) = J2h*alpha'^2/2 + m2*g*l2*(cos(alpha) - 1)`, 0 upright at
+//! rest).
 
 pub mod ast;
 pub mod check;

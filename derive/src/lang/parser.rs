@@ -688,6 +688,62 @@ impl<'a> Parser<'a> {
                     span: Span::new(start, self.prev_end()),
                 }
             }
+            "surface" if self.peek2() == Tok::Ident => {
+                self.bump();
+                let name = self.ident("a surface name (e.g. `s`)")?;
+                let def = if self.is_kw("poles") {
+                    self.bump();
+                    SurfaceDef::Poles(self.list(|p| p.complex())?)
+                } else {
+                    self.expect(Tok::Eq, "`=` and the surface, or `poles [...]`")?;
+                    self.skip_newlines();
+                    SurfaceDef::Expr(self.statement_expr(start)?)
+                };
+                ControllerStmt::Surface {
+                    name,
+                    def,
+                    span: Span::new(start, self.prev_end()),
+                }
+            }
+            "mode" if self.peek2() == Tok::Ident => {
+                self.bump();
+                let name = self.ident("a mode name")?;
+                self.expect(Tok::Eq, "`=` and the controller of this mode")?;
+                let controller = self.ident("the name of a controller of this file")?;
+                let swing_up = if self.is_kw("swing_up") {
+                    Some(self.bump().span)
+                } else {
+                    None
+                };
+                ControllerStmt::Mode {
+                    name,
+                    controller,
+                    swing_up,
+                    span: Span::new(start, self.prev_end()),
+                }
+            }
+            "switch" if self.peek2() == Tok::Ident => {
+                self.bump();
+                let from = self.ident("the mode switched from")?;
+                self.expect(Tok::Arrow, "`->`")?;
+                let to = self.ident("the mode switched to")?;
+                self.keyword("when")?;
+                let when = self.guard()?;
+                ControllerStmt::Switch {
+                    from,
+                    to,
+                    when,
+                    span: Span::new(start, self.prev_end()),
+                }
+            }
+            "wrap" if self.peek2() == Tok::Ident => {
+                self.bump();
+                let coordinate = self.ident("an angle coordinate")?;
+                ControllerStmt::Wrap {
+                    coordinate,
+                    span: Span::new(start, self.prev_end()),
+                }
+            }
             _ if t.tok == Tok::Ident && self.peek2() == Tok::Eq => {
                 let target = self.ident("a name")?;
                 self.bump();
@@ -709,13 +765,68 @@ impl<'a> Parser<'a> {
                         "not a controller statement",
                     )
                     .with_help(
-                        "a controller is `place poles [...]`, `lqr Q [...] R [...]`, `gains K [...]`, or `linearize output y` with `gain name = value` lines and a law `v = ...`",
+                        "a controller is `place poles [...]`, `lqr Q [...] R [...]`, `gains K [...]`, `linearize output y` or `surface s = ...` with `gain name = value` lines and a law `v = ...`, a direct law `u = ...` for an input `u`, or `mode` and `switch` lines",
                     ),
                 );
                 return Err(());
             }
         };
         Ok(stmt)
+    }
+
+    /// `cmp (and cmp)* (or cmp (and cmp)*)*`.
+    fn guard(&mut self) -> PResult<Guard> {
+        let mut lhs = self.guard_and()?;
+        while self.is_kw("or") {
+            self.bump();
+            let rhs = self.guard_and()?;
+            let span = lhs.span.to(rhs.span);
+            lhs = Guard {
+                kind: GuardKind::Or(Box::new(lhs), Box::new(rhs)),
+                span,
+            };
+        }
+        Ok(lhs)
+    }
+
+    fn guard_and(&mut self) -> PResult<Guard> {
+        let mut lhs = self.comparison()?;
+        while self.is_kw("and") {
+            self.bump();
+            let rhs = self.comparison()?;
+            let span = lhs.span.to(rhs.span);
+            lhs = Guard {
+                kind: GuardKind::And(Box::new(lhs), Box::new(rhs)),
+                span,
+            };
+        }
+        Ok(lhs)
+    }
+
+    fn comparison(&mut self) -> PResult<Guard> {
+        let a = self.expr()?;
+        let op = match self.peek() {
+            Tok::Lt => CmpOp::Lt,
+            Tok::Le => CmpOp::Le,
+            Tok::Gt => CmpOp::Gt,
+            Tok::Ge => CmpOp::Ge,
+            _ => {
+                let r = self.unexpected("a comparison `<`, `<=`, `>` or `>=`");
+                if let Some(d) = self.diags.last_mut() {
+                    d.help = Some(
+                        "a switch condition compares two expressions, e.g. `when abs(alpha) < 15 [deg]`; join comparisons with `and` / `or`".into(),
+                    );
+                }
+                return r;
+            }
+        };
+        self.bump();
+        let b = self.expr()?;
+        let span = a.span.to(b.span);
+        Ok(Guard {
+            kind: GuardKind::Cmp(op, Box::new(a), Box::new(b)),
+            span,
+        })
     }
 
     fn recorded_stmt(&mut self) -> PResult<RecordedStmt> {

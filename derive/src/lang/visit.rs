@@ -25,6 +25,10 @@ pub enum SymbolRef {
     LawOutput(usize),
     /// A set or controller name (one namespace).
     Block(String),
+    /// A sliding surface of the controller with this index (usable in its law).
+    Surface(usize, String),
+    /// A mode of the hybrid controller with this index.
+    Mode(usize, String),
     /// A built-in function (`sin`, `atan2`, ...).
     Builtin(String),
     /// An effect (`viscous_friction`, `sensor_offset`, ...).
@@ -97,6 +101,16 @@ pub fn root_exprs(file: &ModelFile) -> Vec<(&Expr, ExprScope)> {
             match st {
                 ControllerStmt::Gain { value, .. } => v.push((value, m)),
                 ControllerStmt::Law { expr, .. } => v.push((expr, ExprScope::Law(i))),
+                ControllerStmt::Surface {
+                    def: SurfaceDef::Expr(e),
+                    ..
+                } => v.push((e, ExprScope::Law(i))),
+                ControllerStmt::Switch { when, .. } => {
+                    for (_, a, b) in when.comparisons() {
+                        v.push((a, m));
+                        v.push((b, m));
+                    }
+                }
                 _ => {}
             }
         }
@@ -145,18 +159,46 @@ pub fn occurrences(file: &ModelFile) -> Vec<Occurrence> {
             push(model(&e.name), e.name.span, refr);
         }
     }
-    let mut gains: Vec<BTreeMap<&str, ()>> = Vec::new();
+    // a controller's own names in its law: gains and surfaces
+    let mut gains: Vec<BTreeMap<&str, SymbolRef>> = Vec::new();
     for (ci, c) in file.controllers.iter().enumerate() {
         push(SymbolRef::Block(c.name.name.clone()), c.name.span, decl);
         let mut g = BTreeMap::new();
         for st in &c.body {
             match st {
                 ControllerStmt::Gain { name, .. } => {
-                    g.insert(name.name.as_str(), ());
-                    push(SymbolRef::Gain(ci, name.name.clone()), name.span, decl);
+                    let sym = SymbolRef::Gain(ci, name.name.clone());
+                    g.insert(name.name.as_str(), sym.clone());
+                    push(sym, name.span, decl);
+                }
+                ControllerStmt::Surface { name, .. } => {
+                    let sym = SymbolRef::Surface(ci, name.name.clone());
+                    g.insert(name.name.as_str(), sym.clone());
+                    push(sym, name.span, decl);
                 }
                 ControllerStmt::Linearize { output, .. } => {
                     push(model(output), output.span, refr);
+                }
+                // `Vm = ...`: a direct law names its input (`v` is the outer law)
+                ControllerStmt::Law { target, .. } if target.name != "v" => {
+                    push(model(target), target.span, refr);
+                }
+                ControllerStmt::Mode {
+                    name, controller, ..
+                } => {
+                    push(SymbolRef::Mode(ci, name.name.clone()), name.span, decl);
+                    push(
+                        SymbolRef::Block(controller.name.clone()),
+                        controller.span,
+                        refr,
+                    );
+                }
+                ControllerStmt::Switch { from, to, .. } => {
+                    push(SymbolRef::Mode(ci, from.name.clone()), from.span, refr);
+                    push(SymbolRef::Mode(ci, to.name.clone()), to.span, refr);
+                }
+                ControllerStmt::Wrap { coordinate, .. } => {
+                    push(model(coordinate), coordinate.span, refr);
                 }
                 _ => {}
             }
@@ -184,9 +226,7 @@ pub fn occurrences(file: &ModelFile) -> Vec<Occurrence> {
                 _ => return,
             };
             let sym = match scope {
-                ExprScope::Law(ci) if gains[ci].contains_key(name) => {
-                    SymbolRef::Gain(ci, name.to_string())
-                }
+                ExprScope::Law(ci) if gains[ci].contains_key(name) => gains[ci][name].clone(),
                 ExprScope::Law(ci) if name == "y" => SymbolRef::LawOutput(ci),
                 _ => SymbolRef::Model(name.to_string()),
             };

@@ -5,6 +5,7 @@
 //! - [`controllability`]: controllability matrix and SVD rank.
 //! - [`place`]: single-input pole placement (`u = -K x`).
 //! - [`lqr`]: continuous-time LQR via the CARE.
+//! - [`sliding_surface`], [`reduced_dynamics`]: linear sliding surfaces.
 //! - [`design_velocity_observer`]: steady-state Kalman velocity observer for
 //!   encoder-only measurements (used by the runtime and by `plantc gen --rig`).
 //! - [`AnalysisReport`], [`PlaceReport`], [`LqrReport`]: the CLI's JSON shapes.
@@ -19,6 +20,7 @@ mod observer;
 mod place;
 mod poles;
 mod report;
+mod sliding;
 
 pub use controllability::{
     controllability, controllability_matrix, numerical_rank, Controllability,
@@ -30,3 +32,4 @@ pub use observer::{design_velocity_observer, encoder_variance, ObserverDesign, O
 pub use place::{char_poly, check_desired_poles, place, pole_match_error, Placement};
 pub use poles::{canonicalize_poles, format_pole, parse_poles, poles, Pole};
 pub use report::{analyze, to_json, AnalysisReport, LqrReport, PlaceReport};
+pub use sliding::{reduced_dynamics, sliding_surface, ReducedDynamics, SlidingSurface};

@@ -122,40 +122,8 @@ pub fn place(
     let n = a.nrows();
     check_desired_poles(desired, n)?;
 
-    let c = controllability_matrix(a, b)?;
-    let (rank, tolerance, _) = numerical_rank(&c)?;
-    if rank < n {
-        return Err(LinearError::NotControllable { rank, n, tolerance });
-    }
-
-    // Scale columns: C = Cs D, so C' w = e_n  <=>  Cs' w = D^-1 e_n.
-    let mut cs = c.clone();
-    let mut rhs = nalgebra::DVector::zeros(n);
-    for j in 0..n {
-        let norm = cs.column(j).norm();
-        if norm == 0.0 {
-            return Err(LinearError::NotControllable { rank, n, tolerance });
-        }
-        cs.column_mut(j).unscale_mut(norm);
-        if j == n - 1 {
-            rhs[j] = 1.0 / norm;
-        }
-    }
-    let w = cs
-        .transpose()
-        .lu()
-        .solve(&rhs)
-        .ok_or(LinearError::SingularSystem {
-            what: "controllability matrix in Ackermann's formula",
-        })?;
-
-    // p(A) by Horner's rule.
-    let coeffs = char_poly(desired);
-    let identity = DMatrix::<f64>::identity(n, n);
-    let mut p_of_a = identity.clone();
-    for k in (0..n).rev() {
-        p_of_a = &p_of_a * a + &identity * coeffs[k];
-    }
+    let w = last_row_of_inverse_controllability(a, b)?;
+    let p_of_a = matrix_polynomial(a, &char_poly(desired));
     let k = DMatrix::from_row_slice(1, n, (w.transpose() * p_of_a).as_slice());
     if k.iter().any(|v| !v.is_finite()) {
         return Err(LinearError::SingularSystem {
@@ -171,4 +139,49 @@ pub fn place(
         closed_loop_poles,
         max_pole_error,
     })
+}
+
+/// `w = C^-T e_n` (the last row of the inverse controllability matrix, as a
+/// column), by an LU solve after scaling the columns of `C` to unit norm.
+pub(super) fn last_row_of_inverse_controllability(
+    a: &DMatrix<f64>,
+    b: &DMatrix<f64>,
+) -> Result<nalgebra::DVector<f64>, LinearError> {
+    let n = a.nrows();
+    let c = controllability_matrix(a, b)?;
+    let (rank, tolerance, _) = numerical_rank(&c)?;
+    if rank < n {
+        return Err(LinearError::NotControllable { rank, n, tolerance });
+    }
+    // Scale columns: C = Cs D, so C' w = e_n  <=>  Cs' w = D^-1 e_n.
+    let mut cs = c.clone();
+    let mut rhs = nalgebra::DVector::zeros(n);
+    for j in 0..n {
+        let norm = cs.column(j).norm();
+        if norm == 0.0 {
+            return Err(LinearError::NotControllable { rank, n, tolerance });
+        }
+        cs.column_mut(j).unscale_mut(norm);
+        if j == n - 1 {
+            rhs[j] = 1.0 / norm;
+        }
+    }
+    cs.transpose()
+        .lu()
+        .solve(&rhs)
+        .ok_or(LinearError::SingularSystem {
+            what: "controllability matrix in Ackermann's formula",
+        })
+}
+
+/// `p(A)` for the monic polynomial `coeffs[0] + coeffs[1] s + ... + s^d`
+/// (`coeffs` of length `d + 1`, the last entry ignored as 1), by Horner's rule.
+pub(super) fn matrix_polynomial(a: &DMatrix<f64>, coeffs: &[f64]) -> DMatrix<f64> {
+    let n = a.nrows();
+    let identity = DMatrix::<f64>::identity(n, n);
+    let mut p_of_a = identity.clone();
+    for k in (0..coeffs.len().saturating_sub(1)).rev() {
+        p_of_a = &p_of_a * a + &identity * coeffs[k];
+    }
+    p_of_a
 }

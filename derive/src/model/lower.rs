@@ -6,8 +6,8 @@ use std::path::Path;
 
 use super::{
     ActuatorEffect, ActuatorEffectKind, ControllerSpec, Coordinate, CoordinateKind,
-    DerivativeFilter, Derived, Input, Model, Output, Parameter, ParameterSet, RecordedController,
-    RecordedSignal, SensorEffect, SensorEffectKind,
+    DerivativeFilter, Derived, Guard, Input, ModeSpec, Model, Output, Parameter, ParameterSet,
+    RecordedController, RecordedSignal, SensorEffect, SensorEffectKind, SurfaceSpec, SwitchSpec,
 };
 use crate::lang::ast::{self, BinOp, ExprKind};
 use crate::lang::effects;
@@ -171,6 +171,8 @@ struct Lowerer<'a> {
     derived: Vec<Derived>,
     derived_names: HashSet<String>,
     in_progress: HashSet<String>,
+    /// `energy(q)` of each coordinate (filled once T and V are lowered).
+    energies: HashMap<String, Expr>,
 }
 
 impl<'a> Lowerer<'a> {
@@ -191,6 +193,20 @@ impl<'a> Lowerer<'a> {
                     BinOp::Div => x / y,
                     BinOp::Pow => x.pow(y),
                 }
+            }
+            ExprKind::Call(f, args) if f.name == "energy" => match args.first().map(|a| &a.kind) {
+                Some(ExprKind::Name(q)) if args.len() == 1 => self
+                    .energies
+                    .get(q)
+                    .copied()
+                    .unwrap_or_else(|| Expr::float(f64::NAN)),
+                _ => Expr::float(f64::NAN),
+            },
+            ExprKind::Call(f, args) if f.name == "sat" && args.len() == 1 => {
+                // x clamped to [-1, 1], in functions the symbolic core has
+                let x = self.expr(&args[0]);
+                let one = Expr::one();
+                ((x + one).abs() - (x - one).abs()) * Expr::frac(1, 2)
             }
             ExprKind::Call(f, args) => {
                 let a: Vec<Expr> = args.iter().map(|x| self.expr(x)).collect();
@@ -261,6 +277,7 @@ pub fn lower(file: &ast::ModelFile, symbols: Option<&Symbols>) -> Model {
         derived: Vec::new(),
         derived_names: HashSet::new(),
         in_progress: HashSet::new(),
+        energies: HashMap::new(),
     };
     // Lower lets in file order so derived quantities are in dependency order.
     for l in &file.lets {
@@ -391,10 +408,26 @@ pub fn lower(file: &ast::ModelFile, symbols: Option<&Symbols>) -> Model {
                 .collect(),
         })
         .collect();
+    lw.energies = coordinates
+        .iter()
+        .enumerate()
+        .map(|(i, c)| {
+            let others: HashMap<Symbol, Expr> = coordinates
+                .iter()
+                .enumerate()
+                .filter(|(j, _)| *j != i)
+                .map(|(_, o)| (o.symbols.qd, Expr::zero()))
+                .collect();
+            let at_zero: HashMap<Symbol, Expr> = [(c.symbols.q, Expr::zero())].into();
+            let t = crate::sym::substitute_symbols(kinetic, &others);
+            let v = potential - crate::sym::substitute_symbols(potential, &at_zero);
+            (c.name.clone(), t + v)
+        })
+        .collect();
     let controllers = file
         .controllers
         .iter()
-        .map(|c| lower_controller(&mut lw, c))
+        .map(|c| lower_controller(&mut lw, c, &coordinates, &inputs))
         .collect();
     let recorded = file
         .recorded
@@ -465,11 +498,48 @@ fn lower_signal_effects(
     (sensors, actuators)
 }
 
-fn lower_controller(lw: &mut Lowerer<'_>, c: &ast::Controller) -> ControllerSpec {
+fn lower_gain(
+    lw: &mut Lowerer<'_>,
+    gains: &mut Vec<(String, f64)>,
+    g: &ast::Ident,
+    value: &ast::Expr,
+) {
+    let env: HashMap<Symbol, f64> = gains.iter().map(|(n, v)| (Symbol::new(n), *v)).collect();
+    let v = lw.expr(value).eval_map(&env);
+    gains.push((g.name.clone(), v));
+}
+
+fn lower_guard(lw: &mut Lowerer<'_>, g: &ast::Guard) -> Guard {
+    match &g.kind {
+        ast::GuardKind::Cmp(op, a, b) => Guard::Cmp {
+            op: *op,
+            lhs: lw.expr(a),
+            rhs: lw.expr(b),
+        },
+        ast::GuardKind::And(a, b) => {
+            Guard::And(Box::new(lower_guard(lw, a)), Box::new(lower_guard(lw, b)))
+        }
+        ast::GuardKind::Or(a, b) => {
+            Guard::Or(Box::new(lower_guard(lw, a)), Box::new(lower_guard(lw, b)))
+        }
+    }
+}
+
+fn lower_controller(
+    lw: &mut Lowerer<'_>,
+    c: &ast::Controller,
+    coordinates: &[Coordinate],
+    inputs: &[Input],
+) -> ControllerSpec {
     let name = c.name.name.clone();
     let mut gains: Vec<(String, f64)> = Vec::new();
     let mut output = None;
     let mut law = None;
+    let mut surface = None;
+    let mut direct: Vec<Option<Expr>> = vec![None; inputs.len()];
+    let mut modes: Vec<ModeSpec> = Vec::new();
+    let mut switches = Vec::new();
+    let mut wrap = Vec::new();
     for st in &c.body {
         match st {
             ast::ControllerStmt::Place { poles, .. } => {
@@ -493,13 +563,77 @@ fn lower_controller(lw: &mut Lowerer<'_>, c: &ast::Controller) -> ControllerSpec
             }
             ast::ControllerStmt::Linearize { output: o, .. } => output = Some(o.name.clone()),
             ast::ControllerStmt::Gain { name: g, value, .. } => {
-                let env: HashMap<Symbol, f64> =
-                    gains.iter().map(|(n, v)| (Symbol::new(n), *v)).collect();
-                let v = lw.expr(value).eval_map(&env);
-                gains.push((g.name.clone(), v));
+                lower_gain(lw, &mut gains, g, value)
             }
-            ast::ControllerStmt::Law { expr, .. } => law = Some(lw.expr(expr)),
+            ast::ControllerStmt::Law { target, expr, .. } => {
+                match inputs.iter().position(|i| i.name == target.name) {
+                    Some(j) => direct[j] = Some(lw.expr(expr)),
+                    None => law = Some(lw.expr(expr)),
+                }
+            }
+            ast::ControllerStmt::Surface { name: s, def, .. } => {
+                let spec = match def {
+                    ast::SurfaceDef::Expr(e) => SurfaceSpec::Expr(lw.expr(e)),
+                    ast::SurfaceDef::Poles(p) => {
+                        SurfaceSpec::Poles(p.iter().map(|p| p.value()).collect())
+                    }
+                };
+                surface = Some((s.name.clone(), spec));
+            }
+            ast::ControllerStmt::Mode {
+                name: m,
+                controller,
+                swing_up,
+                ..
+            } => modes.push(ModeSpec {
+                name: m.name.clone(),
+                controller: controller.name.clone(),
+                swing_up: swing_up.is_some(),
+            }),
+            ast::ControllerStmt::Switch { from, to, when, .. } => {
+                let index = |m: &ast::Ident| modes.iter().position(|k| k.name == m.name);
+                if let (Some(f), Some(t)) = (index(from), index(to)) {
+                    switches.push(SwitchSpec {
+                        from: f,
+                        to: t,
+                        when: lower_guard(lw, when),
+                        text: when.to_string(),
+                    });
+                }
+            }
+            ast::ControllerStmt::Wrap { coordinate, .. } => {
+                if let Some(i) = coordinates.iter().position(|q| q.name == coordinate.name) {
+                    wrap.push(i);
+                }
+            }
         }
+    }
+    if !modes.is_empty() {
+        return ControllerSpec::Hybrid {
+            name,
+            modes,
+            switches,
+            wrap,
+        };
+    }
+    if let Some((surface_name, surface)) = surface {
+        return ControllerSpec::SlidingMode {
+            name,
+            surface_name,
+            surface,
+            gains,
+            v: law.unwrap_or_else(Expr::zero),
+        };
+    }
+    if output.is_none() && direct.iter().any(Option::is_some) {
+        return ControllerSpec::Direct {
+            name,
+            gains,
+            laws: direct
+                .into_iter()
+                .map(|l| l.unwrap_or_else(Expr::zero))
+                .collect(),
+        };
     }
     ControllerSpec::FeedbackLinearization {
         name,

@@ -3,9 +3,11 @@
 //! analysis, code generation and identification.
 
 mod lower;
+mod modes;
 mod values;
 
 pub use lower::{load_model, load_model_text, lower, LoadError, LoadedModel};
+pub use modes::{Guard, ModeSpec, SurfaceSpec, SwitchSpec};
 pub use values::{ParameterValues, ValuesError};
 
 use crate::sym::{CoordinateSymbols, Expr, Symbol};
@@ -136,6 +138,46 @@ pub enum ControllerSpec {
         /// The outer law `v` over `y`, `y'`, ..., coordinates, velocities and gains.
         v: Expr,
     },
+    /// A law for every input written directly, e.g. the energy swing-up
+    /// `Vm = kE*(0 - energy(alpha))*sign(alpha'*cos(alpha)) - k_theta*theta`.
+    /// `energy(q)` is lowered to the kinetic energy with the other
+    /// coordinates' velocities at 0 plus `V - V|q=0`; `sat(x)` to
+    /// `(|x + 1| - |x - 1|)/2`, i.e. `x` clamped to [-1, 1].
+    Direct {
+        /// Name.
+        name: String,
+        /// Named gains with their values (in file order).
+        gains: Vec<(String, f64)>,
+        /// One law per input, in input order, over the state, parameters and gains.
+        laws: Vec<Expr>,
+    },
+    /// Sliding mode on a surface `s`: `u = (v - L_f s) / L_g s`, i.e. the
+    /// equivalent control plus the reaching law `s' = v` (e.g.
+    /// `v = -k*sat(s/phi)`, a switching term with a boundary layer).
+    SlidingMode {
+        /// Name.
+        name: String,
+        /// The surface's name as used in `v`.
+        surface_name: String,
+        /// The surface.
+        surface: SurfaceSpec,
+        /// Named gains with their values (in file order).
+        gains: Vec<(String, f64)>,
+        /// The reaching law `v` over the surface symbol, the state, parameters and gains.
+        v: Expr,
+    },
+    /// A controller made of modes (other controllers of the file) with
+    /// switch conditions; the first mode is the initial one.
+    Hybrid {
+        /// Name.
+        name: String,
+        /// Modes in file order.
+        modes: Vec<ModeSpec>,
+        /// Switches in file order (the first one whose condition holds wins).
+        switches: Vec<SwitchSpec>,
+        /// Coordinates (indices) the modes and conditions see wrapped into (-pi, pi].
+        wrap: Vec<usize>,
+    },
 }
 
 impl ControllerSpec {
@@ -145,7 +187,10 @@ impl ControllerSpec {
             ControllerSpec::Gains { name, .. }
             | ControllerSpec::Place { name, .. }
             | ControllerSpec::Lqr { name, .. }
-            | ControllerSpec::FeedbackLinearization { name, .. } => name,
+            | ControllerSpec::FeedbackLinearization { name, .. }
+            | ControllerSpec::Direct { name, .. }
+            | ControllerSpec::SlidingMode { name, .. }
+            | ControllerSpec::Hybrid { name, .. } => name,
         }
     }
 }

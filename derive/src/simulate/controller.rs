@@ -1,18 +1,42 @@
 //! Numeric controllers and open-loop input signals.
 
 use crate::control::ResolvedController;
-use crate::model::Model;
-use crate::sym::{Symbol, Tape, TapeError};
+use crate::model::{Guard, Model};
+use crate::sym::{Expr, Symbol, Tape, TapeError};
 
 use super::SimError;
 
 /// A resolved controller compiled for fast evaluation.
+///
+/// Hybrid controllers have a current mode, kept in the
+/// [`ControllerWorkspace`]: [`ControllerEval::update_mode`] applies the
+/// switches at a sample instant, [`ControllerEval::eval`] evaluates the
+/// current mode's law.
 #[derive(Clone)]
 pub struct ControllerEval {
     name: String,
     n_states: usize,
     n_inputs: usize,
     kind: Kind,
+    modes: Vec<ModeInfo>,
+}
+
+/// Name and kind of a hybrid controller's mode.
+#[derive(Clone, Debug, PartialEq, Eq)]
+pub struct ModeInfo {
+    /// Mode name.
+    pub name: String,
+    /// Whether it is a swing-up mode (the pendulum anywhere).
+    pub swing_up: bool,
+}
+
+#[derive(Clone)]
+struct SwitchEval {
+    from: usize,
+    to: usize,
+    guard: Guard,
+    /// Index of the guard's first margin in the margin tape's outputs.
+    first: usize,
 }
 
 #[derive(Clone)]
@@ -25,11 +49,19 @@ enum Kind {
         x0: Vec<f64>,
         u0: Vec<f64>,
     },
-    /// A law compiled over `[state, parameters, gains]`.
+    /// Laws (one per input) compiled over `[state, parameters, gains]`.
     Law {
         tape: Tape,
         gain_names: Vec<String>,
         gains: Vec<f64>,
+    },
+    /// Modes with switch conditions; the margins `lhs - rhs` of every
+    /// comparison compiled over `[state, parameters]`.
+    Hybrid {
+        modes: Vec<ControllerEval>,
+        switches: Vec<SwitchEval>,
+        margins: Tape,
+        wrap: Vec<usize>,
     },
 }
 
@@ -38,23 +70,79 @@ impl std::fmt::Debug for ControllerEval {
         f.debug_struct("ControllerEval")
             .field("name", &self.name)
             .field("gains", &self.gains())
+            .field("modes", &self.modes)
             .finish()
     }
 }
 
-/// Scratch buffers for [`ControllerEval::eval`].
+/// Scratch buffers (and a hybrid controller's current mode) for
+/// [`ControllerEval::eval`].
 #[derive(Clone, Debug)]
 pub struct ControllerWorkspace {
     tape_in: Vec<f64>,
     scratch: Vec<f64>,
+    mode: usize,
+    wrapped: Vec<f64>,
+    margins: Vec<f64>,
+    modes: Vec<ControllerWorkspace>,
 }
 
-/// Override named gains of a resolved controller (feedback linearization:
-/// `wn`, `zeta`, `a`, `b`, ...). State feedback has no named gains.
+/// `a` wrapped into [-pi, pi): `a - 2 pi floor((a + pi) / (2 pi))`, the
+/// formula generated code uses too.
+pub fn wrap_angle(a: f64) -> f64 {
+    let tau = std::f64::consts::TAU;
+    a - tau * ((a + std::f64::consts::PI) / tau).floor()
+}
+
+fn set_named(
+    controller: &str,
+    have: &mut [(Symbol, f64)],
+    g: &str,
+    v: f64,
+) -> Result<(), SimError> {
+    let Some(slot) = have.iter_mut().find(|(s, _)| s.name() == g) else {
+        return Err(SimError::UnknownGain {
+            controller: controller.to_string(),
+            name: g.to_string(),
+            known: have.iter().map(|(s, _)| s.name().to_string()).collect(),
+        });
+    };
+    if !v.is_finite() {
+        return Err(SimError::Setup(format!("gain `{g}` = {v} is not finite")));
+    }
+    slot.1 = v;
+    Ok(())
+}
+
+/// Named gains of a resolved controller (`mode.gain` for a hybrid one).
+pub fn gain_names(controller: &ResolvedController) -> Vec<String> {
+    match controller {
+        ResolvedController::StateFeedback { .. } => Vec::new(),
+        ResolvedController::FeedbackLinearization { gains, .. }
+        | ResolvedController::Direct { gains, .. }
+        | ResolvedController::SlidingMode { gains, .. } => {
+            gains.iter().map(|(s, _)| s.name().to_string()).collect()
+        }
+        ResolvedController::Hybrid { modes, .. } => modes
+            .iter()
+            .flat_map(|m| {
+                gain_names(&m.controller)
+                    .into_iter()
+                    .map(move |g| format!("{}.{g}", m.name))
+            })
+            .collect(),
+    }
+}
+
+/// Override named gains of a resolved controller (feedback linearization,
+/// sliding mode, direct laws: `wn`, `zeta`, `kE`, ...). State feedback has no
+/// named gains. For a hybrid controller a gain is `mode.gain`, or a bare
+/// `gain` when only one mode has it.
 pub fn set_gains(
     controller: &mut ResolvedController,
     gains: &[(String, f64)],
 ) -> Result<(), SimError> {
+    let known = gain_names(controller);
     match controller {
         ResolvedController::StateFeedback { name, .. } => match gains.first() {
             None => Ok(()),
@@ -66,32 +154,94 @@ pub fn set_gains(
         },
         ResolvedController::FeedbackLinearization {
             name, gains: have, ..
+        }
+        | ResolvedController::Direct {
+            name, gains: have, ..
+        }
+        | ResolvedController::SlidingMode {
+            name, gains: have, ..
         } => {
             for (g, v) in gains {
-                let Some(slot) = have.iter_mut().find(|(s, _)| s.name() == g) else {
+                set_named(name, have, g, *v)?;
+            }
+            Ok(())
+        }
+        ResolvedController::Hybrid { name, modes, .. } => {
+            for (g, v) in gains {
+                let mut targets = Vec::new();
+                for (i, m) in modes.iter().enumerate() {
+                    let bare = match g.split_once('.') {
+                        Some((mode, gain)) if mode == m.name => gain,
+                        Some(_) => continue,
+                        None => g.as_str(),
+                    };
+                    if gain_names(&m.controller).iter().any(|k| k == bare) {
+                        targets.push((i, bare.to_string()));
+                    }
+                }
+                if targets.len() > 1 {
+                    return Err(SimError::Setup(format!(
+                        "controller `{name}`: gain `{g}` is in several modes; write {}",
+                        targets
+                            .iter()
+                            .map(|(i, k)| format!("`{}.{k}`", modes[*i].name))
+                            .collect::<Vec<_>>()
+                            .join(" or ")
+                    )));
+                }
+                let Some((i, bare)) = targets.pop() else {
                     return Err(SimError::UnknownGain {
                         controller: name.clone(),
                         name: g.clone(),
-                        known: have.iter().map(|(s, _)| s.name().to_string()).collect(),
+                        known,
                     });
                 };
-                if !v.is_finite() {
-                    return Err(SimError::Setup(format!("gain `{g}` = {v} is not finite")));
-                }
-                slot.1 = *v;
+                set_gains(&mut modes[i].controller, &[(bare, *v)])?;
             }
             Ok(())
         }
     }
 }
 
+fn compile_laws(
+    model: &Model,
+    controller: &ResolvedController,
+    laws: &[Expr],
+    gains: &[(Symbol, f64)],
+) -> Result<Kind, SimError> {
+    let mut inputs: Vec<Symbol> = model.state_symbols();
+    inputs.extend(model.parameter_symbols());
+    inputs.extend(gains.iter().map(|(s, _)| *s));
+    let tape = Tape::compile(laws, &inputs).map_err(|e| match e {
+        TapeError::UnknownSymbol(s) => SimError::Setup(format!(
+            "controller `{}`: the law mentions `{s}`, which is not a state, parameter or gain",
+            controller.name()
+        )),
+    })?;
+    Ok(Kind::Law {
+        tape,
+        gain_names: gains.iter().map(|(s, _)| s.name().to_string()).collect(),
+        gains: gains.iter().map(|(_, v)| *v).collect(),
+    })
+}
+
 impl ControllerEval {
-    /// Compile `controller` for `model`. A linearizing law is compiled to a
-    /// tape over the state symbols, the parameter symbols (in the order of
-    /// [`crate::model::ParameterValues::full`]) and its gain symbols.
+    /// Compile `controller` for `model`. A law is compiled to a tape over the
+    /// state symbols, the parameter symbols (in the order of
+    /// [`crate::model::ParameterValues::full`]) and its gain symbols; a hybrid
+    /// controller compiles every mode and the margins of its conditions.
     pub fn new(model: &Model, controller: &ResolvedController) -> Result<ControllerEval, SimError> {
         let n = model.state_symbols().len();
         let m = model.inputs.len();
+        let single = |what: &str| {
+            if m != 1 {
+                return Err(SimError::Setup(format!(
+                    "{what} needs a single-input model"
+                )));
+            }
+            Ok(())
+        };
+        let mut modes = Vec::new();
         let kind = match controller {
             ResolvedController::StateFeedback { k, x0, u0, .. } => {
                 if k.len() != m || k.iter().any(|r| r.len() != n) || x0.len() != n || u0.len() != m
@@ -114,24 +264,64 @@ impl ControllerEval {
                 }
             }
             ResolvedController::FeedbackLinearization { law, gains, .. } => {
-                if m != 1 {
-                    return Err(SimError::Setup(
-                        "a linearizing law needs a single-input model".into(),
-                    ));
+                single("a linearizing law")?;
+                compile_laws(model, controller, &[*law], gains)?
+            }
+            ResolvedController::SlidingMode { law, gains, .. } => {
+                single("a sliding-mode law")?;
+                compile_laws(model, controller, &[*law], gains)?
+            }
+            ResolvedController::Direct { laws, gains, .. } => {
+                if laws.len() != m {
+                    return Err(SimError::Setup(format!(
+                        "controller `{}`: {} laws for {m} inputs",
+                        controller.name(),
+                        laws.len()
+                    )));
+                }
+                compile_laws(model, controller, laws, gains)?
+            }
+            ResolvedController::Hybrid {
+                modes: rmodes,
+                switches,
+                wrap,
+                ..
+            } => {
+                let evals = rmodes
+                    .iter()
+                    .map(|md| ControllerEval::new(model, &md.controller))
+                    .collect::<Result<Vec<_>, _>>()?;
+                modes = rmodes
+                    .iter()
+                    .map(|md| ModeInfo {
+                        name: md.name.clone(),
+                        swing_up: md.swing_up,
+                    })
+                    .collect();
+                let mut margins = Vec::new();
+                let mut sw = Vec::new();
+                for s in switches {
+                    sw.push(SwitchEval {
+                        from: s.from,
+                        to: s.to,
+                        guard: s.when.clone(),
+                        first: margins.len(),
+                    });
+                    margins.extend(s.when.margins().into_iter().map(|(_, e)| e));
                 }
                 let mut inputs: Vec<Symbol> = model.state_symbols();
                 inputs.extend(model.parameter_symbols());
-                inputs.extend(gains.iter().map(|(s, _)| *s));
-                let tape = Tape::compile(&[*law], &inputs).map_err(|e| match e {
+                let tape = Tape::compile(&margins, &inputs).map_err(|e| match e {
                     TapeError::UnknownSymbol(s) => SimError::Setup(format!(
-                        "controller `{}`: the law mentions `{s}`, which is not a state, parameter or gain",
+                        "controller `{}`: a switch condition mentions `{s}`, which is not a state or parameter",
                         controller.name()
                     )),
                 })?;
-                Kind::Law {
-                    tape,
-                    gain_names: gains.iter().map(|(s, _)| s.name().to_string()).collect(),
-                    gains: gains.iter().map(|(_, v)| *v).collect(),
+                Kind::Hybrid {
+                    modes: evals,
+                    switches: sw,
+                    margins: tape,
+                    wrap: wrap.clone(),
                 }
             }
         };
@@ -140,6 +330,7 @@ impl ControllerEval {
             n_states: n,
             n_inputs: m,
             kind,
+            modes,
         })
     }
 
@@ -148,8 +339,14 @@ impl ControllerEval {
         &self.name
     }
 
+    /// A hybrid controller's modes (empty otherwise); mode indices refer to it.
+    pub fn modes(&self) -> &[ModeInfo] {
+        &self.modes
+    }
+
     /// Named gains and their values (state feedback: the entries of `K`,
-    /// named by [`crate::control::state_feedback_gain_name`]).
+    /// named by [`crate::control::state_feedback_gain_name`]; a hybrid
+    /// controller: `mode.gain`).
     pub fn gains(&self) -> Vec<(String, f64)> {
         match &self.kind {
             Kind::StateFeedback { k, k_names, .. } => {
@@ -162,10 +359,20 @@ impl ControllerEval {
                 .cloned()
                 .zip(gains.iter().copied())
                 .collect(),
+            Kind::Hybrid { modes, .. } => modes
+                .iter()
+                .zip(&self.modes)
+                .flat_map(|(c, info)| {
+                    c.gains()
+                        .into_iter()
+                        .map(move |(g, v)| (format!("{}.{g}", info.name), v))
+                })
+                .collect(),
         }
     }
 
-    /// Change a named gain.
+    /// Change a named gain (`mode.gain`, or a bare `gain` that only one mode
+    /// has, for a hybrid controller).
     pub fn set_gain(&mut self, name: &str, value: f64) -> Result<(), SimError> {
         let known = self.gains().into_iter().map(|(n, _)| n).collect::<Vec<_>>();
         match &mut self.kind {
@@ -175,6 +382,33 @@ impl ControllerEval {
                 if let Some(i) = gain_names.iter().position(|g| g == name) {
                     gains[i] = value;
                     return Ok(());
+                }
+            }
+            Kind::Hybrid { modes, .. } => {
+                let mut targets = Vec::new();
+                for (i, (c, info)) in modes.iter().zip(&self.modes).enumerate() {
+                    let bare = match name.split_once('.') {
+                        Some((mode, gain)) if mode == info.name => gain,
+                        Some(_) => continue,
+                        None => name,
+                    };
+                    if c.gains().iter().any(|(g, _)| g == bare) {
+                        targets.push((i, bare.to_string()));
+                    }
+                }
+                if targets.len() > 1 {
+                    return Err(SimError::Setup(format!(
+                        "controller `{}`: gain `{name}` is in several modes; write {}",
+                        self.name,
+                        targets
+                            .iter()
+                            .map(|(i, g)| format!("`{}.{g}`", self.modes[*i].name))
+                            .collect::<Vec<_>>()
+                            .join(" or ")
+                    )));
+                }
+                if let Some((i, bare)) = targets.pop() {
+                    return modes[i].set_gain(&bare, value);
                 }
             }
             Kind::StateFeedback { k, k_names, .. } => {
@@ -191,22 +425,88 @@ impl ControllerEval {
         })
     }
 
-    /// Buffers for [`ControllerEval::eval`]; `n_params` is the length of the
-    /// full parameter vector.
+    /// Buffers for [`ControllerEval::eval`] (a hybrid controller starts in
+    /// its first mode); `n_params` is the length of the full parameter vector.
     pub fn workspace(&self, n_params: usize) -> ControllerWorkspace {
+        let empty = || ControllerWorkspace {
+            tape_in: Vec::new(),
+            scratch: Vec::new(),
+            mode: 0,
+            wrapped: Vec::new(),
+            margins: Vec::new(),
+            modes: Vec::new(),
+        };
         match &self.kind {
-            Kind::StateFeedback { .. } => ControllerWorkspace {
-                tape_in: Vec::new(),
-                scratch: Vec::new(),
-            },
+            Kind::StateFeedback { .. } => empty(),
             Kind::Law { tape, gains, .. } => ControllerWorkspace {
                 tape_in: vec![0.0; self.n_states + n_params + gains.len()],
                 scratch: vec![0.0; tape.scratch_len()],
+                ..empty()
+            },
+            Kind::Hybrid { modes, margins, .. } => ControllerWorkspace {
+                tape_in: vec![0.0; self.n_states + n_params],
+                scratch: vec![0.0; margins.scratch_len()],
+                wrapped: vec![0.0; self.n_states],
+                margins: vec![0.0; margins.n_outputs()],
+                modes: modes.iter().map(|c| c.workspace(n_params)).collect(),
+                ..empty()
             },
         }
     }
 
-    /// The demanded input (before saturation). Does not allocate.
+    /// The current mode (index into [`ControllerEval::modes`]; 0 if not hybrid).
+    pub fn mode(&self, ws: &ControllerWorkspace) -> usize {
+        ws.mode
+    }
+
+    /// Back to the first mode.
+    pub fn reset(&self, ws: &mut ControllerWorkspace) {
+        ws.mode = 0;
+    }
+
+    /// Applies the switches of a hybrid controller at state `x`: from the
+    /// current mode, the first switch (in file order) whose condition holds
+    /// is taken, and again from the new mode (at most one round per mode).
+    /// Returns `(from, to)` when the mode changed. Does nothing for other
+    /// controllers. Does not allocate.
+    pub fn update_mode(
+        &self,
+        x: &[f64],
+        params_full: &[f64],
+        ws: &mut ControllerWorkspace,
+    ) -> Option<(usize, usize)> {
+        let Kind::Hybrid {
+            modes,
+            switches,
+            margins,
+            wrap,
+        } = &self.kind
+        else {
+            return None;
+        };
+        let n = self.n_states;
+        ws.wrapped.copy_from_slice(x);
+        for &i in wrap {
+            ws.wrapped[i] = wrap_angle(ws.wrapped[i]);
+        }
+        ws.tape_in[..n].copy_from_slice(&ws.wrapped);
+        ws.tape_in[n..].copy_from_slice(params_full);
+        margins.eval(&ws.tape_in, &mut ws.margins, &mut ws.scratch);
+        let start = ws.mode;
+        for _ in 0..modes.len() {
+            let next = switches.iter().find(|s| {
+                let mut k = s.first;
+                s.from == ws.mode && s.guard.holds(&ws.margins, &mut k)
+            });
+            match next {
+                Some(s) => ws.mode = s.to,
+                None => break,
+            }
+        }
+        (ws.mode != start).then_some((start, ws.mode))
+    }
+
+    /// The demanded input (before saturation) of the current mode. Does not allocate.
     pub fn eval(
         &self,
         x: &[f64],
@@ -233,6 +533,19 @@ impl ControllerEval {
                 ws.tape_in[n..n + p].copy_from_slice(params_full);
                 ws.tape_in[n + p..].copy_from_slice(gains);
                 tape.eval(&ws.tape_in, u, &mut ws.scratch);
+            }
+            Kind::Hybrid { modes, wrap, .. } => {
+                let ControllerWorkspace {
+                    wrapped,
+                    modes: wss,
+                    mode,
+                    ..
+                } = ws;
+                wrapped.copy_from_slice(x);
+                for &i in wrap {
+                    wrapped[i] = wrap_angle(wrapped[i]);
+                }
+                modes[*mode].eval(wrapped, params_full, u, &mut wss[*mode]);
             }
         }
     }

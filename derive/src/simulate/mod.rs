@@ -6,6 +6,9 @@
 //! inside every integrator stage (continuous time, the default) or sampled at
 //! [`SimOptions::sample_rate`] and held (zero-order hold; the integrator
 //! restarts at every sample). Inputs are clipped to the model's limits.
+//! A hybrid controller's switches are applied at every controller sample,
+//! or, in continuous time, at every output instant (where the integrator
+//! stops anyway); its mode is recorded in [`Trajectory::modes`].
 //!
 //! ```
 //! use plantc_derive::control::{resolve, Derivation};
@@ -29,7 +32,9 @@ pub mod rk;
 
 use std::fmt;
 
-pub use controller::{set_gains, ControllerEval, ControllerWorkspace, InputSignal};
+pub use controller::{
+    gain_names, set_gains, wrap_angle, ControllerEval, ControllerWorkspace, InputSignal, ModeInfo,
+};
 use rk::{DormandPrince, RkError, RkOptions, RkStats};
 
 use crate::mechanics::{has_sign, Equations, NumericDynamics, NumericError, Workspace};
@@ -123,6 +128,10 @@ pub struct SimProblem {
     pub input_names: Vec<String>,
     /// Output names (model outputs).
     pub output_names: Vec<String>,
+    /// Parameter values the controller was designed with, when they differ
+    /// from the plant's [`SimProblem::params`] (a robustness study); `None`:
+    /// the plant's.
+    pub controller_params: Option<Vec<f64>>,
     output_tape: Tape,
     has_sign: bool,
 }
@@ -154,6 +163,7 @@ impl SimProblem {
             state_names: model.state_names(),
             input_names: model.inputs.iter().map(|i| i.name.clone()).collect(),
             output_names: model.outputs.iter().map(|o| o.name.clone()).collect(),
+            controller_params: None,
             output_tape,
             has_sign: has_sign(equations),
         };
@@ -168,6 +178,14 @@ impl SimProblem {
                 "the initial state needs {} finite values",
                 d.n_states()
             )));
+        }
+        if let Some(c) = &self.controller_params {
+            if c.len() != d.n_params() || c.iter().any(|v| !v.is_finite()) {
+                return Err(SimError::Setup(format!(
+                    "the controller's parameter vector needs {} finite values",
+                    d.n_params()
+                )));
+            }
         }
         if self.params.len() != d.n_params() {
             return Err(SimError::Setup(format!(
@@ -247,6 +265,12 @@ pub struct Trajectory {
     pub output_names: Vec<String>,
     /// Integrator counts.
     pub stats: RkStats,
+    /// A hybrid controller's mode names (empty otherwise).
+    pub mode_names: Vec<String>,
+    /// The mode (index into `mode_names`) at each sample; empty if not hybrid.
+    pub modes: Vec<usize>,
+    /// Mode switches `(t, from, to)` in time order.
+    pub switches: Vec<(f64, usize, usize)>,
 }
 
 impl Trajectory {
@@ -315,7 +339,12 @@ impl Plant<'_> {
             return Ok(());
         };
         let cws = self.cws.as_mut().expect("controller workspace");
-        c.eval(x, &self.p.params, &mut self.u_raw, cws);
+        let params = self
+            .p
+            .controller_params
+            .as_deref()
+            .unwrap_or(&self.p.params);
+        c.eval(x, params, &mut self.u_raw, cws);
         if let Some(i) = self.u_raw.iter().position(|v| !v.is_finite()) {
             return Err(SimError::NonFiniteControl {
                 t,
@@ -324,6 +353,33 @@ impl Plant<'_> {
         }
         self.apply_limits();
         Ok(())
+    }
+
+    /// Applies a hybrid controller's switches at `(t, x)`; true if the mode changed.
+    fn update_mode(&mut self, t: f64, x: &[f64], switches: &mut Vec<(f64, usize, usize)>) -> bool {
+        let Control::Feedback(c) = &self.p.control else {
+            return false;
+        };
+        let cws = self.cws.as_mut().expect("controller workspace");
+        let params = self
+            .p
+            .controller_params
+            .as_deref()
+            .unwrap_or(&self.p.params);
+        match c.update_mode(x, params, cws) {
+            Some((from, to)) => {
+                switches.push((t, from, to));
+                true
+            }
+            None => false,
+        }
+    }
+
+    fn mode(&self) -> Option<usize> {
+        match (&self.p.control, &self.cws) {
+            (Control::Feedback(c), Some(ws)) if !c.modes().is_empty() => Some(c.mode(ws)),
+            _ => None,
+        }
     }
 
     fn apply_limits(&mut self) {
@@ -410,7 +466,14 @@ pub fn simulate(problem: &SimProblem, options: &SimOptions) -> Result<Trajectory
         input_names: problem.input_names.clone(),
         output_names: problem.output_names.clone(),
         stats: RkStats::default(),
+        mode_names: match &problem.control {
+            Control::Feedback(c) => c.modes().iter().map(|m| m.name.clone()).collect(),
+            Control::OpenLoop(_) => Vec::new(),
+        },
+        modes: Vec::new(),
+        switches: Vec::new(),
     };
+    let mut switches = Vec::new();
     let n_y = problem.output_tape.n_outputs();
     let mut y_in = vec![0.0; n + m + problem.params.len()];
     let mut y_scratch = vec![0.0; problem.output_tape.scratch_len()];
@@ -441,9 +504,14 @@ pub fn simulate(problem: &SimProblem, options: &SimOptions) -> Result<Trajectory
                 due = true;
             }
             if due {
+                plant.update_mode(t, &x, &mut switches);
                 plant.demand(t, &x)?;
                 changed = true;
             }
+        } else if plant.update_mode(t, &x, &mut switches) {
+            // continuous control: switches are checked at every output
+            // instant (and input breakpoint), where the integrator stops
+            changed = true;
         }
         if changed && !first {
             rk.restart();
@@ -465,6 +533,9 @@ pub fn simulate(problem: &SimProblem, options: &SimOptions) -> Result<Trajectory
             traj.outputs.push(y);
             traj.saturated
                 .push(plant.u.iter().zip(&plant.u_raw).any(|(a, b)| a != b));
+            if let Some(m) = plant.mode() {
+                traj.modes.push(m);
+            }
             i_out += 1;
         }
         if i_out >= outs.len() {
@@ -498,5 +569,6 @@ pub fn simulate(problem: &SimProblem, options: &SimOptions) -> Result<Trajectory
         t = next;
     }
     traj.stats = rk.stats;
+    traj.switches = switches;
     Ok(traj)
 }

@@ -1,4 +1,6 @@
-//! Counting global allocator: the generated controller and RK4 step never allocate.
+//! Counting global allocator: the generated controllers (FL, pole placement,
+//! the hybrid swing-up with its mode switches, sliding mode) and RK4 step
+//! never allocate.
 //! Only allocations on the test's own thread count (the test harness may
 //! allocate on its main thread meanwhile), as in `runtime/tests/no_alloc.rs`.
 
@@ -41,6 +43,8 @@ fn controller_and_rk4_do_not_allocate() {
     let p = Params::default();
     let mut fl = FeedbackLinearization::default();
     let mut pp = PolePlacement::new();
+    let mut swing = SwingUp::default();
+    let mut smc = SlidingMode::default();
     let mut x = [0.0, 0.1, 0.0, 0.0];
     ACTIVE.with(|a| a.set(true));
     let before = ALLOCS.load(Ordering::SeqCst);
@@ -50,6 +54,15 @@ fn controller_and_rk4_do_not_allocate() {
         acc += pp.control(&x)[0];
         x = rk4_step(&x, &u, &p, 1e-4);
     }
+    // the hybrid controller through a swing-up (mode switches included) and
+    // the sliding-mode law
+    let mut y = [0.0, std::f64::consts::PI - 0.05, 0.0, 0.0];
+    for _ in 0..20_000 {
+        let u = swing.control(&y);
+        acc += smc.control(&y)[0];
+        y = rk4_step(&y, &u, &p, 1e-4);
+    }
+    acc += swing.mode() as f64;
     for _ in 0..1_000 {
         acc += jacobian_x(&x, &[0.0], &p)[2][1] + jacobian_u(&x, &[0.0], &p)[2][0];
     }

@@ -5,9 +5,10 @@ use std::io::Write;
 use std::path::Path;
 
 use plantc_derive::analysis::{
-    lie_chain, normal_form, zero_dynamics, LieChain, NormalForm, ZeroDynamics,
+    lie_chain, normal_form, sliding_analysis, zero_dynamics, LieChain, NormalForm, ZeroDynamics,
 };
-use plantc_derive::control::{output_expr, Derivation};
+use plantc_derive::control::{output_expr, resolve, Derivation, ResolvedController};
+use plantc_derive::model::ControllerSpec;
 use plantc_derive::sym::Expr;
 
 use crate::cli::ParamArgs;
@@ -134,5 +135,126 @@ pub fn run(
             zd.equilibrium_residual
         );
     }
+    Ok(())
+}
+
+/// `plantc analyze --controller NAME`: a sliding-mode controller's surface,
+/// equivalent control and reduced dynamics; a feedback-linearizing one's output.
+pub fn controller(
+    path: &Path,
+    name: &str,
+    params: &ParamArgs,
+    json: bool,
+    out: &mut dyn Write,
+    err: &mut dyn Write,
+) -> Result<(), CliError> {
+    let loaded = load(path, err)?;
+    let model = &loaded.model;
+    match model.controller(name) {
+        Some(ControllerSpec::FeedbackLinearization { output, .. }) => {
+            let output = output.clone();
+            return run(path, Some(&output), params, json, out, err);
+        }
+        Some(ControllerSpec::SlidingMode { .. }) => {}
+        Some(_) => {
+            return Err(CliError::input(format!(
+                "error: `{name}` is neither a sliding-mode (`surface`) nor a `linearize output` controller; \
+                 analyze reports those (state feedback: `plantc linearize`, `place`, `lqr`)"
+            )))
+        }
+        None => {
+            return Err(CliError::input(format!(
+                "error: unknown controller `{name}` (known: {})",
+                model
+                    .controllers
+                    .iter()
+                    .map(|c| c.name())
+                    .collect::<Vec<_>>()
+                    .join(", ")
+            )))
+        }
+    }
+    let vals = values(&loaded, params)?;
+    let d = Derivation::new(model).map_err(|e| CliError::failure(format!("error: {e}")))?;
+    let rc =
+        resolve(model, &d, name, &vals).map_err(|e| CliError::failure(format!("error: {e}")))?;
+    let ResolvedController::SlidingMode { law, .. } = &rc else {
+        return Err(CliError::failure(
+            "error: internal: not a sliding-mode controller",
+        ));
+    };
+    let a = sliding_analysis(model, &d, &rc, &vals)
+        .map_err(|e| CliError::failure(format!("error: {e}")))?;
+    let poles: Vec<String> = a
+        .reduced
+        .poles
+        .iter()
+        .map(|p| {
+            // eigenvalues to 9 significant digits (the rest is rounding)
+            let r = |x: f64| {
+                if x == 0.0 {
+                    0.0
+                } else {
+                    let scale = 10f64.powi(8 - p.abs().log10().floor() as i32);
+                    (x * scale).round() / scale
+                }
+            };
+            complex_text(r(p.re), r(p.im))
+        })
+        .collect();
+    let stable = a.reduced.asymptotically_stable();
+    let verdict = if stable {
+        "asymptotically stable (every sliding pole in the left half-plane): on the surface the state returns to 0"
+    } else {
+        "NOT asymptotically stable: a sliding pole is not in the left half-plane, so on the surface the state does not return to 0"
+    };
+    if json {
+        let v = serde_json::json!({
+            "controller": name,
+            "surface": a.surface.to_string(),
+            "c": a.c,
+            "c_b": a.reduced.cb,
+            "equivalent_control": format!("u_eq = {}", a.equivalent_control),
+            "control_law": format!("u = {law}"),
+            "singular_set": a.singular_set,
+            "reduced_dynamics": {
+                "eliminated": a.eliminated_text(),
+                "equations": a.equations(),
+                "poles": a.reduced.poles.iter().map(|p| serde_json::json!({"re": p.re, "im": p.im})).collect::<Vec<_>>(),
+                "asymptotically_stable": stable,
+            },
+        });
+        write_json(out, &v);
+        return Ok(());
+    }
+    let _ = writeln!(out, "controller {name}: sliding mode");
+    let _ = writeln!(out, "surface: s = {}", a.surface);
+    let _ = writeln!(
+        out,
+        "  c = [{}] (c B = {:.6} on the linearization about 0)",
+        a.c.iter()
+            .zip(&a.states)
+            .map(|(c, s)| format!("{s}: {c:.6}"))
+            .collect::<Vec<_>>()
+            .join(", "),
+        a.reduced.cb
+    );
+    let _ = writeln!(
+        out,
+        "equivalent control: u_eq = -L_f s / L_g s = {}",
+        a.equivalent_control
+    );
+    let _ = writeln!(out, "law: u = {law}");
+    let _ = writeln!(out, "singular set (L_g s = 0): {}", a.singular_set);
+    let _ = writeln!(
+        out,
+        "reduced dynamics on s = 0 under u_eq, linearized about 0 ({}):",
+        a.eliminated_text()
+    );
+    for e in a.equations() {
+        let _ = writeln!(out, "  {e}");
+    }
+    let _ = writeln!(out, "  sliding poles: {}", poles.join(", "));
+    let _ = writeln!(out, "  {verdict}");
     Ok(())
 }

@@ -12,6 +12,7 @@ mod gen;
 mod identify;
 mod linearize;
 mod lsp;
+mod robustness;
 mod run;
 mod run_compiled;
 mod sim;
@@ -39,6 +40,17 @@ pub fn dispatch(cli: &Cli, out: &mut dyn Write, err: &mut dyn Write) -> Result<(
         Command::Analyze {
             model,
             output,
+            controller: Some(c),
+            params,
+            json,
+        } => {
+            let _ = output;
+            analyze::controller(model, c, params, *json, out, err)
+        }
+        Command::Analyze {
+            model,
+            output,
+            controller: None,
             params,
             json,
         } => analyze::run(model, output.as_deref(), params, *json, out, err),
@@ -56,6 +68,7 @@ pub fn dispatch(cli: &Cli, out: &mut dyn Write, err: &mut dyn Write) -> Result<(
         } => design::place(source, poles, *json, out, err),
         Command::Lqr { source, q, r, json } => design::lqr(source, q, r, *json, out, err),
         Command::Run(args) => run::run(args, out, err),
+        Command::Robustness(args) => robustness::run(args, out, err),
         Command::Sim(args) => sim::run(args, out, err),
         Command::Synth(args) => synth::run(args, out, err),
         Command::Compare(args) => compare::run(args, out, err),

@@ -3,12 +3,13 @@
 use std::io::Write;
 
 use plantc_derive::analysis::{linearize, OperatingPoint};
-use plantc_derive::control::{resolve, Derivation};
+use plantc_derive::control::{resolve, Derivation, ResolvedController};
 use plantc_derive::mechanics::NumericDynamics;
 use plantc_derive::model::{Model, ParameterValues};
 use plantc_runtime::{
     run_with_events, stop_on_ctrl_c, Backend, FaultKind, LogWriter, ModelController, ModelPlant,
     ObserverSpec, Q2Usb, Q2UsbConfig, RunConfig, SimBackend, SimConfig, SupervisorState,
+    SwingUpLimits,
 };
 
 use super::sim::{parse_gains, refuse_overwrite};
@@ -45,14 +46,51 @@ pub fn run(args: &RunArgs, out: &mut dyn Write, err: &mut dyn Write) -> Result<(
                 ))
             })
     };
-    if !(args.velocity_bandwidth.is_finite() && args.velocity_bandwidth > 0.0) {
+    let swing_up = matches!(&resolved, ResolvedController::Hybrid { modes, .. }
+        if modes.iter().any(|m| m.swing_up));
+    let velocity = match (args.velocity, swing_up) {
+        (Some(VelocityKind::Observer), true) => {
+            return Err(CliError::input(format!(
+                "error: `{}` has a swing-up mode; the velocity observer's model is linearized \
+                 about upright and does not hold while the pendulum swings: use --velocity derivative",
+                args.controller
+            )))
+        }
+        (Some(v), _) => v,
+        (None, true) => VelocityKind::Derivative,
+        (None, false) => VelocityKind::Observer,
+    };
+    let bandwidth = args
+        .velocity_bandwidth
+        .unwrap_or(if swing_up { 200.0 } else { 50.0 });
+    if !(bandwidth.is_finite() && bandwidth > 0.0) {
         return Err(CliError::input(format!(
-            "error: --velocity-bandwidth {}: expected a positive rate in rad/s",
-            args.velocity_bandwidth
+            "error: --velocity-bandwidth {bandwidth}: expected a positive rate in rad/s"
         )));
     }
-    config.velocity_bandwidth = args.velocity_bandwidth;
-    if args.velocity == VelocityKind::Observer {
+    config.velocity_bandwidth = bandwidth;
+    if swing_up {
+        let speed = |x: f64, what: &str| {
+            if x.is_finite() && x > 0.0 {
+                Ok(x)
+            } else {
+                Err(CliError::input(format!(
+                    "error: --{what} {x}: expected a positive speed in rad/s"
+                )))
+            }
+        };
+        config.supervisor.swing_up = Some(SwingUpLimits {
+            hanging_window_rad: angle(&args.hanging_window, "hanging-window")?,
+            max_arm_speed: speed(args.max_arm_speed, "max-arm-speed")?,
+            max_pendulum_speed: speed(args.max_pendulum_speed, "max-pendulum-speed")?,
+        });
+        let _ = writeln!(
+            err,
+            "note: `{}` has a swing-up mode: swing-up allowed from hanging (within {}), arm limit {}, speeds up to {} rad/s (arm) and {} rad/s (pendulum)",
+            args.controller, args.hanging_window, args.arm_limit, args.max_arm_speed, args.max_pendulum_speed
+        );
+    }
+    if velocity == VelocityKind::Observer {
         let mut spec = observer_spec(model, &derivation, &vals)?;
         if !(args.observer_accel.is_finite() && args.observer_accel > 0.0) {
             return Err(CliError::input(format!(
@@ -65,6 +103,13 @@ pub fn run(args: &RunArgs, out: &mut dyn Write, err: &mut dyn Write) -> Result<(
     }
     config.supervisor.arm_limit_rad = angle(&args.arm_limit, "arm-limit")?;
     config.supervisor.fall_angle_rad = angle(&args.fall_angle, "fall-angle")?;
+    config.supervisor.catch_window_rad = angle(&args.catch_window, "catch-window")?;
+    if config.supervisor.catch_window_rad >= config.supervisor.fall_angle_rad {
+        return Err(CliError::input(format!(
+            "error: --catch-window {} must be smaller than --fall-angle {}",
+            args.catch_window, args.fall_angle
+        )));
+    }
     let mut backend: Box<dyn Backend> = match args.backend {
         BackendKind::Sim => {
             let x0 = match &args.x0 {

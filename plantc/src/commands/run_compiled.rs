@@ -63,12 +63,49 @@ pub fn run(args: &RunArgs, out: &mut dyn Write, err: &mut dyn Write) -> Result<(
     let arm_limit = angle(&args.arm_limit, "arm-limit")?;
     let fall_angle = angle(&args.fall_angle, "fall-angle")?;
     let noise = sim_noise(args)?;
-    if !(args.velocity_bandwidth.is_finite() && args.velocity_bandwidth > 0.0) {
+    let catch_window = angle(&args.catch_window, "catch-window")?;
+    if catch_window >= fall_angle {
         return Err(CliError::input(format!(
-            "error: --velocity-bandwidth {}: expected a positive rate in rad/s",
-            args.velocity_bandwidth
+            "error: --catch-window {} must be smaller than --fall-angle {}",
+            args.catch_window, args.fall_angle
         )));
     }
+    // as in the interpreted `run`: a swing-up mode needs the derivative
+    // (the observer's model is linearized about upright), faster
+    let swing_up = matches!(model.controller(&args.controller),
+        Some(plantc_derive::model::ControllerSpec::Hybrid { modes, .. }) if modes.iter().any(|m| m.swing_up));
+    let velocity = match (args.velocity, swing_up) {
+        (Some(VelocityKind::Observer), true) => {
+            return Err(CliError::input(format!(
+                "error: `{}` has a swing-up mode; the velocity observer's model is linearized \
+                 about upright and does not hold while the pendulum swings: use --velocity derivative",
+                args.controller
+            )))
+        }
+        (Some(v), _) => v,
+        (None, true) => VelocityKind::Derivative,
+        (None, false) => VelocityKind::Observer,
+    };
+    let bandwidth = args
+        .velocity_bandwidth
+        .unwrap_or(if swing_up { 200.0 } else { 50.0 });
+    if !(bandwidth.is_finite() && bandwidth > 0.0) {
+        return Err(CliError::input(format!(
+            "error: --velocity-bandwidth {bandwidth}: expected a positive rate in rad/s"
+        )));
+    }
+    let speed = |x: f64, what: &str| {
+        if x.is_finite() && x > 0.0 {
+            Ok(x)
+        } else {
+            Err(CliError::input(format!(
+                "error: --{what} {x}: expected a positive speed in rad/s"
+            )))
+        }
+    };
+    let hanging_window = angle(&args.hanging_window, "hanging-window")?;
+    let max_arm_speed = speed(args.max_arm_speed, "max-arm-speed")?;
+    let max_pendulum_speed = speed(args.max_pendulum_speed, "max-pendulum-speed")?;
     if let Some(path) = &args.log {
         refuse_overwrite(path, args.force, "log")?;
     }
@@ -137,14 +174,22 @@ pub fn run(args: &RunArgs, out: &mut dyn Write, err: &mut dyn Write) -> Result<(
         format!("{arm_limit:?}"),
         "--fall-angle".into(),
         format!("{fall_angle:?}"),
+        "--catch-window".into(),
+        format!("{catch_window:?}rad"),
+        "--hanging-window".into(),
+        format!("{hanging_window:?}rad"),
+        "--max-arm-speed".into(),
+        format!("{max_arm_speed:?}"),
+        "--max-pendulum-speed".into(),
+        format!("{max_pendulum_speed:?}"),
     ]);
-    match args.velocity {
+    match velocity {
         VelocityKind::Observer => child_args.extend(["--velocity".into(), "observer".into()]),
         VelocityKind::Derivative => child_args.extend([
             "--velocity".into(),
             "derivative".into(),
             "--velocity-bandwidth".into(),
-            format!("{:?}", args.velocity_bandwidth),
+            format!("{bandwidth:?}"),
         ]),
     }
     if args.realtime {
@@ -172,7 +217,15 @@ pub fn run(args: &RunArgs, out: &mut dyn Write, err: &mut dyn Write) -> Result<(
 
     if args.compare {
         if let Some(log) = &args.log {
-            compare(args, model, &vals, log, noise.is_some(), out)?;
+            compare(
+                args,
+                model,
+                &vals,
+                log,
+                noise.is_some(),
+                (velocity, bandwidth),
+                out,
+            )?;
         }
     }
     match code {
@@ -245,6 +298,7 @@ fn compare(
     vals: &plantc_derive::model::ParameterValues,
     log: &std::path::Path,
     noisy: bool,
+    (velocity, bandwidth): (VelocityKind, f64),
     out: &mut dyn Write,
 ) -> Result<(), CliError> {
     let fail = |e: &dyn std::fmt::Display| CliError::failure(format!("error: --compare: {e}"));
@@ -259,18 +313,14 @@ fn compare(
             .collect(),
     };
     let period = 1.0 / args.rate;
-    let mut estimator: Box<dyn VelocityEstimator> = match args.velocity {
+    let mut estimator: Box<dyn VelocityEstimator> = match velocity {
         VelocityKind::Observer => {
             let derivation = Derivation::new(model).map_err(|e| fail(&e))?;
             let mut spec = observer_spec(model, &derivation, vals)?;
             spec.accel_std = args.observer_accel;
             Box::new(VelocityObserver::design(&spec, &maps, period).map_err(|e| fail(&e))?)
         }
-        VelocityKind::Derivative => Box::new(DerivativeEstimator::new(
-            nq,
-            args.velocity_bandwidth,
-            period,
-        )),
+        VelocityKind::Derivative => Box::new(DerivativeEstimator::new(nq, bandwidth, period)),
     };
     let derivation = Derivation::new(model).map_err(|e| fail(&e))?;
     let resolved = resolve(model, &derivation, &args.controller, vals).map_err(|e| fail(&e))?;

@@ -64,6 +64,9 @@ fn headers(traj: &Trajectory) -> Vec<String> {
             h.push(o.clone());
         }
     }
+    if !traj.modes.is_empty() {
+        h.push("mode".to_string());
+    }
     h
 }
 
@@ -76,6 +79,7 @@ fn write_csv(path: &Path, traj: &Trajectory) -> Result<(), CliError> {
             .chain(traj.inputs[k].iter().copied())
             .chain(traj.outputs[k].iter().copied())
             .map(|x| format!("{x}"))
+            .chain(traj.modes.get(k).map(|m| traj.mode_names[*m].clone()))
             .collect();
         text.push_str(&row.join(","));
         text.push('\n');
@@ -229,6 +233,16 @@ pub fn run(args: &SimArgs, out: &mut dyn Write, err: &mut dyn Write) -> Result<(
         "input saturated {:.1} % of the time",
         100.0 * traj.saturation_share()
     );
+    if let Some(first) = traj.mode_names.first() {
+        let _ = writeln!(out, "mode at t = 0: {first}");
+        for (t, from, to) in &traj.switches {
+            let _ = writeln!(
+                out,
+                "mode switch at t = {t:.3} s: {} -> {}",
+                traj.mode_names[*from], traj.mode_names[*to]
+            );
+        }
+    }
     if let Some(p) = &args.plot {
         let title = format!("{}: {} ({mode})", model.name, args.controller);
         let units: Vec<String> = model.inputs.iter().map(|i| i.unit.clone()).collect();
