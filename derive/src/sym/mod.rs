@@ -7,6 +7,7 @@ pub mod canonical;
 pub mod diff;
 pub mod expr;
 pub mod poly;
+pub mod present;
 pub mod print;
 pub mod rational;
 pub mod subst;
@@ -18,6 +19,7 @@ pub use canonical::{
 pub use diff::{diff, jacobian, time_derivative, CoordinateSymbols};
 pub use expr::{Expr, Func, Node, Symbol};
 pub use poly::CanonError;
+pub use present::{present, try_present, Name};
 pub use rational::Rational;
 pub use subst::{substitute, substitute_symbols};
 pub use tape::{Instr, SplitTape, Tape, TapeError};

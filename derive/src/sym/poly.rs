@@ -9,11 +9,12 @@
 //! Ordering is structural ([`structural_cmp`] on the atoms), never by interning
 //! id or hash order, so every result is deterministic.
 
+use std::cell::RefCell;
 use std::cmp::Ordering;
 use std::collections::HashMap;
 use std::fmt;
 
-use super::expr::{structural_cmp, Expr};
+use super::expr::{structural_cmp, Expr, Func, Node};
 use super::rational::Rational;
 
 /// Why an exact computation was abandoned.
@@ -311,11 +312,27 @@ impl Ord for Poly {
     }
 }
 
-/// Side relations `atom^q = replacement` used to reduce monomials
-/// (`sin(u)^2 = 1 - cos(u)^2`, `(B^(1/q))^q = B`).
+/// What a trigonometric atom is: `sin(angle)` or `cos(angle)` with the angle
+/// a canonical polynomial whose leading coefficient is positive.
+#[derive(Clone, Debug)]
+struct TrigAtom {
+    sin: bool,
+    angle: Poly,
+}
+
+/// Side relations used to reduce monomials:
+///
+/// * `atom^q = replacement` (roots: `(B^(1/q))^q = B`);
+/// * products of two trigonometric atoms by the product-to-sum formulas
+///   (`cos a cos b = (cos(a - b) + cos(a + b))/2`, ...), so a reduced monomial
+///   has at most one trigonometric factor. The functions `1`, `cos(k.x)`,
+///   `sin(k.x)` (one per angle up to sign) are linearly independent, so this
+///   Fourier form of a trigonometric polynomial is unique for any number of
+///   angles and any multiples.
 #[derive(Clone, Debug, Default)]
 pub struct Rules {
     rules: HashMap<Atom, (u32, Poly)>,
+    trig: RefCell<HashMap<Atom, TrigAtom>>,
 }
 
 impl Rules {
@@ -331,21 +348,124 @@ impl Rules {
 
     /// Is there a relation for `a`?
     pub fn has(&self, a: Atom) -> bool {
-        self.rules.contains_key(&a)
+        self.rules.contains_key(&a) || self.trig.borrow().contains_key(&a)
     }
 
-    fn rewrite(&self, m: &Mono) -> Option<(Mono, &Poly)> {
-        if self.rules.is_empty() {
-            return None;
+    /// The root relations only (no product-to-sum reduction of sines and
+    /// cosines).
+    pub fn without_trig(&self) -> Rules {
+        Rules {
+            rules: self.rules.clone(),
+            trig: RefCell::new(HashMap::new()),
+        }
+    }
+
+    /// True if no relation is registered (plain polynomial arithmetic).
+    pub fn is_trivial(&self) -> bool {
+        self.rules.is_empty() && self.trig.borrow().is_empty()
+    }
+
+    /// `sin(angle)` (or `cos(angle)`) as a reduced polynomial: a signed
+    /// trigonometric atom (the angle sign-normalised so that its leading
+    /// coefficient is positive), or a constant when the angle is 0 or the
+    /// expression constructors fold it (a float angle).
+    pub fn trig(&self, sin: bool, angle: &Poly) -> CResult<Poly> {
+        if angle.is_zero() {
+            return Ok(if sin {
+                Poly::zero()
+            } else {
+                Poly::constant(Rational::ONE)
+            });
+        }
+        let negative = angle.leading().is_some_and(|(_, c)| c.is_negative());
+        let angle = if negative {
+            angle.neg()?
+        } else {
+            angle.clone()
+        };
+        let ae = angle.to_expr();
+        let e = if sin { ae.sin() } else { ae.cos() };
+        let p = match e.node() {
+            Node::Func(Func::Sin | Func::Cos, x) if *x == ae => {
+                self.trig
+                    .borrow_mut()
+                    .entry(Atom(e))
+                    .or_insert(TrigAtom { sin, angle });
+                Poly::atom(Atom(e))
+            }
+            _ => constant_poly(e),
+        };
+        if negative && sin {
+            p.neg()
+        } else {
+            Ok(p)
+        }
+    }
+
+    /// The angle of a trigonometric atom, with `true` for `sin`.
+    pub fn trig_angle(&self, a: Atom) -> Option<(bool, Poly)> {
+        self.trig.borrow().get(&a).map(|t| (t.sin, t.angle.clone()))
+    }
+
+    fn rewrite(&self, m: &Mono) -> CResult<Option<(Mono, Poly)>> {
+        if self.is_trivial() {
+            return Ok(None);
         }
         for &(a, e) in &m.vars {
             if let Some((q, p)) = self.rules.get(&a) {
                 if e >= *q {
-                    return Some((m.with_exp(a, e - q), p));
+                    return Ok(Some((m.with_exp(a, e - q), p.clone())));
                 }
             }
         }
-        None
+        let (ta, tb, rest) = {
+            let trig = self.trig.borrow();
+            if trig.is_empty() {
+                return Ok(None);
+            }
+            let mut first: Option<(Atom, u32)> = None;
+            let mut pair = None;
+            for &(a, e) in &m.vars {
+                if !trig.contains_key(&a) {
+                    continue;
+                }
+                if e >= 2 {
+                    pair = Some((a, e, a, e));
+                    break;
+                }
+                match first {
+                    None => first = Some((a, e)),
+                    Some((f, ef)) => {
+                        pair = Some((f, ef, a, e));
+                        break;
+                    }
+                }
+            }
+            let Some((a, ea, b, eb)) = pair else {
+                return Ok(None);
+            };
+            let rest = if a == b {
+                m.with_exp(a, ea - 2)
+            } else {
+                m.with_exp(a, ea - 1).with_exp(b, eb - 1)
+            };
+            (trig[&a].clone(), trig[&b].clone(), rest)
+        };
+        let sum = ta.angle.add(&tb.angle)?;
+        let dif = ta.angle.sub(&tb.angle)?;
+        let half = Rational::new(1, 2).ok_or(CanonError::Overflow)?;
+        let (x, y, sign) = match (ta.sin, tb.sin) {
+            // cos a cos b = (cos(a - b) + cos(a + b))/2
+            (false, false) => (self.trig(false, &dif)?, self.trig(false, &sum)?, 1),
+            // sin a sin b = (cos(a - b) - cos(a + b))/2
+            (true, true) => (self.trig(false, &dif)?, self.trig(false, &sum)?, -1),
+            // sin a cos b = (sin(a + b) + sin(a - b))/2
+            (true, false) => (self.trig(true, &sum)?, self.trig(true, &dif)?, 1),
+            // cos a sin b = (sin(a + b) - sin(a - b))/2
+            (false, true) => (self.trig(true, &sum)?, self.trig(true, &dif)?, -1),
+        };
+        let y = if sign < 0 { y.neg()? } else { y };
+        Ok(Some((rest, x.add(&y)?.scale(half)?)))
     }
 
     /// Collect terms into a reduced polynomial.
@@ -356,7 +476,7 @@ impl Rules {
             if c.is_zero() {
                 continue;
             }
-            if let Some((rest, p)) = self.rewrite(&m) {
+            if let Some((rest, p)) = self.rewrite(&m)? {
                 for (pm, pc) in &p.terms {
                     work.push((rest.mul(pm)?, rmul(c, *pc)?));
                 }
@@ -382,10 +502,35 @@ impl Rules {
     }
 }
 
+/// A constant expression (rational or float) as a polynomial: floats are
+/// sign-normalised atoms, as in the canonical form.
+fn constant_poly(e: Expr) -> Poly {
+    if let Some(r) = e.as_rational() {
+        return Poly::constant(r);
+    }
+    match e.as_f64() {
+        Some(v) if v < 0.0 => Poly::term(Mono::atom(Atom(Expr::float(-v)), 1), Rational::MINUS_ONE),
+        _ => Poly::atom(Atom(e)),
+    }
+}
+
 impl Poly {
     /// Zero.
     pub fn zero() -> Poly {
         Poly::default()
+    }
+
+    /// Terms as given (like monomials summed, no reduction by any relation).
+    pub fn from_terms<I: IntoIterator<Item = (Mono, Rational)>>(terms: I) -> CResult<Poly> {
+        let mut acc: HashMap<Mono, Rational> = HashMap::new();
+        for (m, c) in terms {
+            let v = acc.entry(m).or_insert(Rational::ZERO);
+            *v = radd(*v, c)?;
+        }
+        let mut terms: Vec<(Mono, Rational)> =
+            acc.into_iter().filter(|(_, c)| !c.is_zero()).collect();
+        terms.sort_by(|a, b| b.0.cmp(&a.0));
+        Ok(Poly { terms })
     }
 
     /// A constant.
@@ -556,7 +701,7 @@ impl Poly {
         }
         // Cheap rejection: total degree.
         if g.terms.iter().map(|t| t.0.deg).max() > self.terms.iter().map(|t| t.0.deg).max()
-            && rules.rules.is_empty()
+            && rules.is_trivial()
         {
             return Ok(None);
         }
