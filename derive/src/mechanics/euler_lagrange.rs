@@ -23,6 +23,14 @@ pub enum MechanicsError {
     },
     /// The mass matrix is identically singular (e.g. a coordinate without inertia).
     SingularMassMatrix,
+    /// An exact computation hit its term budget (e.g. the expanded `M^-1` of
+    /// a large system).
+    Budget {
+        /// What was being computed.
+        what: String,
+        /// Why it stopped.
+        reason: String,
+    },
 }
 
 impl fmt::Display for MechanicsError {
@@ -40,6 +48,9 @@ impl fmt::Display for MechanicsError {
                 f,
                 "the mass matrix is singular for every state: does every coordinate carry inertia in T?"
             ),
+            MechanicsError::Budget { what, reason } => {
+                write!(f, "{what} was not computed: {reason}")
+            }
         }
     }
 }
@@ -195,10 +206,27 @@ pub struct ControlAffine {
 }
 
 /// Form the control-affine system. Uses the adjugate over the determinant and
-/// the canonical form, so `f` and `g` are exact rational functions.
+/// the canonical form, so `f` and `g` are exact rational functions; the size
+/// grows quickly with the number of coordinates (see
+/// [`control_affine_within`] for a budget).
 pub fn control_affine(eqs: &Equations) -> Result<ControlAffine, MechanicsError> {
+    control_affine_within(eqs, crate::sym::poly::MAX_TERMS)
+}
+
+/// [`control_affine`] with a term budget: an intermediate polynomial with more
+/// than `max_terms` terms stops it with [`MechanicsError::Budget`].
+pub fn control_affine_within(
+    eqs: &Equations,
+    max_terms: usize,
+) -> Result<ControlAffine, MechanicsError> {
+    let tidy = |e: Expr, what: &str| {
+        crate::sym::try_simplify_within(e, max_terms).map_err(|x| MechanicsError::Budget {
+            what: what.to_string(),
+            reason: format!("{x} (budget {max_terms} terms)"),
+        })
+    };
     let n = eqs.coords.len();
-    let det = tidy(determinant(&eqs.mass_matrix));
+    let det = tidy(determinant(&eqs.mass_matrix), "det M")?;
     if det.is_zero() {
         return Err(MechanicsError::SingularMassMatrix);
     }
@@ -210,10 +238,10 @@ pub fn control_affine(eqs: &Equations) -> Result<ControlAffine, MechanicsError> 
     let mut g = vec![vec![Expr::zero(); eqs.inputs.len()]; 2 * n];
     for i in 0..n {
         let num: Expr = (0..n).map(|k| adj[i][k] * drift[k]).sum();
-        f.push(tidy(num / det));
+        f.push(tidy(num / det, "the control-affine f")?);
         for (j, gij) in g[n + i].iter_mut().enumerate() {
             let num: Expr = (0..n).map(|k| adj[i][k] * eqs.input_matrix[k][j]).sum();
-            *gij = tidy(num / det);
+            *gij = tidy(num / det, "the control-affine g")?;
         }
     }
     Ok(ControlAffine {

@@ -2,9 +2,11 @@
 //! syntax. Produced by [`lower`] from the checked AST; consumed by mechanics,
 //! analysis, code generation and identification.
 
+mod chain;
 mod lower;
 mod values;
 
+pub use chain::n_link_chain_source;
 pub use lower::{load_model, load_model_text, lower, LoadError, LoadedModel};
 pub use values::{ParameterValues, ValuesError};
 

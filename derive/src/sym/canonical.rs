@@ -113,9 +113,9 @@ pub(super) struct Ctx {
 }
 
 impl Ctx {
-    fn new() -> Ctx {
+    fn new(max_terms: usize) -> Ctx {
         Ctx {
-            rules: Rules::new(),
+            rules: Rules::with_budget(max_terms),
             memo: HashMap::new(),
             visiting: HashSet::new(),
         }
@@ -488,13 +488,16 @@ impl Ctx {
         let angle = if r.den.is_empty() {
             r.num.clone()
         } else {
-            let (rr, sign) = self.sign_normalise(&r)?;
-            let p = Poly::atom(Atom(self.to_expr(&rr)));
-            if sign < 0 {
-                p.neg()?
-            } else {
-                p
-            }
+            // c * u with u = (N/c)/D primitive: an opaque angle atom, so that
+            // the expression of any multiple converts back to the same atom
+            let c = r.num.content()?;
+            let u = RatFn {
+                num: r.num.scale(rdiv(Rational::ONE, c)?)?,
+                den: r.den.clone(),
+            };
+            let ua = Atom(self.to_expr(&u));
+            self.rules.opaque_angle(ua);
+            Poly::term(super::poly::Mono::atom(ua, 1), c)
         };
         Ok((
             self.rules.trig(true, &angle)?,
@@ -504,7 +507,11 @@ impl Ctx {
 }
 
 pub(super) fn to_rat(e: Expr) -> CResult<(Ctx, Rc<RatFn>)> {
-    let mut ctx = Ctx::new();
+    to_rat_within(e, super::poly::MAX_TERMS)
+}
+
+pub(super) fn to_rat_within(e: Expr, max_terms: usize) -> CResult<(Ctx, Rc<RatFn>)> {
+    let mut ctx = Ctx::new(max_terms);
     let r = ctx.convert(e)?;
     Ok((ctx, r))
 }
@@ -530,6 +537,21 @@ pub fn try_is_zero(e: Expr) -> Result<bool, CanonError> {
     }
     let (_, r) = to_rat(e)?;
     Ok(r.num.is_zero())
+}
+
+/// [`try_is_zero`] with a term budget: `Err(CanonError::TooLarge)` as soon as
+/// an intermediate polynomial has more than `max_terms` terms.
+pub fn try_is_zero_within(e: Expr, max_terms: usize) -> Result<bool, CanonError> {
+    if e.is_zero() {
+        return Ok(true);
+    }
+    let (_, r) = to_rat_within(e, max_terms)?;
+    Ok(r.num.is_zero())
+}
+
+/// [`try_simplify`] with a term budget (see [`try_is_zero_within`]).
+pub fn try_simplify_within(e: Expr, max_terms: usize) -> Result<Expr, CanonError> {
+    super::present::try_present_within(e, &[], max_terms)
 }
 
 /// True if `e` is identically zero. `false` when it is not, or when exact

@@ -14,12 +14,13 @@ pub mod subst;
 pub mod tape;
 
 pub use canonical::{
-    canonical, equivalent, is_zero, simplify, try_canonical, try_is_zero, try_simplify,
+    canonical, equivalent, is_zero, simplify, try_canonical, try_is_zero, try_is_zero_within,
+    try_simplify, try_simplify_within,
 };
 pub use diff::{diff, jacobian, time_derivative, CoordinateSymbols};
 pub use expr::{Expr, Func, Node, Symbol};
 pub use poly::CanonError;
-pub use present::{present, try_present, Name};
+pub use present::{present, try_present, try_present_within, Name};
 pub use rational::Rational;
 pub use subst::{substitute, substitute_symbols};
 pub use tape::{Instr, SplitTape, Tape, TapeError};

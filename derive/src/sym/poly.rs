@@ -318,6 +318,10 @@ impl Ord for Poly {
 struct TrigAtom {
     sin: bool,
     angle: Poly,
+    /// `None` for a polynomial angle; `Some(u)` for a multiple of an opaque
+    /// angle atom `u` (a rational function). Only atoms of the same class
+    /// combine by the product-to-sum formulas.
+    class: Option<Atom>,
 }
 
 /// Side relations used to reduce monomials:
@@ -325,20 +329,46 @@ struct TrigAtom {
 /// * `atom^q = replacement` (roots: `(B^(1/q))^q = B`);
 /// * products of two trigonometric atoms by the product-to-sum formulas
 ///   (`cos a cos b = (cos(a - b) + cos(a + b))/2`, ...), so a reduced monomial
-///   has at most one trigonometric factor. The functions `1`, `cos(k.x)`,
-///   `sin(k.x)` (one per angle up to sign) are linearly independent, so this
-///   Fourier form of a trigonometric polynomial is unique for any number of
-///   angles and any multiples.
-#[derive(Clone, Debug, Default)]
+///   has at most one trigonometric factor per class. The functions `1`,
+///   `cos(k.x)`, `sin(k.x)` (one per angle up to sign) are linearly
+///   independent, so this Fourier form of a trigonometric polynomial is unique
+///   for any number of angles and any multiples. Polynomial angles form one
+///   class; each opaque angle `u` (a rational function, registered with
+///   [`Rules::opaque_angle`]) forms its own class of multiples `k u`.
+#[derive(Clone, Debug)]
 pub struct Rules {
     rules: HashMap<Atom, (u32, Poly)>,
     trig: RefCell<HashMap<Atom, TrigAtom>>,
+    opaque: RefCell<std::collections::HashSet<Atom>>,
+    max_terms: usize,
+}
+
+impl Default for Rules {
+    fn default() -> Rules {
+        Rules::new()
+    }
 }
 
 impl Rules {
-    /// No relations.
+    /// No relations; polynomials up to [`MAX_TERMS`] terms.
     pub fn new() -> Rules {
-        Rules::default()
+        Rules::with_budget(MAX_TERMS)
+    }
+
+    /// No relations; any intermediate polynomial with more than `max_terms`
+    /// terms stops the computation with [`CanonError::TooLarge`].
+    pub fn with_budget(max_terms: usize) -> Rules {
+        Rules {
+            rules: HashMap::new(),
+            trig: RefCell::new(HashMap::new()),
+            opaque: RefCell::new(std::collections::HashSet::new()),
+            max_terms,
+        }
+    }
+
+    /// The term budget.
+    pub fn budget(&self) -> usize {
+        self.max_terms
     }
 
     /// Register `a^q = p` (`p` must itself be reduced).
@@ -357,12 +387,20 @@ impl Rules {
         Rules {
             rules: self.rules.clone(),
             trig: RefCell::new(HashMap::new()),
+            opaque: RefCell::new(std::collections::HashSet::new()),
+            max_terms: self.max_terms,
         }
     }
 
     /// True if no relation is registered (plain polynomial arithmetic).
     pub fn is_trivial(&self) -> bool {
         self.rules.is_empty() && self.trig.borrow().is_empty()
+    }
+
+    /// Register `u` as an opaque angle: trigonometric atoms of its multiples
+    /// form their own class.
+    pub fn opaque_angle(&self, u: Atom) {
+        self.opaque.borrow_mut().insert(u);
     }
 
     /// `sin(angle)` (or `cos(angle)`) as a reduced polynomial: a signed
@@ -387,10 +425,17 @@ impl Rules {
         let e = if sin { ae.sin() } else { ae.cos() };
         let p = match e.node() {
             Node::Func(Func::Sin | Func::Cos, x) if *x == ae => {
+                let class = match angle.terms() {
+                    [(m, _)] if m.vars().len() == 1 && m.vars()[0].1 == 1 => {
+                        let a = m.vars()[0].0;
+                        self.opaque.borrow().contains(&a).then_some(a)
+                    }
+                    _ => None,
+                };
                 self.trig
                     .borrow_mut()
                     .entry(Atom(e))
-                    .or_insert(TrigAtom { sin, angle });
+                    .or_insert(TrigAtom { sin, angle, class });
                 Poly::atom(Atom(e))
             }
             _ => constant_poly(e),
@@ -423,22 +468,21 @@ impl Rules {
             if trig.is_empty() {
                 return Ok(None);
             }
-            let mut first: Option<(Atom, u32)> = None;
+            // the first two trigonometric factors of one class
+            let mut firsts: Vec<(Option<Atom>, Atom, u32)> = Vec::new();
             let mut pair = None;
             for &(a, e) in &m.vars {
-                if !trig.contains_key(&a) {
-                    continue;
-                }
+                let Some(t) = trig.get(&a) else { continue };
                 if e >= 2 {
                     pair = Some((a, e, a, e));
                     break;
                 }
-                match first {
-                    None => first = Some((a, e)),
-                    Some((f, ef)) => {
+                match firsts.iter().find(|(c, _, _)| *c == t.class) {
+                    Some(&(_, f, ef)) => {
                         pair = Some((f, ef, a, e));
                         break;
                     }
+                    None => firsts.push((t.class, a, e)),
                 }
             }
             let Some((a, ea, b, eb)) = pair else {
@@ -480,7 +524,7 @@ impl Rules {
                 for (pm, pc) in &p.terms {
                     work.push((rest.mul(pm)?, rmul(c, *pc)?));
                 }
-                if work.len() > MAX_TERMS {
+                if work.len() > self.max_terms {
                     return Err(CanonError::TooLarge);
                 }
                 continue;
@@ -489,7 +533,7 @@ impl Rules {
                 Some(v) => *v = radd(*v, c)?,
                 None => {
                     acc.insert(m, c);
-                    if acc.len() > MAX_TERMS {
+                    if acc.len() > self.max_terms {
                         return Err(CanonError::TooLarge);
                     }
                 }
@@ -665,7 +709,7 @@ impl Poly {
         if let Some(c) = o.as_constant() {
             return self.scale(c);
         }
-        if self.terms.len().saturating_mul(o.terms.len()) > 4 * MAX_TERMS {
+        if self.terms.len().saturating_mul(o.terms.len()) > 4 * rules.max_terms {
             return Err(CanonError::TooLarge);
         }
         let mut v = Vec::with_capacity(self.terms.len() * o.terms.len());

@@ -24,7 +24,7 @@
 
 use std::collections::{BTreeMap, HashMap};
 
-use super::canonical::{factorize, flip_for_reading, to_rat, Ctx};
+use super::canonical::{factorize, flip_for_reading, to_rat_within, Ctx};
 use super::expr::{Expr, Func, Node};
 use super::poly::{rdiv, rmul, rneg, Atom, CResult, CanonError, Mono, Poly, Rules};
 use super::rational::Rational;
@@ -172,7 +172,13 @@ impl<'a> Converter<'a> {
 /// The presentation of `e` (see the module docs); denominator factors equal to
 /// a name's definition (up to a constant) are written as the name.
 pub fn try_present(e: Expr, names: &[Name]) -> Result<Expr, CanonError> {
-    let (mut ctx, r) = to_rat(e)?;
+    try_present_within(e, names, super::poly::MAX_TERMS)
+}
+
+/// [`try_present`] with a term budget: `Err(CanonError::TooLarge)` as soon as
+/// an intermediate polynomial has more than `max_terms` terms.
+pub fn try_present_within(e: Expr, names: &[Name], max_terms: usize) -> Result<Expr, CanonError> {
+    let (mut ctx, r) = to_rat_within(e, max_terms)?;
     if r.num.is_zero() {
         return Ok(Expr::zero());
     }
