@@ -20,7 +20,7 @@
 use super::lie::{state_factors, AnalysisError, LieChain};
 use crate::mechanics::{adjugate, determinant, ldl_solve, screening_points, Equations};
 use crate::model::Model;
-use crate::sym::{diff, try_is_zero_within, try_simplify_within, CanonError, Expr, Symbol};
+use crate::sym::{diff, try_simplify_within, CanonError, Canonicalizer, Expr, Symbol};
 
 /// Largest number of coordinates for which `L_f^2 h` and `L_g L_f h` are
 /// expanded (as `adj(M)/det(M)` products in canonical form).
@@ -54,6 +54,7 @@ fn budget_reason(what: &str, e: CanonError) -> String {
 
 /// Expanded `(L_g L_f h, L_f^2 h, det M)`.
 fn explicit(
+    canon: &mut Canonicalizer,
     eqs: &Equations,
     grad: &[Expr],
     curvature: Expr,
@@ -61,9 +62,7 @@ fn explicit(
     b: &[Expr],
 ) -> Result<(Expr, Expr, Expr), String> {
     let n = grad.len();
-    let simp = |e: Expr, what: &str| {
-        try_simplify_within(e, ANALYSIS_MAX_TERMS).map_err(|x| budget_reason(what, x))
-    };
+    let mut simp = |e: Expr, what: &str| canon.try_simplify(e).map_err(|x| budget_reason(what, x));
     let mut m = vec![vec![Expr::zero(); n]; n];
     for i in 0..n {
         for j in 0..n {
@@ -143,19 +142,24 @@ pub fn mechanical_chain(
     let n = eqs.coords.len();
     let mut state: Vec<Symbol> = eqs.coords.iter().map(|c| c.q).collect();
     state.extend(eqs.coords.iter().map(|c| c.qd));
-    let simp = |e: Expr, what: &str| {
-        try_simplify_within(e, ANALYSIS_MAX_TERMS).map_err(|x| AnalysisError::Budget {
+    let mut canon = Canonicalizer::new(ANALYSIS_MAX_TERMS);
+    let simp = |c: &mut Canonicalizer, e: Expr, what: &str| {
+        c.try_simplify(e).map_err(|x| AnalysisError::Budget {
             reason: budget_reason(what, x),
         })
     };
-    let h = simp(h, "h")?;
+    let h = simp(&mut canon, h, "h")?;
     let grad: Vec<Expr> = eqs
         .coords
         .iter()
-        .map(|c| simp(diff(h, c.q), "dh/dq"))
+        .map(|c| simp(&mut canon, diff(h, c.q), "dh/dq"))
         .collect::<Result<_, _>>()?;
     let qd: Vec<Expr> = eqs.coords.iter().map(|c| Expr::symbol(c.qd)).collect();
-    let lfh = simp(Expr::add_all((0..n).map(|i| grad[i] * qd[i])), "L_f h")?;
+    let lfh = simp(
+        &mut canon,
+        Expr::add_all((0..n).map(|i| grad[i] * qd[i])),
+        "L_f h",
+    )?;
     let mut curv = Vec::new();
     for i in 0..n {
         for k in 0..n {
@@ -165,7 +169,7 @@ pub fn mechanical_chain(
             }
         }
     }
-    let curvature = simp(Expr::add_all(curv), "q'^T H q'")?;
+    let curvature = simp(&mut canon, Expr::add_all(curv), "q'^T H q'")?;
     let r0: Vec<Expr> = (0..n).map(|i| eqs.forces[i] - eqs.bias[i]).collect();
     let b: Vec<Expr> = eqs.input_matrix.iter().map(|r| r[0]).collect();
     // numeric screening of L_g L_f h = w . B with M w = J^T
@@ -183,7 +187,7 @@ pub fn mechanical_chain(
     }
     let screened_nonzero = margin > 1e-9;
     let explicit = if n <= EXPLICIT_MAX_COORDINATES {
-        explicit(eqs, &grad, curvature, &r0, &b)
+        explicit(&mut canon, eqs, &grad, curvature, &r0, &b)
     } else {
         Err(format!(
             "not expanded for {n} coordinates (more than {EXPLICIT_MAX_COORDINATES}): \
@@ -193,10 +197,8 @@ pub fn mechanical_chain(
     let (lglf, lf2, det, not_expanded) = match explicit {
         Ok((lglf, lf2, det)) => {
             if !screened_nonzero {
-                let zero = try_is_zero_within(lglf, ANALYSIS_MAX_TERMS).map_err(|x| {
-                    AnalysisError::Budget {
-                        reason: budget_reason("exact test of L_g L_f h = 0", x),
-                    }
+                let zero = canon.try_is_zero(lglf).map_err(|x| AnalysisError::Budget {
+                    reason: budget_reason("exact test of L_g L_f h = 0", x),
                 })?;
                 if zero {
                     return Ok(None);

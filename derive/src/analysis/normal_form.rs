@@ -26,7 +26,7 @@ use super::lie::LieChain;
 use super::mechanical::ANALYSIS_MAX_TERMS;
 use crate::control::Derivation;
 use crate::model::{Model, ParameterValues};
-use crate::sym::{diff, is_zero, try_simplify_within, Expr, Symbol};
+use crate::sym::{diff, eval_jacobian, is_zero, Canonicalizer, Expr, Symbol};
 
 /// Why a normal form could not be built.
 #[derive(Clone, Debug, PartialEq)]
@@ -132,26 +132,21 @@ fn numeric_rank(rows: &[Vec<f64>]) -> (usize, Vec<f64>) {
     (rank, sv)
 }
 
-/// The numeric gradient of `e` at `at`.
+/// The numeric gradient of `e` at `at` (forward-mode, exact up to rounding).
 fn gradient(
     e: Expr,
     state: &[Symbol],
     at: &HashMap<Symbol, f64>,
     what: &str,
 ) -> Result<Vec<f64>, NormalFormError> {
-    state
-        .iter()
-        .map(|s| {
-            let v = diff(e, *s).eval_map(at);
-            if v.is_finite() {
-                Ok(v)
-            } else {
-                Err(NormalFormError::NotFinite {
-                    entry: format!("d({what})/d{}", s.name()),
-                })
-            }
-        })
-        .collect()
+    let (_, jac) = eval_jacobian(&[e], state, at);
+    let row = jac.into_iter().next().unwrap_or_default();
+    if let Some(k) = row.iter().position(|v| !v.is_finite()) {
+        return Err(NormalFormError::NotFinite {
+            entry: format!("d({what})/d{}", state[k].name()),
+        });
+    }
+    Ok(row)
 }
 
 /// A candidate complementary coordinate: `(eta, L_f eta, origin, L_f eta in
@@ -172,7 +167,8 @@ pub fn candidates(
     let n = eqs.coords.len();
     let mut out = Vec::new();
     let mut rejected = Vec::new();
-    let tidy = |e: Expr| try_simplify_within(e, ANALYSIS_MAX_TERMS).unwrap_or(e);
+    let mut canon = Canonicalizer::new(ANALYSIS_MAX_TERMS);
+    let mut tidy = |e: Expr| canon.try_simplify(e).unwrap_or(e);
     for c in &eqs.coords {
         let q = Expr::symbol(c.q);
         if !xi.contains(&q) {

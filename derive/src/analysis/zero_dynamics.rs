@@ -26,7 +26,9 @@ use super::normal_form::NormalForm;
 use crate::linear::{poles, Pole};
 use crate::mechanics::{adjugate, determinant, lu_solve_at};
 use crate::model::{Model, ParameterValues};
-use crate::sym::{diff, is_zero, substitute_symbols, try_simplify_within, Expr, Node, Symbol};
+use crate::sym::{
+    diff, eval_jacobian, is_zero, substitute_symbols, Canonicalizer, Expr, Node, Symbol,
+};
 
 /// Why the zero dynamics could not be formed.
 #[derive(Clone, Debug, PartialEq)]
@@ -225,11 +227,15 @@ pub fn zero_dynamics(
     let state = &nf.state;
     let n = model.coordinates.len();
     let explicit = n <= EXPLICIT_MAX_COORDINATES;
+    let canon = std::cell::RefCell::new(Canonicalizer::new(ANALYSIS_MAX_TERMS));
     let tidy = |e: Expr| -> Result<Expr, ZeroDynamicsError> {
         if explicit {
-            try_simplify_within(e, ANALYSIS_MAX_TERMS).map_err(|x| ZeroDynamicsError::Budget {
-                reason: format!("{x} (budget {ANALYSIS_MAX_TERMS} terms)"),
-            })
+            canon
+                .borrow_mut()
+                .try_simplify(e)
+                .map_err(|x| ZeroDynamicsError::Budget {
+                    reason: format!("{x} (budget {ANALYSIS_MAX_TERMS} terms)"),
+                })
         } else {
             Ok(e)
         }
@@ -345,18 +351,16 @@ pub fn zero_dynamics(
         .collect::<Result<_, _>>()?;
     // Linearization at eta = 0.
     let m = etas.len();
-    let mut jac = vec![vec![0.0; m]; m];
+    let (values0, jac) = eval_jacobian(&rhs, &etas, &point);
     let mut residual: f64 = 0.0;
     for i in 0..m {
-        residual = residual.max(rhs[i].eval_map(&point).abs());
+        residual = residual.max(values0[i].abs());
         for j in 0..m {
-            let v = diff(rhs[i], etas[j]).eval_map(&point);
-            if !v.is_finite() {
+            if !jac[i][j].is_finite() {
                 return Err(ZeroDynamicsError::NotFinite {
                     entry: format!("d({}')/d{}", etas[i].name(), etas[j].name()),
                 });
             }
-            jac[i][j] = v;
         }
     }
     let (eigenvalues, tolerance, class) = classify(&jac)?;

@@ -141,7 +141,25 @@ pub fn derive_equations(model: &Model) -> Result<Equations, MechanicsError> {
             });
         }
     }
-    let lagrangian = model.kinetic - model.potential;
+    derive_equations_from(
+        &coords,
+        &inputs,
+        model.kinetic,
+        model.potential,
+        &model.forces,
+    )
+}
+
+/// [`derive_equations`] for given coordinates, inputs, energies and
+/// generalised forces (one per coordinate).
+pub fn derive_equations_from(
+    coords: &[CoordinateSymbols],
+    inputs: &[Symbol],
+    kinetic: Expr,
+    potential: Expr,
+    model_forces: &[Expr],
+) -> Result<Equations, MechanicsError> {
+    let lagrangian = kinetic - potential;
     let n = coords.len();
     let mut mass_matrix = vec![vec![Expr::zero(); n]; n];
     let mut bias = vec![Expr::zero(); n];
@@ -159,14 +177,14 @@ pub fn derive_equations(model: &Model) -> Result<Equations, MechanicsError> {
         inputs.iter().map(|u| (*u, Expr::zero())).collect();
     let mut forces = Vec::with_capacity(n);
     let mut input_matrix = vec![vec![Expr::zero(); inputs.len()]; n];
-    for (i, q) in model.forces.iter().enumerate() {
+    for (i, q) in model_forces.iter().enumerate() {
         for (j, u) in inputs.iter().enumerate() {
             let b = diff(*q, *u);
-            for v in &inputs {
+            for v in inputs {
                 let second = diff(b, *v);
                 if !second.is_zero() && !crate::sym::is_zero(second) {
                     return Err(MechanicsError::NotControlAffine {
-                        coordinate: model.coordinates[i].name.clone(),
+                        coordinate: coords[i].q.name().to_string(),
                         input: u.name().to_string(),
                     });
                 }
@@ -176,8 +194,8 @@ pub fn derive_equations(model: &Model) -> Result<Equations, MechanicsError> {
         forces.push(crate::sym::substitute_symbols(*q, &zero_inputs));
     }
     Ok(Equations {
-        coords,
-        inputs,
+        coords: coords.to_vec(),
+        inputs: inputs.to_vec(),
         mass_matrix,
         bias,
         forces,

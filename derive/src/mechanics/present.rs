@@ -5,7 +5,7 @@
 //! computation is reported in [`PresentedEquations::notes`], never hidden.
 
 use super::{adjugate, determinant, Equations};
-use crate::sym::{try_present_within, Expr, Name};
+use crate::sym::{Canonicalizer, Expr, Name};
 
 /// Largest number of coordinates whose control-affine form is expanded by
 /// default.
@@ -58,8 +58,17 @@ pub fn det_name() -> Expr {
 pub fn present_equations(eqs: &Equations, expand: Expand) -> PresentedEquations {
     let n = eqs.coords.len();
     let mut notes = Vec::new();
+    let (mut small, mut large) = (
+        Canonicalizer::new(PRESENT_MAX_TERMS),
+        Canonicalizer::new(EXPAND_MAX_TERMS),
+    );
     let mut show = |e: Expr, what: String, names: &[Name], budget: usize| -> Option<Expr> {
-        match try_present_within(e, names, budget) {
+        let c = if budget > PRESENT_MAX_TERMS {
+            &mut large
+        } else {
+            &mut small
+        };
+        match c.try_present(e, names) {
             Ok(p) => Some(p),
             Err(x) => {
                 notes.push(format!(

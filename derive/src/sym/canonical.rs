@@ -113,7 +113,7 @@ pub(super) struct Ctx {
 }
 
 impl Ctx {
-    fn new(max_terms: usize) -> Ctx {
+    pub(super) fn new(max_terms: usize) -> Ctx {
         Ctx {
             rules: Rules::with_budget(max_terms),
             memo: HashMap::new(),
@@ -236,7 +236,7 @@ impl Ctx {
         }
     }
 
-    fn to_expr(&self, r: &RatFn) -> Expr {
+    pub(super) fn to_expr(&self, r: &RatFn) -> Expr {
         let mut fs = vec![r.num.to_expr()];
         for (f, k) in &r.den {
             fs.push(f.to_expr().powi(-(*k as i64)));

@@ -5,6 +5,7 @@
 
 pub mod canonical;
 pub mod diff;
+pub mod dual;
 pub mod expr;
 pub mod poly;
 pub mod present;
@@ -18,9 +19,10 @@ pub use canonical::{
     try_simplify, try_simplify_within,
 };
 pub use diff::{diff, jacobian, time_derivative, CoordinateSymbols};
+pub use dual::eval_jacobian;
 pub use expr::{Expr, Func, Node, Symbol};
 pub use poly::CanonError;
-pub use present::{present, try_present, try_present_within, Name};
+pub use present::{present, try_present, try_present_within, Canonicalizer, Name};
 pub use rational::Rational;
 pub use subst::{substitute, substitute_symbols};
 pub use tape::{Instr, SplitTape, Tape, TapeError};

@@ -340,6 +340,8 @@ pub struct Rules {
     rules: HashMap<Atom, (u32, Poly)>,
     trig: RefCell<HashMap<Atom, TrigAtom>>,
     opaque: RefCell<std::collections::HashSet<Atom>>,
+    /// Memo of reduced products of two trigonometric atoms.
+    products: RefCell<HashMap<(Atom, Atom), Poly>>,
     max_terms: usize,
 }
 
@@ -362,6 +364,7 @@ impl Rules {
             rules: HashMap::new(),
             trig: RefCell::new(HashMap::new()),
             opaque: RefCell::new(std::collections::HashSet::new()),
+            products: RefCell::new(HashMap::new()),
             max_terms,
         }
     }
@@ -388,6 +391,7 @@ impl Rules {
             rules: self.rules.clone(),
             trig: RefCell::new(HashMap::new()),
             opaque: RefCell::new(std::collections::HashSet::new()),
+            products: RefCell::new(HashMap::new()),
             max_terms: self.max_terms,
         }
     }
@@ -463,7 +467,7 @@ impl Rules {
                 }
             }
         }
-        let (ta, tb, rest) = {
+        let ta = {
             let trig = self.trig.borrow();
             if trig.is_empty() {
                 return Ok(None);
@@ -493,8 +497,12 @@ impl Rules {
             } else {
                 m.with_exp(a, ea - 1).with_exp(b, eb - 1)
             };
-            (trig[&a].clone(), trig[&b].clone(), rest)
+            if let Some(p) = self.products.borrow().get(&(a, b)) {
+                return Ok(Some((rest, p.clone())));
+            }
+            (a, b, trig[&a].clone(), trig[&b].clone(), rest)
         };
+        let (a, b, ta, tb, rest) = (ta.0, ta.1, ta.2, ta.3, ta.4);
         let sum = ta.angle.add(&tb.angle)?;
         let dif = ta.angle.sub(&tb.angle)?;
         let half = Rational::new(1, 2).ok_or(CanonError::Overflow)?;
@@ -509,7 +517,9 @@ impl Rules {
             (false, true) => (self.trig(true, &sum)?, self.trig(true, &dif)?, -1),
         };
         let y = if sign < 0 { y.neg()? } else { y };
-        Ok(Some((rest, x.add(&y)?.scale(half)?)))
+        let p = x.add(&y)?.scale(half)?;
+        self.products.borrow_mut().insert((a, b), p.clone());
+        Ok(Some((rest, p)))
     }
 
     /// Collect terms into a reduced polynomial.

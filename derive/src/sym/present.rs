@@ -24,7 +24,7 @@
 
 use std::collections::{BTreeMap, HashMap};
 
-use super::canonical::{factorize, flip_for_reading, to_rat_within, Ctx};
+use super::canonical::{factorize, flip_for_reading, Ctx};
 use super::expr::{Expr, Func, Node};
 use super::poly::{rdiv, rmul, rneg, Atom, CResult, CanonError, Mono, Poly, Rules};
 use super::rational::Rational;
@@ -178,11 +178,57 @@ pub fn try_present(e: Expr, names: &[Name]) -> Result<Expr, CanonError> {
 /// [`try_present`] with a term budget: `Err(CanonError::TooLarge)` as soon as
 /// an intermediate polynomial has more than `max_terms` terms.
 pub fn try_present_within(e: Expr, names: &[Name], max_terms: usize) -> Result<Expr, CanonError> {
-    let (mut ctx, r) = to_rat_within(e, max_terms)?;
+    Canonicalizer::new(max_terms).try_present(e, names)
+}
+
+/// A canonical-form context reused across expressions: the conversions of
+/// shared subexpressions and the products of trigonometric atoms are
+/// memoised, so presenting the entries of `M`, `bias`, ... one after the
+/// other costs little more than the largest of them.
+pub struct Canonicalizer {
+    ctx: Ctx,
+}
+
+impl Canonicalizer {
+    /// A context whose computations stop with [`CanonError::TooLarge`] at an
+    /// intermediate polynomial of more than `max_terms` terms.
+    pub fn new(max_terms: usize) -> Canonicalizer {
+        Canonicalizer {
+            ctx: Ctx::new(max_terms),
+        }
+    }
+
+    /// [`crate::sym::try_is_zero`] in this context.
+    pub fn try_is_zero(&mut self, e: Expr) -> Result<bool, CanonError> {
+        if e.is_zero() {
+            return Ok(true);
+        }
+        Ok(self.ctx.convert(e)?.num.is_zero())
+    }
+
+    /// [`crate::sym::try_canonical`] in this context.
+    pub fn try_canonical(&mut self, e: Expr) -> Result<Expr, CanonError> {
+        let r = self.ctx.convert(e)?;
+        Ok(self.ctx.to_expr(&r))
+    }
+
+    /// [`crate::sym::try_simplify`] in this context.
+    pub fn try_simplify(&mut self, e: Expr) -> Result<Expr, CanonError> {
+        self.try_present(e, &[])
+    }
+
+    /// [`try_present`] in this context.
+    pub fn try_present(&mut self, e: Expr, names: &[Name]) -> Result<Expr, CanonError> {
+        present_in(&mut self.ctx, e, names)
+    }
+}
+
+fn present_in(ctx: &mut Ctx, e: Expr, names: &[Name]) -> Result<Expr, CanonError> {
+    let r = ctx.convert(e)?;
     if r.num.is_zero() {
         return Ok(Expr::zero());
     }
-    let named = named_factors(&mut ctx, names)?;
+    let named = named_factors(ctx, names)?;
     let mut conv = Converter::new(&ctx.rules);
     let mut coeff = Rational::ONE;
     let mut den_atoms: Vec<(Atom, u32)> = Vec::new();
