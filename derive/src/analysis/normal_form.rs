@@ -167,8 +167,20 @@ pub fn candidates(
     let n = eqs.coords.len();
     let mut out = Vec::new();
     let mut rejected = Vec::new();
+    let explicit = chain
+        .mechanical
+        .as_ref()
+        .map_or(true, |m| m.not_expanded.is_none());
+    // simplified for printing only when the analysis is expanded (small
+    // systems); otherwise they stay as derived (exact)
     let mut canon = Canonicalizer::new(ANALYSIS_MAX_TERMS);
-    let mut tidy = |e: Expr| canon.try_simplify(e).unwrap_or(e);
+    let mut tidy = |e: Expr| {
+        if explicit {
+            canon.try_simplify(e).unwrap_or(e)
+        } else {
+            e
+        }
+    };
     for c in &eqs.coords {
         let q = Expr::symbol(c.q);
         if !xi.contains(&q) {
@@ -229,10 +241,6 @@ pub fn candidates(
             ));
         }
     }
-    let explicit = chain
-        .mechanical
-        .as_ref()
-        .map_or(true, |m| m.not_expanded.is_none());
     for (i, c) in eqs.coords.iter().enumerate() {
         let qd = Expr::symbol(c.qd);
         if xi.contains(&qd) {

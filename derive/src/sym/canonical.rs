@@ -62,7 +62,9 @@
 //! functions return a [`CanonError`]; the infallible wrappers fall back
 //! gracefully (return the input unchanged, or `false`).
 
-use std::collections::{BTreeMap, HashMap, HashSet};
+use std::collections::BTreeMap;
+
+use super::fxhash::{FxHashMap as HashMap, FxHashSet as HashSet};
 use std::rc::Rc;
 
 use super::expr::{Expr, Func, Node};
@@ -116,8 +118,8 @@ impl Ctx {
     pub(super) fn new(max_terms: usize) -> Ctx {
         Ctx {
             rules: Rules::with_budget(max_terms),
-            memo: HashMap::new(),
-            visiting: HashSet::new(),
+            memo: HashMap::default(),
+            visiting: HashSet::default(),
         }
     }
 

@@ -1,17 +1,17 @@
 //! Symbolic differentiation and the total time derivative.
 
-use std::collections::HashMap;
+use super::fxhash::FxHashMap;
 
 use super::expr::{Expr, Func, Node, Symbol};
 
 /// `d e / d x`, memoised over the DAG. `sign` and `abs` follow the usual
 /// almost-everywhere rules (`d sign(u) = 0`, `d abs(u) = sign(u) du`).
 pub fn diff(e: Expr, x: Symbol) -> Expr {
-    let mut memo = HashMap::new();
+    let mut memo = FxHashMap::default();
     diff_memo(e, x, &mut memo)
 }
 
-fn diff_memo(e: Expr, x: Symbol, memo: &mut HashMap<Expr, Expr>) -> Expr {
+fn diff_memo(e: Expr, x: Symbol, memo: &mut FxHashMap<Expr, Expr>) -> Expr {
     if let Some(&d) = memo.get(&e) {
         return d;
     }
@@ -87,7 +87,7 @@ fn diff_memo(e: Expr, x: Symbol, memo: &mut HashMap<Expr, Expr>) -> Expr {
     d
 }
 
-fn memoise(memo: &mut HashMap<Expr, Expr>, e: Expr, d: Expr) -> Expr {
+fn memoise(memo: &mut FxHashMap<Expr, Expr>, e: Expr, d: Expr) -> Expr {
     memo.insert(e, d);
     d
 }

@@ -22,7 +22,7 @@ pub fn eval_jacobian(
     let m = vars.len();
     let width = m + 1;
     let var_index: HashMap<Symbol, usize> = vars.iter().enumerate().map(|(i, s)| (*s, i)).collect();
-    let mut slot: HashMap<Expr, usize> = HashMap::new();
+    let mut slot: super::fxhash::FxHashMap<Expr, usize> = Default::default();
     let mut data: Vec<f64> = Vec::new();
     let mut stack: Vec<(Expr, bool)> = exprs.iter().rev().map(|e| (*e, false)).collect();
     while let Some((e, ready)) = stack.pop() {

@@ -7,6 +7,7 @@ pub mod canonical;
 pub mod diff;
 pub mod dual;
 pub mod expr;
+pub(crate) mod fxhash;
 pub mod poly;
 pub mod present;
 pub mod print;

@@ -11,7 +11,7 @@
 
 use std::cell::RefCell;
 use std::cmp::Ordering;
-use std::collections::HashMap;
+use super::fxhash::{FxHashMap as HashMap, FxHashSet};
 use std::fmt;
 
 use super::expr::{structural_cmp, Expr, Func, Node};
@@ -339,7 +339,7 @@ struct TrigAtom {
 pub struct Rules {
     rules: HashMap<Atom, (u32, Poly)>,
     trig: RefCell<HashMap<Atom, TrigAtom>>,
-    opaque: RefCell<std::collections::HashSet<Atom>>,
+    opaque: RefCell<FxHashSet<Atom>>,
     /// Memo of reduced products of two trigonometric atoms.
     products: RefCell<HashMap<(Atom, Atom), Poly>>,
     max_terms: usize,
@@ -361,10 +361,10 @@ impl Rules {
     /// terms stops the computation with [`CanonError::TooLarge`].
     pub fn with_budget(max_terms: usize) -> Rules {
         Rules {
-            rules: HashMap::new(),
-            trig: RefCell::new(HashMap::new()),
-            opaque: RefCell::new(std::collections::HashSet::new()),
-            products: RefCell::new(HashMap::new()),
+            rules: HashMap::default(),
+            trig: RefCell::new(HashMap::default()),
+            opaque: RefCell::new(FxHashSet::default()),
+            products: RefCell::new(HashMap::default()),
             max_terms,
         }
     }
@@ -389,9 +389,9 @@ impl Rules {
     pub fn without_trig(&self) -> Rules {
         Rules {
             rules: self.rules.clone(),
-            trig: RefCell::new(HashMap::new()),
-            opaque: RefCell::new(std::collections::HashSet::new()),
-            products: RefCell::new(HashMap::new()),
+            trig: RefCell::new(HashMap::default()),
+            opaque: RefCell::new(FxHashSet::default()),
+            products: RefCell::new(HashMap::default()),
             max_terms: self.max_terms,
         }
     }
@@ -524,7 +524,7 @@ impl Rules {
 
     /// Collect terms into a reduced polynomial.
     pub fn collect<I: IntoIterator<Item = (Mono, Rational)>>(&self, terms: I) -> CResult<Poly> {
-        let mut acc: HashMap<Mono, Rational> = HashMap::new();
+        let mut acc: HashMap<Mono, Rational> = HashMap::default();
         let mut work: Vec<(Mono, Rational)> = terms.into_iter().collect();
         while let Some((m, c)) = work.pop() {
             if c.is_zero() {
@@ -576,7 +576,7 @@ impl Poly {
 
     /// Terms as given (like monomials summed, no reduction by any relation).
     pub fn from_terms<I: IntoIterator<Item = (Mono, Rational)>>(terms: I) -> CResult<Poly> {
-        let mut acc: HashMap<Mono, Rational> = HashMap::new();
+        let mut acc: HashMap<Mono, Rational> = HashMap::default();
         for (m, c) in terms {
             let v = acc.entry(m).or_insert(Rational::ZERO);
             *v = radd(*v, c)?;

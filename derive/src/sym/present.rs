@@ -22,7 +22,7 @@
 //! The result is equal to the input as a function (a test checks it against
 //! the canonical form), but it is not itself canonical.
 
-use std::collections::{BTreeMap, HashMap};
+use std::collections::BTreeMap;
 
 use super::canonical::{factorize, flip_for_reading, Ctx};
 use super::expr::{Expr, Func, Node};
@@ -49,7 +49,7 @@ struct Converter<'a> {
     rules: Rules,
     /// `(sin b, cos b)` atoms of the base angles met.
     bases: Vec<(Atom, Atom)>,
-    cache: HashMap<Atom, Option<Poly>>,
+    cache: super::fxhash::FxHashMap<Atom, Option<Poly>>,
 }
 
 impl<'a> Converter<'a> {
@@ -58,7 +58,7 @@ impl<'a> Converter<'a> {
             fourier,
             rules: fourier.without_trig(),
             bases: Vec::new(),
-            cache: HashMap::new(),
+            cache: Default::default(),
         }
     }
 
@@ -118,18 +118,32 @@ impl<'a> Converter<'a> {
     /// A Fourier-form polynomial in powers of sines and cosines, then the
     /// shorter of `sin^2` and `1 - cos^2` for each pair of terms.
     fn convert(&mut self, p: &Poly) -> CResult<Poly> {
-        let mut acc = Poly::zero();
+        let mut terms: Vec<(Mono, Rational)> = Vec::with_capacity(p.len());
         for (m, c) in p.terms() {
-            let mut t = Poly::constant(*c);
+            let mut t: Option<Poly> = None;
             let mut plain = Mono::one();
             for (a, e) in m.vars() {
                 match self.atom(*a)? {
-                    Some(q) => t = t.mul(&q.pow(*e, &self.rules)?, &self.rules)?,
+                    Some(q) => {
+                        let qe = q.pow(*e, &self.rules)?;
+                        t = Some(match t {
+                            None => qe,
+                            Some(t) => t.mul(&qe, &self.rules)?,
+                        });
+                    }
                     None => plain = plain.mul(&Mono::atom(*a, *e))?,
                 }
             }
-            acc = acc.add(&t.mul_term(&plain, Rational::ONE, &self.rules)?)?;
+            match t {
+                None => terms.push((plain, *c)),
+                Some(t) => {
+                    for (tm, tc) in t.terms() {
+                        terms.push((tm.mul(&plain)?, super::poly::rmul(*tc, *c)?));
+                    }
+                }
+            }
         }
+        let acc = self.rules.collect(terms)?;
         self.pair_squares(&acc)
     }
 
