@@ -2,13 +2,15 @@
 //!
 //! - [`LinearModel`]: `x' = A x + B u` with names, JSON load/save.
 //! - [`poles`], [`parse_poles`]: eigenvalues in canonical order; pole lists.
-//! - [`controllability`]: controllability matrix and SVD rank.
+//! - [`controllability`]: PBH margin on the balanced realisation (the decision),
+//!   controllability matrix and SVD rank.
 //! - [`place`]: single-input pole placement (`u = -K x`).
 //! - [`lqr`]: continuous-time LQR via the CARE.
 //! - [`AnalysisReport`], [`PlaceReport`], [`LqrReport`]: the CLI's JSON shapes.
 //!
 //! All functions return [`LinearError`] on bad input instead of panicking.
 
+mod balance;
 mod controllability;
 mod error;
 mod linear_model;
@@ -18,8 +20,9 @@ mod poles;
 mod report;
 
 pub use controllability::{
-    controllability, controllability_matrix, numerical_rank, Controllability,
+    controllability, controllability_matrix, numerical_rank, pbh_margin, Controllability,
 };
+pub use balance::{balance, balancing_scales};
 pub use error::LinearError;
 pub use linear_model::{matrix_from_rows, matrix_to_rows, LinearModel};
 pub use lqr::{care_residual, lqr, Lqr};
