@@ -181,7 +181,22 @@ pub fn candidates(
             e
         }
     };
-    for c in &eqs.coords {
+    // Coordinates in which a position-level output `h(q)` is linear (a
+    // nonzero coefficient free of the coordinates, e.g. the cart position
+    // `x` in a tip position `x + L1*sin(th1) + L2*sin(th2)`) come last, so
+    // that `xi = 0` can be solved for one of them.
+    let positions: Vec<Symbol> = eqs.coords.iter().map(|c| c.q).collect();
+    let linear_in = |c: &crate::sym::CoordinateSymbols| {
+        let h = xi[0];
+        if eqs.coords.iter().any(|k| h.contains(k.qd)) {
+            return false;
+        }
+        let d = diff(h, c.q);
+        !is_zero(d) && !positions.iter().any(|s| d.contains(*s))
+    };
+    let (last, first): (Vec<&crate::sym::CoordinateSymbols>, Vec<_>) =
+        eqs.coords.iter().partition(|c| linear_in(c));
+    for c in first.into_iter().chain(last) {
         let q = Expr::symbol(c.q);
         if !xi.contains(&q) {
             out.push((
