@@ -7,10 +7,13 @@ mod derive;
 mod design;
 mod diagnose;
 mod fit;
+mod fmt;
 mod gen;
 mod identify;
 mod linearize;
+mod lsp;
 mod run;
+mod run_compiled;
 mod sim;
 mod stability;
 mod synth;
@@ -25,6 +28,8 @@ use plantc_derive::mechanics::Expand;
 pub fn dispatch(cli: &Cli, out: &mut dyn Write, err: &mut dyn Write) -> Result<(), CliError> {
     match &cli.command {
         Command::Check { model, json } => check::run(model, *json, out, err),
+        Command::Fmt { paths, check } => fmt::run(paths, *check, out, err),
+        Command::Lsp => lsp::run(),
         Command::Derive {
             model,
             json,
@@ -73,12 +78,6 @@ pub fn dispatch(cli: &Cli, out: &mut dyn Write, err: &mut dyn Write) -> Result<(
         Command::Fit(args) => fit::run(args, out, err),
         Command::Diagnose(args) => diagnose::run(args, out, err),
         Command::Identify(args) => identify::run(args, out, err),
-        Command::Gen {
-            model,
-            controllers,
-            params,
-            out: dir,
-            force,
-        } => gen::run(model, controllers, params, dir, *force, out, err),
+        Command::Gen(args) => gen::run(args, out, err),
     }
 }
