@@ -80,12 +80,15 @@ fn four_link_chain_outputs_q1_and_tip() {
             let g: Vec<f64> = dyn_at(x, 1.0).iter().zip(&f0).map(|(a, b)| a - b).collect();
             let lf2 = (lfh(&along(x, &f0, e), &mut dyn_at) - lfh(&along(x, &f0, -e), &mut dyn_at))
                 / (2.0 * e);
-            let lglf =
-                (lfh(&along(x, &g, e), &mut dyn_at) - lfh(&along(x, &g, -e), &mut dyn_at)) / (2.0 * e);
+            let lglf = (lfh(&along(x, &g, e), &mut dyn_at) - lfh(&along(x, &g, -e), &mut dyn_at))
+                / (2.0 * e);
             let (s_lf2, s_lglf) = (eval(chain.lf[2], x), eval(chain.lg[1], x));
             assert!(eval(chain.lg[0], x).abs() < 1e-12, "{output}: L_g h");
             let scale = lf2.abs().max(1.0);
-            assert!((s_lf2 - lf2).abs() < 1e-5 * scale, "{output}: L_f^2 h {s_lf2} vs {lf2}");
+            assert!(
+                (s_lf2 - lf2).abs() < 1e-5 * scale,
+                "{output}: L_f^2 h {s_lf2} vs {lf2}"
+            );
             assert!(
                 (s_lglf - lglf).abs() < 1e-6 * lglf.abs(),
                 "{output}: L_g L_f h {s_lglf} vs {lglf}"

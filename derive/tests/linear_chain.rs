@@ -36,7 +36,11 @@ fn chains_are_controllable_by_pbh_and_lqr_stabilises_them() {
             2 * n
         );
         assert!(c.controllable, "n = {n}: margin {}", c.pbh_margin);
-        assert!(c.pbh_margin > 10.0 * c.pbh_tolerance, "n = {n}: margin {}", c.pbh_margin);
+        assert!(
+            c.pbh_margin > 10.0 * c.pbh_tolerance,
+            "n = {n}: margin {}",
+            c.pbh_margin
+        );
         if n == 10 {
             let q = DMatrix::<f64>::identity(2 * n, 2 * n);
             let r = DMatrix::<f64>::identity(1, 1);

@@ -54,13 +54,20 @@ fn new_models_through_every_command() {
         let derive = ok(&["derive", &m]);
         assert!(derive.contains("M[0][0] ="), "{}: {derive}", case.file);
 
-        let lin: serde_json::Value = serde_json::from_str(&ok(&["linearize", &m, "--json"])).unwrap();
+        let lin: serde_json::Value =
+            serde_json::from_str(&ok(&["linearize", &m, "--json"])).unwrap();
         assert_eq!(lin["controllable"], true, "{}", case.file);
         let nx = lin["state"].as_array().unwrap().len();
         let nu = lin["inputs"].as_array().unwrap().len();
         let ones = |k: usize| vec!["1"; k].join(",");
         let lqr: serde_json::Value = serde_json::from_str(&ok(&[
-            "lqr", &m, "--q", &ones(nx), "--r", &ones(nu), "--json",
+            "lqr",
+            &m,
+            "--q",
+            &ones(nx),
+            "--r",
+            &ones(nu),
+            "--json",
         ]))
         .unwrap();
         let res = lqr["care_residual"].as_f64().unwrap();
@@ -71,9 +78,21 @@ fn new_models_through_every_command() {
 
         for output in case.outputs {
             let out = ok(&["analyze", &m, "--output", output]);
-            assert!(out.contains("relative degree"), "{} {output}: {out}", case.file);
-            assert!(out.contains("linearizing law"), "{} {output}: {out}", case.file);
-            assert!(out.contains("eigenvalues at eta = 0"), "{} {output}: {out}", case.file);
+            assert!(
+                out.contains("relative degree"),
+                "{} {output}: {out}",
+                case.file
+            );
+            assert!(
+                out.contains("linearizing law"),
+                "{} {output}: {out}",
+                case.file
+            );
+            assert!(
+                out.contains("eigenvalues at eta = 0"),
+                "{} {output}: {out}",
+                case.file
+            );
         }
         if case.outputs.is_empty() {
             let (code, _, err) = plantc(&["analyze", &m]);
@@ -88,8 +107,18 @@ fn new_models_through_every_command() {
 
         let csv = dir.join("sim.csv");
         ok(&[
-            "sim", &m, "--controller", "lqr_unit", "--x0", case.tilt.0, "--duration", "10",
-            "--output-rate", "10", "-o", &s(&csv),
+            "sim",
+            &m,
+            "--controller",
+            "lqr_unit",
+            "--x0",
+            case.tilt.0,
+            "--duration",
+            "10",
+            "--output-rate",
+            "10",
+            "-o",
+            &s(&csv),
         ]);
         let text = std::fs::read_to_string(&csv).unwrap();
         let mut lines = text.lines().filter(|l| !l.starts_with('#'));
@@ -99,11 +128,20 @@ fn new_models_through_every_command() {
             .position(|h| h.split('[').next() == Some(case.tilt.1))
             .unwrap_or_else(|| panic!("{}: no column {} in {header:?}", case.file, case.tilt.1));
         let rows: Vec<Vec<f64>> = lines
-            .map(|l| l.split(',').map(|v| v.parse().unwrap_or(f64::NAN)).collect())
+            .map(|l| {
+                l.split(',')
+                    .map(|v| v.parse().unwrap_or(f64::NAN))
+                    .collect()
+            })
             .collect();
         let first = rows.first().unwrap()[col].abs();
         let last = rows.last().unwrap()[col].abs();
         assert!(first > 0.01, "{}: start {first}", case.file);
-        assert!(last < 1e-2 * first, "{}: {} from {first} to {last}", case.file, case.tilt.1);
+        assert!(
+            last < 1e-2 * first,
+            "{}: {} from {first} to {last}",
+            case.file,
+            case.tilt.1
+        );
     }
 }

@@ -29,7 +29,10 @@ fn run(args: &[&str]) -> String {
 fn rotary_pendulum_printed_equations_and_law() {
     let m = model_file("rotary_pendulum.plant");
     let derive = run(&["derive", &m]);
-    assert!(derive.contains("M[0][0] = J0h + J2h*sin(alpha)^2"), "{derive}");
+    assert!(
+        derive.contains("M[0][0] = J0h + J2h*sin(alpha)^2"),
+        "{derive}"
+    );
     assert!(derive.contains("D = det M"), "{derive}");
     insta::with_settings!({description => THESIS_EQ_14_15, omit_expression => true}, {
         insta::assert_snapshot!("rotary_derive", derive);

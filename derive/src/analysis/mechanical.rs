@@ -64,9 +64,9 @@ fn explicit(
     let n = grad.len();
     let mut simp = |e: Expr, what: &str| canon.try_simplify(e).map_err(|x| budget_reason(what, x));
     let mut m = vec![vec![Expr::zero(); n]; n];
-    for i in 0..n {
-        for j in 0..n {
-            m[i][j] = simp(eqs.mass_matrix[i][j], "M")?;
+    for (row, src) in m.iter_mut().zip(&eqs.mass_matrix) {
+        for (e, s) in row.iter_mut().zip(src) {
+            *e = simp(*s, "M")?;
         }
     }
     let det = simp(determinant(&m), "det M")?;
@@ -173,7 +173,7 @@ pub fn mechanical_chain(
     let r0: Vec<Expr> = (0..n).map(|i| eqs.forces[i] - eqs.bias[i]).collect();
     let b: Vec<Expr> = eqs.input_matrix.iter().map(|r| r[0]).collect();
     // numeric screening of L_g L_f h = w . B with M w = J^T
-    let w = ldl_solve(&eqs.mass_matrix, &[grad.clone()]).remove(0);
+    let w = ldl_solve(&eqs.mass_matrix, std::slice::from_ref(&grad)).remove(0);
     let lglf_dag = Expr::add_all((0..n).map(|i| w[i] * b[i]));
     let mut margin = f64::INFINITY;
     for p in screening_points(model, eqs, SCREEN_POINTS) {

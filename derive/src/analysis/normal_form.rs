@@ -170,7 +170,7 @@ pub fn candidates(
     let explicit = chain
         .mechanical
         .as_ref()
-        .map_or(true, |m| m.not_expanded.is_none());
+        .is_none_or(|m| m.not_expanded.is_none());
     // simplified for printing only when the analysis is expanded (small
     // systems); otherwise they stay as derived (exact)
     let mut canon = Canonicalizer::new(ANALYSIS_MAX_TERMS);

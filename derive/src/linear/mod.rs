@@ -22,10 +22,10 @@ mod place;
 mod poles;
 mod report;
 
+pub use balance::{balance, balancing_scales};
 pub use controllability::{
     controllability, controllability_matrix, numerical_rank, pbh_margin, Controllability,
 };
-pub use balance::{balance, balancing_scales};
 pub use error::LinearError;
 pub use linear_model::{matrix_from_rows, matrix_to_rows, LinearModel};
 pub use lqr::{care_residual, lqr, Lqr};

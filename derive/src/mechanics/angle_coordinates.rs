@@ -128,6 +128,7 @@ fn invert(m: &[Vec<Rational>]) -> Option<Vec<Vec<Rational>>> {
     Some(inv)
 }
 
+#[allow(clippy::needless_range_loop)] // row/column index loops over a matrix
 fn rank(rows: &[Vec<Rational>]) -> usize {
     let mut a: Vec<Vec<Rational>> = rows.to_vec();
     let (mut r, cols) = (0, a.first().map_or(0, Vec::len));

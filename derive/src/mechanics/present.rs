@@ -55,6 +55,7 @@ pub fn det_name() -> Expr {
 }
 
 /// Present `eqs` (see the module docs).
+#[allow(clippy::needless_range_loop)] // row/column index loops over a matrix
 pub fn present_equations(eqs: &Equations, expand: Expand) -> PresentedEquations {
     let n = eqs.coords.len();
     let mut notes = Vec::new();

@@ -91,6 +91,7 @@ pub fn ldl_solve(m: &[Vec<Expr>], rhs: &[Vec<Expr>]) -> Vec<Vec<Expr>> {
 
 /// `y = A^-1 b` by Gaussian elimination with partial pivoting, the pivot of
 /// each column chosen by its absolute value at `point` (symbol values).
+#[allow(clippy::needless_range_loop)] // row/column index loops over a matrix
 pub fn lu_solve_at(
     a: &[Vec<Expr>],
     b: &[Expr],
@@ -117,7 +118,7 @@ pub fn lu_solve_at(
         let (p, pv) = (k..n)
             .map(|i| (i, value(a[i][k]).abs()))
             .fold((k, -1.0), |acc, x| if x.1 > acc.1 { x } else { acc });
-        if !(pv > 1e-12 * scale.max(f64::MIN_POSITIVE)) || !pv.is_finite() {
+        if pv.is_nan() || pv <= 1e-12 * scale.max(f64::MIN_POSITIVE) || !pv.is_finite() {
             return Err(SolveError::Singular { step: k });
         }
         a.swap(k, p);
@@ -166,7 +167,7 @@ mod tests {
         let mut point = HashMap::new();
         point.insert(Symbol::new("x"), 0.3);
         point.insert(Symbol::new("y"), -1.1);
-        let s1 = ldl_solve(&m, &[b.clone()]).remove(0);
+        let s1 = ldl_solve(&m, std::slice::from_ref(&b)).remove(0);
         let s2 = lu_solve_at(&m, &b, &point).unwrap();
         for s in [s1, s2] {
             for i in 0..3 {

@@ -489,7 +489,11 @@ fn contains_memo(e: Expr, sym: Symbol, seen: &mut FxHashMap<Expr, bool>) -> bool
     r
 }
 
-fn eval_memo(e: Expr, value: &mut dyn FnMut(Symbol) -> f64, memo: &mut FxHashMap<Expr, f64>) -> f64 {
+fn eval_memo(
+    e: Expr,
+    value: &mut dyn FnMut(Symbol) -> f64,
+    memo: &mut FxHashMap<Expr, f64>,
+) -> f64 {
     if let Some(&v) = memo.get(&e) {
         return v;
     }

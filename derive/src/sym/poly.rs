@@ -9,9 +9,9 @@
 //! Ordering is structural ([`structural_cmp`] on the atoms), never by interning
 //! id or hash order, so every result is deterministic.
 
+use super::fxhash::{FxHashMap as HashMap, FxHashSet};
 use std::cell::RefCell;
 use std::cmp::Ordering;
-use super::fxhash::{FxHashMap as HashMap, FxHashSet};
 use std::fmt;
 
 use super::expr::{structural_cmp, Expr, Func, Node};
