@@ -384,6 +384,19 @@ impl Graph {
                 let (c, rest) = e.coeff_and_rest();
                 self.product(env, c, rest)?
             }
+            Node::Func(f @ (Func::Sin | Func::Cos), a) => match self.trig_by_addition(env, *a)? {
+                Some((s, c)) => {
+                    if *f == Func::Sin {
+                        s
+                    } else {
+                        c
+                    }
+                }
+                None => {
+                    let a = self.expr(env, *a)?;
+                    self.unary(*f, a)
+                }
+            },
             Node::Func(f, a) => {
                 let a = self.expr(env, *a)?;
                 self.unary(*f, a)
@@ -398,6 +411,40 @@ impl Graph {
         };
         env.memo.insert(e, v);
         Ok(v)
+    }
+
+    /// `(sin a, cos a)` of an angle that is an integer combination of at
+    /// least two units of simpler angles (`q1 + q2`, `theta3 - theta1`,
+    /// `2*alpha`), by the addition formulas from the sines and cosines of its
+    /// parts (6 flops instead of a `sin_cos` per distinct angle). `None` for
+    /// a single angle or non-integer coefficients.
+    fn trig_by_addition(&mut self, env: &mut Env, a: Expr) -> Result<Option<(V, V)>, Error> {
+        let terms: Vec<Expr> = match a.node() {
+            Node::Add(ts) => ts.to_vec(),
+            _ => vec![a],
+        };
+        let mut units = 0i128;
+        for t in &terms {
+            let (c, rest) = t.coeff_and_rest();
+            if !c.is_integer() || c.numer().abs() > 4 || rest.is_constant() {
+                return Ok(None);
+            }
+            units += c.numer().abs();
+        }
+        if units < 2 {
+            return Ok(None);
+        }
+        let (c0, r0) = terms[0].coeff_and_rest();
+        let sign = if c0.is_negative() { -1 } else { 1 };
+        let rest = a - Expr::int(sign) * r0;
+        let (s0, c0v) = (self.expr(env, r0.sin())?, self.expr(env, r0.cos())?);
+        let s0 = if sign < 0 { self.neg(s0) } else { s0 };
+        let (sr, cr) = (self.expr(env, rest.sin())?, self.expr(env, rest.cos())?);
+        let (t1, t2) = (self.mul(s0, cr), self.mul(c0v, sr));
+        let s = self.add(t1, t2);
+        let (t3, t4) = (self.mul(c0v, cr), self.mul(s0, sr));
+        let c = self.sub(t3, t4);
+        Ok(Some((s, c)))
     }
 
     /// Flatten nested sums `c * (a + b + ...)` into `(coefficient, term)`

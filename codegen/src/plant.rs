@@ -10,9 +10,9 @@
 use proc_macro2::TokenStream;
 use quote::quote;
 
-use plantc_derive::mechanics::Equations;
+use plantc_derive::mechanics::{angle_coordinates, AngleCoordinates, Equations};
 use plantc_derive::model::Model;
-use plantc_derive::sym::{diff, Expr};
+use plantc_derive::sym::{diff, Expr, Rational, Symbol};
 
 use crate::emit::idx;
 use crate::ir::{Env, Graph, Level, V};
@@ -57,62 +57,210 @@ pub(crate) fn env(
     Ok(env)
 }
 
-/// `M` (symmetric, from its lower triangle) and `r` lowered in `env`.
+/// The coordinates the accelerations are computed in: the model's, or the
+/// coordinates of the trigonometric arguments `theta = S q`
+/// ([`plantc_derive::mechanics::angle_coordinates`]), where the mass matrix
+/// and bias have far fewer terms (an n-link chain in relative angles).
+pub(crate) enum Frame<'a> {
+    /// `M(q) q'' = Q0 - bias + B u`.
+    Model(&'a Equations),
+    /// `M_theta theta'' = S^-T (Q0 + B u) - bias_theta`, `q'' = S^-1 theta''`.
+    Angles(&'a Equations, &'a AngleCoordinates),
+}
+
+impl Frame<'_> {
+    fn n(&self) -> usize {
+        match self {
+            Frame::Model(e) | Frame::Angles(e, _) => e.coords.len(),
+        }
+    }
+}
+
+/// `sum_j c_j v_j` for rational `c_j` (exact zeros skipped).
+fn combination(g: &mut Graph, coeffs: &[Rational], vs: &[V]) -> V {
+    let mut acc = g.konst(0.0);
+    for (c, v) in coeffs.iter().zip(vs) {
+        if c.is_zero() {
+            continue;
+        }
+        let t = if c.is_one() {
+            *v
+        } else if *c == Rational::MINUS_ONE {
+            g.neg(*v)
+        } else {
+            let k = g.konst(c.to_f64());
+            g.mul(k, *v)
+        };
+        acc = g.add(acc, t);
+    }
+    acc
+}
+
+/// Bind `theta_k = (S q)_k` and `theta_k' = (S q')_k` in `env` (for the
+/// angle frame); returns the values of `theta`.
+fn bind_angles(g: &mut Graph, env: &mut Env, frame: &Frame, xs: &[V]) -> Vec<V> {
+    let Frame::Angles(_, ac) = frame else {
+        return Vec::new();
+    };
+    let n = frame.n();
+    let mut theta = Vec::with_capacity(n);
+    for k in 0..n {
+        let t = combination(g, &ac.s[k], &xs[..n]);
+        let td = combination(g, &ac.s[k], &xs[n..2 * n]);
+        env.bind(ac.coords[k].q, t);
+        env.bind(ac.coords[k].qd, td);
+        theta.push(t);
+    }
+    theta
+}
+
+/// `M` (symmetric, from its lower triangle) and the right-hand side of the
+/// frame, lowered in `env`.
 fn mass_and_rhs(
     g: &mut Graph,
     env: &mut Env,
-    eqs: &Equations,
-    rhs: &[Expr],
+    frame: &Frame,
 ) -> Result<(Vec<Vec<V>>, Vec<V>), Error> {
-    let n = rhs.len();
+    let n = frame.n();
     let zero = g.konst(0.0);
+    let mass = match frame {
+        Frame::Model(eqs) => &eqs.mass_matrix,
+        Frame::Angles(_, ac) => &ac.equations.mass_matrix,
+    };
     let mut m = vec![vec![zero; n]; n];
     for i in 0..n {
         for j in 0..=i {
-            let v = g.expr(env, eqs.mass_matrix[i][j])?;
+            let v = g.expr(env, mass[i][j])?;
             m[i][j] = v;
             m[j][i] = v;
         }
     }
-    let r = rhs
-        .iter()
-        .map(|e| g.expr(env, *e))
-        .collect::<Result<Vec<_>, _>>()?;
+    let r = match frame {
+        Frame::Model(eqs) => eqs
+            .rhs()
+            .iter()
+            .map(|e| g.expr(env, *e))
+            .collect::<Result<Vec<_>, _>>()?,
+        Frame::Angles(eqs, ac) => {
+            let forces = applied_forces(eqs);
+            let fq = forces
+                .iter()
+                .map(|e| g.expr(env, *e))
+                .collect::<Result<Vec<_>, _>>()?;
+            let mut r = Vec::with_capacity(n);
+            for k in 0..n {
+                // (S^-T f)_k = sum_i S^-1[i][k] f_i
+                let col: Vec<Rational> = (0..n).map(|i| ac.s_inv[i][k]).collect();
+                let f = combination(g, &col, &fq);
+                let b = g.expr(env, ac.equations.bias[k])?;
+                r.push(g.sub(f, b));
+            }
+            r
+        }
+    };
     Ok((m, r))
 }
 
+/// `Q0 + B u` of each model coordinate.
+fn applied_forces(eqs: &Equations) -> Vec<Expr> {
+    (0..eqs.coords.len())
+        .map(|i| {
+            let bu: Expr = eqs
+                .inputs
+                .iter()
+                .enumerate()
+                .map(|(j, u)| eqs.input_matrix[i][j] * Expr::symbol(*u))
+                .sum();
+            eqs.forces[i] + bu
+        })
+        .collect()
+}
+
+/// Accelerations of the frame mapped to the model's `q''`.
+fn to_model(g: &mut Graph, frame: &Frame, a: Vec<V>) -> Vec<V> {
+    match frame {
+        Frame::Model(_) => a,
+        Frame::Angles(_, ac) => (0..a.len())
+            .map(|i| combination(g, &ac.s_inv[i], &a))
+            .collect(),
+    }
+}
+
 #[allow(clippy::too_many_arguments)]
-/// `x' = (q', M^-1 r)` at the state values `xs`. With `shift = (x0, d)`
-/// (a Runge-Kutta stage `xs = x0 + d`), `sin(q)` and `cos(q)` of a coordinate
-/// whose sine or cosine was needed at `x0` are formed by the addition
-/// formulas from those at `x0` and `sin_cos_step(d)`.
+/// `x' = (q', q'')` at the state values `xs`. With `shift = (theta0, d)`
+/// (a Runge-Kutta stage `xs = x0 + d`), `sin` and `cos` of a trigonometric
+/// argument whose sine or cosine was needed at `x0` are formed by the
+/// addition formulas from those at `x0` and `sin_cos_step` of its increment.
 fn state_derivative(
     g: &mut Graph,
     model: &Model,
-    eqs: &Equations,
-    rhs: &[Expr],
+    frame: &Frame,
     xs: &[V],
     us: &[V],
     ps: &[V],
     shift: Option<(&[V], &[V])>,
-) -> Result<Vec<V>, Error> {
-    let n = rhs.len();
+) -> Result<(Vec<V>, Vec<V>), Error> {
+    let n = frame.n();
     let mut e = env(g, model, xs, us, ps)?;
-    if let Some((x0, d)) = shift {
-        for (i, q) in model.state_symbols().into_iter().take(n).enumerate() {
-            if g.has_trig(x0[i]) {
-                let (s, c) = g.sin_cos_shifted(x0[i], d[i]);
-                let q = Expr::symbol(q);
+    let theta = bind_angles(g, &mut e, frame, xs);
+    if let Some((a0, d)) = shift {
+        let (args, syms): (Vec<V>, Vec<Symbol>) = match frame {
+            Frame::Model(_) => (
+                a0[..n].to_vec(),
+                model.state_symbols().into_iter().take(n).collect(),
+            ),
+            Frame::Angles(_, ac) => (a0.to_vec(), ac.coords.iter().map(|c| c.q).collect()),
+        };
+        let incr: Vec<V> = match frame {
+            Frame::Model(_) => d[..n].to_vec(),
+            Frame::Angles(_, ac) => (0..n).map(|k| combination(g, &ac.s[k], &d[..n])).collect(),
+        };
+        for i in 0..n {
+            if g.has_trig(args[i]) {
+                let (s, c) = g.sin_cos_shifted(args[i], incr[i]);
+                let q = Expr::symbol(syms[i]);
                 e.preset(q.sin(), s);
                 e.preset(q.cos(), c);
             }
         }
     }
-    let (m, r) = mass_and_rhs(g, &mut e, eqs, rhs)?;
+    let (m, r) = mass_and_rhs(g, &mut e, frame)?;
     let a = g.solve_sym(&m, &[r]).remove(0);
+    let a = to_model(g, frame, a);
     let mut out: Vec<V> = xs[n..].to_vec();
     out.extend(a);
-    Ok(out)
+    let args = match frame {
+        Frame::Model(_) => xs[..n].to_vec(),
+        Frame::Angles(..) => theta,
+    };
+    Ok((out, args))
+}
+
+/// `d e / d x_j` for the state variable `j` (`q_j` or `q_j'`), through the
+/// frame's coordinates: `sum_k S[k][j] de/dtheta_k + de/dq_j`.
+fn state_diff(frame: &Frame, model: &Model, e: Expr, j: usize) -> Expr {
+    let state = model.state_symbols();
+    let direct = diff(e, state[j]);
+    match frame {
+        Frame::Model(_) => direct,
+        Frame::Angles(_, ac) => {
+            let n = frame.n();
+            let (col, vel) = (j % n, j >= n);
+            let mut terms = vec![direct];
+            for k in 0..n {
+                let c = ac.s[k][col];
+                if c.is_zero() {
+                    continue;
+                }
+                let t = if vel { ac.coords[k].qd } else { ac.coords[k].q };
+                let d = diff(e, t);
+                if !d.is_zero() {
+                    terms.push(Expr::rational(c) * d);
+                }
+            }
+            Expr::add_all(terms)
+        }
+    }
 }
 
 /// The generated plant items.
@@ -120,8 +268,26 @@ pub(crate) fn plant_items(model: &Model, eqs: &Equations) -> Result<TokenStream,
     let n = eqs.coords.len();
     let nx = 2 * n;
     let nu = eqs.inputs.len();
-    let rhs = eqs.rhs();
-    let state = model.state_symbols();
+    let ac = angle_coordinates(model).map_err(Error::Mechanics)?;
+    let frame = match &ac {
+        Some(ac) => Frame::Angles(eqs, ac),
+        None => Frame::Model(eqs),
+    };
+    let (mass_f, rhs_f): (Vec<Vec<Expr>>, Vec<Expr>) = match &frame {
+        Frame::Model(eqs) => (eqs.mass_matrix.clone(), eqs.rhs()),
+        Frame::Angles(eqs, ac) => {
+            let forces = applied_forces(eqs);
+            let rhs = (0..n)
+                .map(|k| {
+                    let f: Expr = (0..n)
+                        .map(|i| Expr::rational(ac.s_inv[i][k]) * forces[i])
+                        .sum();
+                    f - ac.equations.bias[k]
+                })
+                .collect();
+            (ac.equations.mass_matrix.clone(), rhs)
+        }
+    };
 
     let mut g = Graph::new();
     let xs: Vec<V> = (0..nx)
@@ -139,27 +305,39 @@ pub(crate) fn plant_items(model: &Model, eqs: &Equations) -> Result<TokenStream,
     let ps = param_inputs(&mut g, model, &quote!(p));
 
     // dynamics
-    let dyn_out = state_derivative(&mut g, model, eqs, &rhs, &xs, &us, &ps, None)?;
+    let (dyn_out, args0) = state_derivative(&mut g, model, &frame, &xs, &us, &ps, None)?;
 
     // Jacobians: da/dx_k = M^-1 (dr/dx_k - dM/dx_k a), da/du_k = M^-1 dr/du_k
+    // (a, M, r in the frame's coordinates, then mapped to q'')
     let mut e = env(&mut g, model, &xs, &us, &ps)?;
-    let (m, _) = mass_and_rhs(&mut g, &mut e, eqs, &rhs)?;
-    let a: Vec<V> = dyn_out[n..].to_vec();
+    bind_angles(&mut g, &mut e, &frame, &xs);
+    let (m, _) = mass_and_rhs(&mut g, &mut e, &frame)?;
+    let a_frame: Vec<V> = match &frame {
+        Frame::Model(_) => dyn_out[n..].to_vec(),
+        Frame::Angles(..) => {
+            let (m2, r2) = mass_and_rhs(&mut g, &mut e, &frame)?;
+            g.solve_sym(&m2, &[r2]).remove(0)
+        }
+    };
     let mut cols = Vec::new();
-    for s in &state {
+    for j in 0..nx {
         let mut col = Vec::new();
         for i in 0..n {
-            let mut c = g.expr(&mut e, diff(rhs[i], *s))?;
-            for j in 0..n {
-                let dm = g.expr(&mut e, diff(eqs.mass_matrix[i][j], *s))?;
-                let t = g.mul(dm, a[j]);
+            let mut c = g.expr(&mut e, state_diff(&frame, model, rhs_f[i], j))?;
+            for (k, ak) in a_frame.iter().enumerate() {
+                let dm = g.expr(&mut e, state_diff(&frame, model, mass_f[i][k], j))?;
+                let t = g.mul(dm, *ak);
                 c = g.sub(c, t);
             }
             col.push(c);
         }
         cols.push(col);
     }
-    let da = g.solve_sym(&m, &cols);
+    let da: Vec<Vec<V>> = g
+        .solve_sym(&m, &cols)
+        .into_iter()
+        .map(|c| to_model(&mut g, &frame, c))
+        .collect();
     let (zero, one) = (g.konst(0.0), g.konst(1.0));
     let mut jx = Vec::new(); // row-major
     for r in 0..nx {
@@ -178,11 +356,15 @@ pub(crate) fn plant_items(model: &Model, eqs: &Equations) -> Result<TokenStream,
     let mut ucols = Vec::new();
     for s in &eqs.inputs {
         let col = (0..n)
-            .map(|i| g.expr(&mut e, diff(rhs[i], *s)))
+            .map(|i| g.expr(&mut e, diff(rhs_f[i], *s)))
             .collect::<Result<Vec<_>, _>>()?;
         ucols.push(col);
     }
-    let db = g.solve_sym(&m, &ucols);
+    let db: Vec<Vec<V>> = g
+        .solve_sym(&m, &ucols)
+        .into_iter()
+        .map(|c| to_model(&mut g, &frame, c))
+        .collect();
     let mut ju = Vec::new();
     for r in 0..nx {
         for k in 0..nu {
@@ -205,11 +387,11 @@ pub(crate) fn plant_items(model: &Model, eqs: &Equations) -> Result<TokenStream,
         (y, d)
     };
     let (y2, d2) = stage(&mut g, &k1, hh);
-    let k2 = state_derivative(&mut g, model, eqs, &rhs, &y2, &us, &ps, Some((&xs, &d2)))?;
+    let (k2, _) = state_derivative(&mut g, model, &frame, &y2, &us, &ps, Some((&args0, &d2)))?;
     let (y3, d3) = stage(&mut g, &k2, hh);
-    let k3 = state_derivative(&mut g, model, eqs, &rhs, &y3, &us, &ps, Some((&xs, &d3)))?;
+    let (k3, _) = state_derivative(&mut g, model, &frame, &y3, &us, &ps, Some((&args0, &d3)))?;
     let (y4, d4) = stage(&mut g, &k3, h);
-    let k4 = state_derivative(&mut g, model, eqs, &rhs, &y4, &us, &ps, Some((&xs, &d4)))?;
+    let (k4, _) = state_derivative(&mut g, model, &frame, &y4, &us, &ps, Some((&args0, &d4)))?;
     let mut rk = Vec::new();
     for i in 0..nx {
         let s23 = g.add(k2[i], k3[i]);

@@ -8,7 +8,7 @@
 
 use std::time::Instant;
 
-use plantc_derive::analysis::{lie_chain, normal_form, zero_dynamics};
+use plantc_derive::analysis::{normal_form, zero_dynamics};
 use plantc_derive::control::{output_expr, Derivation};
 use plantc_derive::model::{load_model_text, ParameterValues};
 
@@ -25,7 +25,7 @@ fn pipeline(name: &str, text: &str, output: &str, set: Option<&str>, full: bool)
     let values = ParameterValues::new(model, set, &[]).expect("parameter set");
     let d = Derivation::new(model).expect("equations");
     let h = output_expr(model, output).expect("output");
-    let chain = lie_chain(&d.affine, h).expect("Lie derivatives");
+    let chain = d.lie_chain(model, h).expect("Lie derivatives");
     if !full {
         return (chain.relative_degree, 0.0);
     }

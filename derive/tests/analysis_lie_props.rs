@@ -5,7 +5,7 @@
 use std::collections::HashMap;
 use std::path::Path;
 
-use plantc_derive::analysis::{lie_chain, lie_derivative};
+use plantc_derive::analysis::lie_derivative;
 use plantc_derive::control::{output_expr, Derivation};
 use plantc_derive::model::{load_model, ParameterValues};
 use plantc_derive::sym::{Expr, Symbol};
@@ -27,15 +27,18 @@ fn case(file: &str, output: &str) -> Case {
     let model = &loaded.model;
     let values = ParameterValues::new(model, None, &[]).expect("values");
     let d = Derivation::new(model).expect("derivation");
-    let chain = lie_chain(&d.affine, output_expr(model, output).expect("output")).expect("chain");
-    let st = &d.affine.state;
+    let chain = d
+        .lie_chain(model, output_expr(model, output).expect("output"))
+        .expect("chain");
+    let ca = d.affine().expect("control-affine form");
+    let st = &ca.state;
     let x = |i: usize| Expr::symbol(st[i]);
     let mut hs = chain.lf.clone();
     hs.push(x(0).sin() * x(3).powi(2) + x(1).cos() * x(2));
     Case {
         state: st.clone(),
-        f: d.affine.f.clone(),
-        g: d.affine.g.iter().map(|r| r[0]).collect(),
+        f: ca.f.clone(),
+        g: ca.g.iter().map(|r| r[0]).collect(),
         hs,
         params: values.symbol_map(model),
     }

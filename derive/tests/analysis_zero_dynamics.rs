@@ -4,7 +4,7 @@
 
 use std::path::Path;
 
-use plantc_derive::analysis::{lie_chain, normal_form, zero_dynamics, ZeroDynamicsClass};
+use plantc_derive::analysis::{normal_form, zero_dynamics, ZeroDynamicsClass};
 use plantc_derive::control::{output_expr, Derivation};
 use plantc_derive::model::{load_model, LoadedModel, ParameterValues};
 use plantc_derive::sym::{is_zero, Expr};
@@ -30,7 +30,7 @@ fn analyse(file: &str, output: &str, set: Option<&str>) -> Analysed {
     let values = ParameterValues::new(model, set, &[]).expect("values");
     let d = Derivation::new(model).expect("derivation");
     let h = output_expr(model, output).expect("output");
-    let chain = lie_chain(&d.affine, h).expect("chain");
+    let chain = d.lie_chain(model, h).expect("chain");
     let nf = normal_form(model, &d, &chain, &values, None).expect("normal form");
     let zd = zero_dynamics(model, &nf, &values).expect("zero dynamics");
     Analysed {

@@ -72,8 +72,8 @@ fn numeric_dynamics_match_control_affine_form() {
             map.extend(states.iter().copied().zip(x.iter().copied()));
             map.extend(inputs.iter().copied().zip(u.iter().copied()));
             for (i, got) in dx.iter().enumerate() {
-                let want = derivation.affine.f[i].eval_map(&map)
-                    + derivation.affine.g[i][0].eval_map(&map) * u[0];
+                let ca = derivation.affine().expect("control-affine form");
+                let want = ca.f[i].eval_map(&map) + ca.g[i][0].eval_map(&map) * u[0];
                 let err = (got - want).abs() / want.abs().max(1e-6);
                 worst = worst.max(err);
                 assert!(

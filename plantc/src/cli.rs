@@ -60,6 +60,14 @@ pub enum Command {
         /// Print LaTeX instead of plain text.
         #[arg(long, conflicts_with = "json")]
         latex: bool,
+        /// Expand f = (q', M^-1 (Q0 - bias)) and g = (0, M^-1 B) whatever the
+        /// size (by default only up to 3 coordinates; larger systems are
+        /// printed by their structure).
+        #[arg(long, conflicts_with = "no_expand")]
+        expand: bool,
+        /// Never expand f and g (print M, bias, Q0, B only).
+        #[arg(long)]
+        no_expand: bool,
     },
     /// Linearize about an operating point (default: every state and input 0).
     Linearize {

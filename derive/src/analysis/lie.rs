@@ -21,6 +21,11 @@ pub enum AnalysisError {
         /// Number of inputs.
         inputs: usize,
     },
+    /// An exact computation hit its term budget; the reason says which and why.
+    Budget {
+        /// What stopped, and why.
+        reason: String,
+    },
     /// The output named is not declared in the model.
     UnknownOutput {
         /// The name.
@@ -41,6 +46,7 @@ impl fmt::Display for AnalysisError {
                 f,
                 "input-output linearization is implemented for one input; the model has {inputs}"
             ),
+            AnalysisError::Budget { reason } => write!(f, "analysis stopped: {reason}"),
             AnalysisError::UnknownOutput { name, known } => {
                 write!(
                     f,
@@ -77,6 +83,12 @@ pub struct LieChain {
     /// State-dependent factors of `L_g L_f^(r-1) h` whose zeros make the law
     /// singular (e.g. `cos(alpha)`), and the full decoupling term.
     pub singular_factors: Vec<Expr>,
+    /// What the singular set is when it is not a list of factors (e.g. none
+    /// because the decoupling term is a diagonal entry of `M^-1`).
+    pub singular_note: Option<String>,
+    /// The parts of a mechanical output's derivatives (`h(q)` through `M`,
+    /// `Q0 - bias`, `B`), when computed that way.
+    pub mechanical: Option<super::mechanical::MechanicalParts>,
 }
 
 impl LieChain {
@@ -87,6 +99,9 @@ impl LieChain {
 
     /// The singular set as text, e.g. `cos(alpha) = 0`.
     pub fn singular_set(&self) -> String {
+        if let Some(note) = &self.singular_note {
+            return note.clone();
+        }
         if self.singular_factors.is_empty() {
             return "none (L_g L_f^(r-1) h has no state-dependent factor)".into();
         }
@@ -110,7 +125,7 @@ impl LieChain {
 }
 
 /// Factors of `e`'s numerator that depend on the state.
-fn state_factors(e: Expr, state: &[Symbol]) -> Vec<Expr> {
+pub(crate) fn state_factors(e: Expr, state: &[Symbol]) -> Vec<Expr> {
     let depends = |x: Expr| state.iter().any(|s| x.contains(*s));
     let factors: Vec<Expr> = match e.node() {
         Node::Mul(fs) => fs.to_vec(),
@@ -146,6 +161,8 @@ pub fn lie_chain(ca: &ControlAffine, h: Expr) -> Result<LieChain, AnalysisError>
         if !is_zero(lgk) {
             return Ok(LieChain {
                 singular_factors: state_factors(lgk, &ca.state),
+                singular_note: None,
+                mechanical: None,
                 lf,
                 lg,
                 relative_degree: k + 1,

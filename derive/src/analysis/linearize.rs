@@ -13,7 +13,7 @@ use nalgebra::{DMatrix, DVector};
 
 use crate::mechanics::Equations;
 use crate::model::{Model, ParameterValues};
-use crate::sym::{diff, Expr, Func, Node, Symbol};
+use crate::sym::{eval_jacobian, Expr, Func, Node, Symbol};
 
 /// The state and input values to linearize about (SI units, model order).
 #[derive(Clone, Debug, PartialEq)]
@@ -161,8 +161,17 @@ pub fn linearize(
              its derivative is taken as 0, so the term drops out of the linearization"
         ));
     }
-    let eval = |e: Expr, entry: &dyn Fn() -> String| -> Result<f64, LinearizeError> {
-        let v = e.eval_map(&at);
+    // values and first derivatives of M and r = Q0 - bias + B u in one
+    // forward-mode pass (exact up to rounding, no symbolic derivatives)
+    let mut vars = state.clone();
+    vars.extend(eqs.inputs.iter().copied());
+    let mut outs: Vec<Expr> = Vec::with_capacity(n * n + n);
+    for row in &eqs.mass_matrix {
+        outs.extend(row.iter().copied());
+    }
+    outs.extend(rhs.iter().copied());
+    let (vals, jac) = eval_jacobian(&outs, &vars, &at);
+    let finite = |v: f64, entry: &dyn Fn() -> String| -> Result<f64, LinearizeError> {
         if v.is_finite() {
             Ok(v)
         } else {
@@ -172,12 +181,14 @@ pub fn linearize(
     let mut mass = DMatrix::zeros(n, n);
     for i in 0..n {
         for j in 0..n {
-            mass[(i, j)] = eval(eqs.mass_matrix[i][j], &|| format!("M[{i}][{j}]"))?;
+            mass[(i, j)] = finite(vals[i * n + j], &|| format!("M[{i}][{j}]"))?;
         }
     }
     let mut r0 = DVector::zeros(n);
     for i in 0..n {
-        r0[i] = eval(rhs[i], &|| format!("the right-hand side of equation {i}"))?;
+        r0[i] = finite(vals[n * n + i], &|| {
+            format!("the right-hand side of equation {i}")
+        })?;
     }
     let lu = mass.clone().lu();
     let acc = lu.solve(&r0).ok_or(LinearizeError::SingularMassMatrix)?;
@@ -193,11 +204,11 @@ pub fn linearize(
     for (k, s) in state.iter().enumerate() {
         let name = s.name();
         for i in 0..n {
-            let mut v = eval(diff(rhs[i], *s), &|| format!("d r{i} / d {name}"))?;
+            let mut v = finite(jac[n * n + i][k], &|| format!("d r{i} / d {name}"))?;
             for j in 0..n {
-                let dm = diff(eqs.mass_matrix[i][j], *s);
-                if !dm.is_zero() {
-                    v -= eval(dm, &|| format!("d M[{i}][{j}] / d {name}"))? * acc[j];
+                let dm = jac[i * n + j][k];
+                if dm != 0.0 {
+                    v -= finite(dm, &|| format!("d M[{i}][{j}] / d {name}"))? * acc[j];
                 }
             }
             drdx[(i, k)] = v;
@@ -206,7 +217,9 @@ pub fn linearize(
     let mut drdu = DMatrix::zeros(n, m);
     for (k, u) in eqs.inputs.iter().enumerate() {
         for i in 0..n {
-            drdu[(i, k)] = eval(diff(rhs[i], *u), &|| format!("d r{i} / d {}", u.name()))?;
+            drdu[(i, k)] = finite(jac[n * n + i][2 * n + k], &|| {
+                format!("d r{i} / d {}", u.name())
+            })?;
         }
     }
     let lower_a = lu.solve(&drdx).ok_or(LinearizeError::SingularMassMatrix)?;

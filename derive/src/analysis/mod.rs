@@ -5,14 +5,20 @@
 
 mod lie;
 mod linearize;
+mod mechanical;
 mod normal_form;
+mod report;
 mod sliding;
 mod stability_interval;
 mod zero_dynamics;
 
 pub use lie::{lie_chain, lie_derivative, AnalysisError, LieChain};
 pub use linearize::{linearize, Linearization, LinearizeError, OperatingPoint};
+pub use mechanical::{
+    mechanical_chain, MechanicalParts, ANALYSIS_MAX_TERMS, EXPLICIT_MAX_COORDINATES,
+};
 pub use normal_form::{candidates, normal_form, NormalForm, NormalFormError};
+pub use report::{analyze_output, OutputAnalysisError, OutputReport};
 pub use sliding::{sliding_analysis, SlidingAnalysis, SlidingError};
 pub use stability_interval::{
     stability_interval, KPoly, StabilityError, StabilityInterval, METHOD as STABILITY_METHOD,

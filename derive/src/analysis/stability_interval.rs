@@ -2,9 +2,11 @@
 //! vary together along a line (`a = b = k`).
 //!
 //! Method: the closed-loop Jacobian `A_cl(k) = d/dx [f + g u(x; k)]` at `x = 0`
-//! is formed symbolically; each entry is a polynomial in `k` (structural
-//! degree bound), whose coefficients are the Taylor coefficients
-//! `d^m/dk^m entry / m!` at `k = 0`, evaluated with the parameter values. The
+//! is formed through the mechanical structure, never the expanded `M^-1`:
+//! its lower half is `M0^-1 (dr0/dx + dB/dx u + B du/dx - dM/dx a0)` with
+//! `M0 = M(0)` numeric and `u(0; k)`, `du/dx(0; k)` polynomials in `k`
+//! (structural degree bound) whose coefficients are the Taylor coefficients
+//! `d^m/dk^m / m!` at `k = 0`, evaluated with the parameter values. The
 //! characteristic polynomial `det(sI - A_cl(k))` is computed over the ring of
 //! polynomials in `k` (Faddeev-LeVerrier: only divisions by integers), then
 //! the Hurwitz conditions (every coefficient and every leading Hurwitz minor
@@ -375,11 +377,13 @@ pub fn stability_interval(
             });
         }
     }
-    let ca = &derivation.affine;
-    let n = ca.state.len();
+    let eqs = &derivation.equations;
+    let nq = eqs.coords.len();
+    let n = 2 * nq;
     if n > 10 {
         return Err(StabilityError::TooLarge { n });
     }
+    let state = model.state_symbols();
     let k = Symbol::new("k\u{2032}sweep");
     let mut gain_map: HashMap<Symbol, Expr> = HashMap::new();
     for (g, val) in gains {
@@ -391,40 +395,106 @@ pub fn stability_interval(
         gain_map.insert(*g, e);
     }
     let u = substitute_symbols(*law, &gain_map);
-    let zero_state: HashMap<Symbol, Expr> = ca.state.iter().map(|s| (*s, Expr::zero())).collect();
+    let zero_state: HashMap<Symbol, Expr> = state.iter().map(|s| (*s, Expr::zero())).collect();
     let mut point = values.symbol_map(model);
     point.insert(k, 0.0);
-    for s in &ca.state {
+    for s in &state {
         point.insert(*s, 0.0);
     }
-    for s in &ca.inputs {
+    for s in &eqs.inputs {
         point.insert(*s, 0.0);
     }
     let mut memo = HashMap::new();
-    let mut a_cl = vec![vec![KPoly::zero(); n]; n];
-    for (i, row) in a_cl.iter_mut().enumerate() {
-        let fi = ca.f[i] + ca.g[i][0] * u;
-        for (j, entry) in row.iter_mut().enumerate() {
-            let e = substitute_symbols(diff(fi, ca.state[j]), &zero_state);
-            let deg = degree_in(e, k, &mut memo)
-                .ok_or(StabilityError::NotPolynomial { entry: (i, j) })?;
-            let mut coeffs = Vec::with_capacity(deg as usize + 1);
-            let mut dm = e;
-            let mut fact = 1.0;
-            for m in 0..=deg {
-                if m > 0 {
-                    dm = diff(dm, k);
-                    fact *= m as f64;
-                }
-                let v = dm.eval_map(&point) / fact;
-                if !v.is_finite() {
-                    return Err(StabilityError::NotFinite {
-                        what: format!("A_cl[{i}][{j}]"),
-                    });
-                }
-                coeffs.push(v);
+    // A polynomial in k from an expression (Taylor coefficients at k = 0).
+    let mut kpoly = |e: Expr, what: &dyn Fn() -> String, entry: (usize, usize)| {
+        let e = substitute_symbols(e, &zero_state);
+        let deg = degree_in(e, k, &mut memo).ok_or(StabilityError::NotPolynomial { entry })?;
+        let mut coeffs = Vec::with_capacity(deg as usize + 1);
+        let mut dm = e;
+        let mut fact = 1.0;
+        for m in 0..=deg {
+            if m > 0 {
+                dm = diff(dm, k);
+                fact *= m as f64;
             }
-            *entry = KPoly(coeffs);
+            let v = dm.eval_map(&point) / fact;
+            if !v.is_finite() {
+                return Err(StabilityError::NotFinite { what: what() });
+            }
+            coeffs.push(v);
+        }
+        Ok(KPoly(coeffs))
+    };
+    let num = |e: Expr, what: &str| -> Result<f64, StabilityError> {
+        let v = e.eval_map(&point);
+        if v.is_finite() {
+            Ok(v)
+        } else {
+            Err(StabilityError::NotFinite {
+                what: what.to_string(),
+            })
+        }
+    };
+    // M(0), r0 = Q0 - bias, B (single input) and their derivatives at the origin
+    let b: Vec<Expr> = eqs.input_matrix.iter().map(|r| r[0]).collect();
+    let r0: Vec<Expr> = (0..nq).map(|i| eqs.forces[i] - eqs.bias[i]).collect();
+    let m0 = DMatrix::from_fn(nq, nq, |i, j| eqs.mass_matrix[i][j].eval_map(&point));
+    if m0.iter().any(|v| !v.is_finite()) {
+        return Err(StabilityError::NotFinite { what: "M".into() });
+    }
+    let lu = m0.lu();
+    let solve = |v: &[KPoly]| -> Result<Vec<KPoly>, StabilityError> {
+        // M0^-1 applied to a vector of polynomials, coefficient by coefficient
+        let deg = v.iter().map(|p| p.0.len()).max().unwrap_or(0);
+        let mut out = vec![KPoly(vec![0.0; deg]); v.len()];
+        for d in 0..deg {
+            let col =
+                nalgebra::DVector::from_fn(v.len(), |i, _| v[i].0.get(d).copied().unwrap_or(0.0));
+            let x = lu.solve(&col).ok_or(StabilityError::NotFinite {
+                what: "M^-1 (singular mass matrix)".into(),
+            })?;
+            for i in 0..v.len() {
+                out[i].0[d] = x[i];
+            }
+        }
+        Ok(out)
+    };
+    let u0 = kpoly(u, &|| "the law".into(), (0, 0))?;
+    // accelerations at the origin: a0 = M0^-1 (r(0) with u = u0(k))
+    let acc_rhs: Vec<KPoly> = (0..nq)
+        .map(|i| {
+            let r = num(substitute_symbols(r0[i], &zero_state), "Q0 - bias")?;
+            let bi = num(substitute_symbols(b[i], &zero_state), "B")?;
+            Ok(KPoly::constant(r).add(&u0.scale(bi)))
+        })
+        .collect::<Result<_, StabilityError>>()?;
+    let a0 = solve(&acc_rhs)?;
+    let mut a_cl = vec![vec![KPoly::zero(); n]; n];
+    for i in 0..nq {
+        a_cl[i][nq + i] = KPoly::constant(1.0);
+    }
+    for (j, xj) in state.iter().enumerate() {
+        let du = kpoly(
+            diff(u, *xj),
+            &|| format!("d law / d {}", xj.name()),
+            (nq, j),
+        )?;
+        let mut col = Vec::with_capacity(nq);
+        for i in 0..nq {
+            let z = |e: Expr| substitute_symbols(diff(e, *xj), &zero_state);
+            let mut c = KPoly::constant(num(z(r0[i]), "d(Q0 - bias)/dx")?)
+                .add(&u0.scale(num(z(b[i]), "dB/dx")?))
+                .add(&du.scale(num(substitute_symbols(b[i], &zero_state), "B")?));
+            for (jj, a0j) in a0.iter().enumerate() {
+                let dm = z(eqs.mass_matrix[i][jj]);
+                if !dm.is_zero() {
+                    c = c.add(&a0j.scale(-num(dm, "dM/dx")?));
+                }
+            }
+            col.push(c);
+        }
+        for (i, v) in solve(&col)?.into_iter().enumerate() {
+            a_cl[nq + i][j] = v;
         }
     }
     let cp = char_poly(&a_cl);

@@ -1,24 +1,34 @@
 //! Zero dynamics `eta' = q(0, eta) = L_f eta` on the manifold `xi = 0`, their
 //! linearization at `eta = 0` and a classification (minimum phase or not).
 //!
-//! The state is expressed in `eta` coordinates on `xi = 0` symbolically: each
-//! `xi_k` must reduce (after the earlier ones are set to zero) to a constant
-//! multiple of a state variable, which is set to zero; then `eta` components
-//! that are a multiple of a state variable give it directly, and the remaining
-//! state variables must enter the remaining `eta` linearly (momenta are linear
-//! in the velocities); that linear system is solved by Cramer's rule through
-//! the adjugate and the determinant.
+//! The state is expressed in `eta` coordinates on `xi = 0`:
+//!
+//! 1. components of `eta` that are a constant multiple of a state variable
+//!    give it directly (`eta1 = theta`);
+//! 2. position-level components of `xi` (no velocities, e.g. `h = q1 + q2 +
+//!    q3`) are solved for a remaining coordinate in which they are linear;
+//! 3. the remaining components (velocity level: `L_f h = J q'`, momenta
+//!    `p = M q'`) must be linear in the remaining state variables; that linear
+//!    system is solved by Cramer's rule (adjugate over determinant, canonical
+//!    form) for up to [`EXPLICIT_MAX_COORDINATES`] coordinates, and beyond by
+//!    a symbolic LU solve whose pivots are chosen at `eta = 0`
+//!    ([`crate::mechanics::lu_solve_at`]), leaving the right-hand sides as
+//!    unexpanded expressions: the linearization is then exact numerically, and
+//!    the equations are reported by their parts.
 
 use std::collections::HashMap;
 use std::fmt;
 
 use nalgebra::DMatrix;
 
+use super::mechanical::{ANALYSIS_MAX_TERMS, EXPLICIT_MAX_COORDINATES};
 use super::normal_form::NormalForm;
 use crate::linear::{poles, Pole};
-use crate::mechanics::{adjugate, determinant};
+use crate::mechanics::{adjugate, determinant, lu_solve_at};
 use crate::model::{Model, ParameterValues};
-use crate::sym::{diff, is_zero, simplify, substitute_symbols, Expr, Node, Symbol};
+use crate::sym::{
+    diff, eval_jacobian, is_zero, substitute_symbols, Canonicalizer, Expr, Node, Symbol,
+};
 
 /// Why the zero dynamics could not be formed.
 #[derive(Clone, Debug, PartialEq)]
@@ -40,6 +50,11 @@ pub enum ZeroDynamicsError {
     },
     /// The eigenvalue computation failed.
     Eigen(String),
+    /// An exact computation hit its term budget.
+    Budget {
+        /// Why it stopped.
+        reason: String,
+    },
 }
 
 impl fmt::Display for ZeroDynamicsError {
@@ -47,7 +62,7 @@ impl fmt::Display for ZeroDynamicsError {
         match self {
             ZeroDynamicsError::CannotSolveOutput { xi } => write!(
                 f,
-                "cannot solve xi = 0 for the state: `{xi}` is not a multiple of one state variable"
+                "cannot solve xi = 0 for the state: `{xi}` is not linear in a coordinate with a nonzero coefficient at the operating point"
             ),
             ZeroDynamicsError::CannotSolveEta { reason } => {
                 write!(
@@ -57,6 +72,7 @@ impl fmt::Display for ZeroDynamicsError {
             }
             ZeroDynamicsError::NotFinite { entry } => write!(f, "{entry} is not finite at eta = 0"),
             ZeroDynamicsError::Eigen(e) => write!(f, "eigenvalues of the zero dynamics: {e}"),
+            ZeroDynamicsError::Budget { reason } => write!(f, "zero dynamics stopped: {reason}"),
         }
     }
 }
@@ -101,6 +117,11 @@ pub struct ZeroDynamics {
     pub jacobian: Vec<Vec<f64>>,
     /// Its eigenvalues.
     pub eigenvalues: Vec<Pole>,
+    /// True if `rhs` and `state_on_manifold` are expanded and simplified;
+    /// false if they are unexpanded expressions (large systems), in which
+    /// case [`ZeroDynamics::equations`] gives them by their parts.
+    pub explicit: bool,
+    text: Vec<String>,
     /// Largest `|rhs_i(0)|` (0 if `eta = 0` is an equilibrium).
     pub equilibrium_residual: f64,
     /// Tolerance used to decide "on the imaginary axis".
@@ -121,13 +142,10 @@ impl ZeroDynamics {
         self.asymptotically_stable()
     }
 
-    /// The equations as text, `eta1' = ...`.
+    /// The equations as text, `eta1' = ...` (by their parts when not
+    /// [`ZeroDynamics::explicit`]).
     pub fn equations(&self) -> Vec<String> {
-        self.eta_symbols
-            .iter()
-            .zip(&self.rhs)
-            .map(|(s, e)| format!("{}' = {e}", s.name()))
-            .collect()
+        self.text.clone()
     }
 }
 
@@ -177,6 +195,29 @@ fn eta_names(model: &Model, count: usize) -> Vec<Symbol> {
         .collect()
 }
 
+/// `e = c * s + rest` with `s` one of `vars` and `c` free of `s` and
+/// nonzero at `point`: `(s, -rest/c)`.
+fn linear_in_one(e: Expr, vars: &[Symbol], point: &HashMap<Symbol, f64>) -> Option<(Symbol, Expr)> {
+    for s in vars {
+        if !e.contains(*s) {
+            continue;
+        }
+        let c = diff(e, *s);
+        if c.contains(*s) {
+            continue;
+        }
+        let cv = c.eval_map(point);
+        if !cv.is_finite() || cv.abs() < 1e-12 {
+            continue;
+        }
+        let mut z = HashMap::new();
+        z.insert(*s, Expr::zero());
+        let rest = substitute_symbols(e, &z);
+        return Some((*s, -rest / c));
+    }
+    None
+}
+
 /// The zero dynamics of `nf`, linearized at `eta = 0` with parameter `values`.
 pub fn zero_dynamics(
     model: &Model,
@@ -184,67 +225,119 @@ pub fn zero_dynamics(
     values: &ParameterValues,
 ) -> Result<ZeroDynamics, ZeroDynamicsError> {
     let state = &nf.state;
+    let n = model.coordinates.len();
+    let explicit = n <= EXPLICIT_MAX_COORDINATES;
+    let canon = std::cell::RefCell::new(Canonicalizer::new(ANALYSIS_MAX_TERMS));
+    let tidy = |e: Expr| -> Result<Expr, ZeroDynamicsError> {
+        if explicit {
+            canon
+                .borrow_mut()
+                .try_simplify(e)
+                .map_err(|x| ZeroDynamicsError::Budget {
+                    reason: format!("{x} (budget {ANALYSIS_MAX_TERMS} terms)"),
+                })
+        } else {
+            Ok(e)
+        }
+    };
+    let velocities: Vec<Symbol> = model.coordinates.iter().map(|c| c.symbols.qd).collect();
+    let moving = |e: Expr| velocities.iter().any(|v| e.contains(*v));
+    let etas = eta_names(model, nf.eta.len());
+    let mut point = values.symbol_map(model);
+    for s in etas.iter().chain(state.iter()) {
+        point.insert(*s, 0.0);
+    }
     let mut map: HashMap<Symbol, Expr> = HashMap::new();
     let mut free: Vec<Symbol> = state.clone();
-    for x in &nf.xi {
-        let e = simplify(substitute_symbols(*x, &map));
-        let Some((k, s)) = scaled_symbol(e, &free) else {
-            return Err(ZeroDynamicsError::CannotSolveOutput { xi: e.to_string() });
-        };
-        if is_zero(k) {
-            return Err(ZeroDynamicsError::CannotSolveOutput { xi: e.to_string() });
-        }
-        map.insert(s, Expr::zero());
-        free.retain(|v| *v != s);
-    }
-    let etas = eta_names(model, nf.eta.len());
-    // Components that are a multiple of one free state variable.
-    let mut pending: Vec<(Expr, Symbol)> = Vec::new();
+    // 1. eta components that are a multiple of one state variable
+    let mut pending: Vec<(Expr, Expr)> = Vec::new(); // (expression, value on the manifold)
     for (e, sym) in nf.eta.iter().zip(&etas) {
-        let e = simplify(substitute_symbols(*e, &map));
-        match scaled_symbol(e, &free) {
-            Some((k, s)) if !is_zero(k) => {
+        match scaled_symbol(*e, &free) {
+            Some((k, s)) if !is_zero(k) && !k.symbols().iter().any(|v| state.contains(v)) => {
                 map.insert(s, Expr::symbol(*sym) / k);
                 free.retain(|v| *v != s);
             }
-            _ => pending.push((e, *sym)),
+            _ => pending.push((*e, Expr::symbol(*sym))),
         }
     }
+    // 2. position-level xi: solve for a remaining coordinate
+    for x in &nf.xi {
+        let e = tidy(substitute_symbols(*x, &map))?;
+        if e.is_zero() {
+            continue;
+        }
+        if moving(e) {
+            pending.push((e, Expr::zero()));
+            continue;
+        }
+        let coords: Vec<Symbol> = free
+            .iter()
+            .copied()
+            .filter(|s| !velocities.contains(s))
+            .collect();
+        let Some((s, value)) = linear_in_one(e, &coords, &point) else {
+            return Err(ZeroDynamicsError::CannotSolveOutput { xi: e.to_string() });
+        };
+        let value = tidy(value)?;
+        for v in map.values_mut() {
+            let mut one = HashMap::new();
+            one.insert(s, value);
+            *v = tidy(substitute_symbols(*v, &one))?;
+        }
+        map.insert(s, value);
+        free.retain(|v| *v != s);
+    }
+    // 3. the rest: linear in the remaining state variables
     if pending.len() != free.len() {
         return Err(ZeroDynamicsError::CannotSolveEta {
             reason: format!("{} equations for {} unknowns", pending.len(), free.len()),
         });
     }
     if !pending.is_empty() {
-        // pending_i = sum_k a_ik u_k + b_i, linear in the free variables u.
         let zero_free: HashMap<Symbol, Expr> = free.iter().map(|s| (*s, Expr::zero())).collect();
         let mut a = Vec::new();
         let mut rhs = Vec::new();
-        for (e, sym) in &pending {
-            let e = simplify(substitute_symbols(*e, &map));
+        for (e, value) in &pending {
+            let e = tidy(substitute_symbols(*e, &map))?;
             let mut row = Vec::new();
             for u in &free {
                 let c = diff(e, *u);
-                if free.iter().any(|v| !is_zero(diff(c, *v))) {
+                let nonlinear = if explicit {
+                    free.iter().any(|v| !is_zero(diff(c, *v)))
+                } else {
+                    free.iter().any(|v| c.contains(*v))
+                };
+                if nonlinear {
                     return Err(ZeroDynamicsError::CannotSolveEta {
                         reason: format!("`{e}` is not linear in the remaining state variables"),
                     });
                 }
-                row.push(simplify(c));
+                row.push(tidy(c)?);
             }
             a.push(row);
-            rhs.push(Expr::symbol(*sym) - substitute_symbols(e, &zero_free));
+            rhs.push(*value - substitute_symbols(e, &zero_free));
         }
-        let det = simplify(determinant(&a));
-        if is_zero(det) {
-            return Err(ZeroDynamicsError::CannotSolveEta {
-                reason: "the remaining eta components are dependent on xi = 0".into(),
-            });
-        }
-        let adj = adjugate(&a);
-        for (k, u) in free.iter().enumerate() {
-            let num: Expr = (0..free.len()).map(|j| adj[k][j] * rhs[j]).sum();
-            map.insert(*u, simplify(num / det));
+        if explicit {
+            let det = tidy(determinant(&a))?;
+            if is_zero(det) {
+                return Err(ZeroDynamicsError::CannotSolveEta {
+                    reason: "the remaining eta components are dependent on xi = 0".into(),
+                });
+            }
+            let adj = adjugate(&a);
+            for (k, u) in free.iter().enumerate() {
+                let num: Expr = (0..free.len()).map(|j| adj[k][j] * rhs[j]).sum();
+                map.insert(*u, tidy(num / det)?);
+            }
+        } else {
+            let y =
+                lu_solve_at(&a, &rhs, &point).map_err(|_| ZeroDynamicsError::CannotSolveEta {
+                    reason: "the remaining eta components are dependent on xi = 0 (at eta = 0)"
+                        .into(),
+                })?;
+            for (u, v) in free.iter().zip(y) {
+                map.insert(*u, v);
+            }
         }
     }
     let state_on_manifold: Vec<(Symbol, Expr)> = state
@@ -254,29 +347,47 @@ pub fn zero_dynamics(
     let rhs: Vec<Expr> = nf
         .eta_dot
         .iter()
-        .map(|e| simplify(substitute_symbols(*e, &map)))
-        .collect();
+        .map(|e| tidy(substitute_symbols(*e, &map)))
+        .collect::<Result<_, _>>()?;
     // Linearization at eta = 0.
-    let mut point = values.symbol_map(model);
-    for s in &etas {
-        point.insert(*s, 0.0);
-    }
     let m = etas.len();
-    let mut jac = vec![vec![0.0; m]; m];
+    let (values0, jac) = eval_jacobian(&rhs, &etas, &point);
     let mut residual: f64 = 0.0;
     for i in 0..m {
-        residual = residual.max(rhs[i].eval_map(&point).abs());
+        residual = residual.max(values0[i].abs());
         for j in 0..m {
-            let v = diff(rhs[i], etas[j]).eval_map(&point);
-            if !v.is_finite() {
+            if !jac[i][j].is_finite() {
                 return Err(ZeroDynamicsError::NotFinite {
                     entry: format!("d({}')/d{}", etas[i].name(), etas[j].name()),
                 });
             }
-            jac[i][j] = v;
         }
     }
     let (eigenvalues, tolerance, class) = classify(&jac)?;
+    let equations = if explicit {
+        etas.iter()
+            .zip(&rhs)
+            .map(|(s, e)| format!("{}' = {e}", s.name()))
+            .collect()
+    } else {
+        let mut v: Vec<String> = etas
+            .iter()
+            .zip(&nf.eta_dot_text)
+            .map(|(s, t)| format!("{}' = {t}", s.name()))
+            .collect();
+        let coords: Vec<String> = state_on_manifold
+            .iter()
+            .filter(|(s, _)| !velocities.contains(s))
+            .map(|(s, e)| format!("{} = {e}", s.name()))
+            .collect();
+        v.push(format!(
+            "at {} and the velocities solving {} linear equations ({} components of xi and eta; not expanded for {n} coordinates)",
+            coords.join(", "),
+            pending.len(),
+            pending.len()
+        ));
+        v
+    };
     Ok(ZeroDynamics {
         eta_symbols: etas,
         rhs,
@@ -286,6 +397,8 @@ pub fn zero_dynamics(
         equilibrium_residual: residual,
         tolerance,
         class,
+        explicit,
+        text: equations,
     })
 }
 

@@ -13,12 +13,16 @@
 
 use std::fmt;
 
+use std::sync::OnceLock;
+
 use crate::analysis::{
-    lie_chain, linearize, AnalysisError, LieChain, LinearizeError, OperatingPoint,
+    lie_chain, linearize, mechanical_chain, AnalysisError, LieChain, LinearizeError,
+    OperatingPoint, ANALYSIS_MAX_TERMS,
 };
 use crate::linear::{lqr, place, LinearError, Pole};
 use crate::mechanics::{
-    control_affine, derive_equations, ControlAffine, Equations, MechanicsError,
+    control_affine_within, derive_equations, mass_matrix_conditioning, ControlAffine, Equations,
+    MechanicsError,
 };
 use crate::model::{ControllerSpec, Model, ParameterValues, SurfaceSpec, SwitchSpec};
 use crate::sym::{diff, is_zero, Expr, Symbol};
@@ -170,21 +174,67 @@ impl ResolvedController {
     }
 }
 
-/// Equations and control-affine form, derived once and shared.
+/// The equations of motion, derived once and shared; the expanded
+/// control-affine form only when asked for ([`Derivation::affine`]).
 #[derive(Clone, Debug)]
 pub struct Derivation {
     /// Euler-Lagrange equations (unsimplified, exact).
     pub equations: Equations,
-    /// `x' = f(x) + g(x) u`.
-    pub affine: ControlAffine,
+    affine: OnceLock<Result<ControlAffine, MechanicsError>>,
 }
 
+/// Screening states used to check that the mass matrix is nonsingular.
+const MASS_SCREEN_POINTS: usize = 3;
+
 impl Derivation {
-    /// Derive both for a model.
+    /// Derive the equations of a model and check that its mass matrix is
+    /// nonsingular (numerically at random states; exactly, through the
+    /// determinant, when it looks singular at all of them).
     pub fn new(model: &Model) -> Result<Derivation, MechanicsError> {
         let equations = derive_equations(model)?;
-        let affine = control_affine(&equations)?;
-        Ok(Derivation { equations, affine })
+        if mass_matrix_conditioning(model, &equations, MASS_SCREEN_POINTS) < 1e-13 {
+            let det = crate::sym::try_simplify_within(
+                crate::mechanics::determinant(&equations.mass_matrix),
+                ANALYSIS_MAX_TERMS,
+            )
+            .map_err(|e| MechanicsError::Budget {
+                what: "det M (the mass matrix looks singular at random states)".into(),
+                reason: e.to_string(),
+            })?;
+            if det.is_zero() {
+                return Err(MechanicsError::SingularMassMatrix);
+            }
+        }
+        Ok(Derivation {
+            equations,
+            affine: OnceLock::new(),
+        })
+    }
+
+    /// `x' = f(x) + g(x) u` with `M^-1` expanded (computed on first use, with
+    /// the analysis term budget: [`MechanicsError::Budget`] says why when it
+    /// is out of reach).
+    pub fn affine(&self) -> Result<&ControlAffine, MechanicsError> {
+        self.affine
+            .get_or_init(|| control_affine_within(&self.equations, ANALYSIS_MAX_TERMS))
+            .as_ref()
+            .map_err(Clone::clone)
+    }
+
+    /// The Lie chain of the output `h`: through the mechanical structure for
+    /// an output of the coordinates ([`mechanical_chain`]), otherwise from the
+    /// expanded control-affine form ([`lie_chain`]).
+    pub fn lie_chain(&self, model: &Model, h: Expr) -> Result<LieChain, AnalysisError> {
+        if let Some(c) = mechanical_chain(model, &self.equations, h)? {
+            return Ok(c);
+        }
+        let ca = self.affine().map_err(|e| AnalysisError::Budget {
+            reason: format!(
+                "the output needs the expanded control-affine form (it depends on velocities, \
+                 or L_g L_f h vanishes identically), and {e}"
+            ),
+        })?;
+        lie_chain(ca, h)
     }
 }
 
@@ -317,7 +367,9 @@ pub fn resolve(
                     )
                 }
             };
-            let chain = lie_chain(&derivation.affine, s).map_err(ControlError::Analysis)?;
+            let chain = derivation
+                .lie_chain(model, s)
+                .map_err(ControlError::Analysis)?;
             if chain.relative_degree != 1 {
                 return Err(bad(format!(
                     "the input reaches the surface only in derivative {} (relative degree {}); \
@@ -362,7 +414,9 @@ pub fn resolve(
             output, gains, v, ..
         } => {
             let h = output_expr(model, output).map_err(ControlError::Analysis)?;
-            let chain = lie_chain(&derivation.affine, h).map_err(ControlError::Analysis)?;
+            let chain = derivation
+                .lie_chain(model, h)
+                .map_err(ControlError::Analysis)?;
             let law = chain.law(*v);
             return Ok(ResolvedController::FeedbackLinearization {
                 name: name.to_string(),

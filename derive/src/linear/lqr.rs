@@ -2,6 +2,7 @@
 
 use nalgebra::{Cholesky, Complex, DMatrix, SymmetricEigen, SVD};
 
+use super::balance::balance;
 use super::error::{check_finite, check_pair, LinearError};
 use super::poles::{poles, Pole};
 
@@ -183,12 +184,95 @@ fn sign_function(h: &DMatrix<f64>) -> Result<DMatrix<f64>, LinearError> {
     })
 }
 
+/// Stabilizing CARE solution of `(a, g, q)` by the sign function of the
+/// Hamiltonian, refined by Newton-Kleinman.
+fn care_balanced(
+    a: &DMatrix<f64>,
+    g: &DMatrix<f64>,
+    q: &DMatrix<f64>,
+) -> Result<DMatrix<f64>, LinearError> {
+    let n = a.nrows();
+    // Hamiltonian and its sign.
+    let mut h = DMatrix::<f64>::zeros(2 * n, 2 * n);
+    h.view_mut((0, 0), (n, n)).copy_from(a);
+    h.view_mut((0, n), (n, n)).copy_from(&(-g));
+    h.view_mut((n, 0), (n, n)).copy_from(&(-q));
+    h.view_mut((n, n), (n, n)).copy_from(&(-a.transpose()));
+    let w = sign_function(&h)?;
+
+    // (W + I) [I; P] = 0  =>  [W12; W22 + I] P = -[W11 + I; W21].
+    let id = DMatrix::<f64>::identity(n, n);
+    let mut lhs = DMatrix::<f64>::zeros(2 * n, n);
+    lhs.view_mut((0, 0), (n, n))
+        .copy_from(&w.view((0, n), (n, n)));
+    lhs.view_mut((n, 0), (n, n))
+        .copy_from(&(w.view((n, n), (n, n)) + &id));
+    let mut rhs = DMatrix::<f64>::zeros(2 * n, n);
+    rhs.view_mut((0, 0), (n, n))
+        .copy_from(&(-(w.view((0, 0), (n, n)) + &id)));
+    rhs.view_mut((n, 0), (n, n))
+        .copy_from(&(-w.view((n, 0), (n, n))));
+    let svd = SVD::try_new(lhs, true, true, f64::EPSILON, 2000 + 200 * n).ok_or(
+        LinearError::SvdFailed {
+            rows: 2 * n,
+            cols: n,
+        },
+    )?;
+    let smax = svd.singular_values.max();
+    let smin = svd.singular_values.min();
+    if smin.is_nan() || smin <= 2.0 * n as f64 * f64::EPSILON * smax * 1e3 {
+        return Err(LinearError::CareFailed {
+            reason: "stable invariant subspace of the Hamiltonian is not a graph [I; P]",
+            residual: f64::NAN,
+        });
+    }
+    let p = svd.solve(&rhs, 0.0).map_err(|_| LinearError::CareFailed {
+        reason: "least-squares solve for P failed",
+        residual: f64::NAN,
+    })?;
+    let mut p = symmetric_part(&p);
+    let mut res = care_residual(a, g, q, &p);
+    if n <= NEWTON_MAX_N {
+        newton_kleinman(a, g, q, &mut p, &mut res);
+    }
+    Ok(p)
+}
+
+/// Newton-Kleinman refinement in correction form:
+/// `(A - G P)' E + E (A - G P) = -Res(P)`, `P <- P + E`, up to four steps,
+/// each kept only if it lowers the residual.
+fn newton_kleinman(
+    a: &DMatrix<f64>,
+    g: &DMatrix<f64>,
+    q: &DMatrix<f64>,
+    p: &mut DMatrix<f64>,
+    res: &mut f64,
+) {
+    for _ in 0..4 {
+        if *res < 1e-15 {
+            break;
+        }
+        let (r_mat, _) = residual_and_scale(a, g, q, p);
+        let f = a - g * &*p;
+        let Some(e) = lyapunov(&f, &r_mat) else { break };
+        let candidate = symmetric_part(&(&*p + e));
+        let cres = care_residual(a, g, q, &candidate);
+        if cres.is_finite() && cres < *res {
+            *p = candidate;
+            *res = cres;
+        } else {
+            break;
+        }
+    }
+}
+
 /// Continuous-time LQR: minimises `integral x'Qx + u'Ru dt` for `x' = Ax + Bu`,
 /// `u = -K x`.
 ///
 /// Method: the stabilizing CARE solution is read off the sign function of the
 /// Hamiltonian `[[A, -G], [-Q, -A']]` (`G = B R^-1 B'`, Newton iteration with
-/// determinant scaling, stable subspace by a least-squares solve), then refined
+/// determinant scaling, stable subspace by a least-squares solve) on the
+/// balanced realisation (see [`super::balance`]), then refined
 /// by up to four Newton-Kleinman steps (Lyapunov equations solved as Kronecker
 /// systems, n <= 30), each kept only if it lowers the residual.
 ///
@@ -228,66 +312,18 @@ pub fn lqr(
     let rinv_bt = chol.solve(&b.transpose()); // m x n
     let g = symmetric_part(&(b * &rinv_bt));
 
-    // Hamiltonian and its sign.
-    let mut h = DMatrix::<f64>::zeros(2 * n, 2 * n);
-    h.view_mut((0, 0), (n, n)).copy_from(a);
-    h.view_mut((0, n), (n, n)).copy_from(&(-&g));
-    h.view_mut((n, 0), (n, n)).copy_from(&(-&q));
-    h.view_mut((n, n), (n, n)).copy_from(&(-a.transpose()));
-    let w = sign_function(&h)?;
-
-    // (W + I) [I; P] = 0  =>  [W12; W22 + I] P = -[W11 + I; W21].
-    let id = DMatrix::<f64>::identity(n, n);
-    let mut lhs = DMatrix::<f64>::zeros(2 * n, n);
-    lhs.view_mut((0, 0), (n, n))
-        .copy_from(&w.view((0, n), (n, n)));
-    lhs.view_mut((n, 0), (n, n))
-        .copy_from(&(w.view((n, n), (n, n)) + &id));
-    let mut rhs = DMatrix::<f64>::zeros(2 * n, n);
-    rhs.view_mut((0, 0), (n, n))
-        .copy_from(&(-(w.view((0, 0), (n, n)) + &id)));
-    rhs.view_mut((n, 0), (n, n))
-        .copy_from(&(-w.view((n, 0), (n, n))));
-    let svd = SVD::try_new(lhs, true, true, f64::EPSILON, 2000 + 200 * n).ok_or(
-        LinearError::SvdFailed {
-            rows: 2 * n,
-            cols: n,
-        },
-    )?;
-    let smax = svd.singular_values.max();
-    let smin = svd.singular_values.min();
-    if smin.is_nan() || smin <= 2.0 * n as f64 * f64::EPSILON * smax * 1e3 {
-        return Err(LinearError::CareFailed {
-            reason: "stable invariant subspace of the Hamiltonian is not a graph [I; P]",
-            residual: f64::NAN,
-        });
-    }
-    let p = svd.solve(&rhs, 0.0).map_err(|_| LinearError::CareFailed {
-        reason: "least-squares solve for P failed",
-        residual: f64::NAN,
-    })?;
-    let mut p = symmetric_part(&p);
+    // Solved on the balanced realisation x = D z (D^-1 A D, D^-1 B, D Q D):
+    // the same problem with P = D^-1 P_z D^-1, in the system's own scales.
+    let (az, bz, d) = balance(a, b);
+    let qz = DMatrix::from_fn(n, n, |i, j| q[(i, j)] * d[i] * d[j]);
+    let gz = symmetric_part(&(&bz * chol.solve(&bz.transpose())));
+    let pz = care_balanced(&az, &gz, &qz)?;
+    let mut p = symmetric_part(&DMatrix::from_fn(n, n, |i, j| pz[(i, j)] / (d[i] * d[j])));
     let mut res = care_residual(a, &g, &q, &p);
-
-    // Newton-Kleinman refinement in correction form:
-    // (A - G P)' E + E (A - G P) = -Res(P),  P <- P + E.
+    // Newton-Kleinman refinement on the original realisation (kept only if
+    // it lowers the residual reported).
     if n <= NEWTON_MAX_N {
-        for _ in 0..4 {
-            if res < 1e-15 {
-                break;
-            }
-            let (r_mat, _) = residual_and_scale(a, &g, &q, &p);
-            let f = a - &g * &p;
-            let Some(e) = lyapunov(&f, &r_mat) else { break };
-            let candidate = symmetric_part(&(&p + e));
-            let cres = care_residual(a, &g, &q, &candidate);
-            if cres.is_finite() && cres < res {
-                p = candidate;
-                res = cres;
-            } else {
-                break;
-            }
-        }
+        newton_kleinman(a, &g, &q, &mut p, &mut res);
     }
 
     let k = &rinv_bt * &p;

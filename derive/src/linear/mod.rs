@@ -2,7 +2,8 @@
 //!
 //! - [`LinearModel`]: `x' = A x + B u` with names, JSON load/save.
 //! - [`poles`], [`parse_poles`]: eigenvalues in canonical order; pole lists.
-//! - [`controllability`]: controllability matrix and SVD rank.
+//! - [`controllability`]: PBH margin on the balanced realisation (the decision),
+//!   controllability matrix and SVD rank.
 //! - [`place`]: single-input pole placement (`u = -K x`).
 //! - [`lqr`]: continuous-time LQR via the CARE.
 //! - [`sliding_surface`], [`reduced_dynamics`]: linear sliding surfaces.
@@ -12,6 +13,7 @@
 //!
 //! All functions return [`LinearError`] on bad input instead of panicking.
 
+mod balance;
 mod controllability;
 mod error;
 mod linear_model;
@@ -22,8 +24,9 @@ mod poles;
 mod report;
 mod sliding;
 
+pub use balance::{balance, balancing_scales};
 pub use controllability::{
-    controllability, controllability_matrix, numerical_rank, Controllability,
+    controllability, controllability_matrix, numerical_rank, pbh_margin, Controllability,
 };
 pub use error::LinearError;
 pub use linear_model::{matrix_from_rows, matrix_to_rows, LinearModel};

@@ -14,10 +14,13 @@ use super::poles::{poles, Pole};
 pub struct AnalysisReport {
     /// Eigenvalues of A, canonical order.
     pub poles: Vec<Pole>,
-    /// Whether the controllability matrix has full rank.
+    /// Controllable by the PBH test on the balanced realisation.
     pub controllable: bool,
-    /// Numerical rank of the controllability matrix.
+    /// Numerical rank of the controllability matrix (informative).
     pub controllability_rank: usize,
+    /// PBH margin (see [`super::Controllability::pbh_margin`]).
+    #[serde(default)]
+    pub pbh_margin: f64,
 }
 
 /// Pole placement: `{"K": [[..]], "closed_loop_poles": [{"re", "im"}]}`.
@@ -52,6 +55,7 @@ pub fn analyze(model: &LinearModel) -> Result<AnalysisReport, LinearError> {
         poles: poles(&model.a)?,
         controllable: ctrb.controllable,
         controllability_rank: ctrb.rank,
+        pbh_margin: ctrb.pbh_margin,
     })
 }
 

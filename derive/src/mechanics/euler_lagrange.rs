@@ -23,6 +23,14 @@ pub enum MechanicsError {
     },
     /// The mass matrix is identically singular (e.g. a coordinate without inertia).
     SingularMassMatrix,
+    /// An exact computation hit its term budget (e.g. the expanded `M^-1` of
+    /// a large system).
+    Budget {
+        /// What was being computed.
+        what: String,
+        /// Why it stopped.
+        reason: String,
+    },
 }
 
 impl fmt::Display for MechanicsError {
@@ -40,6 +48,9 @@ impl fmt::Display for MechanicsError {
                 f,
                 "the mass matrix is singular for every state: does every coordinate carry inertia in T?"
             ),
+            MechanicsError::Budget { what, reason } => {
+                write!(f, "{what} was not computed: {reason}")
+            }
         }
     }
 }
@@ -130,7 +141,25 @@ pub fn derive_equations(model: &Model) -> Result<Equations, MechanicsError> {
             });
         }
     }
-    let lagrangian = model.kinetic - model.potential;
+    derive_equations_from(
+        &coords,
+        &inputs,
+        model.kinetic,
+        model.potential,
+        &model.forces,
+    )
+}
+
+/// [`derive_equations`] for given coordinates, inputs, energies and
+/// generalised forces (one per coordinate).
+pub fn derive_equations_from(
+    coords: &[CoordinateSymbols],
+    inputs: &[Symbol],
+    kinetic: Expr,
+    potential: Expr,
+    model_forces: &[Expr],
+) -> Result<Equations, MechanicsError> {
+    let lagrangian = kinetic - potential;
     let n = coords.len();
     let mut mass_matrix = vec![vec![Expr::zero(); n]; n];
     let mut bias = vec![Expr::zero(); n];
@@ -148,14 +177,14 @@ pub fn derive_equations(model: &Model) -> Result<Equations, MechanicsError> {
         inputs.iter().map(|u| (*u, Expr::zero())).collect();
     let mut forces = Vec::with_capacity(n);
     let mut input_matrix = vec![vec![Expr::zero(); inputs.len()]; n];
-    for (i, q) in model.forces.iter().enumerate() {
+    for (i, q) in model_forces.iter().enumerate() {
         for (j, u) in inputs.iter().enumerate() {
             let b = diff(*q, *u);
-            for v in &inputs {
+            for v in inputs {
                 let second = diff(b, *v);
                 if !second.is_zero() && !crate::sym::is_zero(second) {
                     return Err(MechanicsError::NotControlAffine {
-                        coordinate: model.coordinates[i].name.clone(),
+                        coordinate: coords[i].q.name().to_string(),
                         input: u.name().to_string(),
                     });
                 }
@@ -165,8 +194,8 @@ pub fn derive_equations(model: &Model) -> Result<Equations, MechanicsError> {
         forces.push(crate::sym::substitute_symbols(*q, &zero_inputs));
     }
     Ok(Equations {
-        coords,
-        inputs,
+        coords: coords.to_vec(),
+        inputs: inputs.to_vec(),
         mass_matrix,
         bias,
         forces,
@@ -195,10 +224,27 @@ pub struct ControlAffine {
 }
 
 /// Form the control-affine system. Uses the adjugate over the determinant and
-/// the canonical form, so `f` and `g` are exact rational functions.
+/// the canonical form, so `f` and `g` are exact rational functions; the size
+/// grows quickly with the number of coordinates (see
+/// [`control_affine_within`] for a budget).
 pub fn control_affine(eqs: &Equations) -> Result<ControlAffine, MechanicsError> {
+    control_affine_within(eqs, crate::sym::poly::MAX_TERMS)
+}
+
+/// [`control_affine`] with a term budget: an intermediate polynomial with more
+/// than `max_terms` terms stops it with [`MechanicsError::Budget`].
+pub fn control_affine_within(
+    eqs: &Equations,
+    max_terms: usize,
+) -> Result<ControlAffine, MechanicsError> {
+    let tidy = |e: Expr, what: &str| {
+        crate::sym::try_simplify_within(e, max_terms).map_err(|x| MechanicsError::Budget {
+            what: what.to_string(),
+            reason: format!("{x} (budget {max_terms} terms)"),
+        })
+    };
     let n = eqs.coords.len();
-    let det = tidy(determinant(&eqs.mass_matrix));
+    let det = tidy(determinant(&eqs.mass_matrix), "det M")?;
     if det.is_zero() {
         return Err(MechanicsError::SingularMassMatrix);
     }
@@ -210,10 +256,10 @@ pub fn control_affine(eqs: &Equations) -> Result<ControlAffine, MechanicsError> 
     let mut g = vec![vec![Expr::zero(); eqs.inputs.len()]; 2 * n];
     for i in 0..n {
         let num: Expr = (0..n).map(|k| adj[i][k] * drift[k]).sum();
-        f.push(tidy(num / det));
+        f.push(tidy(num / det, "the control-affine f")?);
         for (j, gij) in g[n + i].iter_mut().enumerate() {
             let num: Expr = (0..n).map(|k| adj[i][k] * eqs.input_matrix[k][j]).sum();
-            *gij = tidy(num / det);
+            *gij = tidy(num / det, "the control-affine g")?;
         }
     }
     Ok(ControlAffine {

@@ -2,13 +2,25 @@
 //! `M(q) q'' + bias(q, q') = Q0(q, q') + B(q, q') u` and the control-affine form
 //! `x' = f(x) + g(x) u` with `x = (q, q')`.
 
+mod angle_coordinates;
 mod euler_lagrange;
 mod matrix;
 mod numeric;
+mod present;
+mod screen;
 pub mod small_lu;
+mod solve;
 
+pub use angle_coordinates::{angle_coordinates, AngleCoordinates};
 pub use euler_lagrange::{
-    control_affine, derive_equations, ControlAffine, Equations, MechanicsError,
+    control_affine, control_affine_within, derive_equations, derive_equations_from, ControlAffine,
+    Equations, MechanicsError,
 };
 pub use matrix::{adjugate, determinant};
 pub use numeric::{flat_outputs, has_sign, smooth_signs, NumericDynamics, NumericError, Workspace};
+pub use present::{
+    det_name, present_equations, Expand, PresentedEquations, EXPAND_MAX_COORDINATES,
+    EXPAND_MAX_TERMS, PRESENT_MAX_TERMS,
+};
+pub use screen::{mass_matrix_conditioning, screening_points};
+pub use solve::{ldl_solve, lu_solve_at, SolveError};

@@ -2,10 +2,12 @@
 //! syntax. Produced by [`lower`] from the checked AST; consumed by mechanics,
 //! analysis, code generation and identification.
 
+mod chain;
 mod lower;
 mod modes;
 mod values;
 
+pub use chain::n_link_chain_source;
 pub use lower::{load_model, load_model_text, lower, LoadError, LoadedModel};
 pub use modes::{Guard, ModeSpec, SurfaceSpec, SwitchSpec};
 pub use values::{ParameterValues, ValuesError};

@@ -62,26 +62,22 @@
 //! functions return a [`CanonError`]; the infallible wrappers fall back
 //! gracefully (return the input unchanged, or `false`).
 
-use std::collections::{BTreeMap, HashMap, HashSet};
+use std::collections::BTreeMap;
+
+use super::fxhash::{FxHashMap as HashMap, FxHashSet as HashSet};
 use std::rc::Rc;
 
 use super::expr::{Expr, Func, Node};
-use super::poly::{rdiv, rneg, Atom, CResult, CanonError, Poly, Rules};
+use super::poly::{rdiv, Atom, CResult, CanonError, Poly, Rules};
 use super::rational::Rational;
 
-/// Maximum number of terms of a `sin`/`cos` argument expanded by the addition
-/// formulas.
-pub const MAX_ANGLE_TERMS: usize = 4;
-/// Maximum integer multiple expanded by the multiple-angle formulas.
-pub const MAX_MULTIPLE: i128 = 8;
-
-type Den = BTreeMap<Poly, u32>;
+pub(super) type Den = BTreeMap<Poly, u32>;
 
 /// A rational function with a factored denominator.
 #[derive(Clone, Debug, PartialEq, Eq)]
-struct RatFn {
-    num: Poly,
-    den: Den,
+pub(super) struct RatFn {
+    pub(super) num: Poly,
+    pub(super) den: Den,
 }
 
 impl RatFn {
@@ -97,7 +93,7 @@ impl RatFn {
 }
 
 /// Split a polynomial into `content * prod(factor^k)` with normalised factors.
-fn factorize(p: &Poly) -> CResult<(Rational, Vec<(Poly, u32)>)> {
+pub(super) fn factorize(p: &Poly) -> CResult<(Rational, Vec<(Poly, u32)>)> {
     if p.is_zero() {
         return Err(CanonError::DivisionByZero);
     }
@@ -112,18 +108,18 @@ fn factorize(p: &Poly) -> CResult<(Rational, Vec<(Poly, u32)>)> {
     Ok((c, out))
 }
 
-struct Ctx {
-    rules: Rules,
+pub(super) struct Ctx {
+    pub(super) rules: Rules,
     memo: HashMap<Expr, Rc<RatFn>>,
     visiting: HashSet<Expr>,
 }
 
 impl Ctx {
-    fn new() -> Ctx {
+    pub(super) fn new(max_terms: usize) -> Ctx {
         Ctx {
-            rules: Rules::new(),
-            memo: HashMap::new(),
-            visiting: HashSet::new(),
+            rules: Rules::with_budget(max_terms),
+            memo: HashMap::default(),
+            visiting: HashSet::default(),
         }
     }
 
@@ -242,7 +238,7 @@ impl Ctx {
         }
     }
 
-    fn to_expr(&self, r: &RatFn) -> Expr {
+    pub(super) fn to_expr(&self, r: &RatFn) -> Expr {
         let mut fs = vec![r.num.to_expr()];
         for (f, k) in &r.den {
             fs.push(f.to_expr().powi(-(*k as i64)));
@@ -268,7 +264,7 @@ impl Ctx {
         RatFn::poly(Poly::atom(Atom(e)))
     }
 
-    fn convert(&mut self, e: Expr) -> CResult<Rc<RatFn>> {
+    pub(super) fn convert(&mut self, e: Expr) -> CResult<Rc<RatFn>> {
         if let Some(r) = self.memo.get(&e) {
             return Ok(r.clone());
         }
@@ -483,84 +479,41 @@ impl Ctx {
         }
     }
 
-    /// `(sin(b), cos(b))` for a base angle `b` (already canonical).
-    fn trig_base(&mut self, b: Expr) -> CResult<(Poly, Poly)> {
-        let s = b.sin();
-        let c = b.cos();
-        let s_ok = matches!(s.node(), Node::Func(Func::Sin, x) if *x == b);
-        let c_ok = matches!(c.node(), Node::Func(Func::Cos, x) if *x == b);
-        if s_ok && c_ok {
-            let cp = Poly::atom(Atom(c));
-            let one_minus_c2 = Poly::constant(Rational::ONE).sub(&cp.mul(&cp, &self.rules)?)?;
-            self.rules.insert(Atom(s), 2, one_minus_c2);
-            return Ok((Poly::atom(Atom(s)), cp));
-        }
-        // Folded (e.g. a float argument): whatever the constructors produced.
-        let sp = if s_ok {
-            self.atom(s)
-        } else {
-            (*self.convert(s)?).clone()
-        };
-        let cp = if c_ok {
-            self.atom(c)
-        } else {
-            (*self.convert(c)?).clone()
-        };
-        if !sp.den.is_empty() || !cp.den.is_empty() {
-            return Ok((Poly::atom(Atom(s)), Poly::atom(Atom(c))));
-        }
-        Ok((sp.num, cp.num))
-    }
-
-    /// `(sin(u), cos(u))` as reduced polynomials.
+    /// `(sin(u), cos(u))` as reduced polynomials: one trigonometric atom
+    /// each, whose angle is the canonical polynomial of `u` (or an opaque
+    /// atom for a rational function), sign-normalised.
     fn trig(&mut self, u: Expr) -> CResult<(Poly, Poly)> {
         let r = self.convert(u)?;
-        let mut angles: Vec<(Expr, i128)> = Vec::new();
         if r.num.is_zero() {
             return Ok((Poly::zero(), Poly::constant(Rational::ONE)));
         }
-        if !r.den.is_empty() || r.num.len() > MAX_ANGLE_TERMS {
-            let (rr, sign) = self.sign_normalise(&r)?;
-            angles.push((self.to_expr(&rr), sign));
+        let angle = if r.den.is_empty() {
+            r.num.clone()
         } else {
-            for (m, c) in r.num.terms() {
-                let sign = if c.is_negative() { -1 } else { 1 };
-                if m.is_one() {
-                    angles.push((Expr::rational(c.abs()), sign));
-                } else if c.numer().abs() <= MAX_MULTIPLE {
-                    let inv_d = Rational::new(1, c.denom()).ok_or(CanonError::Overflow)?;
-                    angles.push((Expr::rational(inv_d) * m.to_expr(), c.numer()));
-                } else {
-                    angles.push((Expr::rational(c.abs()) * m.to_expr(), sign));
-                }
-            }
-        }
-        let one = Poly::constant(Rational::ONE);
-        let (mut s, mut c) = (Poly::zero(), one.clone());
-        for (base, k) in angles {
-            let (sb, cb) = self.trig_base(base)?;
-            // Multiple angle: sin((j+1)b) = s_j cb + c_j sb, cos((j+1)b) = c_j cb - s_j sb.
-            let (mut sk, mut ck) = (sb.clone(), cb.clone());
-            for _ in 1..k.abs() {
-                let ns = sk.mul(&cb, &self.rules)?.add(&ck.mul(&sb, &self.rules)?)?;
-                let nc = ck.mul(&cb, &self.rules)?.sub(&sk.mul(&sb, &self.rules)?)?;
-                sk = ns;
-                ck = nc;
-            }
-            if k < 0 {
-                sk = sk.neg()?;
-            }
-            let ns = s.mul(&ck, &self.rules)?.add(&c.mul(&sk, &self.rules)?)?;
-            let nc = c.mul(&ck, &self.rules)?.sub(&s.mul(&sk, &self.rules)?)?;
-            s = ns;
-            c = nc;
-        }
-        Ok((s, c))
+            // c * u with u = (N/c)/D primitive: an opaque angle atom, so that
+            // the expression of any multiple converts back to the same atom
+            let c = r.num.content()?;
+            let u = RatFn {
+                num: r.num.scale(rdiv(Rational::ONE, c)?)?,
+                den: r.den.clone(),
+            };
+            let ua = Atom(self.to_expr(&u));
+            self.rules.opaque_angle(ua);
+            Poly::term(super::poly::Mono::atom(ua, 1), c)
+        };
+        Ok((
+            self.rules.trig(true, &angle)?,
+            self.rules.trig(false, &angle)?,
+        ))
     }
 }
 
-fn to_rat(e: Expr) -> CResult<(Ctx, Rc<RatFn>)> {
-    let mut ctx = Ctx::new();
+pub(super) fn to_rat(e: Expr) -> CResult<(Ctx, Rc<RatFn>)> {
+    to_rat_within(e, super::poly::MAX_TERMS)
+}
+
+pub(super) fn to_rat_within(e: Expr, max_terms: usize) -> CResult<(Ctx, Rc<RatFn>)> {
+    let mut ctx = Ctx::new(max_terms);
     let r = ctx.convert(e)?;
     Ok((ctx, r))
 }
@@ -588,6 +541,21 @@ pub fn try_is_zero(e: Expr) -> Result<bool, CanonError> {
     Ok(r.num.is_zero())
 }
 
+/// [`try_is_zero`] with a term budget: `Err(CanonError::TooLarge)` as soon as
+/// an intermediate polynomial has more than `max_terms` terms.
+pub fn try_is_zero_within(e: Expr, max_terms: usize) -> Result<bool, CanonError> {
+    if e.is_zero() {
+        return Ok(true);
+    }
+    let (_, r) = to_rat_within(e, max_terms)?;
+    Ok(r.num.is_zero())
+}
+
+/// [`try_simplify`] with a term budget (see [`try_is_zero_within`]).
+pub fn try_simplify_within(e: Expr, max_terms: usize) -> Result<Expr, CanonError> {
+    super::present::try_present_within(e, &[], max_terms)
+}
+
 /// True if `e` is identically zero. `false` when it is not, or when exact
 /// arithmetic failed (never a false positive).
 pub fn is_zero(e: Expr) -> bool {
@@ -599,42 +567,18 @@ pub fn equivalent(a: Expr, b: Expr) -> bool {
     a == b || is_zero(a - b)
 }
 
-/// Canonical form presented for reading: the numerator's rational content and
-/// common monomial factor pulled out, the denominator as a product of factors.
+/// Canonical form presented for reading (see [`crate::sym::present`]): sums
+/// of angles kept whole, multiples of one angle as powers (the shorter of
+/// `sin^2` and `1 - cos^2`), the numerator's content and common monomial factor
+/// pulled out, parameters dividing only some terms kept with those terms, the
+/// denominator as a product of factors.
 pub fn try_simplify(e: Expr) -> Result<Expr, CanonError> {
-    let (ctx, r) = to_rat(e)?;
-    if r.num.is_zero() {
-        return Ok(Expr::zero());
-    }
-    let c = r.num.content()?;
-    let prim = r.num.scale(rdiv(Rational::ONE, c)?)?;
-    let m = prim.mono_gcd();
-    let rest = prim.div_mono(&m);
-    let (mut c, mut rest) = (c, rest);
-    if flip_for_reading(&rest) {
-        c = rneg(c)?;
-        rest = rest.neg()?;
-    }
-    let mut fs = vec![m.to_expr(), rest.to_expr()];
-    for (f, k) in &r.den {
-        let f = if flip_for_reading(f) {
-            if k % 2 == 1 {
-                c = rneg(c)?;
-            }
-            f.neg()?
-        } else {
-            f.clone()
-        };
-        fs.push(f.to_expr().powi(-(*k as i64)));
-    }
-    drop(ctx);
-    fs.push(Expr::rational(c));
-    Ok(Expr::mul_all(fs))
+    super::present::try_present(e, &[])
 }
 
 /// Presentation sign: mostly positive terms, ties broken by a positive
 /// lowest-order term (`J0*J2 + J2^2 - c^2*cos(a)^2` rather than its negative).
-fn flip_for_reading(p: &Poly) -> bool {
+pub(super) fn flip_for_reading(p: &Poly) -> bool {
     let neg = p.terms().iter().filter(|t| t.1.is_negative()).count();
     let pos = p.len() - neg;
     match neg.cmp(&pos) {

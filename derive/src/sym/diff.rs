@@ -1,17 +1,17 @@
 //! Symbolic differentiation and the total time derivative.
 
-use std::collections::HashMap;
+use super::fxhash::FxHashMap;
 
 use super::expr::{Expr, Func, Node, Symbol};
 
 /// `d e / d x`, memoised over the DAG. `sign` and `abs` follow the usual
 /// almost-everywhere rules (`d sign(u) = 0`, `d abs(u) = sign(u) du`).
 pub fn diff(e: Expr, x: Symbol) -> Expr {
-    let mut memo = HashMap::new();
+    let mut memo = FxHashMap::default();
     diff_memo(e, x, &mut memo)
 }
 
-fn diff_memo(e: Expr, x: Symbol, memo: &mut HashMap<Expr, Expr>) -> Expr {
+fn diff_memo(e: Expr, x: Symbol, memo: &mut FxHashMap<Expr, Expr>) -> Expr {
     if let Some(&d) = memo.get(&e) {
         return d;
     }
@@ -24,7 +24,6 @@ fn diff_memo(e: Expr, x: Symbol, memo: &mut HashMap<Expr, Expr>) -> Expr {
                 Expr::zero()
             }
         }
-        _ if !e.contains(x) => Expr::zero(),
         Node::Add(ts) => Expr::add_all(ts.iter().map(|t| diff_memo(*t, x, memo))),
         Node::Mul(fs) => {
             let mut terms = Vec::with_capacity(fs.len());
@@ -45,15 +44,24 @@ fn diff_memo(e: Expr, x: Symbol, memo: &mut HashMap<Expr, Expr>) -> Expr {
         Node::Pow(b, p) => {
             let db = diff_memo(*b, x, memo);
             if p.is_constant() {
+                if db.is_zero() {
+                    return memoise(memo, e, Expr::zero());
+                }
                 *p * b.pow(*p - 1) * db
             } else {
                 let dp = diff_memo(*p, x, memo);
+                if dp.is_zero() && db.is_zero() {
+                    return memoise(memo, e, Expr::zero());
+                }
                 // d(b^p) = b^p * (dp*ln b + p*db/b)
                 e * (dp * b.ln() + *p * db / *b)
             }
         }
         Node::Func(f, u) => {
             let du = diff_memo(*u, x, memo);
+            if du.is_zero() {
+                return memoise(memo, e, Expr::zero());
+            }
             let outer = match f {
                 Func::Sin => u.cos(),
                 Func::Cos => -u.sin(),
@@ -69,9 +77,17 @@ fn diff_memo(e: Expr, x: Symbol, memo: &mut HashMap<Expr, Expr>) -> Expr {
         Node::Atan2(y, xx) => {
             let dy = diff_memo(*y, x, memo);
             let dx = diff_memo(*xx, x, memo);
+            if dy.is_zero() && dx.is_zero() {
+                return memoise(memo, e, Expr::zero());
+            }
             (*xx * dy - *y * dx) / (xx.powi(2) + y.powi(2))
         }
     };
+    memo.insert(e, d);
+    d
+}
+
+fn memoise(memo: &mut FxHashMap<Expr, Expr>, e: Expr, d: Expr) -> Expr {
     memo.insert(e, d);
     d
 }

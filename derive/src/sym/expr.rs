@@ -17,6 +17,7 @@ use std::collections::HashMap;
 use std::fmt;
 use std::sync::{Mutex, OnceLock};
 
+use super::fxhash::FxHashMap;
 use super::rational::Rational;
 
 /// A handle to an interned expression node.
@@ -136,7 +137,7 @@ pub enum Node {
 
 struct Arena {
     nodes: boxcar::Vec<Node>,
-    index: Mutex<HashMap<Node, u32>>,
+    index: Mutex<FxHashMap<Node, u32>>,
     names: boxcar::Vec<Box<str>>,
     name_index: Mutex<HashMap<Box<str>, u32>>,
 }
@@ -145,7 +146,7 @@ fn arena() -> &'static Arena {
     static ARENA: OnceLock<Arena> = OnceLock::new();
     ARENA.get_or_init(|| Arena {
         nodes: boxcar::Vec::new(),
-        index: Mutex::new(HashMap::new()),
+        index: Mutex::new(FxHashMap::default()),
         names: boxcar::Vec::new(),
         name_index: Mutex::new(HashMap::new()),
     })
@@ -424,14 +425,14 @@ impl Expr {
 
     /// Does `sym` occur in this expression?
     pub fn contains(self, sym: Symbol) -> bool {
-        let mut seen = HashMap::new();
+        let mut seen = FxHashMap::default();
         contains_memo(self, sym, &mut seen)
     }
 
     /// All symbols occurring in this expression, sorted by name.
     pub fn symbols(self) -> Vec<Symbol> {
         let mut out = Vec::new();
-        let mut seen = std::collections::HashSet::new();
+        let mut seen = super::fxhash::FxHashSet::default();
         let mut stack = vec![self];
         while let Some(e) = stack.pop() {
             if !seen.insert(e) {
@@ -449,7 +450,7 @@ impl Expr {
 
     /// Number of distinct nodes in the DAG below (and including) this one.
     pub fn dag_size(self) -> usize {
-        let mut seen = std::collections::HashSet::new();
+        let mut seen = super::fxhash::FxHashSet::default();
         let mut stack = vec![self];
         while let Some(e) = stack.pop() {
             if seen.insert(e) {
@@ -462,7 +463,7 @@ impl Expr {
     /// Evaluate by walking the DAG (memoised). For repeated evaluation compile a
     /// [`crate::sym::Tape`] instead. `value` supplies each symbol's value.
     pub fn eval_with(self, value: &mut dyn FnMut(Symbol) -> f64) -> f64 {
-        let mut memo: HashMap<Expr, f64> = HashMap::new();
+        let mut memo: FxHashMap<Expr, f64> = FxHashMap::default();
         eval_memo(self, value, &mut memo)
     }
 
@@ -472,7 +473,7 @@ impl Expr {
     }
 }
 
-fn contains_memo(e: Expr, sym: Symbol, seen: &mut HashMap<Expr, bool>) -> bool {
+fn contains_memo(e: Expr, sym: Symbol, seen: &mut FxHashMap<Expr, bool>) -> bool {
     if let Some(&b) = seen.get(&e) {
         return b;
     }
@@ -488,7 +489,11 @@ fn contains_memo(e: Expr, sym: Symbol, seen: &mut HashMap<Expr, bool>) -> bool {
     r
 }
 
-fn eval_memo(e: Expr, value: &mut dyn FnMut(Symbol) -> f64, memo: &mut HashMap<Expr, f64>) -> f64 {
+fn eval_memo(
+    e: Expr,
+    value: &mut dyn FnMut(Symbol) -> f64,
+    memo: &mut FxHashMap<Expr, f64>,
+) -> f64 {
     if let Some(&v) = memo.get(&e) {
         return v;
     }
@@ -587,8 +592,8 @@ fn build_add(terms: Vec<Expr>) -> Expr {
     let mut float_const = 0.0f64;
     let mut has_float = false;
     let mut order: Vec<Expr> = Vec::new();
-    let mut coeffs: HashMap<Expr, Rational> = HashMap::new();
-    let mut float_coeffs: HashMap<Expr, f64> = HashMap::new();
+    let mut coeffs: FxHashMap<Expr, Rational> = FxHashMap::default();
+    let mut float_coeffs: FxHashMap<Expr, f64> = FxHashMap::default();
     for t in flat {
         match t.node() {
             Node::Rational(r) => match constant.checked_add(*r) {
@@ -691,7 +696,7 @@ fn build_mul(factors: Vec<Expr>) -> Expr {
     }
     let mut k = ProductCoefficient::new();
     let mut order: Vec<Expr> = Vec::new();
-    let mut exps: HashMap<Expr, Vec<Expr>> = HashMap::new();
+    let mut exps: FxHashMap<Expr, Vec<Expr>> = FxHashMap::default();
     for f in flat {
         match f.node() {
             Node::Rational(r) => {
@@ -747,7 +752,7 @@ fn build_mul(factors: Vec<Expr>) -> Expr {
     }
     // Merge any duplicated bases produced by distribution.
     if out.len() > 1 {
-        let mut seen = std::collections::HashSet::new();
+        let mut seen = super::fxhash::FxHashSet::default();
         if out.iter().any(|x| !seen.insert(x.base_and_exp().0)) {
             let mut all = out;
             all.push(Expr::rational(coeff));

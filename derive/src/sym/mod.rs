@@ -5,19 +5,25 @@
 
 pub mod canonical;
 pub mod diff;
+pub mod dual;
 pub mod expr;
+pub(crate) mod fxhash;
 pub mod poly;
+pub mod present;
 pub mod print;
 pub mod rational;
 pub mod subst;
 pub mod tape;
 
 pub use canonical::{
-    canonical, equivalent, is_zero, simplify, try_canonical, try_is_zero, try_simplify,
+    canonical, equivalent, is_zero, simplify, try_canonical, try_is_zero, try_is_zero_within,
+    try_simplify, try_simplify_within,
 };
 pub use diff::{diff, jacobian, time_derivative, CoordinateSymbols};
+pub use dual::eval_jacobian;
 pub use expr::{Expr, Func, Node, Symbol};
 pub use poly::CanonError;
+pub use present::{present, try_present, try_present_within, Canonicalizer, Name};
 pub use rational::Rational;
 pub use subst::{substitute, substitute_symbols};
 pub use tape::{Instr, SplitTape, Tape, TapeError};

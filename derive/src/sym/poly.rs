@@ -9,11 +9,12 @@
 //! Ordering is structural ([`structural_cmp`] on the atoms), never by interning
 //! id or hash order, so every result is deterministic.
 
+use super::fxhash::{FxHashMap as HashMap, FxHashSet};
+use std::cell::RefCell;
 use std::cmp::Ordering;
-use std::collections::HashMap;
 use std::fmt;
 
-use super::expr::{structural_cmp, Expr};
+use super::expr::{structural_cmp, Expr, Func, Node};
 use super::rational::Rational;
 
 /// Why an exact computation was abandoned.
@@ -311,17 +312,66 @@ impl Ord for Poly {
     }
 }
 
-/// Side relations `atom^q = replacement` used to reduce monomials
-/// (`sin(u)^2 = 1 - cos(u)^2`, `(B^(1/q))^q = B`).
-#[derive(Clone, Debug, Default)]
+/// What a trigonometric atom is: `sin(angle)` or `cos(angle)` with the angle
+/// a canonical polynomial whose leading coefficient is positive.
+#[derive(Clone, Debug)]
+struct TrigAtom {
+    sin: bool,
+    angle: Poly,
+    /// `None` for a polynomial angle; `Some(u)` for a multiple of an opaque
+    /// angle atom `u` (a rational function). Only atoms of the same class
+    /// combine by the product-to-sum formulas.
+    class: Option<Atom>,
+}
+
+/// Side relations used to reduce monomials:
+///
+/// * `atom^q = replacement` (roots: `(B^(1/q))^q = B`);
+/// * products of two trigonometric atoms by the product-to-sum formulas
+///   (`cos a cos b = (cos(a - b) + cos(a + b))/2`, ...), so a reduced monomial
+///   has at most one trigonometric factor per class. The functions `1`,
+///   `cos(k.x)`, `sin(k.x)` (one per angle up to sign) are linearly
+///   independent, so this Fourier form of a trigonometric polynomial is unique
+///   for any number of angles and any multiples. Polynomial angles form one
+///   class; each opaque angle `u` (a rational function, registered with
+///   [`Rules::opaque_angle`]) forms its own class of multiples `k u`.
+#[derive(Clone, Debug)]
 pub struct Rules {
     rules: HashMap<Atom, (u32, Poly)>,
+    trig: RefCell<HashMap<Atom, TrigAtom>>,
+    opaque: RefCell<FxHashSet<Atom>>,
+    /// Memo of reduced products of two trigonometric atoms.
+    products: RefCell<HashMap<(Atom, Atom), Poly>>,
+    max_terms: usize,
+}
+
+impl Default for Rules {
+    fn default() -> Rules {
+        Rules::new()
+    }
 }
 
 impl Rules {
-    /// No relations.
+    /// No relations; polynomials up to [`MAX_TERMS`] terms.
     pub fn new() -> Rules {
-        Rules::default()
+        Rules::with_budget(MAX_TERMS)
+    }
+
+    /// No relations; any intermediate polynomial with more than `max_terms`
+    /// terms stops the computation with [`CanonError::TooLarge`].
+    pub fn with_budget(max_terms: usize) -> Rules {
+        Rules {
+            rules: HashMap::default(),
+            trig: RefCell::new(HashMap::default()),
+            opaque: RefCell::new(FxHashSet::default()),
+            products: RefCell::new(HashMap::default()),
+            max_terms,
+        }
+    }
+
+    /// The term budget.
+    pub fn budget(&self) -> usize {
+        self.max_terms
     }
 
     /// Register `a^q = p` (`p` must itself be reduced).
@@ -331,36 +381,160 @@ impl Rules {
 
     /// Is there a relation for `a`?
     pub fn has(&self, a: Atom) -> bool {
-        self.rules.contains_key(&a)
+        self.rules.contains_key(&a) || self.trig.borrow().contains_key(&a)
     }
 
-    fn rewrite(&self, m: &Mono) -> Option<(Mono, &Poly)> {
-        if self.rules.is_empty() {
-            return None;
+    /// The root relations only (no product-to-sum reduction of sines and
+    /// cosines).
+    pub fn without_trig(&self) -> Rules {
+        Rules {
+            rules: self.rules.clone(),
+            trig: RefCell::new(HashMap::default()),
+            opaque: RefCell::new(FxHashSet::default()),
+            products: RefCell::new(HashMap::default()),
+            max_terms: self.max_terms,
+        }
+    }
+
+    /// True if no relation is registered (plain polynomial arithmetic).
+    pub fn is_trivial(&self) -> bool {
+        self.rules.is_empty() && self.trig.borrow().is_empty()
+    }
+
+    /// Register `u` as an opaque angle: trigonometric atoms of its multiples
+    /// form their own class.
+    pub fn opaque_angle(&self, u: Atom) {
+        self.opaque.borrow_mut().insert(u);
+    }
+
+    /// `sin(angle)` (or `cos(angle)`) as a reduced polynomial: a signed
+    /// trigonometric atom (the angle sign-normalised so that its leading
+    /// coefficient is positive), or a constant when the angle is 0 or the
+    /// expression constructors fold it (a float angle).
+    pub fn trig(&self, sin: bool, angle: &Poly) -> CResult<Poly> {
+        if angle.is_zero() {
+            return Ok(if sin {
+                Poly::zero()
+            } else {
+                Poly::constant(Rational::ONE)
+            });
+        }
+        let negative = angle.leading().is_some_and(|(_, c)| c.is_negative());
+        let angle = if negative {
+            angle.neg()?
+        } else {
+            angle.clone()
+        };
+        let ae = angle.to_expr();
+        let e = if sin { ae.sin() } else { ae.cos() };
+        let p = match e.node() {
+            Node::Func(Func::Sin | Func::Cos, x) if *x == ae => {
+                let class = match angle.terms() {
+                    [(m, _)] if m.vars().len() == 1 && m.vars()[0].1 == 1 => {
+                        let a = m.vars()[0].0;
+                        self.opaque.borrow().contains(&a).then_some(a)
+                    }
+                    _ => None,
+                };
+                self.trig
+                    .borrow_mut()
+                    .entry(Atom(e))
+                    .or_insert(TrigAtom { sin, angle, class });
+                Poly::atom(Atom(e))
+            }
+            _ => constant_poly(e),
+        };
+        if negative && sin {
+            p.neg()
+        } else {
+            Ok(p)
+        }
+    }
+
+    /// The angle of a trigonometric atom, with `true` for `sin`.
+    pub fn trig_angle(&self, a: Atom) -> Option<(bool, Poly)> {
+        self.trig.borrow().get(&a).map(|t| (t.sin, t.angle.clone()))
+    }
+
+    fn rewrite(&self, m: &Mono) -> CResult<Option<(Mono, Poly)>> {
+        if self.is_trivial() {
+            return Ok(None);
         }
         for &(a, e) in &m.vars {
             if let Some((q, p)) = self.rules.get(&a) {
                 if e >= *q {
-                    return Some((m.with_exp(a, e - q), p));
+                    return Ok(Some((m.with_exp(a, e - q), p.clone())));
                 }
             }
         }
-        None
+        let ta = {
+            let trig = self.trig.borrow();
+            if trig.is_empty() {
+                return Ok(None);
+            }
+            // the first two trigonometric factors of one class
+            let mut firsts: Vec<(Option<Atom>, Atom, u32)> = Vec::new();
+            let mut pair = None;
+            for &(a, e) in &m.vars {
+                let Some(t) = trig.get(&a) else { continue };
+                if e >= 2 {
+                    pair = Some((a, e, a, e));
+                    break;
+                }
+                match firsts.iter().find(|(c, _, _)| *c == t.class) {
+                    Some(&(_, f, ef)) => {
+                        pair = Some((f, ef, a, e));
+                        break;
+                    }
+                    None => firsts.push((t.class, a, e)),
+                }
+            }
+            let Some((a, ea, b, eb)) = pair else {
+                return Ok(None);
+            };
+            let rest = if a == b {
+                m.with_exp(a, ea - 2)
+            } else {
+                m.with_exp(a, ea - 1).with_exp(b, eb - 1)
+            };
+            if let Some(p) = self.products.borrow().get(&(a, b)) {
+                return Ok(Some((rest, p.clone())));
+            }
+            (a, b, trig[&a].clone(), trig[&b].clone(), rest)
+        };
+        let (a, b, ta, tb, rest) = (ta.0, ta.1, ta.2, ta.3, ta.4);
+        let sum = ta.angle.add(&tb.angle)?;
+        let dif = ta.angle.sub(&tb.angle)?;
+        let half = Rational::new(1, 2).ok_or(CanonError::Overflow)?;
+        let (x, y, sign) = match (ta.sin, tb.sin) {
+            // cos a cos b = (cos(a - b) + cos(a + b))/2
+            (false, false) => (self.trig(false, &dif)?, self.trig(false, &sum)?, 1),
+            // sin a sin b = (cos(a - b) - cos(a + b))/2
+            (true, true) => (self.trig(false, &dif)?, self.trig(false, &sum)?, -1),
+            // sin a cos b = (sin(a + b) + sin(a - b))/2
+            (true, false) => (self.trig(true, &sum)?, self.trig(true, &dif)?, 1),
+            // cos a sin b = (sin(a + b) - sin(a - b))/2
+            (false, true) => (self.trig(true, &sum)?, self.trig(true, &dif)?, -1),
+        };
+        let y = if sign < 0 { y.neg()? } else { y };
+        let p = x.add(&y)?.scale(half)?;
+        self.products.borrow_mut().insert((a, b), p.clone());
+        Ok(Some((rest, p)))
     }
 
     /// Collect terms into a reduced polynomial.
     pub fn collect<I: IntoIterator<Item = (Mono, Rational)>>(&self, terms: I) -> CResult<Poly> {
-        let mut acc: HashMap<Mono, Rational> = HashMap::new();
+        let mut acc: HashMap<Mono, Rational> = HashMap::default();
         let mut work: Vec<(Mono, Rational)> = terms.into_iter().collect();
         while let Some((m, c)) = work.pop() {
             if c.is_zero() {
                 continue;
             }
-            if let Some((rest, p)) = self.rewrite(&m) {
+            if let Some((rest, p)) = self.rewrite(&m)? {
                 for (pm, pc) in &p.terms {
                     work.push((rest.mul(pm)?, rmul(c, *pc)?));
                 }
-                if work.len() > MAX_TERMS {
+                if work.len() > self.max_terms {
                     return Err(CanonError::TooLarge);
                 }
                 continue;
@@ -369,7 +543,7 @@ impl Rules {
                 Some(v) => *v = radd(*v, c)?,
                 None => {
                     acc.insert(m, c);
-                    if acc.len() > MAX_TERMS {
+                    if acc.len() > self.max_terms {
                         return Err(CanonError::TooLarge);
                     }
                 }
@@ -382,10 +556,35 @@ impl Rules {
     }
 }
 
+/// A constant expression (rational or float) as a polynomial: floats are
+/// sign-normalised atoms, as in the canonical form.
+fn constant_poly(e: Expr) -> Poly {
+    if let Some(r) = e.as_rational() {
+        return Poly::constant(r);
+    }
+    match e.as_f64() {
+        Some(v) if v < 0.0 => Poly::term(Mono::atom(Atom(Expr::float(-v)), 1), Rational::MINUS_ONE),
+        _ => Poly::atom(Atom(e)),
+    }
+}
+
 impl Poly {
     /// Zero.
     pub fn zero() -> Poly {
         Poly::default()
+    }
+
+    /// Terms as given (like monomials summed, no reduction by any relation).
+    pub fn from_terms<I: IntoIterator<Item = (Mono, Rational)>>(terms: I) -> CResult<Poly> {
+        let mut acc: HashMap<Mono, Rational> = HashMap::default();
+        for (m, c) in terms {
+            let v = acc.entry(m).or_insert(Rational::ZERO);
+            *v = radd(*v, c)?;
+        }
+        let mut terms: Vec<(Mono, Rational)> =
+            acc.into_iter().filter(|(_, c)| !c.is_zero()).collect();
+        terms.sort_by(|a, b| b.0.cmp(&a.0));
+        Ok(Poly { terms })
     }
 
     /// A constant.
@@ -520,7 +719,7 @@ impl Poly {
         if let Some(c) = o.as_constant() {
             return self.scale(c);
         }
-        if self.terms.len().saturating_mul(o.terms.len()) > 4 * MAX_TERMS {
+        if self.terms.len().saturating_mul(o.terms.len()) > 4 * rules.max_terms {
             return Err(CanonError::TooLarge);
         }
         let mut v = Vec::with_capacity(self.terms.len() * o.terms.len());
@@ -556,7 +755,7 @@ impl Poly {
         }
         // Cheap rejection: total degree.
         if g.terms.iter().map(|t| t.0.deg).max() > self.terms.iter().map(|t| t.0.deg).max()
-            && rules.rules.is_empty()
+            && rules.is_trivial()
         {
             return Ok(None);
         }

@@ -2,12 +2,14 @@
 
 use std::collections::HashMap;
 
+use super::fxhash::FxHashMap;
+
 use super::expr::{Expr, Node, Symbol};
 
 /// Replace every occurrence of a key of `map` (any subexpression, usually a
 /// symbol) by its value, rebuilding the DAG bottom-up (memoised).
 pub fn substitute(e: Expr, map: &HashMap<Expr, Expr>) -> Expr {
-    let mut memo = HashMap::new();
+    let mut memo = FxHashMap::default();
     subst_memo(e, map, &mut memo)
 }
 
@@ -17,7 +19,7 @@ pub fn substitute_symbols(e: Expr, map: &HashMap<Symbol, Expr>) -> Expr {
     substitute(e, &m)
 }
 
-fn subst_memo(e: Expr, map: &HashMap<Expr, Expr>, memo: &mut HashMap<Expr, Expr>) -> Expr {
+fn subst_memo(e: Expr, map: &HashMap<Expr, Expr>, memo: &mut FxHashMap<Expr, Expr>) -> Expr {
     if let Some(&v) = map.get(&e) {
         return v;
     }

@@ -134,7 +134,7 @@ fn feedback_linearization_matches_symbolic_at_10000_states() {
 #[test]
 fn jacobians_match_symbolic_derivatives_at_10000_states() {
     let f = fixture();
-    let aff = &f.der.affine;
+    let aff = f.der.affine().expect("control-affine form");
     let (nx, nu) = (aff.state.len(), aff.inputs.len());
     let mut outs = Vec::new();
     for i in 0..nx {

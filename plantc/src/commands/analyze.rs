@@ -4,47 +4,12 @@
 use std::io::Write;
 use std::path::Path;
 
-use plantc_derive::analysis::{
-    lie_chain, normal_form, sliding_analysis, zero_dynamics, LieChain, NormalForm, ZeroDynamics,
-};
-use plantc_derive::control::{output_expr, resolve, Derivation, ResolvedController};
+use plantc_derive::analysis::{analyze_output, sliding_analysis, OutputAnalysisError};
+use plantc_derive::control::{resolve, Derivation, ResolvedController};
 use plantc_derive::model::ControllerSpec;
-use plantc_derive::sym::Expr;
 
 use crate::cli::ParamArgs;
 use crate::common::{complex_text, load, values, write_json, CliError};
-
-fn lf_name(k: usize) -> String {
-    match k {
-        0 => "h".into(),
-        1 => "L_f h".into(),
-        _ => format!("L_f^{k} h"),
-    }
-}
-
-fn lg_name(k: usize) -> String {
-    match k {
-        0 => "L_g h".into(),
-        _ => format!("L_g {}", lf_name(k)),
-    }
-}
-
-fn named_lie(chain: &LieChain) -> Vec<(String, String)> {
-    let r = chain.relative_degree;
-    let mut v: Vec<(String, String)> = (0..=r)
-        .map(|k| (lf_name(k), chain.lf[k].to_string()))
-        .collect();
-    v.extend((0..r).map(|k| (lg_name(k), chain.lg[k].to_string())));
-    v
-}
-
-fn eig_text(zd: &ZeroDynamics) -> String {
-    zd.eigenvalues
-        .iter()
-        .map(|p| complex_text(p.re, p.im))
-        .collect::<Vec<_>>()
-        .join(", ")
-}
 
 pub fn run(
     path: &Path,
@@ -67,26 +32,40 @@ pub fn run(
                 CliError::input("error: the model declares no output; pass --output NAME")
             })?,
     };
-    let h = output_expr(model, &name).map_err(|e| CliError::input(format!("error: {e}")))?;
+    if !model.outputs.iter().any(|o| o.name == name) {
+        let known: Vec<&str> = model.outputs.iter().map(|o| o.name.as_str()).collect();
+        return Err(CliError::input(format!(
+            "error: unknown output `{name}` (the model declares: {})",
+            known.join(", ")
+        )));
+    }
     let d = Derivation::new(model).map_err(|e| CliError::failure(format!("error: {e}")))?;
-    let chain = lie_chain(&d.affine, h).map_err(|e| CliError::failure(format!("error: {e}")))?;
-    let law = chain.law(Expr::sym("v"));
-    let nf: NormalForm = normal_form(model, &d, &chain, &vals, None)
-        .map_err(|e| CliError::failure(format!("error: {e}")))?;
-    let zd =
-        zero_dynamics(model, &nf, &vals).map_err(|e| CliError::failure(format!("error: {e}")))?;
-    let lie = named_lie(&chain);
+    let rep = analyze_output(model, &d, &name, &vals).map_err(|e| match e {
+        OutputAnalysisError::Lie(e) => CliError::failure(format!("error: {e}")),
+        e => CliError::failure(format!("error: {e}")),
+    })?;
+    let nf = &rep.normal_form;
+    let zd = &rep.zero_dynamics;
     if json {
-        let lie_map: serde_json::Map<String, serde_json::Value> = lie
+        let lie_map: serde_json::Map<String, serde_json::Value> = rep
+            .lie_derivatives
+            .iter()
+            .map(|(k, v)| (k.clone(), serde_json::Value::String(v.clone())))
+            .collect();
+        let defs: serde_json::Map<String, serde_json::Value> = rep
+            .definitions
             .iter()
             .map(|(k, v)| (k.clone(), serde_json::Value::String(v.clone())))
             .collect();
         let v = serde_json::json!({
             "output": name,
-            "relative_degree": chain.relative_degree,
+            "relative_degree": rep.relative_degree,
+            "definitions": defs,
             "lie_derivatives": lie_map,
-            "control_law": format!("u = {law}"),
-            "singular_set": chain.singular_set(),
+            "control_law": rep.law,
+            "control_law_expanded": rep.law_expanded,
+            "singular_set": rep.singular_set,
+            "notes": rep.notes,
             "normal_form": {
                 "xi": nf.xi.iter().map(|e| e.to_string()).collect::<Vec<_>>(),
                 "eta": nf.eta.iter().map(|e| e.to_string()).collect::<Vec<_>>(),
@@ -94,6 +73,7 @@ pub fn run(
             },
             "zero_dynamics": {
                 "equations": zd.equations(),
+                "explicit": zd.explicit,
                 "eigenvalues": zd.eigenvalues.iter().map(|p| serde_json::json!({"re": p.re, "im": p.im})).collect::<Vec<_>>(),
                 "asymptotically_stable": zd.asymptotically_stable(),
                 "minimum_phase": zd.minimum_phase(),
@@ -107,26 +87,45 @@ pub fn run(
     let _ = writeln!(
         out,
         "output y = {name}, relative degree {}",
-        chain.relative_degree
+        rep.relative_degree
     );
-    let width = lie.iter().map(|(k, _)| k.len()).max().unwrap_or(0);
-    for (k, v) in &lie {
+    let width = rep
+        .lie_derivatives
+        .iter()
+        .chain(&rep.definitions)
+        .map(|(k, _)| k.len())
+        .max()
+        .unwrap_or(0);
+    for (k, v) in &rep.definitions {
         let _ = writeln!(out, "  {k:<width$} = {v}");
     }
-    let _ = writeln!(out, "linearizing law: u = {law}");
-    let _ = writeln!(out, "singular set: {}", chain.singular_set());
+    for (k, v) in &rep.lie_derivatives {
+        let _ = writeln!(out, "  {k:<width$} = {v}");
+    }
+    let _ = writeln!(out, "linearizing law: {}", rep.law);
+    let _ = writeln!(out, "singular set: {}", rep.singular_set);
     let _ = writeln!(out, "normal form:");
     for (i, x) in nf.xi.iter().enumerate() {
         let _ = writeln!(out, "  xi{} = {x}", i + 1);
     }
     for (i, (e, o)) in nf.eta.iter().zip(&nf.eta_origin).enumerate() {
-        let _ = writeln!(out, "  eta{} = {e}    ({o})", i + 1);
+        let shown = if zd.explicit || e.dag_size() < 200 {
+            e.to_string()
+        } else {
+            "(see origin)".to_string()
+        };
+        let _ = writeln!(out, "  eta{} = {shown}    ({o})", i + 1);
     }
     let _ = writeln!(out, "zero dynamics (xi = 0):");
     for e in zd.equations() {
         let _ = writeln!(out, "  {e}");
     }
-    let _ = writeln!(out, "  eigenvalues at eta = 0: {}", eig_text(&zd));
+    let eig: Vec<String> = zd
+        .eigenvalues
+        .iter()
+        .map(|p| complex_text(p.re, p.im))
+        .collect();
+    let _ = writeln!(out, "  eigenvalues at eta = 0: {}", eig.join(", "));
     let _ = writeln!(out, "  {}", zd.class.describe());
     if zd.equilibrium_residual > 1e-9 {
         let _ = writeln!(
@@ -134,6 +133,9 @@ pub fn run(
             "  note: eta = 0 is not an equilibrium (residual {:.3e})",
             zd.equilibrium_residual
         );
+    }
+    for n in &rep.notes {
+        let _ = writeln!(out, "note: {n}");
     }
     Ok(())
 }

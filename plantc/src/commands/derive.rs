@@ -3,7 +3,7 @@
 use std::io::Write;
 use std::path::Path;
 
-use plantc_derive::mechanics::{control_affine, derive_equations};
+use plantc_derive::mechanics::{derive_equations, det_name, present_equations, Expand};
 use plantc_derive::sym::Expr;
 
 use crate::common::{load, write_json, CliError};
@@ -16,26 +16,48 @@ pub fn run(
     path: &Path,
     json: bool,
     latex: bool,
+    expand: Expand,
     out: &mut dyn Write,
     err: &mut dyn Write,
 ) -> Result<(), CliError> {
     let loaded = load(path, err)?;
     let model = &loaded.model;
-    let eqs = derive_equations(model)
-        .map_err(|e| CliError::failure(format!("error: {e}")))?
-        .simplified();
-    let ca = control_affine(&eqs).map_err(|e| CliError::failure(format!("error: {e}")))?;
+    let eqs = derive_equations(model).map_err(|e| CliError::failure(format!("error: {e}")))?;
+    let p = present_equations(&eqs, expand);
+    let n = eqs.coords.len();
+    let names = model.state_names();
     if json {
+        let mut f: Vec<Option<String>> = eqs
+            .coords
+            .iter()
+            .map(|c| Some(c.qd.name().to_string()))
+            .collect();
+        let mut g: Vec<Vec<Option<String>>> = vec![vec![Some("0".into()); model.inputs.len()]; n];
+        match (&p.f, &p.g) {
+            (Some(pf), Some(pg)) => {
+                f.extend(pf.iter().map(|e| Some(e.to_string())));
+                g.extend(
+                    pg.iter()
+                        .map(|r| r.iter().map(|e| Some(e.to_string())).collect()),
+                );
+            }
+            _ => {
+                f.extend((0..n).map(|_| None));
+                g.extend((0..n).map(|_| vec![None; model.inputs.len()]));
+            }
+        }
         let v = serde_json::json!({
             "coordinates": model.coordinates.iter().map(|c| &c.name).collect::<Vec<_>>(),
-            "state": model.state_names(),
+            "state": names,
             "inputs": model.inputs.iter().map(|c| &c.name).collect::<Vec<_>>(),
-            "mass_matrix": eqs.mass_matrix.iter().map(|r| strings(r)).collect::<Vec<_>>(),
-            "bias": strings(&eqs.bias),
-            "forces": strings(&eqs.forces),
-            "input_matrix": eqs.input_matrix.iter().map(|r| strings(r)).collect::<Vec<_>>(),
-            "f": strings(&ca.f),
-            "g": ca.g.iter().map(|r| strings(r)).collect::<Vec<_>>(),
+            "mass_matrix": p.mass_matrix.iter().map(|r| strings(r)).collect::<Vec<_>>(),
+            "bias": strings(&p.bias),
+            "forces": strings(&p.forces),
+            "input_matrix": p.input_matrix.iter().map(|r| strings(r)).collect::<Vec<_>>(),
+            "det_mass": p.det_mass.map(|d| d.to_string()),
+            "f": f,
+            "g": g,
+            "notes": p.notes,
             "derived": model.derived.iter().map(|d| (d.name.clone(), d.expr.to_string())).collect::<std::collections::BTreeMap<_, _>>(),
         });
         write_json(out, &v);
@@ -54,32 +76,41 @@ pub fn run(
     if !model.derived.is_empty() {
         let _ = writeln!(out);
     }
-    let n = eqs.coords.len();
     for i in 0..n {
         let _ = writeln!(out, "equation of {}:", model.coordinates[i].name);
         for j in 0..n {
-            let _ = writeln!(out, "  M[{i}][{j}] = {}", show(eqs.mass_matrix[i][j]));
+            let _ = writeln!(out, "  M[{i}][{j}] = {}", show(p.mass_matrix[i][j]));
         }
-        let _ = writeln!(out, "  bias   = {}", show(eqs.bias[i]));
-        let _ = writeln!(out, "  Q0     = {}", show(eqs.forces[i]));
+        let _ = writeln!(out, "  bias   = {}", show(p.bias[i]));
+        let _ = writeln!(out, "  Q0     = {}", show(p.forces[i]));
         for (j, u) in model.inputs.iter().enumerate() {
-            let _ = writeln!(out, "  B[{}]  = {}", u.name, show(eqs.input_matrix[i][j]));
+            let _ = writeln!(out, "  B[{}]  = {}", u.name, show(p.input_matrix[i][j]));
         }
         let _ = writeln!(out);
     }
-    let _ = writeln!(out, "det M = {}", show(ca.det_mass));
-    let _ = writeln!(out);
-    let names = model.state_names();
-    let _ = writeln!(out, "x' = f(x) + g(x) u, x = ({})", names.join(", "));
-    for (i, name) in names.iter().enumerate() {
-        let _ = writeln!(out, "  f[{name}] = {}", show(ca.f[i]));
+    if let Some(d) = p.det_mass {
+        let _ = writeln!(out, "{} = det M = {}", show(det_name()), show(d));
+        let _ = writeln!(out);
     }
-    for (j, u) in model.inputs.iter().enumerate() {
-        for (i, name) in names.iter().enumerate() {
-            if !ca.g[i][j].is_zero() {
-                let _ = writeln!(out, "  g[{name}, {}] = {}", u.name, show(ca.g[i][j]));
+    let _ = writeln!(
+        out,
+        "x' = f(x) + g(x) u, x = ({}): f = (q', M^-1 (Q0 - bias)), g = (0, M^-1 B)",
+        names.join(", ")
+    );
+    if let (Some(f), Some(g)) = (&p.f, &p.g) {
+        for i in 0..n {
+            let _ = writeln!(out, "  f[{}] = {}", names[n + i], show(f[i]));
+        }
+        for (j, u) in model.inputs.iter().enumerate() {
+            for i in 0..n {
+                if !g[i][j].is_zero() {
+                    let _ = writeln!(out, "  g[{}, {}] = {}", names[n + i], u.name, show(g[i][j]));
+                }
             }
         }
+    }
+    for note in &p.notes {
+        let _ = writeln!(out, "note: {note}");
     }
     Ok(())
 }

@@ -72,6 +72,8 @@ pub fn run(
             "poles": p,
             "controllable": ctrb.controllable,
             "controllability_rank": ctrb.rank,
+            "pbh_margin": ctrb.pbh_margin,
+            "pbh_tolerance": ctrb.pbh_tolerance,
             "rank_tolerance": ctrb.tolerance,
             "singular_values": ctrb.singular_values,
             "notes": lin.notes,
@@ -96,14 +98,21 @@ pub fn run(
         .collect();
     let _ = writeln!(
         out,
-        "controllability: rank {} of {} ({}; singular values {}; tolerance {:.3e})",
-        ctrb.rank,
-        lin.state.len(),
+        "controllability: {} (PBH margin {:.3e} at eigenvalue {} on the balanced realisation; tolerance {:.1e})",
         if ctrb.controllable {
             "controllable"
         } else {
             "NOT controllable"
         },
+        ctrb.pbh_margin,
+        complex_text(ctrb.pbh_eigenvalue.0, ctrb.pbh_eigenvalue.1),
+        ctrb.pbh_tolerance
+    );
+    let _ = writeln!(
+        out,
+        "controllability matrix: rank {} of {} (singular values {}; tolerance {:.3e}; informative only, it spans many orders of magnitude)",
+        ctrb.rank,
+        lin.state.len(),
         sv.join(", "),
         ctrb.tolerance
     );

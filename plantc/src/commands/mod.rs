@@ -23,6 +23,7 @@ use std::io::Write;
 
 use crate::cli::{Cli, Command};
 use crate::common::CliError;
+use plantc_derive::mechanics::Expand;
 
 /// Run the parsed command.
 pub fn dispatch(cli: &Cli, out: &mut dyn Write, err: &mut dyn Write) -> Result<(), CliError> {
@@ -30,7 +31,22 @@ pub fn dispatch(cli: &Cli, out: &mut dyn Write, err: &mut dyn Write) -> Result<(
         Command::Check { model, json } => check::run(model, *json, out, err),
         Command::Fmt { paths, check } => fmt::run(paths, *check, out, err),
         Command::Lsp => lsp::run(),
-        Command::Derive { model, json, latex } => derive::run(model, *json, *latex, out, err),
+        Command::Derive {
+            model,
+            json,
+            latex,
+            expand,
+            no_expand,
+        } => {
+            let e = if *expand {
+                Expand::Always
+            } else if *no_expand {
+                Expand::Never
+            } else {
+                Expand::Auto
+            };
+            derive::run(model, *json, *latex, e, out, err)
+        }
         Command::Linearize {
             model,
             params,
