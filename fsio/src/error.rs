@@ -21,6 +21,13 @@ pub enum Error {
         /// What was expected: "a file" or "a directory".
         expected: &'static str,
     },
+    /// A fresh directory cannot replace the current directory (or one of its
+    /// ancestors): the process (and the user's shell) would be left in a
+    /// removed directory.
+    CurrentDirectory {
+        /// The directory.
+        path: PathBuf,
+    },
     /// Creating, writing or syncing the temporary file or directory failed.
     Write {
         /// The target the temporary belongs to.
@@ -50,6 +57,7 @@ impl Error {
         match self {
             Error::NoFileName { path }
             | Error::WrongKind { path, .. }
+            | Error::CurrentDirectory { path }
             | Error::Write { path, .. }
             | Error::Replace { path, .. }
             | Error::Read { path, .. } => path,
@@ -66,6 +74,11 @@ impl fmt::Display for Error {
             Error::WrongKind { path, expected } => {
                 write!(f, "cannot write `{}`: expected {expected}", path.display())
             }
+            Error::CurrentDirectory { path } => write!(
+                f,
+                "cannot replace `{}`: it is the current directory (or contains it); choose a subdirectory",
+                path.display()
+            ),
             Error::Write { path, source } => {
                 write!(f, "cannot write `{}`: {source}", path.display())
             }

@@ -92,13 +92,30 @@ impl FreshDir {
     /// Starts a new version of the directory `target` (created with its
     /// parents if missing; an existing `target` must be a directory). Write
     /// everything into [`FreshDir::path`], then [`FreshDir::commit`].
+    /// Refuses ([`Error::CurrentDirectory`]) a `target` that is the current
+    /// directory or contains it.
     pub fn create(target: impl AsRef<Path>) -> Result<FreshDir, Error> {
-        let target = target.as_ref().to_path_buf();
-        if target.exists() && !target.is_dir() {
-            return Err(Error::WrongKind {
-                path: target,
-                expected: "a directory",
-            });
+        let given = target.as_ref().to_path_buf();
+        let mut target = given.clone();
+        if target.exists() {
+            if !target.is_dir() {
+                return Err(Error::WrongKind {
+                    path: target,
+                    expected: "a directory",
+                });
+            }
+            // `.`, `..`, `out/.`: work on the real name
+            let real = fs::canonicalize(&target).map_err(|source| Error::Read {
+                path: given.clone(),
+                source,
+            })?;
+            let cwd = std::env::current_dir().and_then(fs::canonicalize);
+            if cwd.is_ok_and(|c| c.starts_with(&real)) {
+                return Err(Error::CurrentDirectory { path: given });
+            }
+            if target.file_name().is_none() || target.ends_with(".") {
+                target = real;
+            }
         }
         let (parent, name) = names::split(&target)?;
         fs::create_dir_all(&parent).map_err(write_err(&target))?;

@@ -217,3 +217,15 @@ fn entries_carried_by_a_killed_run_go_back() {
     assert_eq!(fs::read_to_string(out.join("Cargo.toml")).unwrap(), "old");
     assert_eq!(names(&d), ["crate"]);
 }
+
+#[test]
+fn the_current_directory_is_never_swapped_away() {
+    let cwd = std::env::current_dir().unwrap();
+    for p in [PathBuf::from("."), cwd.clone(), cwd.join("..")] {
+        assert!(
+            matches!(FreshDir::create(&p), Err(Error::CurrentDirectory { .. })),
+            "{}",
+            p.display()
+        );
+    }
+}
