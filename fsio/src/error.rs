@@ -95,9 +95,9 @@ impl fmt::Display for Error {
 impl std::error::Error for Error {
     fn source(&self) -> Option<&(dyn std::error::Error + 'static)> {
         match self {
-            Error::Write { source, .. } | Error::Replace { source, .. } | Error::Read { source, .. } => {
-                Some(source)
-            }
+            Error::Write { source, .. }
+            | Error::Replace { source, .. }
+            | Error::Read { source, .. } => Some(source),
             _ => None,
         }
     }
@@ -106,9 +106,9 @@ impl std::error::Error for Error {
 impl From<Error> for io::Error {
     fn from(e: Error) -> io::Error {
         let kind = match &e {
-            Error::Write { source, .. } | Error::Replace { source, .. } | Error::Read { source, .. } => {
-                source.kind()
-            }
+            Error::Write { source, .. }
+            | Error::Replace { source, .. }
+            | Error::Read { source, .. } => source.kind(),
             _ => io::ErrorKind::InvalidInput,
         };
         io::Error::new(kind, e.to_string())

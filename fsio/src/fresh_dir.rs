@@ -176,15 +176,27 @@ impl FreshDir {
             .filter(|n| keep(Path::new(n)) && !self.staging.join(n).exists())
             .collect();
         kept.sort();
+        // (names that are not UTF-8 cannot be journaled: they stay behind)
+        kept.retain(|n| n.to_str().is_some_and(|s| !s.contains('\n')));
         if !kept.is_empty() {
+            // the journal first (one sync), then the moves: a kill at any
+            // point is undone by `recover`
             let mut j = fs::File::create(&journal).map_err(write_err(&self.target))?;
             for n in &kept {
-                let Some(s) = n.to_str() else { continue };
-                writeln!(j, "{s}")
-                    .and_then(|_| j.sync_all())
-                    .map_err(write_err(&self.target))?;
-                fs::rename(self.target.join(n), self.staging.join(n))
-                    .map_err(replace_err(&self.target))?;
+                writeln!(j, "{}", n.to_string_lossy()).map_err(write_err(&self.target))?;
+            }
+            j.sync_all().map_err(write_err(&self.target))?;
+            for n in &kept {
+                if let Err(e) = fs::rename(self.target.join(n), self.staging.join(n)) {
+                    for c in &carried {
+                        let _ = fs::rename(self.staging.join(c), self.target.join(c));
+                    }
+                    let _ = fs::remove_file(&journal);
+                    return Err(Error::Replace {
+                        path: self.target.clone(),
+                        source: e,
+                    });
+                }
                 carried.insert(n.clone());
             }
         }
@@ -248,7 +260,10 @@ mod tests {
         fs::write(fresh.path().join("report.json"), "new").unwrap();
         fresh.swap(false).unwrap();
         drop(fresh);
-        let names: Vec<_> = fs::read_dir(&out).unwrap().map(|e| e.unwrap().file_name()).collect();
+        let names: Vec<_> = fs::read_dir(&out)
+            .unwrap()
+            .map(|e| e.unwrap().file_name())
+            .collect();
         assert_eq!(names, ["report.json"]);
         assert_eq!(fs::read_dir(&d).unwrap().count(), 1, "only `out` left");
         fs::remove_dir_all(&d).unwrap();

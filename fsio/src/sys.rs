@@ -53,7 +53,15 @@ mod imp {
         let ca = CString::new(a.as_os_str().as_bytes())?;
         let cb = CString::new(b.as_os_str().as_bytes())?;
         // SAFETY: both pointers are valid NUL-terminated strings for the call.
-        let r = unsafe { renameat2(AT_FDCWD, ca.as_ptr(), AT_FDCWD, cb.as_ptr(), RENAME_EXCHANGE) };
+        let r = unsafe {
+            renameat2(
+                AT_FDCWD,
+                ca.as_ptr(),
+                AT_FDCWD,
+                cb.as_ptr(),
+                RENAME_EXCHANGE,
+            )
+        };
         if r == 0 {
             return Ok(true);
         }

@@ -91,9 +91,15 @@ fn permissions_and_symbolic_links_survive() {
     let link = d.join("link.plant");
     std::os::unix::fs::symlink("real.plant", &link).unwrap();
     write_atomic(&link, "new").unwrap();
-    assert!(fs::symlink_metadata(&link).unwrap().file_type().is_symlink());
+    assert!(fs::symlink_metadata(&link)
+        .unwrap()
+        .file_type()
+        .is_symlink());
     assert_eq!(fs::read_to_string(&real).unwrap(), "new");
-    assert_eq!(fs::metadata(&real).unwrap().permissions().mode() & 0o777, 0o640);
+    assert_eq!(
+        fs::metadata(&real).unwrap().permissions().mode() & 0o777,
+        0o640
+    );
 }
 
 #[test]
@@ -211,7 +217,11 @@ fn entries_carried_by_a_killed_run_go_back() {
     fs::create_dir_all(new.join("target")).unwrap();
     fs::write(new.join("target/cache"), "c").unwrap();
     fs::write(new.join("Cargo.toml"), "new, unfinished").unwrap();
-    fs::write(d.join(format!(".crate.plantc-carried-{DEAD}-7")), "target\n").unwrap();
+    fs::write(
+        d.join(format!(".crate.plantc-carried-{DEAD}-7")),
+        "target\n",
+    )
+    .unwrap();
     drop(FreshDir::create(&out).unwrap());
     assert_eq!(names(&out), ["Cargo.toml", "target"]);
     assert_eq!(fs::read_to_string(out.join("Cargo.toml")).unwrap(), "old");

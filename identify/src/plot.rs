@@ -87,7 +87,8 @@ pub fn plot_comparison(
     channels: &[&str],
 ) -> Result<(), PlotError> {
     let svg = render_comparison(measured, simulated, channels)?;
-    std::fs::write(path, svg).map_err(|e| PlotError::Io {
+    // crash-safe: an existing figure is replaced whole or not at all
+    plantc_fsio::write_atomic(path, svg).map_err(|e| PlotError::Io {
         file: path.to_path_buf(),
         message: e.to_string(),
     })

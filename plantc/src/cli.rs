@@ -160,10 +160,13 @@ pub struct IdentifyArgs {
     #[command(flatten)]
     pub data: DataArgs,
     /// Output directory: `with_effect.plant`, `fitted.plant`, `report.json`
-    /// and the figures of each stage.
+    /// and the figures of each stage. Built aside and swapped in when the run
+    /// completes: an interrupted run leaves the previous DIR as it was, and
+    /// files of an earlier run never survive into the new one.
     #[arg(short = 'o', long = "out", value_name = "DIR")]
     pub out: PathBuf,
-    /// Write into a non-empty DIR (files of the same names are replaced).
+    /// Write into a non-empty DIR that identify did not write, or that holds
+    /// the input model (identify's files are replaced, other entries kept).
     #[arg(long)]
     pub force: bool,
     /// Print the summary as JSON instead of the story.
@@ -245,9 +248,13 @@ pub struct CompareArgs {
     /// Print JSON.
     #[arg(long)]
     pub json: bool,
-    /// Write an overlay + residual SVG per experiment into this directory.
+    /// Write an overlay + residual SVG per experiment into this directory
+    /// (`<experiment>.svg`; existing figures are kept unless --force).
     #[arg(long, value_name = "DIR")]
     pub plots: Option<PathBuf>,
+    /// Overwrite existing figures in the --plots directory.
+    #[arg(long, requires = "plots")]
+    pub force: bool,
 }
 
 /// Arguments of `plantc fit`.

@@ -257,13 +257,39 @@ pub fn declared_value_text(p: &plantc_derive::model::Parameter, si: f64) -> Stri
     plantc_derive::lang::edit::number_text(si / scale)
 }
 
-/// Refuses to write `out` when it exists (the input model included) unless
-/// `force`; never writes over the input model without `force` either.
-pub fn refuse_to_clobber(out: &Path, input: &Path, force: bool) -> Result<(), CliError> {
-    let same = match (out.canonicalize(), input.canonicalize()) {
-        (Ok(a), Ok(b)) => a == b,
+/// Whether `a` and `b` are the same existing file (also through links).
+pub fn same_file(a: &Path, b: &Path) -> bool {
+    #[cfg(unix)]
+    {
+        use std::os::unix::fs::MetadataExt;
+        if let (Ok(x), Ok(y)) = (std::fs::metadata(a), std::fs::metadata(b)) {
+            return x.dev() == y.dev() && x.ino() == y.ino();
+        }
+    }
+    match (a.canonicalize(), b.canonicalize()) {
+        (Ok(x), Ok(y)) => x == y,
         _ => false,
-    };
+    }
+}
+
+/// Writes `bytes` to `path` crash-safely (temporary file, fsync, rename):
+/// a kill at any moment leaves the old complete file or the new one.
+pub fn write_output(path: &Path, bytes: impl AsRef<[u8]>) -> Result<(), CliError> {
+    plantc_fsio::write_atomic(path, bytes).map_err(|e| CliError::failure(format!("error: {e}")))
+}
+
+/// Checks before any work that a file can be written at `path` (its
+/// directory exists and accepts files): a long fit must not end in
+/// "cannot write".
+pub fn check_writable(path: &Path) -> Result<(), CliError> {
+    plantc_fsio::probe_writable(path).map_err(|e| CliError::input(format!("error: {e}")))
+}
+
+/// Refuses to write `out` when it exists (the input model included) unless
+/// `force`; never writes over the input model without `force` either. Also
+/// checks up front that `out` can be written.
+pub fn refuse_to_clobber(out: &Path, input: &Path, force: bool) -> Result<(), CliError> {
+    let same = same_file(out, input);
     if same && !force {
         return Err(CliError::input(format!(
             "error: `{}` is the input model; write the result to another file, or pass --force to replace it",
@@ -276,5 +302,5 @@ pub fn refuse_to_clobber(out: &Path, input: &Path, force: bool) -> Result<(), Cl
             out.display()
         )));
     }
-    Ok(())
+    check_writable(out)
 }

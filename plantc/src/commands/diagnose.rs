@@ -13,7 +13,7 @@ use crate::cli::DiagnoseArgs;
 use crate::commands::fit::with_progress;
 
 use crate::common::{
-    load, read_data, refuse_to_clobber, write_json, write_parameter_values, CliError,
+    load, read_data, refuse_to_clobber, write_json, write_output, write_parameter_values, CliError,
 };
 
 /// The candidate with its parameters at their fitted values (still marked
@@ -127,9 +127,7 @@ pub fn run(args: &DiagnoseArgs, out: &mut dyn Write, err: &mut dyn Write) -> Res
                 let values = f.parameters.iter().map(|e| (e.name.as_str(), e.value));
                 edited = write_parameter_values(&edited, model, values)?;
             }
-            std::fs::write(o, edited).map_err(|e| {
-                CliError::failure(format!("error: cannot write `{}`: {e}", o.display()))
-            })?;
+            write_output(o, edited)?;
             let _ = writeln!(
                 err,
                 "model with {} added -> {}",

@@ -18,7 +18,7 @@ use crate::cli::IdentifyArgs;
 use crate::commands::compare::{report, simulate_experiments, write_failures, write_figures};
 use crate::commands::diagnose::fitted_instance;
 use crate::commands::fit::{progress_text, with_progress};
-use crate::common::{load, read_data, write_json, write_parameter_values, CliError};
+use crate::common::{load, read_data, write_json, write_output, write_parameter_values, CliError};
 
 /// One stage of the story: its label and its comparison with the data.
 struct Stage {
@@ -30,22 +30,40 @@ fn fail(e: impl std::fmt::Display) -> CliError {
     CliError::failure(format!("error: {e}"))
 }
 
-fn write_file(path: &Path, text: &str) -> Result<(), CliError> {
-    std::fs::write(path, text).map_err(|e| fail(format!("cannot write `{}`: {e}", path.display())))
+/// The output directory being written: built aside (`fresh`), named `dir`
+/// in messages, swapped in when the story is complete.
+struct OutDir<'a> {
+    dir: &'a Path,
+    fresh: plantc_fsio::FreshDir,
 }
 
-/// Simulate, compare and draw one stage.
+impl OutDir<'_> {
+    /// Writes `name` (crash-safe) and returns the path shown to the user.
+    fn write(&self, name: &str, text: &str) -> Result<PathBuf, CliError> {
+        write_output(&self.fresh.path().join(name), text)?;
+        Ok(self.dir.join(name))
+    }
+}
+
+/// Simulate, compare and draw one stage into `out`'s `figures` folder.
 fn stage(
     label: &str,
     model: &Model,
     full: &[f64],
     measured: &[Experiment],
-    figures: &Path,
+    (out, figures): (&OutDir, &str),
     err: &mut dyn Write,
 ) -> Result<(Stage, Vec<Experiment>), CliError> {
     let simulated = simulate_experiments(model, full, measured)?;
     let rep = report(model, measured, &simulated)?;
-    write_figures(figures, model, measured, &simulated, err)?;
+    write_figures(
+        &out.fresh.path().join(figures),
+        &out.dir.join(figures),
+        model,
+        measured,
+        &simulated,
+        err,
+    )?;
     Ok((
         Stage {
             label: label.to_string(),
@@ -138,9 +156,20 @@ fn story(
         && !made_by_identify(dir)
     {
         return Err(CliError::input(format!(
-            "error: `{}` exists, is not empty and was not written by `plantc identify`; choose a new directory or pass --force (files of the same names are replaced)",
+            "error: `{}` exists, is not empty and was not written by `plantc identify`; choose a new directory or pass --force (identify's files are replaced, others kept)",
             dir.display()
         )));
+    }
+    // the output directory is replaced as a whole: never the input model
+    if let (Ok(m), Ok(d)) = (args.model.canonicalize(), dir.canonicalize()) {
+        if m.starts_with(&d) && !args.force {
+            return Err(CliError::input(format!(
+                "error: the input model `{}` lies inside the output directory `{}`, which identify replaces; copy the model elsewhere (e.g. `cp {} model.plant`) or choose another -o, or pass --force to replace it",
+                args.model.display(),
+                dir.display(),
+                args.model.display()
+            )));
+        }
     }
     let started = Instant::now();
     let loaded = load(&args.model, err)?;
@@ -152,9 +181,12 @@ fn story(
         ))
     })?;
     let measured = read_data(model, &args.data, err)?;
-    // inputs are checked before anything is written
-    std::fs::create_dir_all(dir)
-        .map_err(|e| fail(format!("cannot create `{}`: {e}", dir.display())))?;
+    // inputs are checked before anything is written; the new directory is
+    // built aside and swapped in at the end: a killed run leaves the old one
+    let out_dir = OutDir {
+        dir,
+        fresh: plantc_fsio::FreshDir::create(dir).map_err(fail)?,
+    };
     let channels: Vec<&str> = model.coordinates.iter().map(|c| c.name.as_str()).collect();
     let nominal = ParameterValues::new(model, None, &[]).map_err(fail)?;
 
@@ -170,7 +202,7 @@ fn story(
         model,
         &nominal.full,
         &measured,
-        &dir.join("1-nominal"),
+        (&out_dir, "1-nominal"),
         err,
     )?;
     let _ = writeln!(out, "   RMSE {:.3e}; where it fails:", s1.report.rmse);
@@ -193,7 +225,7 @@ fn story(
         model,
         &refit_vals.full,
         &measured,
-        &dir.join("2-refitted"),
+        (&out_dir, "2-refitted"),
         err,
     )?;
     let _ = writeln!(
@@ -238,8 +270,7 @@ fn story(
                 Some(f) => with_values(&edited, &with_effect, f)?,
                 None => edited,
             };
-            let path = dir.join("with_effect.plant");
-            write_file(&path, &edited)?;
+            let path = out_dir.write("with_effect.plant", &edited)?;
             let _ = writeln!(err, "model with the effect -> {}", path.display());
             // 4. fit it
             let m2 = model_from_text("with_effect", &edited).map_err(fail)?;
@@ -257,8 +288,7 @@ fn story(
             })
             .map_err(fail)?;
             let fitted = with_values(&edited, &m2, &f)?;
-            let path = dir.join("fitted.plant");
-            write_file(&path, &fitted)?;
+            let path = out_dir.write("fitted.plant", &fitted)?;
             let _ = writeln!(
                 out,
                 "\n4. fit of the model with the effect -> {}",
@@ -287,7 +317,7 @@ fn story(
                 &m2,
                 &vals.full,
                 &measured,
-                &dir.join("3-fitted"),
+                (&out_dir, "3-fitted"),
                 err,
             )?;
             stages.push(s3);
@@ -306,7 +336,7 @@ fn story(
                 "\n3. verdict: adequate: no candidate effect lowers the RMSE clearly; the refitted nominal model is the result"
             );
             let fitted = with_values(&text, model, &d.baseline)?;
-            write_file(&dir.join("fitted.plant"), &fitted)?;
+            out_dir.write("fitted.plant", &fitted)?;
             summary["fit"] = crate::commands::fit::fit_json(&d.baseline);
             final_text = "fitted.plant";
         }
@@ -323,7 +353,6 @@ fn story(
         dir.display(),
         if stages.len() > 2 { ",3-fitted" } else { "" }
     );
-    let _ = writeln!(err, "done in {:.1} s", started.elapsed().as_secs_f64());
     summary["stages"] = stages
         .iter()
         .map(|s| serde_json::json!({"stage": s.label, "report": s.report}))
@@ -331,17 +360,44 @@ fn story(
         .into();
     let mut buf = Vec::new();
     write_json(&mut buf, &summary);
-    write_file(&dir.join("report.json"), &String::from_utf8_lossy(&buf))?;
+    out_dir.write("report.json", &String::from_utf8_lossy(&buf))?;
+    // swap the complete directory in; entries identify never writes (the
+    // user's, with --force) are kept
+    out_dir
+        .fresh
+        .commit_keeping(|n| !IDENTIFY_ENTRIES.iter().any(|k| n == Path::new(k)))
+        .map_err(fail)?;
+    let _ = writeln!(err, "done in {:.1} s", started.elapsed().as_secs_f64());
     Ok(summary)
 }
 
+/// Everything identify writes at the top of its output directory.
+const IDENTIFY_ENTRIES: [&str; 6] = [
+    "report.json",
+    "fitted.plant",
+    "with_effect.plant",
+    "1-nominal",
+    "2-refitted",
+    "3-fitted",
+];
+
 /// Whether `dir` holds the output of an earlier `plantc identify` (its
-/// `report.json` has the story's keys): it may be replaced without asking.
+/// `report.json` has the story's keys, and nothing else is in it): it may be
+/// replaced without asking.
 fn made_by_identify(dir: &Path) -> bool {
-    std::fs::read_to_string(dir.join("report.json"))
-        .ok()
-        .and_then(|t| serde_json::from_str::<serde_json::Value>(&t).ok())
-        .is_some_and(|v| v.get("stages").is_some() && v.get("verdict").is_some())
+    let only_ours = std::fs::read_dir(dir).is_ok_and(|entries| {
+        entries.flatten().all(|e| {
+            let n = e.file_name();
+            IDENTIFY_ENTRIES
+                .iter()
+                .any(|k| n == std::ffi::OsStr::new(k))
+        })
+    });
+    only_ours
+        && std::fs::read_to_string(dir.join("report.json"))
+            .ok()
+            .and_then(|t| serde_json::from_str::<serde_json::Value>(&t).ok())
+            .is_some_and(|v| v.get("stages").is_some() && v.get("verdict").is_some())
 }
 
 fn indent(s: &str) -> String {
