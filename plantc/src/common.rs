@@ -73,11 +73,16 @@ pub fn parse_overrides(params: &[String]) -> Result<Vec<(String, f64)>, CliError
                     "error: `--param {p}`: expected NAME=VALUE, e.g. `--param l2=0.1685`"
                 ))
             })?;
-            let v: f64 = value.trim().parse().map_err(|_| {
-                CliError::input(format!(
-                    "error: `--param {p}`: `{value}` is not a number (values are in SI units)"
-                ))
-            })?;
+            let v: f64 = value
+                .trim()
+                .parse()
+                .ok()
+                .filter(|v: &f64| v.is_finite())
+                .ok_or_else(|| {
+                    CliError::input(format!(
+                        "error: `--param {p}`: `{value}` is not a finite number (values are in SI units)"
+                    ))
+                })?;
             Ok((name.trim().to_string(), v))
         })
         .collect()
@@ -105,11 +110,13 @@ pub fn parse_assignments(text: &str, names: &[String], what: &str) -> Result<Vec
                 names.join(", ")
             ))
         })?;
-        out[idx] = parse_quantity(value).ok_or_else(|| {
-            CliError::input(format!(
-                "error: `{value}` is not a number (e.g. 0.1, 10deg)"
-            ))
-        })?;
+        out[idx] = parse_quantity(value)
+            .filter(|v| v.is_finite())
+            .ok_or_else(|| {
+                CliError::input(format!(
+                    "error: `{name}={value}`: `{value}` is not a finite number (e.g. 0.1, 10deg)"
+                ))
+            })?;
     }
     Ok(out)
 }

@@ -5,7 +5,7 @@
 mod lower;
 mod values;
 
-pub use lower::{load_model, load_model_text, lower, LoadError, LoadedModel};
+pub use lower::{load_model, load_model_text, lower, read_source, LoadError, LoadedModel};
 pub use values::{ParameterValues, ValuesError};
 
 use crate::sym::{CoordinateSymbols, Expr, Symbol};

@@ -51,12 +51,8 @@ pub fn run(args: &SynthArgs, out: &mut dyn Write, _err: &mut dyn Write) -> Resul
             }
         }
     }
-    let text = std::fs::read_to_string(&args.model).map_err(|e| {
-        CliError::input(format!(
-            "error: cannot read `{}`: {e}",
-            args.model.display()
-        ))
-    })?;
+    let text =
+        plantc_derive::model::read_source(&args.model).map_err(|e| CliError::input(e.render()))?;
     let case = args.case.clone().unwrap_or_else(|| {
         args.out
             .file_name()
