@@ -812,6 +812,21 @@ impl Checker {
                 .with_help("start the file with `model my_model \"description\"`"),
             );
         }
+        if let (true, Some(decl)) = (file.coordinates.is_empty(), &file.model) {
+            // nothing could be derived, linearized or simulated
+            let at = decl.name.span;
+            self.diags.push(
+                Diagnostic::error(
+                    "plantc::no_coordinates",
+                    "the model declares no coordinate",
+                    at,
+                    "a model needs at least one generalised coordinate",
+                )
+                .with_help(
+                    "declare one, e.g. `coordinate theta : angle` or `coordinate x : length`",
+                ),
+            );
+        }
         // declarations
         for c in &file.coordinates {
             self.declare(
