@@ -51,7 +51,7 @@ pub use backend::{Backend, BackendError, EncoderMap, Tick};
 pub use control_loop::{run, run_with_events, RunConfig, MAX_RATE_HZ};
 pub use controller::{Controller, StateFeedback};
 pub use error::RuntimeError;
-pub use interrupt::stop_on_ctrl_c;
+pub use interrupt::{stop_completed, stop_on_ctrl_c, stop_on_signals, stop_signal, StopSignal};
 pub use log::{LogError, LogWriter};
 pub use model_plant::{ModelController, ModelPlant};
 pub use plant::Plant;
