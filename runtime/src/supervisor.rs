@@ -32,6 +32,9 @@ pub enum FaultKind {
     EncoderStuck,
     /// The stop flag (Ctrl-C) was set.
     Stopped,
+    /// The simulated plant diverged (its state is no longer finite): a
+    /// modelling or parameter problem, not the encoder's.
+    PlantDiverged,
 }
 
 impl FaultKind {
@@ -49,6 +52,7 @@ impl FaultKind {
             FaultKind::WatchdogExpired => "watchdog_expired",
             FaultKind::EncoderStuck => "encoder_stuck",
             FaultKind::Stopped => "stopped",
+            FaultKind::PlantDiverged => "plant_diverged",
         }
     }
 }
@@ -85,6 +89,7 @@ impl SupervisorState {
                 FaultKind::WatchdogExpired => "fault:watchdog_expired",
                 FaultKind::EncoderStuck => "fault:encoder_stuck",
                 FaultKind::Stopped => "fault:stopped",
+                FaultKind::PlantDiverged => "fault:plant_diverged",
             },
         }
     }
