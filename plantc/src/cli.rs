@@ -345,7 +345,10 @@ pub struct RunArgs {
     /// Initial state of the simulator, e.g. `--x0 alpha=5deg`.
     #[arg(long, value_name = "NAME=VALUE,...", allow_hyphen_values = true)]
     pub x0: Option<String>,
-    /// Path of the HIL library (default: hil.dll on Windows, libhil.so elsewhere).
+    /// Path of the HIL library. A bare file name is looked for in the
+    /// current directory first, then on the system library path. Default:
+    /// `hil.dll` (Windows), `libhil.dylib` (macOS), `libhil.so` then
+    /// `/opt/quanser/lib/libhil.so` (Linux).
     #[arg(long, value_name = "PATH")]
     pub hil_lib: Option<PathBuf>,
     /// Board identifier for hil_open.

@@ -1,9 +1,12 @@
-//! `plantc run` stopped by a signal (reliability reproducer 03): SIGINT,
+//! `plantc run` safety outside the loop. Stopped by a signal (reliability
+//! reproducer 03): SIGINT,
 //! SIGTERM, SIGHUP and SIGQUIT each end the run like Ctrl-C: `fault:stopped`,
 //! 0 V the last value written, the board closed, the log flushed, and the exit
 //! code 128 + signal. Against the fake HIL board (which refuses the watchdog,
 //! so nothing but plantc can bring the output back to 0 V) and against the
-//! simulator in real time. Unix only (signals).
+//! simulator in real time. `--hil-lib NAME` (reproducer 14): a bare name is
+//! a file of the current directory first, and what was loaded is said.
+//! Unix only (signals, `.so` names).
 #![cfg(unix)]
 
 mod common;
@@ -178,4 +181,77 @@ fn sigterm_stops_a_real_time_simulated_run() {
     assert_eq!(code, 143, "{err}");
     let (vm, state, complete) = last_row(&log);
     assert_eq!((vm, state.as_str(), complete), (0.0, "fault:stopped", true));
+}
+
+/// Runs the built binary in `dir` with the fake HIL configured.
+fn run_in(dir: &Path, hil_lib: &str) -> (i32, String) {
+    let o = Command::new(env!("CARGO_BIN_EXE_plantc"))
+        .args(["run", &model(), "--controller", "pole_placement"])
+        .args([
+            "--backend",
+            "q2usb",
+            "--hil-lib",
+            hil_lib,
+            "--duration",
+            "0.2",
+        ])
+        .env("PLANTC_FAKE_HIL", "alpha0=5deg")
+        .current_dir(dir)
+        .output()
+        .unwrap();
+    (
+        o.status.code().unwrap_or(-1),
+        String::from_utf8_lossy(&o.stderr).into_owned(),
+    )
+}
+
+#[test]
+fn a_bare_hil_lib_name_is_a_file_of_the_current_directory() {
+    let dir = tmp("hil_lib_bare");
+    std::fs::copy(fake_hil(), dir.join("libhil_local.so")).unwrap();
+    let (code, err) = run_in(&dir, "libhil_local.so");
+    assert_eq!(code, 0, "{err}");
+    let here = std::fs::canonicalize(&dir).unwrap();
+    assert!(
+        err.contains(&format!(
+            "note: HIL library: `{}/libhil_local.so`",
+            here.display()
+        )),
+        "{err}"
+    );
+    // a local file named like a system library wins over the system one
+    std::fs::copy(fake_hil(), dir.join("libm.so.6")).unwrap();
+    let (code, err) = run_in(&dir, "libm.so.6");
+    assert_eq!(code, 0, "{err}");
+    assert!(
+        err.contains(&format!("{}/libm.so.6`", here.display())),
+        "{err}"
+    );
+    // without the local file the system's libm loads, and is named as no HIL library
+    std::fs::remove_file(dir.join("libm.so.6")).unwrap();
+    let (code, err) = run_in(&dir, "libm.so.6");
+    assert_ne!(code, 0, "{err}");
+    assert!(
+        err.contains("libm.so.6: it loaded, but is not a HIL library (no `hil_open`)"),
+        "{err}"
+    );
+}
+
+#[test]
+fn run_help_names_the_default_hil_libraries() {
+    let o = Command::new(env!("CARGO_BIN_EXE_plantc"))
+        .args(["help", "run"])
+        .output()
+        .unwrap();
+    let help = String::from_utf8_lossy(&o.stdout)
+        .split_whitespace()
+        .collect::<Vec<_>>()
+        .join(" ");
+    for c in plantc_runtime::hil_ffi::default_library_candidates() {
+        assert!(
+            help.contains(&c.display().to_string()),
+            "help lacks {}: {help}",
+            c.display()
+        );
+    }
 }
