@@ -308,6 +308,17 @@ pub struct DiagnoseArgs {
     pub force: bool,
 }
 
+/// The integration method of `plantc sim`.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, clap::ValueEnum)]
+pub enum IntegratorKind {
+    /// Explicit unless stiff at the initial state.
+    Auto,
+    /// Dormand-Prince 5(4).
+    Explicit,
+    /// Rosenbrock ROS2 (stiff models).
+    Implicit,
+}
+
 /// Which hardware the loop drives.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, clap::ValueEnum)]
 pub enum BackendKind {
@@ -433,6 +444,11 @@ pub struct SimArgs {
     /// Relative integrator tolerance (default 1e-8; absolute = rtol/100).
     #[arg(long)]
     pub rtol: Option<f64>,
+    /// Integrator: `auto` (explicit Dormand-Prince unless the model is stiff
+    /// at the initial state, then implicit), `explicit`, or `implicit`
+    /// (Rosenbrock: for stiff models, e.g. a tiny resistance or inertia).
+    #[arg(long, value_enum, default_value_t = IntegratorKind::Auto)]
+    pub integrator: IntegratorKind,
     /// Overwrite existing output files.
     #[arg(long)]
     pub force: bool,

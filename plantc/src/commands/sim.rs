@@ -8,10 +8,11 @@ use std::time::Instant;
 use plantc_derive::control::{resolve, Derivation};
 use plantc_derive::mechanics::smooth_signs;
 use plantc_derive::simulate::{
-    set_gains, simulate, Control, ControllerEval, SimError, SimOptions, SimProblem, Trajectory,
+    set_gains, simulate, Control, ControllerEval, Integrator, SimError, SimOptions, SimProblem,
+    Trajectory,
 };
 
-use crate::cli::SimArgs;
+use crate::cli::{IntegratorKind, SimArgs};
 use crate::common::{
     check_writable, load, num, parse_assignments, parse_quantity, same_file, values,
     warn_ignored_effects, write_output, CliError,
@@ -233,6 +234,11 @@ pub fn run(args: &SimArgs, out: &mut dyn Write, err: &mut dyn Write) -> Result<(
     let mut options = SimOptions {
         output_rate: args.output_rate,
         sample_rate: args.sample_rate,
+        integrator: match args.integrator {
+            IntegratorKind::Auto => Integrator::Auto,
+            IntegratorKind::Explicit => Integrator::Explicit,
+            IntegratorKind::Implicit => Integrator::Implicit,
+        },
         ..SimOptions::default()
     };
     if let Some(r) = args.rtol {
@@ -242,6 +248,15 @@ pub fn run(args: &SimArgs, out: &mut dyn Write, err: &mut dyn Write) -> Result<(
     let started = Instant::now();
     let traj = simulate(&problem, &options).map_err(sim_error)?;
     let elapsed = started.elapsed();
+    if let Some(s) = traj.stiffness.filter(|s| s.is_stiff()) {
+        let _ = writeln!(
+            err,
+            "note: the model is stiff at the initial state (fastest mode {:.2e} 1/s: an explicit integrator needs about {:.1e} steps for {} s), so it was integrated with the implicit Rosenbrock method; check the parameter values if that is not expected (`--integrator explicit` forces Dormand-Prince)",
+            s.fastest_mode,
+            s.explicit_steps,
+            num(args.duration)
+        );
+    }
     write_csv(&args.output, &traj)?;
     let mode = match args.sample_rate {
         Some(r) => format!("sampled at {} Hz, zero-order hold", num(r)),
