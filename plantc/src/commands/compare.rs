@@ -12,6 +12,7 @@ use plantc_identify::{
 };
 
 use crate::cli::CompareArgs;
+use crate::commands::fit::with_progress;
 use crate::common::{channel_spec, load, num, read_data, values, write_json, CliError};
 
 /// The model simulated over each measured experiment, as experiments with the
@@ -182,12 +183,16 @@ pub fn run(args: &CompareArgs, out: &mut dyn Write, err: &mut dyn Write) -> Resu
     let loaded = load(&args.model, err)?;
     let model = &loaded.model;
     let vals = values(&loaded, &args.params)?;
-    let measured = read_data(model, &args.data, err)?;
+    // long records take seconds: a progress line on a terminal
+    let measured = with_progress("reading", |_| read_data(model, &args.data, err))?;
     if let Some(dir) = &args.plots {
         refuse_existing_figures(dir, &measured, args.force)?;
     }
-    let simulated = simulate_experiments(model, &vals.full, &measured)?;
-    let rep = report(model, &measured, &simulated)?;
+    let (simulated, rep) = with_progress("simulating", |_| {
+        let simulated = simulate_experiments(model, &vals.full, &measured)?;
+        let rep = report(model, &measured, &simulated)?;
+        Ok::<_, CliError>((simulated, rep))
+    })?;
     if let Some(dir) = &args.plots {
         write_figures(dir, dir, model, &measured, &simulated, err)?;
     }
