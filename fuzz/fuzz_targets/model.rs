@@ -29,7 +29,12 @@ fuzz_target!(|data: &[u8]| {
     sets.extend(model.sets.iter().map(|s| Some(s.name.as_str())));
     for s in sets {
         if let Ok(v) = ParameterValues::new(model, s, &[]) {
-            let _ = linearize(model, &derivation.equations, &v, &OperatingPoint::zero(model));
+            let _ = linearize(
+                model,
+                &derivation.equations,
+                &v,
+                &OperatingPoint::zero(model),
+            );
         }
     }
 });
