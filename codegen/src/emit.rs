@@ -20,6 +20,8 @@ pub(crate) struct Spec<'a> {
     pub controllers: &'a [String],
     pub set: Option<&'a str>,
     pub overrides: &'a [(String, f64)],
+    /// Emit `mod observer` designed with these settings (rig crates).
+    pub observer: Option<crate::ObserverOptions>,
 }
 
 /// An unsuffixed integer literal (`x[1]`, not `x[1usize]`).
@@ -145,6 +147,37 @@ pub(crate) fn generate_body(spec: &Spec) -> Result<String, Error> {
         let f = ident(&d.name);
         quote!(#f: #o,)
     });
+    let n_params = idx(model.parameters.len());
+    let param_names: Vec<&str> = model.parameters.iter().map(|p| p.name.as_str()).collect();
+    let pget = model.parameters.iter().map(|p| {
+        let f = ident(&p.name);
+        let name = &p.name;
+        quote!(#name => Some(self.#f),)
+    });
+    let pset: Vec<TokenStream> = model
+        .parameters
+        .iter()
+        .map(|p| {
+            let f = ident(&p.name);
+            let name = &p.name;
+            quote!(#name => self.#f = value,)
+        })
+        .collect();
+    let pset_body = if pset.is_empty() {
+        quote!(let _ = (name, value); false)
+    } else {
+        quote!(match name { #(#pset)* _ => return false, } true)
+    };
+    let mut limits = Vec::new();
+    for inp in &model.inputs {
+        limits.push(match inp.limits {
+            Some((lo, hi)) => {
+                let (lo, hi) = (lit(lo)?, lit(hi)?);
+                quote!((#lo, #hi))
+            }
+            None => quote!((f64::NEG_INFINITY, f64::INFINITY)),
+        });
+    }
 
     // ---- plant functions ----
     let plant = crate::plant::plant_items(model, eqs)?;
@@ -168,6 +201,12 @@ pub(crate) fn generate_body(spec: &Spec) -> Result<String, Error> {
         }
         brows.push(quote!([#(#row),*]));
     }
+
+    // ---- velocity observer (rig crates) ----
+    let observer_items = match &spec.observer {
+        Some(o) => observer(model, &lin, o)?,
+        None => TokenStream::new(),
+    };
 
     // ---- controllers ----
     let mut ctrl_items = Vec::new();
@@ -205,6 +244,12 @@ pub(crate) fn generate_body(spec: &Spec) -> Result<String, Error> {
         pub const STATE_NAMES: [&str; N_STATES] = [#(#state_names),*];
         /// Input names in order.
         pub const INPUT_NAMES: [&str; N_INPUTS] = [#(#input_names),*];
+        /// Input limits `(min, max)` in order (infinite where the model gives none).
+        pub const INPUT_LIMITS: [(f64, f64); N_INPUTS] = [#(#limits),*];
+        /// Number of parameters.
+        pub const N_PARAMS: usize = #n_params;
+        /// Parameter names in model order ([`Params::get`], [`Params::set`]).
+        pub const PARAM_NAMES: [&str; N_PARAMS] = [#(#param_names),*];
 
         #set_doc
         #[derive(Clone, Copy, Debug, PartialEq)]
@@ -230,6 +275,19 @@ pub(crate) fn generate_body(spec: &Spec) -> Result<String, Error> {
                 #(#dstmts)*
                 Derived { #(#dinit)* }
             }
+
+            /// The value of the parameter `name` (one of [`PARAM_NAMES`]).
+            pub fn get(&self, name: &str) -> Option<f64> {
+                match name {
+                    #(#pget)*
+                    _ => None,
+                }
+            }
+
+            /// Set the parameter `name` (SI units); false if there is none of that name.
+            pub fn set(&mut self, name: &str, value: f64) -> bool {
+                #pset_body
+            }
         }
 
         impl Default for Params {
@@ -245,7 +303,32 @@ pub(crate) fn generate_body(spec: &Spec) -> Result<String, Error> {
         /// Input matrix of the linearization (see [`A`]).
         pub const B: [[f64; N_INPUTS]; N_STATES] = [#(#brows),*];
 
+        /// The interface of every generated controller: the input is a function
+        /// of the measured state, the time and the controller's own internal
+        /// state. Adapters (the rig binary of `plantc gen --rig`, tests) use only
+        /// this trait, so they run any generated controller.
+        pub trait Control {
+            /// The controller's name in the model file.
+            fn name(&self) -> &'static str;
+            /// Names of the gains [`Control::set_gain`] accepts.
+            fn gain_names(&self) -> &'static [&'static str];
+            /// A gain's current value (`None` for an unknown name).
+            fn gain(&self, name: &str) -> Option<f64>;
+            /// Change a gain; false if there is none of that name.
+            fn set_gain(&mut self, name: &str, value: f64) -> bool;
+            /// Change the plant parameters the law uses (a gain designed at
+            /// generation time, e.g. a state-feedback `K`, is not redesigned).
+            fn set_params(&mut self, params: Params);
+            /// Clear the internal state (called when the controller is engaged).
+            fn reset(&mut self);
+            /// The input to apply at time `t` (s) for the measured state `x`,
+            /// saturated at the input limits.
+            fn step(&mut self, t: f64, x: &[f64; N_STATES]) -> [f64; N_INPUTS];
+        }
+
         #(#ctrl_items)*
+
+        #observer_items
 
         /// Elementary functions: `std` by default, `libm` with the `libm` feature
         /// (for `#![no_std]` targets).
@@ -262,6 +345,7 @@ pub(crate) fn generate_body(spec: &Spec) -> Result<String, Error> {
                 #[inline(always)] pub fn sqrt(x: f64) -> f64 { x.sqrt() }
                 #[inline(always)] pub fn powf(x: f64, y: f64) -> f64 { x.powf(y) }
                 #[inline(always)] pub fn atan2(y: f64, x: f64) -> f64 { y.atan2(x) }
+                #[inline(always)] pub fn round(x: f64) -> f64 { x.round() }
             }
             #[cfg(feature = "libm")]
             mod imp {
@@ -275,6 +359,7 @@ pub(crate) fn generate_body(spec: &Spec) -> Result<String, Error> {
                 #[inline(always)] pub fn sqrt(x: f64) -> f64 { libm::sqrt(x) }
                 #[inline(always)] pub fn powf(x: f64, y: f64) -> f64 { libm::pow(x, y) }
                 #[inline(always)] pub fn atan2(y: f64, x: f64) -> f64 { libm::atan2(y, x) }
+                #[inline(always)] pub fn round(x: f64) -> f64 { libm::round(x) }
             }
             pub use imp::*;
 
@@ -328,7 +413,7 @@ pub(crate) fn generate_body(spec: &Spec) -> Result<String, Error> {
 
 fn controller(model: &Model, rc: &ResolvedController) -> Result<TokenStream, Error> {
     let type_name = camel(rc.name());
-    if ["Plant", "PlantCoeffs", "Params", "Derived"].contains(&type_name.as_str()) {
+    if ["Plant", "PlantCoeffs", "Params", "Derived", "Control"].contains(&type_name.as_str()) {
         return Err(Error::Generate(format!(
             "controller `{}` would generate the type `{type_name}`, which the generated \
              module already defines; rename the controller",
@@ -386,8 +471,8 @@ fn controller(model: &Model, rc: &ResolvedController) -> Result<TokenStream, Err
                         quote!(x[#jl])
                     };
                     t = Some(match t {
-                        Some(t) => quote!(#t - Self::K[#il][#jl] * #xj),
-                        None => quote!(-(Self::K[#il][#jl] * #xj)),
+                        Some(t) => quote!(#t - self.k[#il][#jl] * #xj),
+                        None => quote!(-(self.k[#il][#jl] * #xj)),
                     });
                 }
                 let t = t.unwrap_or_else(|| quote!(0.0));
@@ -395,23 +480,58 @@ fn controller(model: &Model, rc: &ResolvedController) -> Result<TokenStream, Err
             }
             let law = us.clone();
             let sat_u = sat(us)?;
+            let n_states = 2 * model.coordinates.len();
+            let gain_names: Vec<String> = (0..k.len())
+                .flat_map(|i| {
+                    (0..n_states)
+                        .map(move |j| plantc_derive::control::state_feedback_gain_name(model, i, j))
+                })
+                .collect();
             let d = doc(&format!(
                 "Controller `{name}` of the model: state feedback `u = u0 - K (x - x0)` \
                  with `K` designed at generation time on the linearization about 0 \
                  ([`A`], [`B`]) with the parameters of [`Params::default`]. \
-                 Saturates at {limits_doc}."
+                 Saturates at {limits_doc}.\n\n\
+                 The gain in use starts at [`Self::K`] and can be changed entry by entry \
+                 ([`Control::set_gain`] with the names of [`Self::GAIN_NAMES`]) or whole \
+                 ([`Self::set_k`]); changing the parameters does not redesign it."
             ));
             Ok(quote! {
                 #d
-                #[derive(Clone, Copy, Debug, Default, PartialEq)]
-                pub struct #sname;
+                #[derive(Clone, Copy, Debug, PartialEq)]
+                pub struct #sname {
+                    k: [[f64; N_STATES]; N_INPUTS],
+                }
+
+                impl Default for #sname {
+                    fn default() -> Self {
+                        #sname::new()
+                    }
+                }
 
                 impl #sname {
-                    /// The gain, one row per input, columns in state order.
+                    /// The gain designed at generation time, one row per input, columns in state order.
                     pub const K: [[f64; N_STATES]; N_INPUTS] = [#(#rows),*];
 
-                    /// A new controller.
-                    pub const fn new() -> Self { #sname }
+                    /// Names of the entries of the gain, row-major, as [`Control::set_gain`] takes them.
+                    pub const GAIN_NAMES: [&'static str; N_STATES * N_INPUTS] = [#(#gain_names),*];
+
+                    /// A new controller with the gain [`Self::K`].
+                    pub const fn new() -> Self {
+                        #sname { k: Self::K }
+                    }
+
+                    /// The gain in use.
+                    #[inline]
+                    pub fn k(&self) -> &[[f64; N_STATES]; N_INPUTS] {
+                        &self.k
+                    }
+
+                    /// Replace the gain.
+                    #[inline]
+                    pub fn set_k(&mut self, k: [[f64; N_STATES]; N_INPUTS]) {
+                        self.k = k;
+                    }
 
                     /// The unsaturated law.
                     #[inline]
@@ -423,6 +543,34 @@ fn controller(model: &Model, rc: &ResolvedController) -> Result<TokenStream, Err
                     #[inline]
                     pub fn control(&mut self, x: &[f64; N_STATES]) -> [f64; N_INPUTS] {
                         [#(#sat_u),*]
+                    }
+                }
+
+                impl Control for #sname {
+                    fn name(&self) -> &'static str {
+                        #name
+                    }
+                    fn gain_names(&self) -> &'static [&'static str] {
+                        &Self::GAIN_NAMES
+                    }
+                    fn gain(&self, name: &str) -> Option<f64> {
+                        let i = Self::GAIN_NAMES.iter().position(|g| *g == name)?;
+                        Some(self.k[i / N_STATES][i % N_STATES])
+                    }
+                    fn set_gain(&mut self, name: &str, value: f64) -> bool {
+                        match Self::GAIN_NAMES.iter().position(|g| *g == name) {
+                            Some(i) => {
+                                self.k[i / N_STATES][i % N_STATES] = value;
+                                true
+                            }
+                            None => false,
+                        }
+                    }
+                    fn set_params(&mut self, _params: Params) {}
+                    fn reset(&mut self) {}
+                    #[inline]
+                    fn step(&mut self, _t: f64, x: &[f64; N_STATES]) -> [f64; N_INPUTS] {
+                        self.control(x)
                     }
                 }
             })
@@ -454,12 +602,21 @@ fn controller(model: &Model, rc: &ResolvedController) -> Result<TokenStream, Err
                 "control",
                 "coeffs",
                 "k",
+                "name",
+                "gain",
+                "gain_names",
+                "set_gain",
+                "reset",
+                "step",
             ];
             let mut gfields = Vec::new();
             let mut gparams = Vec::new();
             let mut ginit = Vec::new();
             let mut gacc = Vec::new();
             let mut gdefault = Vec::new();
+            let mut gnames = Vec::new();
+            let mut gget = Vec::new();
+            let mut gset = Vec::new();
             for (sym, val) in gains {
                 let gname = sym.name();
                 let field = if reserved.contains(&gname) {
@@ -470,6 +627,9 @@ fn controller(model: &Model, rc: &ResolvedController) -> Result<TokenStream, Err
                 let setter = format_ident!("set_{}", field.to_string().trim_start_matches("r#"));
                 let v = g.input(quote!(self.#field), Level::Param);
                 env.bind(*sym, v);
+                gnames.push(gname.to_string());
+                gget.push(quote!(#gname => Some(self.#field),));
+                gset.push(quote!(#gname => self.#setter(value),));
                 let d = doc(&format!("outer-law gain `{gname}`"));
                 gfields.push(quote!(#field: f64,));
                 gparams.push(quote!(#field: f64));
@@ -491,6 +651,12 @@ fn controller(model: &Model, rc: &ResolvedController) -> Result<TokenStream, Err
                     }
                 });
             }
+            let n_gains = idx(gnames.len());
+            let set_gain_body = if gset.is_empty() {
+                quote!(let _ = (name, value); false)
+            } else {
+                quote!(match name { #(#gset)* _ => return false, } true)
+            };
             let lv = g.expr(&mut env, *law)?;
             let plan = g.plan(&[lv])?;
             let f = g.function(&[lv], &plan, &quote!(self.k))?;
@@ -582,7 +748,209 @@ fn controller(model: &Model, rc: &ResolvedController) -> Result<TokenStream, Err
                         [#(#sat_u),*]
                     }
                 }
+
+                impl #sname {
+                    /// Names of the outer-law gains, as [`Control::set_gain`] takes them.
+                    pub const GAIN_NAMES: [&'static str; #n_gains] = [#(#gnames),*];
+                }
+
+                impl Control for #sname {
+                    fn name(&self) -> &'static str {
+                        #name
+                    }
+                    fn gain_names(&self) -> &'static [&'static str] {
+                        &Self::GAIN_NAMES
+                    }
+                    fn gain(&self, name: &str) -> Option<f64> {
+                        match name {
+                            #(#gget)*
+                            _ => None,
+                        }
+                    }
+                    fn set_gain(&mut self, name: &str, value: f64) -> bool {
+                        #set_gain_body
+                    }
+                    fn set_params(&mut self, params: Params) {
+                        #sname::set_params(self, params)
+                    }
+                    fn reset(&mut self) {}
+                    #[inline]
+                    fn step(&mut self, _t: f64, x: &[f64; N_STATES]) -> [f64; N_INPUTS] {
+                        self.control(x)
+                    }
+                }
             })
         }
     }
+}
+
+/// `mod observer`: the steady-state Kalman velocity observer of the rig,
+/// designed now (plantc-derive's `linear::design_velocity_observer`, the
+/// design `plantc run` makes at start-up) on the linearization about 0, and
+/// emitted as constants with an update that performs the same arithmetic in
+/// the same order as plantc-runtime's `VelocityObserver::update`.
+fn observer(
+    model: &Model,
+    lin: &plantc_derive::analysis::Linearization,
+    o: &crate::ObserverOptions,
+) -> Result<TokenStream, Error> {
+    use plantc_derive::linear::{design_velocity_observer, encoder_variance};
+    let nq = model.coordinates.len();
+    let n = 2 * nq;
+    let refuse = |why: String| {
+        Err(Error::Generate(format!(
+            "the rig's velocity observer: {why}"
+        )))
+    };
+    if lin.b.ncols() != 1 {
+        return refuse(format!(
+            "{} inputs; the rig drives exactly one (the motor voltage)",
+            lin.b.ncols()
+        ));
+    }
+    let residual = lin.equilibrium_residual;
+    if residual.is_nan() || residual.abs() >= 1e-9 {
+        return refuse(format!(
+            "the zero state is not an equilibrium of the model (largest acceleration {residual:e}); \
+             the observer is designed about it"
+        ));
+    }
+    if !(o.rate_hz.is_finite() && o.rate_hz > 0.0) {
+        return refuse(format!("rate {} Hz", o.rate_hz));
+    }
+    let a: Vec<f64> = (0..n * n).map(|k| lin.a[(k / n, k % n)]).collect();
+    let b: Vec<f64> = (0..n).map(|i| lin.b[(i, 0)]).collect();
+    let period = 1.0 / o.rate_hz;
+    let d = design_velocity_observer(
+        &a,
+        &b,
+        nq,
+        period,
+        o.accel_std,
+        &vec![encoder_variance(o.counts_per_rev); nq],
+    )
+    .map_err(|e| Error::Generate(format!("the rig's velocity observer: {e}")))?;
+    let rows = |m: &[f64], cols: usize| -> Result<Vec<TokenStream>, Error> {
+        m.chunks(cols)
+            .map(|r| {
+                let r = r.iter().map(|v| lit(*v)).collect::<Result<Vec<_>, _>>()?;
+                Ok(quote!([#(#r),*]))
+            })
+            .collect()
+    };
+    let ad = rows(&d.ad, n)?;
+    let l = rows(&d.gain, nq)?;
+    let bd =
+        d.bd.iter()
+            .map(|v| lit(*v))
+            .collect::<Result<Vec<_>, _>>()?;
+    let (rate, accel, cpr) = (lit(o.rate_hz)?, lit(o.accel_std)?, lit(o.counts_per_rev)?);
+    let (slow, fast) = (lit(d.slowest_pole)?, lit(d.fastest_pole)?);
+    let nq_l = idx(nq);
+    let about = doc(&format!(
+        "The rig's steady-state Kalman velocity observer, designed at generation time \
+         (no linear algebra at start): the linearization about 0 ([`A`](super::A), \
+         [`B`](super::B)) discretised by zero-order hold at {} Hz; process noise: white \
+         angular acceleration of {} rad/s^2 on every joint; measurement noise: the \
+         quantisation of {}-count encoders. Observer poles from {:.0} to {:.0} rad/s. \
+         The same design as `plantc run --velocity observer` at that rate.",
+        o.rate_hz, o.accel_std, o.counts_per_rev, d.slowest_pole, d.fastest_pole
+    ));
+    Ok(quote! {
+        #about
+        pub mod observer {
+            use super::N_STATES;
+
+            /// Number of measured positions (encoders).
+            pub const N_POSITIONS: usize = #nq_l;
+            /// Loop rate the observer is discretised for (Hz).
+            pub const RATE_HZ: f64 = #rate;
+            /// Process noise of the design (rad/s^2).
+            pub const ACCEL_STD: f64 = #accel;
+            /// Encoder counts per revolution of the measurement-noise model.
+            pub const COUNTS_PER_REV: f64 = #cpr;
+            /// Real parts (rad/s) of the slowest and fastest observer poles.
+            pub const POLES: (f64, f64) = (#slow, #fast);
+            /// `Ad = exp(A T)`.
+            pub const AD: [[f64; N_STATES]; N_STATES] = [#(#ad),*];
+            /// `Bd`: the applied voltage's effect over one period.
+            pub const BD: [f64; N_STATES] = [#(#bd),*];
+            /// The steady-state Kalman gain.
+            pub const L: [[f64; N_POSITIONS]; N_STATES] = [#(#l),*];
+
+            /// The running observer (predict with the model and the applied
+            /// voltage, correct with the encoder angles). No allocation.
+            #[derive(Clone, Copy, Debug, PartialEq)]
+            pub struct VelocityObserver {
+                xh: [f64; N_STATES],
+                primed: bool,
+            }
+
+            impl Default for VelocityObserver {
+                fn default() -> Self {
+                    VelocityObserver::new()
+                }
+            }
+
+            impl VelocityObserver {
+                /// An observer that initialises itself on the first update.
+                pub const fn new() -> Self {
+                    VelocityObserver { xh: [0.0; N_STATES], primed: false }
+                }
+
+                /// Forget the estimate (the next update initialises it).
+                pub fn reset(&mut self) {
+                    *self = VelocityObserver::new();
+                }
+
+                /// The estimated state (positions, then velocities).
+                pub fn state(&self) -> &[f64; N_STATES] {
+                    &self.xh
+                }
+
+                /// Feeds this sample's angles `q` (as the controller sees them,
+                /// wrapped where the encoder wraps) and the voltage applied during
+                /// the previous period; returns the velocity estimates. The first
+                /// call initialises the state to `(q, 0)`; an angle that wrapped by a
+                /// multiple of 2 pi shifts the estimate with it.
+                pub fn update(&mut self, q: &[f64; N_POSITIONS], u_prev: f64) -> [f64; N_POSITIONS] {
+                    if !self.primed {
+                        self.primed = true;
+                        for i in 0..N_POSITIONS {
+                            self.xh[i] = q[i];
+                            self.xh[N_POSITIONS + i] = 0.0;
+                        }
+                    } else {
+                        let tau = core::f64::consts::TAU;
+                        for i in 0..N_POSITIONS {
+                            let turns = super::math::round((q[i] - self.xh[i]) / tau);
+                            if turns != 0.0 && turns.is_finite() {
+                                self.xh[i] += turns * tau;
+                            }
+                        }
+                        let mut xp = [0.0; N_STATES];
+                        for i in 0..N_STATES {
+                            let mut s = BD[i] * u_prev;
+                            for j in 0..N_STATES {
+                                s += AD[i][j] * self.xh[j];
+                            }
+                            xp[i] = s;
+                        }
+                        for i in 0..N_STATES {
+                            let mut s = xp[i];
+                            for j in 0..N_POSITIONS {
+                                s += L[i][j] * (q[j] - xp[j]);
+                            }
+                            self.xh[i] = s;
+                        }
+                    }
+                    let mut v = [0.0; N_POSITIONS];
+                    for i in 0..N_POSITIONS {
+                        v[i] = self.xh[N_POSITIONS + i];
+                    }
+                    v
+                }
+            }
+        }
+    })
 }

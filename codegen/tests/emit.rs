@@ -177,3 +177,105 @@ fn other_models_generate() {
         assert!(code.contains("math::sin_cos("), "{m}");
     }
 }
+
+fn rig_options(dir: &Path, controllers: &[&str]) -> plantc_codegen::CrateOptions {
+    plantc_codegen::CrateOptions {
+        model: PathBuf::from("../models/rotary_pendulum.plant"),
+        controllers: controllers.iter().map(|c| c.to_string()).collect(),
+        set: Some("thesis".into()),
+        dir: dir.to_path_buf(),
+        rig: Some(plantc_codegen::RigOptions {
+            observer: plantc_codegen::ObserverOptions::default(),
+            // a version requirement keeps the snapshot free of local paths
+            runtime: plantc_codegen::RuntimeSource::Version("0.1".into()),
+        }),
+        ..Default::default()
+    }
+}
+
+/// The rig crate's adapter, manifest and observer (`plantc gen --rig`); the
+/// rest of `src/model.rs` is the module of `rotary_pendulum_snapshot`.
+/// Built and run by `plantc/tests/rig_cli.rs`.
+#[test]
+fn rig_crate_snapshot() {
+    let dir = tempfile::tempdir().unwrap();
+    let opts = rig_options(dir.path(), &["pole_placement", "fl_arm"]);
+    let files = plantc_codegen::write_crate(&opts).unwrap();
+    let names: Vec<_> = files
+        .iter()
+        .map(|f| f.strip_prefix(dir.path()).unwrap().display().to_string())
+        .collect();
+    assert_eq!(
+        names,
+        ["Cargo.toml", "README.md", "src/model.rs", "src/main.rs"]
+    );
+    let read = |f: &str| std::fs::read_to_string(dir.path().join(f)).unwrap();
+    insta::assert_snapshot!("rig_cargo_toml", read("Cargo.toml"));
+    insta::assert_snapshot!("rig_main_rs", read("src/main.rs"));
+    let model = read("src/model.rs");
+    let start = model.find("/// The rig's steady-state Kalman").unwrap();
+    let end = model.find("/// Elementary functions").unwrap();
+    insta::assert_snapshot!("rig_observer", &model[start..end]);
+    // byte-for-byte deterministic
+    let again = tempfile::tempdir().unwrap();
+    plantc_codegen::write_crate(&rig_options(again.path(), &["pole_placement", "fl_arm"])).unwrap();
+    for f in ["Cargo.toml", "README.md", "src/model.rs", "src/main.rs"] {
+        assert_eq!(
+            read(f),
+            std::fs::read_to_string(again.path().join(f)).unwrap(),
+            "{f}"
+        );
+    }
+}
+
+#[test]
+fn rig_needs_a_controller_and_switching_layout_keeps_user_files() {
+    let dir = tempfile::tempdir().unwrap();
+    let e = plantc_codegen::write_crate(&rig_options(dir.path(), &[])).unwrap_err();
+    assert!(e.to_string().contains("at least one controller"), "{e}");
+    // a library crate, then a rig in the same directory: the generated
+    // library files go, a file of the user's stays
+    let lib = plantc_codegen::CrateOptions {
+        rig: None,
+        ..rig_options(dir.path(), &["pole_placement"])
+    };
+    plantc_codegen::write_crate(&lib).unwrap();
+    std::fs::write(dir.path().join("NOTES.md"), "mine").unwrap();
+    plantc_codegen::write_crate(&rig_options(dir.path(), &["pole_placement"])).unwrap();
+    assert!(!dir.path().join("src/lib.rs").exists());
+    assert!(!dir.path().join("examples/simulate.rs").exists());
+    assert!(dir.path().join("src/main.rs").exists());
+    assert_eq!(
+        std::fs::read_to_string(dir.path().join("NOTES.md")).unwrap(),
+        "mine"
+    );
+    // and back
+    plantc_codegen::write_crate(&lib).unwrap();
+    assert!(!dir.path().join("src/main.rs").exists());
+    assert!(!dir.path().join("README.md").exists());
+    assert!(dir.path().join("src/lib.rs").exists());
+}
+
+/// A model whose zero state is not an equilibrium gets no rig observer: a
+/// clear error instead of a wrong design.
+#[test]
+fn rig_observer_refuses_a_non_equilibrium() {
+    let dir = tempfile::tempdir().unwrap();
+    let text = std::fs::read_to_string(manifest().join("../models/rotary_pendulum.plant")).unwrap();
+    let model = dir.path().join("rp.plant");
+    // the pendulum hanging at alpha = 0: upright is no longer the zero state
+    std::fs::write(
+        &model,
+        text.replace(
+            "potential V = m2*g*l2*cos(alpha)",
+            "potential V = m2*g*l2*cos(alpha) + m2*g*l2*alpha",
+        ),
+    )
+    .unwrap();
+    let opts = plantc_codegen::CrateOptions {
+        model,
+        ..rig_options(&dir.path().join("out"), &["pole_placement"])
+    };
+    let e = plantc_codegen::write_crate(&opts).unwrap_err().to_string();
+    assert!(e.contains("not an equilibrium"), "{e}");
+}

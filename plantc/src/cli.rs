@@ -116,22 +116,9 @@ pub enum Command {
         #[arg(long)]
         json: bool,
     },
-    /// Generate a standalone, allocation-free Rust crate (plant + controllers).
-    Gen {
-        /// The model file.
-        model: PathBuf,
-        /// Emit this controller of the model (repeatable).
-        #[arg(long = "controller", value_name = "NAME")]
-        controllers: Vec<String>,
-        #[command(flatten)]
-        params: ParamArgs,
-        /// Output directory of the crate.
-        #[arg(short = 'o', long = "out", value_name = "DIR")]
-        out: PathBuf,
-        /// Overwrite a non-empty directory that plantc did not generate.
-        #[arg(long)]
-        force: bool,
-    },
+    /// Generate a standalone, allocation-free Rust crate (plant + controllers);
+    /// with --rig, a binary that runs them on the simulator or the board.
+    Gen(GenArgs),
     /// Simulate the model with one of its controllers; write a CSV trajectory.
     Sim(SimArgs),
     /// Run a controller in the real-time loop on the simulator or a Quanser
@@ -150,6 +137,59 @@ pub enum Command {
     /// missing effect, add it to a copy of the model, fit, compare again;
     /// before/after table, fitted model and figures under `-o DIR`.
     Identify(IdentifyArgs),
+}
+
+/// Arguments of `plantc gen`.
+#[derive(Debug, Args, Clone)]
+pub struct GenArgs {
+    /// The model file.
+    pub model: PathBuf,
+    /// Emit this controller of the model (repeatable).
+    #[arg(long = "controller", value_name = "NAME")]
+    pub controllers: Vec<String>,
+    #[command(flatten)]
+    pub params: ParamArgs,
+    /// Output directory of the crate.
+    #[arg(short = 'o', long = "out", value_name = "DIR")]
+    pub out: PathBuf,
+    /// Overwrite a non-empty directory that plantc did not generate.
+    #[arg(long)]
+    pub force: bool,
+    #[command(flatten)]
+    pub rig: RigGenArgs,
+}
+
+/// How `plantc gen --rig` (and `plantc run --compiled`) make a rig crate.
+#[derive(Debug, Args, Clone)]
+pub struct RigGenArgs {
+    /// Generate a rig binary: the generated plant, controllers and velocity
+    /// observer linked into plantc-runtime (simulator and Q2-USB backends,
+    /// supervisor, log), with `plantc run`'s options.
+    #[arg(long)]
+    pub rig: bool,
+    /// Loop rate the rig's velocity observer is designed for (Hz); the rig
+    /// binary's default rate.
+    #[arg(
+        long = "rate",
+        value_name = "HZ",
+        default_value_t = 1000.0,
+        requires = "rig"
+    )]
+    pub observer_rate: f64,
+    /// Process noise of the rig's observer design: unmodelled angular
+    /// acceleration (rad/s^2), as `plantc run --observer-accel`.
+    #[arg(
+        long = "observer-accel",
+        value_name = "RAD_PER_S2",
+        default_value_t = 30.0,
+        requires = "rig"
+    )]
+    pub observer_accel: f64,
+    /// The plantc-runtime the rig crate builds against: a path to its
+    /// directory, or `version:REQ` for a released one (default: the runtime/
+    /// of the plantc checkout this binary was built from).
+    #[arg(long = "runtime", value_name = "PATH|version:REQ", requires = "rig")]
+    pub runtime: Option<String>,
 }
 
 /// Arguments of `plantc identify`.
@@ -396,12 +436,45 @@ pub struct RunArgs {
     /// Run the simulator in real time (default: as fast as possible).
     #[arg(long)]
     pub realtime: bool,
+    /// Seeded simulator noise: encoder noise in counts and a disturbance
+    /// voltage (standard deviations), e.g. `counts=0.5,volts=0.05,seed=1`.
+    #[arg(long, value_name = "counts=STD,volts=STD,seed=N")]
+    pub sim_noise: Option<String>,
     /// CSV log of every sample (never overwritten unless --force).
     #[arg(long, value_name = "FILE.csv")]
     pub log: Option<PathBuf>,
+    /// Numbers in the log: fixed decimals, or the shortest text that reads
+    /// back to the same number (for comparing runs bit for bit).
+    #[arg(long, value_enum, default_value_t = LogPrecision::Fixed)]
+    pub log_precision: LogPrecision,
     /// Overwrite an existing log.
     #[arg(long)]
     pub force: bool,
+    /// Run the generated code instead of the interpreter: generate (or
+    /// update) the rig crate in DIR for this model, parameters and controller
+    /// (as `plantc gen --rig`, the observer designed for --rate and
+    /// --observer-accel), build it with cargo (release) and run its binary
+    /// with these options.
+    #[arg(long, value_name = "DIR")]
+    pub compiled: Option<PathBuf>,
+    /// With --compiled: replay the interpreted observer and controller over
+    /// the compiled run's log (written at full precision) and report the
+    /// largest voltage and velocity differences and the replay's timing.
+    #[arg(long, requires_all = ["compiled", "log"])]
+    pub compare: bool,
+    /// With --compiled: the plantc-runtime the rig crate builds against, as
+    /// `plantc gen --runtime`.
+    #[arg(long, value_name = "PATH|version:REQ", requires = "compiled")]
+    pub runtime: Option<String>,
+}
+
+/// Number format of `plantc run`'s log.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, clap::ValueEnum)]
+pub enum LogPrecision {
+    /// 6 decimals for time and states, 4 for volts.
+    Fixed,
+    /// Round-trip numbers.
+    Full,
 }
 
 /// Arguments of `plantc sim`.

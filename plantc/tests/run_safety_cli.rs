@@ -177,6 +177,10 @@ fn sigterm_stops_a_real_time_simulated_run() {
         .unwrap();
     let mut child = child;
     wait_for_rows(&mut child, &log, 200);
+    // twice, as from a process-group kill plus the one a parent forwards:
+    // the duplicate must not cut the safe stop short
+    // SAFETY: plain kill(2) on our own child.
+    assert_eq!(unsafe { kill(child.id() as i32, 15) }, 0);
     let (code, err) = signal_and_wait(child, 15);
     assert_eq!(code, 143, "{err}");
     let (vm, state, complete) = last_row(&log);

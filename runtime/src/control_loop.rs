@@ -4,6 +4,7 @@
 use crate::backend::{Backend, BackendError, EncoderMap};
 use crate::controller::Controller;
 use crate::error::RuntimeError;
+use crate::estimator::{DerivativeEstimator, VelocityEstimator};
 use crate::histogram::Histogram;
 use crate::log::LogWriter;
 use crate::plant::Plant;
@@ -11,8 +12,7 @@ use crate::reference_pendulum::RotaryPendulumReference;
 use crate::report::{Percentiles, RunReport};
 use crate::rt_os::try_realtime;
 use crate::supervisor::{FaultKind, Supervisor, SupervisorConfig, Transition};
-use crate::velocity_filter::VelocityFilter;
-use crate::velocity_observer::{ObserverSpec, VelocityObserver};
+use crate::velocity_observer::ObserverSpec;
 use std::panic::{catch_unwind, AssertUnwindSafe};
 use std::sync::atomic::{AtomicBool, Ordering};
 use std::sync::Arc;
@@ -129,35 +129,70 @@ pub fn run(
 struct Stats {
     jitter: Histogram,
     ctrl: Histogram,
+    estimator: Histogram,
+    path: Histogram,
     work: Histogram,
     overruns: u64,
     missed: u64,
     samples: u64,
 }
 
-/// How the loop estimates velocities from encoder angles.
-enum Estimator {
-    /// One filtered derivative per encoder.
-    Derivative(Vec<VelocityFilter>),
-    /// A model-based observer over all encoders.
-    Observer(VelocityObserver),
+/// The estimator `config` asks for: the observer designed from
+/// `config.observer` (needs the `model` feature), else the filtered derivative.
+fn configured_estimator(
+    config: &RunConfig,
+    maps: &[EncoderMap],
+    period: f64,
+) -> Result<Box<dyn VelocityEstimator>, RuntimeError> {
+    match &config.observer {
+        #[cfg(feature = "model")]
+        Some(spec) => Ok(Box::new(
+            crate::velocity_observer::VelocityObserver::design(spec, maps, period)?,
+        )),
+        #[cfg(not(feature = "model"))]
+        Some(_) => Err(RuntimeError::InvalidConfig(
+            "designing a velocity observer at start needs plantc-runtime's `model` feature; \
+             pass a designed estimator (run_with_estimator) instead"
+                .into(),
+        )),
+        None => Ok(Box::new(DerivativeEstimator::new(
+            maps.len(),
+            config.velocity_bandwidth,
+            period,
+        ))),
+    }
 }
 
 struct Outcome {
     fault_detail: Option<BackendError>,
 }
 
+/// Runs the control loop with the velocity estimator `config` asks for; see
+/// [`run_with_estimator`].
+pub fn run_with_events(
+    config: &RunConfig,
+    backend: &mut dyn Backend,
+    controller: &mut dyn Controller,
+    log: Option<&mut LogWriter>,
+    on_event: &mut dyn FnMut(&Transition),
+) -> Result<RunReport, RuntimeError> {
+    run_with_estimator(config, backend, controller, None, log, on_event)
+}
+
 /// Runs the control loop until the duration elapses, the stop flag is set or
 /// a fault occurs, calling `on_event` for every supervisor transition.
+/// `estimator` replaces the one `config` describes (`observer`,
+/// `velocity_bandwidth`), e.g. a generated observer.
 ///
 /// Returns `Err` only if the run could not start (bad configuration, backend
 /// start failure) or the loop itself panicked; faults during the run end it
 /// with `Ok(report)` whose `final_state` is `Fault(_)`. On every path the
 /// backend is closed, which writes 0 V.
-pub fn run_with_events(
+pub fn run_with_estimator(
     config: &RunConfig,
     backend: &mut dyn Backend,
     controller: &mut dyn Controller,
+    estimator: Option<&mut dyn VelocityEstimator>,
     mut log: Option<&mut LogWriter>,
     on_event: &mut dyn FnMut(&Transition),
 ) -> Result<RunReport, RuntimeError> {
@@ -169,32 +204,18 @@ pub fn run_with_events(
     }
     let period = 1.0 / config.rate_hz;
     let mut notes = Vec::new();
-    let estimator = match &config.observer {
-        Some(spec) => match VelocityObserver::design(spec, &maps, period) {
-            Ok(o) => {
-                notes.push(format!(
-                    "velocities: steady-state Kalman observer (poles {:.0} to {:.0} rad/s)",
-                    o.slowest_pole(),
-                    o.fastest_pole()
-                ));
-                Estimator::Observer(o)
-            }
+    let mut own_estimator = None;
+    let estimator: &mut dyn VelocityEstimator = match estimator {
+        Some(e) => e,
+        None => match configured_estimator(config, &maps, period) {
+            Ok(e) => &mut **own_estimator.insert(e),
             Err(e) => {
                 let _ = backend.close();
                 return Err(e);
             }
         },
-        None => {
-            notes.push(format!(
-                "velocities: filtered derivative, bandwidth {} rad/s",
-                config.velocity_bandwidth
-            ));
-            Estimator::Derivative(vec![
-                VelocityFilter::new(config.velocity_bandwidth, period);
-                nq
-            ])
-        }
     };
+    notes.push(estimator.describe());
     if let Some(l) = log.as_deref_mut() {
         if let Err(e) = l.begin(&config.state_names, nq, &config.input_names) {
             let _ = backend.close();
@@ -204,6 +225,8 @@ pub fn run_with_events(
     let mut stats = Stats {
         jitter: Histogram::new(),
         ctrl: Histogram::new(),
+        estimator: Histogram::new(),
+        path: Histogram::new(),
         work: Histogram::new(),
         overruns: 0,
         missed: 0,
@@ -287,6 +310,8 @@ pub fn run_with_events(
         overruns: stats.overruns,
         missed_samples: stats.missed,
         controller_ns: pct(&stats.ctrl),
+        estimator_ns: pct(&stats.estimator),
+        control_path_ns: pct(&stats.path),
         cycle_work_ns: pct(&stats.work),
         notes,
     })
@@ -297,7 +322,7 @@ fn cycle_loop(
     config: &RunConfig,
     period: f64,
     maps: &[EncoderMap],
-    mut estimator: Estimator,
+    estimator: &mut dyn VelocityEstimator,
     backend: &mut dyn Backend,
     controller: &mut dyn Controller,
     mut log: Option<&mut LogWriter>,
@@ -375,16 +400,12 @@ fn cycle_loop(
             x[i] = maps[i].angle(counts[i]);
             q_unwrapped[i] = maps[i].angle_unwrapped(counts[i]);
         }
-        match &mut estimator {
-            Estimator::Derivative(filters) => {
-                for i in 0..nq {
-                    velocities[i] = filters[i].update(q_unwrapped[i]);
-                }
-            }
-            // The observer's model holds about upright: it takes the state
-            // angles; u_out still holds the voltage applied since the previous sample.
-            Estimator::Observer(o) => o.update(&x[..nq], u_out[0], &mut velocities),
-        }
+        // An observer's model holds about upright: it takes the state
+        // angles; u_out still holds the voltage applied since the previous sample.
+        let e0 = Instant::now();
+        estimator.update(&x[..nq], &q_unwrapped, u_out[0], &mut velocities);
+        let estimator_ns = e0.elapsed().as_nanos() as u64;
+        stats.estimator.record(estimator_ns);
         x[nq..].copy_from_slice(&velocities);
         if config.stop.load(Ordering::Relaxed) {
             emit(sup.fault(t, FaultKind::Stopped), transitions);
@@ -399,7 +420,9 @@ fn cycle_loop(
             }
             let c0 = Instant::now();
             let r = catch_unwind(AssertUnwindSafe(|| controller.control(t, &x, &mut u_cmd)));
-            stats.ctrl.record(c0.elapsed().as_nanos() as u64);
+            let ctrl_ns = c0.elapsed().as_nanos() as u64;
+            stats.ctrl.record(ctrl_ns);
+            stats.path.record(estimator_ns + ctrl_ns);
             if r.is_err() {
                 emit(sup.fault(t, FaultKind::ControllerPanic), transitions);
             } else if !u_cmd.iter().all(|v| v.is_finite()) {

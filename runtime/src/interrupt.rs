@@ -7,9 +7,10 @@
 //! one sets a stop flag, which the control loop turns into `fault:stopped`
 //! with 0 V written and the log flushed; the caller then closes the board and
 //! reports [`stop_signal`] (exit code `128 + signal` by convention). A second
-//! one terminates the process at once (exit code `128 + signal` on Unix), for
-//! a loop stuck in a driver call; on a board the armed watchdog then takes
-//! the output to its 0 V expiration state.
+//! Ctrl-C (or SIGQUIT) terminates the process at once (exit code
+//! `128 + signal` on Unix), for a loop stuck in a driver call; on a board the
+//! armed watchdog then takes the output to its 0 V expiration state. A
+//! repeated SIGTERM or SIGHUP is a duplicate and changes nothing.
 //!
 //! On Windows the close, logoff and shutdown events end the process when
 //! the handler returns, so the handler waits (at most [`WINDOWS_GRACE`]) until
@@ -77,6 +78,15 @@ pub fn stop_completed() {
     COMPLETED.store(true, Ordering::SeqCst);
 }
 
+/// Passes a stop request this process received on to a child process (a
+/// rig binary run by `plantc run --compiled`): on Unix the same signal, so a
+/// `kill` of the parent stops the child safely too. Returns true if one was
+/// sent. On Windows the console events already reach every process of the
+/// console, so nothing is sent.
+pub fn forward_stop(child_pid: u32) -> bool {
+    imp::forward(SIGNAL.load(Ordering::SeqCst), child_pid)
+}
+
 /// Called by the OS handler with the signal or event; true if this was the
 /// first request.
 fn request_stop(code: i32) -> bool {
@@ -115,10 +125,30 @@ mod imp {
     extern "C" {
         fn signal(signum: c_int, handler: usize) -> usize;
         fn _exit(status: c_int) -> !;
+        fn kill(pid: c_int, sig: c_int) -> c_int;
+    }
+
+    pub fn forward(code: i32, child_pid: u32) -> bool {
+        let Ok(pid) = c_int::try_from(child_pid) else {
+            return false;
+        };
+        // SIGINT and SIGQUIT come from the terminal to the whole process
+        // group (the child has them already, and a second one would make
+        // it exit at once); SIGTERM and SIGHUP may reach the parent alone.
+        if pid <= 0 || !(code == SIGTERM || code == SIGHUP) {
+            return false;
+        }
+        // SAFETY: sends a signal to one child process id (never a group: pid > 0).
+        unsafe { kill(pid, code) == 0 }
     }
 
     extern "C" fn on_signal(sig: c_int) {
-        if !super::request_stop(sig) {
+        // A repeated SIGINT/SIGQUIT is the user insisting (a loop stuck in a
+        // driver call): exit at once. A repeated SIGTERM/SIGHUP is a
+        // duplicate (sent to the process group and forwarded by a parent
+        // `plantc run --compiled`, or a terminal hang-up reaching both), so
+        // it must not cut the safe stop short.
+        if !super::request_stop(sig) && (sig == SIGINT || sig == SIGQUIT) {
             // SAFETY: _exit is async-signal-safe.
             unsafe { _exit(128 + sig) }
         }
@@ -202,6 +232,10 @@ mod imp {
         }
     }
 
+    pub fn forward(_code: i32, _child_pid: u32) -> bool {
+        false
+    }
+
     pub fn describe(code: i32) -> Option<StopSignal> {
         let (name, exit_code) = match u32::try_from(code - OFFSET).ok()? {
             CTRL_C_EVENT => ("Ctrl-C", 130),
@@ -228,5 +262,9 @@ mod imp {
 
     pub fn describe(_code: i32) -> Option<StopSignal> {
         None
+    }
+
+    pub fn forward(_code: i32, _child_pid: u32) -> bool {
+        false
     }
 }

@@ -11,6 +11,14 @@
 //!
 //! [`RotaryPendulumReference`] is the hand-written physics of the test doubles.
 //!
+//! Velocities come from a [`VelocityEstimator`]: the filtered derivative, the
+//! steady-state Kalman observer designed at start (`model` feature, default),
+//! or a generated observer. [`rig`] is the command line and run flow of the
+//! rig binaries `plantc gen --rig` generates: they implement [`RigModel`]
+//! over the generated code and call [`rig_main`]; with
+//! `default-features = false` they depend on nothing of plantc but this
+//! crate and on nothing else but libloading.
+//!
 //! ```
 //! use plantc_runtime::*;
 //!
@@ -25,39 +33,51 @@
 //! # Ok::<(), Box<dyn std::error::Error>>(())
 //! ```
 
+pub mod alloc_count;
 pub mod backend;
 pub mod control_loop;
 pub mod controller;
 pub mod error;
+pub mod estimator;
 pub mod hil_ffi;
 pub mod histogram;
 pub mod integrate;
 pub mod interrupt;
 pub mod log;
+#[cfg(feature = "model")]
 pub mod model_plant;
 pub mod pacer;
 pub mod plant;
 pub mod prng;
 pub mod q2usb;
 pub mod reference_pendulum;
+pub mod replay;
 pub mod report;
+pub mod rig;
 pub mod rt_os;
 pub mod sim;
 pub mod supervisor;
 pub mod velocity_filter;
 pub mod velocity_observer;
 
+pub use alloc_count::CountingAllocator;
 pub use backend::{Backend, BackendError, EncoderMap, Tick};
-pub use control_loop::{run, run_with_events, RunConfig, MAX_RATE_HZ};
+pub use control_loop::{run, run_with_estimator, run_with_events, RunConfig, MAX_RATE_HZ};
 pub use controller::{Controller, StateFeedback};
 pub use error::RuntimeError;
-pub use interrupt::{stop_completed, stop_on_ctrl_c, stop_on_signals, stop_signal, StopSignal};
+pub use estimator::{DerivativeEstimator, VelocityEstimator};
+pub use interrupt::{
+    forward_stop, stop_completed, stop_on_ctrl_c, stop_on_signals, stop_signal, StopSignal,
+};
 pub use log::{LogError, LogWriter};
+#[cfg(feature = "model")]
 pub use model_plant::{ModelController, ModelPlant};
 pub use plant::Plant;
 pub use q2usb::{EncoderChannel, Q2Usb, Q2UsbConfig};
 pub use reference_pendulum::{PendulumParams, RotaryPendulumReference};
+pub use replay::{replay_log, ReplayError, ReplayReport};
 pub use report::{Percentiles, RunReport};
+pub use rig::{rig_main, ObserverInfo, RigInfo, RigModel};
 pub use sim::{SimBackend, SimConfig, SimNoise};
 pub use supervisor::{FaultKind, Supervisor, SupervisorConfig, SupervisorState, Transition};
 pub use velocity_observer::{ObserverSpec, VelocityObserver};

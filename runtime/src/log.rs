@@ -53,6 +53,7 @@ pub struct LogWriter {
     last_flush_t: f64,
     rows: u64,
     error: Option<LogError>,
+    full_precision: bool,
 }
 
 impl LogWriter {
@@ -71,6 +72,7 @@ impl LogWriter {
             last_flush_t: 0.0,
             rows: 0,
             error: None,
+            full_precision: false,
         }
     }
 
@@ -79,6 +81,15 @@ impl LogWriter {
         if seconds.is_finite() && seconds >= 0.0 {
             self.flush_interval_s = seconds.min(0.1);
         }
+    }
+
+    /// Writes every number with the shortest text that reads back to the
+    /// same `f64` (e.g. `0.0012345678901234567`, `-3.1e-9`) instead of fixed
+    /// decimals (6 for time and states, 4 for volts). For comparing runs
+    /// bit for bit (`plantc run --compiled --compare`); the files are about
+    /// twice as large. Default false.
+    pub fn set_full_precision(&mut self, full: bool) {
+        self.full_precision = full;
     }
 
     /// Writes the header. `n_counts` positions get a `<name>_counts` column.
@@ -134,18 +145,26 @@ impl LogWriter {
         // Writing into a Vec with spare capacity does not allocate; the
         // buffer is flushed well before it could grow.
         let b = &mut self.buf;
-        let _ = write!(b, "{t:.6}");
-        for v in x {
-            let _ = write!(b, ",{v:.6}");
+        if self.full_precision {
+            let _ = write!(b, "{t:?}");
+            for v in x {
+                let _ = write!(b, ",{v:?}");
+            }
+        } else {
+            let _ = write!(b, "{t:.6}");
+            for v in x {
+                let _ = write!(b, ",{v:.6}");
+            }
         }
         for c in counts {
             let _ = write!(b, ",{c}");
         }
-        for v in u {
-            let _ = write!(b, ",{v:.4}");
-        }
-        for v in u_cmd {
-            let _ = write!(b, ",{v:.4}");
+        for v in u.iter().chain(u_cmd) {
+            if self.full_precision {
+                let _ = write!(b, ",{v:?}");
+            } else {
+                let _ = write!(b, ",{v:.4}");
+            }
         }
         let _ = writeln!(b, ",{state},{}", u8::from(overrun));
         self.rows += 1;

@@ -41,6 +41,10 @@ pub struct RunReport {
     pub missed_samples: u64,
     /// Time per controller call (ns).
     pub controller_ns: Percentiles,
+    /// Time per velocity-estimator update (ns), every cycle.
+    pub estimator_ns: Percentiles,
+    /// Estimator update + controller call (ns), in the cycles the controller ran.
+    pub control_path_ns: Percentiles,
     /// Time from the sample instant to the end of the output write (ns).
     pub cycle_work_ns: Percentiles,
     /// Notes (real-time setup, watchdog, log errors, fallbacks).
@@ -97,6 +101,14 @@ impl fmt::Display for RunReport {
             self.controller_ns.count,
             us(self.cycle_work_ns.p50),
             us(self.cycle_work_ns.max)
+        )?;
+        writeln!(
+            f,
+            "  velocity estimator: p50 {} ns, max {} ns; estimator + controller: p50 {} ns, p99 {} ns",
+            self.estimator_ns.p50,
+            self.estimator_ns.max,
+            self.control_path_ns.p50,
+            self.control_path_ns.p99
         )?;
         for n in &self.notes {
             writeln!(f, "  note: {n}")?;

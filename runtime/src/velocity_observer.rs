@@ -11,9 +11,8 @@
 //! and the applied voltage, so it has no such lag on model-consistent motion.
 //! See the runtime section of ARCHITECTURE.md for the measured margins.
 
-use crate::backend::EncoderMap;
 use crate::error::RuntimeError;
-use nalgebra::DMatrix;
+use crate::estimator::VelocityEstimator;
 
 /// Default process noise: unmodelled angular acceleration, rad/s^2 (one
 /// standard deviation per joint and sample). With 4096-count encoders at
@@ -92,7 +91,7 @@ impl ObserverSpec {
 }
 
 /// The running observer: per-sample predict (model, applied voltage) and
-/// correct (encoder angles). Allocates only in [`VelocityObserver::design`].
+/// correct (encoder angles). Allocates only when it is made.
 #[derive(Debug, Clone)]
 pub struct VelocityObserver {
     n: usize,
@@ -114,120 +113,75 @@ fn invalid(s: String) -> RuntimeError {
 
 impl VelocityObserver {
     /// Designs the steady-state Kalman filter for sample period `period`
-    /// (s): ZOH discretisation of `(A, B)`; process noise `accel_std^2 G G^T`
-    /// with `G = [T^2/2 I; T I]` (white acceleration on every joint);
-    /// measurement noise the encoder quantisation, `(2 pi / counts_per_rev)^2 / 12`.
-    /// The gain comes from iterating the Riccati recursion to convergence;
-    /// the design is refused if it does not converge or the observer is unstable.
+    /// (s) with plantc-derive's `linear::design_velocity_observer`: ZOH
+    /// discretisation of `(A, B)`; process noise `accel_std^2 G G^T` with
+    /// `G = [T^2/2 I; T I]` (white acceleration on every joint); measurement
+    /// noise the encoder quantisation, `(2 pi / counts_per_rev)^2 / 12`.
+    /// Needs the `model` feature (the rig binaries of `plantc gen --rig` get
+    /// the design as generated constants instead).
+    #[cfg(feature = "model")]
     pub fn design(
         spec: &ObserverSpec,
-        encoders: &[EncoderMap],
+        encoders: &[crate::backend::EncoderMap],
         period: f64,
     ) -> Result<Self, RuntimeError> {
-        let nq = encoders.len();
+        use plantc_derive::linear::{design_velocity_observer, encoder_variance};
+        let variances: Vec<f64> = encoders
+            .iter()
+            .map(|m| encoder_variance(m.counts_per_rev))
+            .collect();
+        let d = design_velocity_observer(
+            &spec.a,
+            &spec.b,
+            encoders.len(),
+            period,
+            spec.accel_std,
+            &variances,
+        )
+        .map_err(|e| invalid(e.to_string()))?;
+        Self::from_gains(
+            d.n_positions,
+            d.ad,
+            d.bd,
+            d.gain,
+            (d.slowest_pole, d.fastest_pole),
+        )
+    }
+
+    /// An observer from a finished design: `ad` (n x n), `bd` (n), `gain`
+    /// (n x nq), all row-major with `n = 2 nq`, and the (slowest, fastest)
+    /// pole real parts in rad/s for the report.
+    pub fn from_gains(
+        n_positions: usize,
+        ad: Vec<f64>,
+        bd: Vec<f64>,
+        gain: Vec<f64>,
+        poles: (f64, f64),
+    ) -> Result<Self, RuntimeError> {
+        let nq = n_positions;
         let n = 2 * nq;
-        if nq == 0 || spec.a.len() != n * n || spec.b.len() != n {
+        if nq == 0 || ad.len() != n * n || bd.len() != n || gain.len() != n * nq {
             return Err(invalid(format!(
-                "A has {} and B {} entries for {nq} encoders (need {} and {n})",
-                spec.a.len(),
-                spec.b.len(),
-                n * n
+                "Ad has {}, Bd {} and the gain {} entries for {nq} encoders",
+                ad.len(),
+                bd.len(),
+                gain.len()
             )));
         }
-        if !spec.a.iter().chain(&spec.b).all(|v| v.is_finite()) {
-            return Err(invalid("A or B is not finite".into()));
+        if !ad.iter().chain(&bd).chain(&gain).all(|v| v.is_finite()) {
+            return Err(invalid("the design is not finite".into()));
         }
-        if !(spec.accel_std.is_finite() && spec.accel_std > 0.0) {
-            return Err(invalid(format!(
-                "acceleration noise {} must be > 0",
-                spec.accel_std
-            )));
-        }
-        if !(period.is_finite() && period > 0.0) {
-            return Err(invalid(format!("period {period}")));
-        }
-        // ZOH: exp([[A, B], [0, 0]] T) = [[Ad, Bd], [0, 1]].
-        let mut aug = DMatrix::<f64>::zeros(n + 1, n + 1);
-        for i in 0..n {
-            for j in 0..n {
-                aug[(i, j)] = spec.a[i * n + j] * period;
-            }
-            aug[(i, n)] = spec.b[i] * period;
-        }
-        let e = aug.exp();
-        let ad = e.view((0, 0), (n, n)).into_owned();
-        let bd: Vec<f64> = (0..n).map(|i| e[(i, n)]).collect();
-        let mut c = DMatrix::<f64>::zeros(nq, n);
-        for i in 0..nq {
-            c[(i, i)] = 1.0;
-        }
-        let mut g = DMatrix::<f64>::zeros(n, nq);
-        for i in 0..nq {
-            g[(i, i)] = period * period / 2.0;
-            g[(nq + i, i)] = period;
-        }
-        let q = &g * g.transpose() * (spec.accel_std * spec.accel_std);
-        let mut r = DMatrix::<f64>::zeros(nq, nq);
-        for (i, m) in encoders.iter().enumerate() {
-            let step = 2.0 * std::f64::consts::PI / m.counts_per_rev.abs();
-            if !(step.is_finite() && step > 0.0) {
-                return Err(invalid(format!("encoder {i}: counts per revolution")));
-            }
-            r[(i, i)] = (step * step / 12.0).max(1e-18);
-        }
-        let identity = DMatrix::<f64>::identity(n, n);
-        let mut p = q.clone() * 1e3 + &identity * 1e-6;
-        let mut gain = DMatrix::<f64>::zeros(n, nq);
-        let mut converged = false;
-        for _ in 0..200_000 {
-            let pp = &ad * &p * ad.transpose() + &q;
-            let s = &c * &pp * c.transpose() + &r;
-            let s_inv = s
-                .try_inverse()
-                .ok_or_else(|| invalid("innovation covariance singular".into()))?;
-            gain = &pp * c.transpose() * s_inv;
-            let pn = (&identity - &gain * &c) * &pp;
-            let pn = (&pn + pn.transpose()) * 0.5;
-            let scale = pn.amax().max(f64::MIN_POSITIVE);
-            let change = (&pn - &p).amax();
-            p = pn;
-            if !p.iter().all(|v| v.is_finite()) {
-                break;
-            }
-            if change <= 1e-12 * scale {
-                converged = true;
-                break;
-            }
-        }
-        if !converged {
-            return Err(invalid(
-                "the Riccati recursion did not converge (is the model detectable from the encoders?)"
-                    .into(),
-            ));
-        }
-        let err_dyn = (&identity - &gain * &c) * &ad;
-        let eig = err_dyn.complex_eigenvalues();
-        let radius = eig.iter().map(|z| z.norm()).fold(0.0, f64::max);
-        if radius.is_nan() || radius >= 1.0 {
-            return Err(invalid(format!(
-                "observer unstable (spectral radius {radius})"
-            )));
-        }
-        // Continuous-time equivalents of the observer poles, rad/s (real parts).
-        let re: Vec<f64> = eig.iter().map(|z| z.norm().ln() / period).collect();
-        let slowest_pole = re.iter().copied().fold(f64::NEG_INFINITY, f64::max);
-        let fastest_pole = re.iter().copied().fold(f64::INFINITY, f64::min);
         Ok(Self {
             n,
             nq,
-            ad: (0..n * n).map(|k| ad[(k / n, k % n)]).collect(),
+            ad,
             bd,
-            gain: (0..n * nq).map(|k| gain[(k / nq, k % nq)]).collect(),
+            gain,
             xh: vec![0.0; n],
             xp: vec![0.0; n],
             primed: false,
-            slowest_pole,
-            fastest_pole,
+            slowest_pole: poles.0,
+            fastest_pole: poles.1,
         })
     }
 
@@ -287,9 +241,23 @@ impl VelocityObserver {
     }
 }
 
-#[cfg(test)]
+impl VelocityEstimator for VelocityObserver {
+    fn update(&mut self, q: &[f64], _q_unwrapped: &[f64], u_prev: f64, velocities: &mut [f64]) {
+        VelocityObserver::update(self, q, u_prev, velocities);
+    }
+
+    fn describe(&self) -> String {
+        format!(
+            "velocities: steady-state Kalman observer (poles {:.0} to {:.0} rad/s)",
+            self.slowest_pole, self.fastest_pole
+        )
+    }
+}
+
+#[cfg(all(test, feature = "model"))]
 mod tests {
     use super::*;
+    use crate::backend::EncoderMap;
 
     /// A double integrator per joint (A = [[0, I], [0, 0]], B = [0, 0, 1, 1]).
     fn double_integrator() -> ObserverSpec {

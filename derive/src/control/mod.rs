@@ -139,6 +139,25 @@ pub fn output_expr(model: &Model, name: &str) -> Result<Expr, AnalysisError> {
         })
 }
 
+/// The name of the state-feedback gain entry `K[input][state]`, as
+/// `--gain` accepts it: `k_<state>` for a single-input model (`k_alpha`,
+/// `k_theta_dot`), `k_<input>_<state>` otherwise. Shared by the interpreted
+/// controllers and the generated code.
+pub fn state_feedback_gain_name(model: &Model, input: usize, state: usize) -> String {
+    let states = model.state_names();
+    let s = states.get(state).map(String::as_str).unwrap_or("?");
+    if model.inputs.len() == 1 {
+        format!("k_{s}")
+    } else {
+        let u = model
+            .inputs
+            .get(input)
+            .map(|u| u.name.as_str())
+            .unwrap_or("?");
+        format!("k_{u}_{s}")
+    }
+}
+
 /// Resolve the controller `name` of `model` with parameter `values`.
 pub fn resolve(
     model: &Model,

@@ -5,6 +5,8 @@
 //! - [`controllability`]: controllability matrix and SVD rank.
 //! - [`place`]: single-input pole placement (`u = -K x`).
 //! - [`lqr`]: continuous-time LQR via the CARE.
+//! - [`design_velocity_observer`]: steady-state Kalman velocity observer for
+//!   encoder-only measurements (used by the runtime and by `plantc gen --rig`).
 //! - [`AnalysisReport`], [`PlaceReport`], [`LqrReport`]: the CLI's JSON shapes.
 //!
 //! All functions return [`LinearError`] on bad input instead of panicking.
@@ -13,6 +15,7 @@ mod controllability;
 mod error;
 mod linear_model;
 mod lqr;
+mod observer;
 mod place;
 mod poles;
 mod report;
@@ -23,6 +26,7 @@ pub use controllability::{
 pub use error::LinearError;
 pub use linear_model::{matrix_from_rows, matrix_to_rows, LinearModel};
 pub use lqr::{care_residual, lqr, Lqr};
+pub use observer::{design_velocity_observer, encoder_variance, ObserverDesign, ObserverError};
 pub use place::{char_poly, check_desired_poles, place, pole_match_error, Placement};
 pub use poles::{canonicalize_poles, format_pole, parse_poles, poles, Pole};
 pub use report::{analyze, to_json, AnalysisReport, LqrReport, PlaceReport};

@@ -20,6 +20,8 @@ enum Kind {
     /// `u = u0 - K (x - x0)`, `k` row-major `m x n`.
     StateFeedback {
         k: Vec<f64>,
+        /// `k_<state>` (see [`crate::control::state_feedback_gain_name`]), row-major like `k`.
+        k_names: Vec<String>,
         x0: Vec<f64>,
         u0: Vec<f64>,
     },
@@ -101,6 +103,12 @@ impl ControllerEval {
                 }
                 Kind::StateFeedback {
                     k: k.iter().flatten().copied().collect(),
+                    k_names: (0..m)
+                        .flat_map(|i| {
+                            (0..n)
+                                .map(move |j| crate::control::state_feedback_gain_name(model, i, j))
+                        })
+                        .collect(),
                     x0: x0.clone(),
                     u0: u0.clone(),
                 }
@@ -140,10 +148,13 @@ impl ControllerEval {
         &self.name
     }
 
-    /// Named gains and their values (empty for state feedback).
+    /// Named gains and their values (state feedback: the entries of `K`,
+    /// named by [`crate::control::state_feedback_gain_name`]).
     pub fn gains(&self) -> Vec<(String, f64)> {
         match &self.kind {
-            Kind::StateFeedback { .. } => Vec::new(),
+            Kind::StateFeedback { k, k_names, .. } => {
+                k_names.iter().cloned().zip(k.iter().copied()).collect()
+            }
             Kind::Law {
                 gain_names, gains, ..
             } => gain_names
@@ -166,7 +177,12 @@ impl ControllerEval {
                     return Ok(());
                 }
             }
-            Kind::StateFeedback { .. } => {}
+            Kind::StateFeedback { k, k_names, .. } => {
+                if let Some(i) = k_names.iter().position(|g| g == name) {
+                    k[i] = value;
+                    return Ok(());
+                }
+            }
         }
         Err(SimError::UnknownGain {
             controller: self.name.clone(),
@@ -200,7 +216,7 @@ impl ControllerEval {
     ) {
         debug_assert_eq!(u.len(), self.n_inputs);
         match &self.kind {
-            Kind::StateFeedback { k, x0, u0 } => {
+            Kind::StateFeedback { k, x0, u0, .. } => {
                 let n = self.n_states;
                 for (i, ui) in u.iter_mut().enumerate() {
                     let mut acc = u0[i];

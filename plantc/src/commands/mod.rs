@@ -11,6 +11,7 @@ mod gen;
 mod identify;
 mod linearize;
 mod run;
+mod run_compiled;
 mod sim;
 mod stability;
 mod synth;
@@ -57,12 +58,6 @@ pub fn dispatch(cli: &Cli, out: &mut dyn Write, err: &mut dyn Write) -> Result<(
         Command::Fit(args) => fit::run(args, out, err),
         Command::Diagnose(args) => diagnose::run(args, out, err),
         Command::Identify(args) => identify::run(args, out, err),
-        Command::Gen {
-            model,
-            controllers,
-            params,
-            out: dir,
-            force,
-        } => gen::run(model, controllers, params, dir, *force, out, err),
+        Command::Gen(args) => gen::run(args, out, err),
     }
 }

@@ -12,10 +12,13 @@ use plantc_runtime::{
 };
 
 use super::sim::{parse_gains, refuse_overwrite};
-use crate::cli::{BackendKind, RunArgs, VelocityKind};
+use crate::cli::{BackendKind, LogPrecision, RunArgs, VelocityKind};
 use crate::common::{load, parse_assignments, parse_quantity, values, CliError};
 
 pub fn run(args: &RunArgs, out: &mut dyn Write, err: &mut dyn Write) -> Result<(), CliError> {
+    if args.compiled.is_some() {
+        return super::run_compiled::run(args, out, err);
+    }
     let loaded = load(&args.model, err)?;
     let model = &loaded.model;
     let vals = values(&loaded, &args.params)?;
@@ -70,6 +73,7 @@ pub fn run(args: &RunArgs, out: &mut dyn Write, err: &mut dyn Write) -> Result<(
             };
             let sim = SimConfig {
                 real_time: args.realtime,
+                noise: sim_noise(args)?,
                 ..SimConfig::default()
             };
             Box::new(SimBackend::new(Box::new(plant), x0, sim).map_err(|e| fail(&e))?)
@@ -97,7 +101,9 @@ pub fn run(args: &RunArgs, out: &mut dyn Write, err: &mut dyn Write) -> Result<(
     let mut log = match &args.log {
         Some(path) => {
             refuse_overwrite(path, args.force, "log")?;
-            Some(LogWriter::create(path).map_err(|e| fail(&e))?)
+            let mut log = LogWriter::create(path).map_err(|e| fail(&e))?;
+            log.set_full_precision(args.log_precision == LogPrecision::Full);
+            Some(log)
         }
         None => None,
     };
@@ -149,9 +155,18 @@ pub fn run(args: &RunArgs, out: &mut dyn Write, err: &mut dyn Write) -> Result<(
     Ok(())
 }
 
+/// `--sim-noise`, parsed as the rig binaries parse it.
+pub(crate) fn sim_noise(args: &RunArgs) -> Result<Option<plantc_runtime::SimNoise>, CliError> {
+    args.sim_noise
+        .as_deref()
+        .map(plantc_runtime::rig::parse_sim_noise)
+        .transpose()
+        .map_err(|e| CliError::input(format!("error: --sim-noise: {e}")))
+}
+
 /// The observer's linear model: the model linearized about zero state and
 /// input (upright), which must be an equilibrium.
-fn observer_spec(
+pub(crate) fn observer_spec(
     model: &Model,
     derivation: &Derivation,
     vals: &ParameterValues,

@@ -76,3 +76,46 @@ pub fn plantc_bin<A: AsRef<OsStr>>(args: &[A]) -> (i32, String, String) {
         String::from_utf8_lossy(&o.stderr).into_owned(),
     )
 }
+
+/// Builds (once per test binary) and locates the fake HIL cdylib
+/// (`runtime/fake-hil`), as the runtime's own tests do.
+pub fn fake_hil_lib() -> PathBuf {
+    use std::sync::OnceLock;
+    static PATH: OnceLock<Result<PathBuf, String>> = OnceLock::new();
+    PATH.get_or_init(|| {
+        let status = Command::new(env!("CARGO"))
+            .args(["build", "-p", "plantc-fake-hil"])
+            .current_dir(repo())
+            .status()
+            .map_err(|e| format!("running cargo: {e}"))?;
+        if !status.success() {
+            return Err(format!("cargo build -p plantc-fake-hil: {status}"));
+        }
+        let name = format!(
+            "{}plantc_fake_hil{}",
+            std::env::consts::DLL_PREFIX,
+            std::env::consts::DLL_SUFFIX
+        );
+        let mut candidates = Vec::new();
+        if let Ok(exe) = std::env::current_exe() {
+            // target/<profile>/deps/<test> -> target/<profile>/, then target/debug/
+            if let Some(dir) = exe.parent().and_then(|d| d.parent()) {
+                candidates.push(dir.join(&name));
+                if let Some(target) = dir.parent() {
+                    candidates.push(target.join("debug").join(&name));
+                }
+            }
+        }
+        if let Ok(t) = std::env::var("CARGO_TARGET_DIR") {
+            candidates.push(PathBuf::from(t).join("debug").join(&name));
+        }
+        candidates.push(repo().join("target/debug").join(&name));
+        candidates
+            .iter()
+            .find(|p| p.is_file())
+            .cloned()
+            .ok_or_else(|| format!("{name} not found in {candidates:?}"))
+    })
+    .clone()
+    .unwrap_or_else(|e| panic!("cannot build/locate the fake HIL: {e}"))
+}
