@@ -32,7 +32,7 @@ echo "   $(wc -l < "$csv") lines, $(du -h "$csv" | cut -f1)"
 echo "== plantc compare (read, simulate, fit %/RMSE, where it fails)"
 out=$( { t "$P" compare "$M" "$csv" > /dev/null; } 2>&1 | tail -1)
 echo "   $out"
-cpu_plantc=$(echo "$out" | awk '{print $3 + $7}')
+cpu_plantc=$(echo "$out" | awk '{print $4 + $8}')
 
 echo "== peer: Python csv module, reading and converting every cell only"
 out=$( { t python3 -c '
@@ -44,7 +44,7 @@ with open(sys.argv[1], newline="") as f:
         [float(c) for c in row]; rows += 1
 print(rows)' "$csv" > /dev/null; } 2>&1 | tail -1)
 echo "   $out"
-cpu_peer=$(echo "$out" | awk '{print $3 + $7}')
+cpu_peer=$(echo "$out" | awk '{print $4 + $8}')
 python3 -c "print(f'   CPU time plantc compare / Python read only: {$cpu_plantc / $cpu_peer:.2f}x; target compare < 2 s: {\"met\" if $cpu_plantc < 2 else \"NOT met\"} ({$cpu_plantc:.2f} s CPU)')"
 
 if [ "$fit" = 1 ]; then
