@@ -9,6 +9,7 @@ use plantc_identify::synth::{
 };
 
 use crate::cli::SynthArgs;
+use crate::commands::fit::with_progress;
 use crate::common::{num, parse_quantity, write_output, CliError};
 
 fn synth_error(e: SynthError) -> CliError {
@@ -104,7 +105,8 @@ pub fn run(args: &SynthArgs, out: &mut dyn Write, _err: &mut dyn Write) -> Resul
         Err(plantc_fsio::Error::CurrentDirectory { .. }) => None,
         Err(e) => return Err(CliError::failure(format!("error: {e}"))),
     };
-    let data = synthesize(&text, &spec).map_err(synth_error)?;
+    // long experiments take seconds: a progress line on a terminal
+    let data = with_progress("synthesizing", |_| synthesize(&text, &spec)).map_err(synth_error)?;
     let staging = fresh.as_ref().map_or(args.out.as_path(), |f| f.path());
     let write = |name: &str, content: &str| write_output(&staging.join(name), content);
     for f in &data.files {
