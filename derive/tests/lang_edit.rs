@@ -197,3 +197,110 @@ fn number_text_round_trips() {
         valid(&set_parameter_value(&src, "b1", &t).unwrap_or_else(|e| panic!("{t}: {e}")));
     }
 }
+
+mod rename {
+    use plantc_derive::lang::edit::{rename, rename_edits, EditError};
+    use plantc_derive::lang::parse_and_check;
+    use plantc_derive::lang::visit::SymbolRef;
+
+    fn fixture() -> String {
+        super::fixture()
+    }
+
+    fn model(n: &str) -> SymbolRef {
+        SymbolRef::Model(n.into())
+    }
+
+    #[test]
+    fn a_let_is_renamed_everywhere_and_nothing_else_changes() {
+        let src = fixture();
+        let out = rename(&src, &model("J2h"), "J_pend").unwrap();
+        assert!(!out.contains("J2h"));
+        assert_eq!(out.replace("J_pend", "J2h"), src);
+        assert!(!parse_and_check("t", &out).has_errors());
+    }
+
+    #[test]
+    fn a_parameter_is_renamed_in_sets_and_laws_too() {
+        let src = fixture();
+        let edits = rename_edits(&src, &model("l2"), "l_2").unwrap();
+        // declaration, uses in lets/T/V and the set entry
+        let out = rename(&src, &model("l2"), "l_2").unwrap();
+        assert_eq!(out.matches("l_2").count(), edits.len());
+        assert!(out.contains("    l_2 = 0.1685 [m]") || out.contains("l_2 = 0.1685"));
+        assert!(!parse_and_check("t", &out).has_errors());
+    }
+
+    #[test]
+    fn a_coordinate_is_renamed_with_its_derivatives_forces_and_outputs() {
+        let src = fixture();
+        let out = rename(&src, &model("alpha"), "phi").unwrap();
+        assert!(out.contains("output phi"));
+        assert!(out.contains("force phi ="));
+        assert!(out.contains("phi'"));
+        assert!(out.contains("linearize output phi"));
+        assert!(!parse_and_check("t", &out).has_errors());
+    }
+
+    #[test]
+    fn gains_are_renamed_in_their_controller_only() {
+        let src = fixture();
+        let Some(ci) = plantc_derive::lang::parser::parse(&src)
+            .0
+            .controllers
+            .iter()
+            .position(|c| c.name.name == "feedback_linearization")
+        else {
+            panic!("fixture has no feedback_linearization controller");
+        };
+        let before = src.matches("wn").count();
+        let out = rename(&src, &SymbolRef::Gain(ci, "wn".into()), "omega").unwrap();
+        assert_eq!(
+            out.matches("omega").count(),
+            3,
+            "decl + two uses in its law"
+        );
+        assert_eq!(out.matches("wn").count(), before - 3);
+        assert!(!parse_and_check("t", &out).has_errors());
+    }
+
+    #[test]
+    fn taken_names_keywords_and_builtins_are_refused() {
+        let src = fixture();
+        assert_eq!(
+            rename(&src, &model("J2h"), "m1"),
+            Err(EditError::NameTaken("m1".into()))
+        );
+        // a parameter may not take the name of a gain that would shadow it in a law
+        assert_eq!(
+            rename(&src, &model("b1"), "wn"),
+            Err(EditError::NameTaken("wn".into()))
+        );
+        for bad in [
+            "sin",
+            "pi",
+            "parameter",
+            "2x",
+            "a b",
+            "",
+            "viscous_friction",
+        ] {
+            assert!(
+                matches!(
+                    rename(&src, &model("J2h"), bad),
+                    Err(EditError::NotAName(_))
+                ),
+                "{bad}"
+            );
+        }
+        assert!(matches!(
+            rename(&src, &SymbolRef::Builtin("sin".into()), "sine"),
+            Err(EditError::NotRenamable(_))
+        ));
+        let broken = format!("{src}\nlet x = (\n");
+        assert!(matches!(
+            rename(&broken, &model("J2h"), "J"),
+            Err(EditError::InvalidSource(_))
+        ));
+    }
+}

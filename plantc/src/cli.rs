@@ -35,6 +35,21 @@ pub enum Command {
         #[arg(long)]
         json: bool,
     },
+    /// Format model files in the canonical layout (aligned parameter tables,
+    /// spacing; comments kept). Directories are searched for `*.plant`; `-`
+    /// reads standard input and writes the result to standard output.
+    Fmt {
+        /// Files or directories.
+        #[arg(required = true)]
+        paths: Vec<PathBuf>,
+        /// Do not write: list the files that are not formatted and exit with
+        /// code 1 if there is any (for CI).
+        #[arg(long)]
+        check: bool,
+    },
+    /// Run the language server (LSP over standard input and output) for
+    /// editors: diagnostics, hover, completion, rename, formatting...
+    Lsp,
     /// Derive the Euler-Lagrange equations and the control-affine form.
     Derive {
         /// The model file.

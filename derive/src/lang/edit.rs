@@ -7,8 +7,10 @@
 use super::ast::ModelFile;
 use super::check::{parse_and_check, suggest};
 use super::diagnostic::Diagnostic;
+use super::effects;
 use super::lexer::{lex, Tok};
 use super::span::Span;
+use super::visit::{occurrences, SymbolRef};
 use std::collections::BTreeSet;
 use std::fmt;
 
@@ -46,6 +48,12 @@ pub enum EditError {
     NotAParameterDeclaration(String),
     /// The edited file would have these new errors.
     WouldBreak(Vec<Diagnostic>),
+    /// The new name is not a name of the model language.
+    NotAName(String),
+    /// The new name is already used by another symbol in the same scope.
+    NameTaken(String),
+    /// This symbol cannot be renamed (a built-in function or an effect).
+    NotRenamable(String),
 }
 
 impl fmt::Display for EditError {
@@ -80,6 +88,12 @@ impl fmt::Display for EditError {
             EditError::NotAParameterDeclaration(t) => {
                 write!(f, "`{t}` is not a single `parameter` declaration")
             }
+            EditError::NotAName(t) => write!(
+                f,
+                "`{t}` is not a name (ASCII letters, digits and `_`, not starting with a digit; not a keyword, `pi` or a built-in function)"
+            ),
+            EditError::NameTaken(t) => write!(f, "`{t}` is already used by another name"),
+            EditError::NotRenamable(t) => write!(f, "`{t}` is built into the language and cannot be renamed"),
             EditError::WouldBreak(d) => {
                 write!(f, "the edit would make the model invalid: ")?;
                 let msgs: Vec<&str> = d.iter().map(|d| d.message.as_str()).collect();
@@ -389,4 +403,93 @@ pub fn add_actuator_effect(text: &str, input: &str, call_text: &str) -> Result<S
     let anchor = effect_anchor(&m, text);
     let edit = insert_line(text, anchor, &format!("actuator {input} = {call}"));
     apply(text, &before, vec![edit])
+}
+
+/// The replacements that rename `symbol` (see [`super::visit::occurrences`])
+/// to `new_name` everywhere in the file, checked like every edit: the result
+/// must parse and check with no new error, and the new name must not be
+/// taken by another symbol it could be confused with (which would silently
+/// change what a name means).
+pub fn rename_edits(
+    text: &str,
+    symbol: &SymbolRef,
+    new_name: &str,
+) -> Result<Vec<(Span, String)>, EditError> {
+    let new_name = new_name.trim();
+    let mut d = Vec::new();
+    let toks = lex(new_name, &mut d);
+    let reserved = super::parser::KEYWORDS.contains(&new_name)
+        || new_name == "pi"
+        || super::check::BUILTINS.iter().any(|(b, _)| *b == new_name)
+        || effects::lookup(new_name).is_some();
+    if !d.is_empty() || toks.len() != 2 || toks[0].tok != Tok::Ident || reserved {
+        return Err(EditError::NotAName(new_name.to_string()));
+    }
+    let (old, scope_names): (&str, Vec<String>) = {
+        let (m, _) = super::parser::parse(text);
+        let occ = occurrences(&m);
+        let names_of = |f: &dyn Fn(&SymbolRef) -> Option<String>| -> Vec<String> {
+            occ.iter().filter_map(|o| f(&o.symbol)).collect()
+        };
+        match symbol {
+            SymbolRef::Model(n) => (
+                n.as_str(),
+                // model names, and gains/`y` that would shadow it in a law
+                names_of(&|s| match s {
+                    SymbolRef::Model(x) | SymbolRef::Gain(_, x) => Some(x.clone()),
+                    SymbolRef::LawOutput(_) => Some("y".into()),
+                    _ => None,
+                }),
+            ),
+            SymbolRef::Gain(ci, n) => (
+                n.as_str(),
+                names_of(&|s| match s {
+                    SymbolRef::Model(x) => Some(x.clone()),
+                    SymbolRef::Gain(c, x) if c == ci => Some(x.clone()),
+                    SymbolRef::LawOutput(c) if c == ci => Some("y".into()),
+                    _ => None,
+                }),
+            ),
+            SymbolRef::Block(n) => (
+                n.as_str(),
+                names_of(&|s| match s {
+                    SymbolRef::Block(x) => Some(x.clone()),
+                    _ => None,
+                }),
+            ),
+            SymbolRef::LawOutput(_) => return Err(EditError::NotRenamable("y".into())),
+            SymbolRef::Builtin(n) | SymbolRef::Effect(n) | SymbolRef::UnknownFunction(n) => {
+                return Err(EditError::NotRenamable(n.clone()))
+            }
+        }
+    };
+    if new_name == old {
+        return Ok(Vec::new());
+    }
+    if scope_names.iter().any(|n| n == new_name) {
+        return Err(EditError::NameTaken(new_name.to_string()));
+    }
+    let (m, before) = parse_ok(text)?;
+    let edits: Vec<(Span, String)> = occurrences(&m)
+        .into_iter()
+        .filter(|o| &o.symbol == symbol)
+        .map(|o| (o.span, new_name.to_string()))
+        .collect();
+    if edits.is_empty() {
+        return Ok(edits);
+    }
+    apply(text, &before, edits.clone())?;
+    Ok(edits)
+}
+
+/// Renames `symbol` to `new_name` everywhere (see [`rename_edits`]); every
+/// other byte of the file is kept.
+pub fn rename(text: &str, symbol: &SymbolRef, new_name: &str) -> Result<String, EditError> {
+    let mut edits = rename_edits(text, symbol, new_name)?;
+    edits.sort_by_key(|(s, _)| std::cmp::Reverse(s.start));
+    let mut out = text.to_string();
+    for (s, r) in edits {
+        out.replace_range(s.start..s.end, &r);
+    }
+    Ok(out)
 }

@@ -1,5 +1,7 @@
 //! The `.plant` model language: lexer, parser, AST with spans, name
-//! resolution, dimensional analysis, diagnostics and lossless editing.
+//! resolution, dimensional analysis, diagnostics, lossless editing
+//! ([`edit`], incl. rename), the canonical layout ([`mod@format`]) and where each
+//! name is declared and used ([`visit`]).
 //!
 //! Entry point: [`parse_and_check`]; render its diagnostics with [`render`].
 //!
@@ -113,11 +115,13 @@ pub mod check;
 pub mod diagnostic;
 pub mod edit;
 pub mod effects;
+pub mod format;
 pub mod lexer;
 pub mod parser;
 pub mod source;
 pub mod span;
 pub mod units;
+pub mod visit;
 
 pub use check::{dimension_of, eval_si, parse_and_check, Checked, Symbols};
 pub use diagnostic::{render, Diagnostic, Severity};

@@ -7,9 +7,11 @@ mod derive;
 mod design;
 mod diagnose;
 mod fit;
+mod fmt;
 mod gen;
 mod identify;
 mod linearize;
+mod lsp;
 mod run;
 mod run_compiled;
 mod sim;
@@ -25,6 +27,8 @@ use crate::common::CliError;
 pub fn dispatch(cli: &Cli, out: &mut dyn Write, err: &mut dyn Write) -> Result<(), CliError> {
     match &cli.command {
         Command::Check { model, json } => check::run(model, *json, out, err),
+        Command::Fmt { paths, check } => fmt::run(paths, *check, out, err),
+        Command::Lsp => lsp::run(),
         Command::Derive { model, json, latex } => derive::run(model, *json, *latex, out, err),
         Command::Linearize {
             model,

@@ -1,0 +1,115 @@
+//! `plantc fmt`: formats in place (only files that change), `--check` for
+//! CI, standard input to standard output, and leaves broken files alone.
+
+mod common;
+
+use common::{plantc, repo, s, tmp};
+use std::io::Write;
+use std::process::{Command, Stdio};
+
+#[test]
+fn formats_files_and_directories_in_place() {
+    let dir = tmp("fmt");
+    let models = ["rotary_pendulum.plant", "cart_pole.plant", "pendubot.plant"];
+    for m in models {
+        std::fs::copy(repo().join("models").join(m), dir.join(m)).unwrap();
+    }
+    std::fs::write(dir.join("notes.txt"), "not a model").unwrap();
+
+    let (code, out, err) = plantc(&["fmt", "--check", &s(&dir)]);
+    assert_eq!(code, 1, "{out}{err}");
+    assert!(
+        out.contains("cart_pole.plant: not formatted (first difference on line 13)"),
+        "{out}"
+    );
+    // --check writes nothing
+    for m in models {
+        assert_eq!(
+            std::fs::read_to_string(dir.join(m)).unwrap(),
+            std::fs::read_to_string(repo().join("models").join(m)).unwrap()
+        );
+    }
+
+    let (code, out, err) = plantc(&["fmt", &s(&dir)]);
+    assert_eq!(code, 0, "{err}");
+    assert_eq!(out.matches("formatted ").count(), 3, "{out}");
+    for m in models {
+        let text = std::fs::read_to_string(dir.join(m)).unwrap();
+        let want = plantc_derive::lang::format::format(
+            &std::fs::read_to_string(repo().join("models").join(m)).unwrap(),
+        )
+        .unwrap();
+        assert_eq!(text, want, "{m}");
+    }
+    assert_eq!(
+        std::fs::read_to_string(dir.join("notes.txt")).unwrap(),
+        "not a model"
+    );
+    // no temporary file is left
+    let left: Vec<_> = std::fs::read_dir(&dir)
+        .unwrap()
+        .map(|e| e.unwrap().file_name().into_string().unwrap())
+        .filter(|n| n.contains(".tmp"))
+        .collect();
+    assert!(left.is_empty(), "{left:?}");
+
+    // formatted now: --check passes, a second run writes nothing
+    let (code, out, _) = plantc(&["fmt", "--check", &s(&dir)]);
+    assert_eq!((code, out.as_str()), (0, ""));
+    let before = std::fs::metadata(dir.join("pendubot.plant"))
+        .unwrap()
+        .modified()
+        .unwrap();
+    let (code, out, _) = plantc(&["fmt", &s(&dir.join("pendubot.plant"))]);
+    assert_eq!((code, out.as_str()), (0, ""));
+    let after = std::fs::metadata(dir.join("pendubot.plant"))
+        .unwrap()
+        .modified()
+        .unwrap();
+    assert_eq!(before, after, "an unchanged file is not rewritten");
+}
+
+#[test]
+fn a_file_with_syntax_errors_is_left_alone() {
+    let dir = tmp("fmt-broken");
+    let bad = dir.join("bad.plant");
+    let text = "model m\nlet x = (a +\nkinetic  T = 1\n";
+    std::fs::write(&bad, text).unwrap();
+    let good = dir.join("good.plant");
+    std::fs::write(&good, "model   m\n").unwrap();
+    let (code, _, err) = plantc(&["fmt", &s(&dir)]);
+    assert_eq!(code, 2, "{err}");
+    assert!(
+        err.contains("bad.plant: not formatted: fix the syntax errors first"),
+        "{err}"
+    );
+    assert!(err.contains("error[plantc::syntax]"), "{err}");
+    assert_eq!(std::fs::read_to_string(&bad).unwrap(), text);
+    // the other files are still formatted
+    assert_eq!(std::fs::read_to_string(&good).unwrap(), "model m\n");
+    let (code, _, err) = plantc(&["fmt", &s(&dir.join("missing.plant"))]);
+    assert_eq!(code, 2);
+    assert!(err.contains("no such file"), "{err}");
+}
+
+#[test]
+fn standard_input_to_standard_output() {
+    let mut child = Command::new(env!("CARGO_BIN_EXE_plantc"))
+        .args(["fmt", "-"])
+        .stdin(Stdio::piped())
+        .stdout(Stdio::piped())
+        .spawn()
+        .unwrap();
+    child
+        .stdin
+        .take()
+        .unwrap()
+        .write_all(b"model  m # the model\nparameter  a=1 [kg]\n")
+        .unwrap();
+    let out = child.wait_with_output().unwrap();
+    assert!(out.status.success());
+    assert_eq!(
+        String::from_utf8(out.stdout).unwrap(),
+        "model m  # the model\nparameter a = 1 [kg]\n"
+    );
+}
