@@ -170,8 +170,15 @@ pub fn read_experiment_with(
         Some("mat") => crate::mat_reader::read_mat(path, expected, options)?,
         Some("csv") | Some("txt") | None => crate::csv_reader::read_csv(path, expected)?,
         Some(_) => {
-            // Sniff: a MAT v5 file starts with a 116-byte text header "MATLAB 5.0".
-            match std::fs::read(path) {
+            // Sniff: a MAT v5 file starts with a 116-byte text header "MATLAB 5.0"
+            // (only the first bytes are read: the file may be large).
+            let head = std::fs::File::open(path).and_then(|f| {
+                use std::io::Read;
+                let mut head = Vec::with_capacity(6);
+                f.take(6).read_to_end(&mut head)?;
+                Ok(head)
+            });
+            match head {
                 Ok(bytes) if bytes.starts_with(b"MATLAB") => {
                     crate::mat_reader::read_mat(path, expected, options)?
                 }
