@@ -131,11 +131,7 @@ fn every_terminating_signal_stops_the_board_at_zero_volts() {
         assert_eq!(code, 128 + sig, "{name}: {err}");
         assert!(err.contains(&format!("stopped by {name}")), "{name}: {err}");
         let t = std::fs::read_to_string(&trace).unwrap();
-        let last_write = t
-            .lines()
-            .filter(|l| l.contains("write ch=0"))
-            .last()
-            .unwrap();
+        let last_write = t.lines().rfind(|l| l.contains("write ch=0")).unwrap();
         assert!(last_write.contains("v=0.000000 ok"), "{name}: {last_write}");
         assert!(
             t.lines().last().unwrap().contains("close output=0.000000"),

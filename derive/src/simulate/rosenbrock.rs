@@ -96,11 +96,11 @@ impl Rosenbrock {
     {
         let n = self.n;
         self.xt.copy_from_slice(x);
-        for j in 0..n {
-            let d = f64::EPSILON.sqrt() * x[j].abs().max(1.0);
-            self.xt[j] = x[j] + d;
+        for (j, &xj) in x.iter().enumerate().take(n) {
+            let d = f64::EPSILON.sqrt() * xj.abs().max(1.0);
+            self.xt[j] = xj + d;
             f(t, &self.xt, &mut self.fx)?;
-            self.xt[j] = x[j];
+            self.xt[j] = xj;
             for i in 0..n {
                 self.jac[i * n + j] = (self.fx[i] - self.f0[i]) / d;
             }
@@ -210,17 +210,22 @@ impl Rosenbrock {
                 self.k1.copy_from_slice(&self.f0);
                 Self::solve(&self.m, &self.piv, &mut self.k1);
                 // F1 = f(x + h k1 / 2); k2 = W^-1 (F1 - k1) + k1
-                for i in 0..n {
-                    self.xt[i] = x[i] + 0.5 * h * self.k1[i];
+                for ((xt, &xi), &k1) in self.xt.iter_mut().zip(x.iter()).zip(&self.k1) {
+                    *xt = xi + 0.5 * h * k1;
                 }
                 f(t + 0.5 * h, &self.xt, &mut self.f1).map_err(RkError::Rhs)?;
                 for i in 0..n {
                     self.k2[i] = self.f1[i] - self.k1[i];
                 }
                 Self::solve(&self.m, &self.piv, &mut self.k2);
-                for i in 0..n {
-                    self.k2[i] += self.k1[i];
-                    self.x1[i] = x[i] + h * self.k2[i];
+                for ((k2, x1), (&xi, &k1)) in self
+                    .k2
+                    .iter_mut()
+                    .zip(self.x1.iter_mut())
+                    .zip(x.iter().zip(&self.k1))
+                {
+                    *k2 += k1;
+                    *x1 = xi + h * *k2;
                 }
                 // F2 = f(x+); k3 = W^-1 (F2 - e32 (k2 - F1) - 2 (k1 - F0))
                 f(t + h, &self.x1, &mut self.k3).map_err(RkError::Rhs)?;
