@@ -59,7 +59,7 @@ pub fn stop_on_signals(flag: Arc<AtomicBool>) -> std::io::Result<()> {
 /// What asked the run to stop, if anything did.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub struct StopSignal {
-    /// Its name: `SIGINT`, `SIGTERM`, `SIGHUP`, `SIGQUIT`, or a Windows
+    /// Its name: `SIGINT (Ctrl-C)`, `SIGTERM`, `SIGHUP`, `SIGQUIT (Ctrl-\)`, or a Windows
     /// console event (`CTRL_CLOSE_EVENT`, ...).
     pub name: &'static str,
     /// The exit code a process ended by it has by convention (`128 + n`
@@ -116,10 +116,10 @@ mod imp {
     const SIG_ERR: usize = usize::MAX;
     /// The signals handled, with their names.
     const SIGNALS: [(c_int, &str); 4] = [
-        (SIGINT, "SIGINT"),
+        (SIGINT, "SIGINT (Ctrl-C)"),
         (SIGTERM, "SIGTERM"),
         (SIGHUP, "SIGHUP"),
-        (SIGQUIT, "SIGQUIT"),
+        (SIGQUIT, "SIGQUIT (Ctrl-\\)"),
     ];
 
     extern "C" {
