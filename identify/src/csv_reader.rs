@@ -121,6 +121,49 @@ pub(crate) fn read_csv(
             needed: true,
         });
     }
+    // Optional channels when present.
+    for (name, kind) in &spec.optional {
+        let Some(index) = found.iter().position(|n| n == name) else {
+            continue;
+        };
+        if plans.iter().any(|p| p.index == index) {
+            continue;
+        }
+        let header = headers.get(index).unwrap_or_default().to_string();
+        let (factor, note) = match &split[index].1 {
+            None => (1.0, None),
+            Some(u) => match lookup_unit(u) {
+                None => {
+                    return Err(DataError::UnknownUnit {
+                        file,
+                        column: index + 1,
+                        header,
+                        unit: u.clone(),
+                        kind: *kind,
+                    })
+                }
+                Some(unit) if *kind != Kind::Other && unit.kind != *kind => {
+                    return Err(DataError::IncompatibleUnit {
+                        file,
+                        column: index + 1,
+                        header,
+                        unit: u.clone(),
+                        expected: *kind,
+                        found: unit.kind,
+                    })
+                }
+                Some(unit) => (unit.factor, Some(unit_note(u, unit.kind))),
+            },
+        };
+        plans.push(ColumnPlan {
+            index,
+            name: name.clone(),
+            header,
+            factor,
+            note,
+            needed: true,
+        });
+    }
     // Extra columns, in file order.
     for (index, (name, unit)) in split.iter().enumerate() {
         if plans.iter().any(|p| p.index == index) || name.is_empty() {

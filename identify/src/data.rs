@@ -74,6 +74,10 @@ pub struct ChannelSpec {
     pub coordinates: Vec<(String, Kind)>,
     /// Inputs, e.g. `("Vm", Kind::Voltage)`.
     pub inputs: Vec<(String, Kind)>,
+    /// Channels read (with their units checked) when the file has them,
+    /// not required: e.g. an input that a recorded controller in the loop
+    /// can compute.
+    pub optional: Vec<(String, Kind)>,
 }
 
 impl ChannelSpec {
@@ -100,14 +104,41 @@ impl ChannelSpec {
         self
     }
 
+    /// Adds a channel read when present (see [`ChannelSpec::optional`]).
+    pub fn optional(mut self, name: &str, kind: Kind) -> Self {
+        self.optional.push((name.to_string(), kind));
+        self
+    }
+
     /// All expected channels, coordinates first.
     pub fn all(&self) -> impl Iterator<Item = &(String, Kind)> {
         self.coordinates.iter().chain(self.inputs.iter())
     }
 
-    /// The kind of a channel, if the spec names it.
+    /// The kind of a channel, if the spec names it (required or optional).
     pub fn kind_of(&self, name: &str) -> Option<Kind> {
-        self.all().find(|(n, _)| n == name).map(|(_, k)| *k)
+        self.all()
+            .chain(self.optional.iter())
+            .find(|(n, _)| n == name)
+            .map(|(_, k)| *k)
+    }
+
+    /// The spec with channels renamed: `(name, column)` reads channel
+    /// `name` from the file's column `column`.
+    fn renamed(&self, rename: &[(String, String)]) -> ChannelSpec {
+        let map = |v: &[(String, Kind)]| -> Vec<(String, Kind)> {
+            v.iter()
+                .map(|(n, k)| {
+                    let col = rename.iter().find(|r| &r.0 == n).map_or(n, |r| &r.1);
+                    (col.clone(), *k)
+                })
+                .collect()
+        };
+        ChannelSpec {
+            coordinates: map(&self.coordinates),
+            inputs: map(&self.inputs),
+            optional: map(&self.optional),
+        }
     }
 
     /// Expected names with time first, for messages.
@@ -125,6 +156,36 @@ pub struct ReadOptions {
     /// (`--channels theta,alpha,Vm`). Without it, the spec's order
     /// (coordinates, then inputs) is assumed and a warning says so.
     pub mat_channels: Option<Vec<String>>,
+    /// Channels read from columns of other names: `(name, column)`, e.g.
+    /// `("Vm", "plant_input")` (`--map Vm=plant_input`).
+    pub rename: Vec<(String, String)>,
+}
+
+/// Parses `--map` arguments `NAME=COLUMN[,NAME=COLUMN...]`.
+pub fn parse_rename(args: &[String]) -> Result<Vec<(String, String)>, DataError> {
+    let mut out: Vec<(String, String)> = Vec::new();
+    for a in args {
+        for part in a.split(',').map(str::trim).filter(|s| !s.is_empty()) {
+            let Some((n, c)) = part.split_once('=') else {
+                return Err(DataError::ChannelMap {
+                    message: format!("`{part}`: expected NAME=COLUMN, e.g. `Vm=plant_input`"),
+                });
+            };
+            let (n, c) = (n.trim(), c.trim());
+            if n.is_empty() || c.is_empty() {
+                return Err(DataError::ChannelMap {
+                    message: format!("`{part}`: expected NAME=COLUMN, e.g. `Vm=plant_input`"),
+                });
+            }
+            if out.iter().any(|(m, _)| m == n) {
+                return Err(DataError::ChannelMap {
+                    message: format!("`{n}` mapped twice"),
+                });
+            }
+            out.push((n.to_string(), c.to_string()));
+        }
+    }
+    Ok(out)
 }
 
 /// Parses a channel mapping argument like `theta,alpha,Vm` (names may carry a
@@ -166,7 +227,14 @@ pub fn read_experiment_with(
         .extension()
         .and_then(|e| e.to_str())
         .map(|e| e.to_ascii_lowercase());
-    let (exp, mut warnings) = match ext.as_deref() {
+    let renamed;
+    let expected = if options.rename.is_empty() {
+        expected
+    } else {
+        renamed = expected.renamed(&options.rename);
+        &renamed
+    };
+    let (mut exp, mut warnings) = match ext.as_deref() {
         Some("mat") => crate::mat_reader::read_mat(path, expected, options)?,
         Some("csv") | Some("txt") | None => crate::csv_reader::read_csv(path, expected)?,
         Some(_) => {
@@ -193,6 +261,11 @@ pub fn read_experiment_with(
         }
     };
     warnings.extend(crate::plausibility::check(&exp, expected));
+    for (name, col) in &options.rename {
+        if let Some(c) = exp.channels.iter_mut().find(|c| &c.name == col) {
+            c.name = name.clone();
+        }
+    }
     Ok((exp, warnings))
 }
 

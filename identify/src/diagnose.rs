@@ -52,7 +52,7 @@ use crate::effect_edit::{all_candidates, EffectEditError, EffectInstance, Effect
 use crate::equation_error::{
     EquationError, EquationErrorError, EquationErrorOptions, Regressor, Score, Share,
 };
-use crate::fit::{fit, Estimate, FitError, FitOptions, FitResult};
+use crate::fit::{fit, Estimate, FitError, FitOptions, FitResult, Horizon, Offsets};
 use crate::sensitivity::estimated_parameters;
 
 /// Smallest RMSE ratio (baseline / candidate) that counts as a found effect.
@@ -361,10 +361,11 @@ pub fn diagnose_with(
                     std_error: e.std_error,
                     start: m.parameter(&e.name).map_or(f64::NAN, |p| p.value),
                     at_bound: false,
+                    fixed: false,
                 })
                 .collect(),
             evidence: Evidence {
-                rmse_before: baseline.after_rmse,
+                rmse_before: baseline.after_cost,
                 rmse_after: None,
                 gain: None,
                 residual_share: score.residual_share,
@@ -387,10 +388,21 @@ pub fn diagnose_with(
         }
         ranking.push(r);
     }
-    // refitted first, by RMSE with a per-parameter penalty
+    // a sensor offset is absorbed by the per-experiment offsets of the
+    // baseline: judged against the baseline without them instead
+    sensor_offsets_from_nuisance(&mut ranking, text, &model, &baseline, experiments, opts);
+    // refitted first, by RMSE with a per-parameter penalty; the RMSE is the
+    // baseline's divided by the candidate's gain (the same as the refit's
+    // RMSE, except for a sensor offset judged against another baseline)
+    let base_cost = baseline.after_cost;
     let penalised = |r: &Ranked| match &r.fit {
         Some(f) => {
-            f.after_rmse / (1.0 - opts.per_parameter_gain).powi(r.candidate.parameters.len() as i32)
+            let cost = if r.gain > 0.0 {
+                base_cost / r.gain
+            } else {
+                f.after_cost
+            };
+            cost / (1.0 - opts.per_parameter_gain).powi(r.candidate.parameters.len() as i32)
         }
         None => f64::INFINITY,
     };
@@ -412,6 +424,140 @@ pub fn diagnose_with(
     })
 }
 
+/// The coordinates whose per-experiment offsets in `baseline` agree: every
+/// experiment (at least two) estimated one, each significant (3 standard
+/// errors), all of one sign, and their spread within a fifth of their mean
+/// (plus 3 standard errors). Returns (coordinate, mean).
+///
+/// Files of a real rig each have their own encoder zero (the shared QUBE
+/// episodes: -0.025 to +0.073 rad): those are nuisance, not physics. One
+/// offset the files share is a property of the sensor: a `sensor_offset`.
+pub fn consistent_offsets(model: &Model, baseline: &FitResult) -> Vec<(usize, f64)> {
+    let mut out = Vec::new();
+    if baseline.experiments.len() < 2 {
+        return out;
+    }
+    for (i, c) in model.coordinates.iter().enumerate() {
+        let name = format!("offset {}", c.name);
+        let vals: Vec<(f64, f64)> = baseline
+            .experiments
+            .iter()
+            .filter_map(|e| e.offsets.iter().find(|o| o.name == name && o.estimated))
+            .map(|o| (o.value, o.std_error))
+            .collect();
+        if vals.len() != baseline.experiments.len()
+            || vals
+                .iter()
+                .any(|&(v, s)| !v.is_finite() || !s.is_finite() || v.abs() < 3.0 * s)
+        {
+            continue;
+        }
+        let mean = vals.iter().map(|v| v.0).sum::<f64>() / vals.len() as f64;
+        let same_sign = vals.iter().all(|v| v.0.signum() == mean.signum());
+        let lo = vals.iter().map(|v| v.0).fold(f64::INFINITY, f64::min);
+        let hi = vals.iter().map(|v| v.0).fold(f64::NEG_INFINITY, f64::max);
+        let smax = vals.iter().map(|v| v.1).fold(0.0, f64::max);
+        if same_sign && hi - lo <= 0.2 * mean.abs() + 3.0 * smax {
+            out.push((i, mean));
+        }
+    }
+    out
+}
+
+/// For each coordinate whose per-experiment offsets agree
+/// ([`consistent_offsets`]), its `sensor_offset` candidate is judged against
+/// the baseline refitted without per-experiment offsets on that coordinate
+/// (the candidate's own refit has none there either: the model's offset
+/// replaces them), so its gain says what one shared offset explains.
+fn sensor_offsets_from_nuisance(
+    ranking: &mut [Ranked],
+    text: &str,
+    model: &Model,
+    baseline: &FitResult,
+    experiments: &[Experiment],
+    opts: &DiagnoseOptions,
+) {
+    if matches!(opts.fit.offsets, Offsets::None) {
+        return;
+    }
+    let estimated_on: Vec<String> = baseline
+        .experiments
+        .first()
+        .map(|e| {
+            e.offsets
+                .iter()
+                .filter(|o| o.estimated)
+                .filter_map(|o| o.name.strip_prefix("offset ").map(str::to_string))
+                .collect()
+        })
+        .unwrap_or_default();
+    let horizon = baseline.segments.map_or(Horizon::Whole, Horizon::Segments);
+    for (i, mean) in consistent_offsets(model, baseline) {
+        let coord = &model.coordinates[i].name;
+        let Some(r) = ranking
+            .iter_mut()
+            .find(|r| r.candidate.kind == EffectKind::Sensor && &r.candidate.target == coord)
+        else {
+            continue;
+        };
+        // the baseline without per-experiment offsets on this coordinate
+        let others: Vec<String> = estimated_on
+            .iter()
+            .filter(|c| *c != coord)
+            .cloned()
+            .collect();
+        let without = FitOptions {
+            free: None,
+            start: Some(baseline.base.clone()),
+            horizon,
+            multistart: 0,
+            act_on_identifiability: false,
+            offsets: Offsets::On(others),
+            ..opts.fit.clone()
+        };
+        let Ok(a) = fit(model, experiments, &without) else {
+            continue;
+        };
+        // the candidate (its refit has no per-experiment offset there),
+        // started at the offsets' mean
+        let b = match r.fit.clone() {
+            Some(f) => f,
+            None => {
+                let Ok(edited) = r.candidate.apply(text) else {
+                    continue;
+                };
+                let Ok(m) = model_from_text(&r.candidate.label(), &edited) else {
+                    continue;
+                };
+                for e in r.parameters.iter_mut().take(1) {
+                    e.value = mean;
+                }
+                match refit_from(r, &m, horizon, Some((model, baseline)), experiments, opts) {
+                    Ok(f) => f,
+                    Err(_) => continue,
+                }
+            }
+        };
+        let gain = a.after_cost / b.after_cost.max(f64::MIN_POSITIVE);
+        r.gain = gain;
+        r.evidence.rmse_before = a.after_cost;
+        r.evidence.rmse_after = Some(b.after_cost);
+        r.evidence.gain = Some(gain);
+        r.evidence.acts_where = format!(
+            "the per-experiment offsets of {coord} agree (mean {mean:.4e}): one sensor offset; {}",
+            r.evidence.acts_where
+        );
+        r.parameters = b
+            .parameters
+            .iter()
+            .filter(|e| r.candidate.parameters.iter().any(|p| p.name == e.name))
+            .cloned()
+            .collect();
+        r.fit = Some(b);
+        r.error = None;
+    }
+}
+
 /// A refit gain above which a second start is not tried.
 const DECISIVE_GAIN: f64 = 30.0;
 
@@ -427,7 +573,9 @@ fn refit(
     experiments: &[Experiment],
     opts: &DiagnoseOptions,
 ) {
-    let mut outcome = refit_from(r, m, Some((model, baseline)), experiments, opts);
+    // the candidate is judged on the baseline's terms: the same horizon
+    let horizon = baseline.segments.map_or(Horizon::Whole, Horizon::Segments);
+    let mut outcome = refit_from(r, m, horizon, Some((model, baseline)), experiments, opts);
     // A baseline distorted by the missing effect can also trap the refit in
     // a local minimum (shared spring_arm case: 5.2x from the baseline, 438x
     // from the nominal values). Unless the first start already gave a
@@ -437,22 +585,22 @@ fn refit(
     // from the first start is not worth a second fit; this keeps clean data
     // cheap).
     let gain = outcome.as_ref().map_or(0.0, |f| {
-        baseline.after_rmse / f.after_rmse.max(f64::MIN_POSITIVE)
+        baseline.after_cost / f.after_cost.max(f64::MIN_POSITIVE)
     });
     let worth_it = outcome.is_err() || r.evidence.equation_error_rank == 1 || gain >= 1.2;
     if worth_it && gain < DECISIVE_GAIN {
-        let second = refit_from(r, m, None, experiments, opts);
+        let second = refit_from(r, m, horizon, None, experiments, opts);
         outcome = match (outcome, second) {
-            (Ok(a), Ok(b)) => Ok(if b.after_rmse < a.after_rmse { b } else { a }),
+            (Ok(a), Ok(b)) => Ok(if b.after_cost < a.after_cost { b } else { a }),
             (Ok(a), Err(_)) => Ok(a),
             (Err(_), second) => second,
         };
     }
     match outcome {
         Ok(f) => {
-            let gain = baseline.after_rmse / f.after_rmse.max(f64::MIN_POSITIVE);
+            let gain = baseline.after_cost / f.after_cost.max(f64::MIN_POSITIVE);
             r.gain = gain;
-            r.evidence.rmse_after = Some(f.after_rmse);
+            r.evidence.rmse_after = Some(f.after_cost);
             r.evidence.gain = Some(gain);
             r.parameters = f
                 .parameters
@@ -469,6 +617,7 @@ fn refit(
 fn refit_from(
     r: &Ranked,
     m: &Model,
+    horizon: Horizon,
     from: Option<(&Model, &FitResult)>,
     experiments: &[Experiment],
     opts: &DiagnoseOptions,
@@ -491,9 +640,14 @@ fn refit_from(
             }
         }
     }
+    // a candidate's refit is a screening: no extra starts, no refit without
+    // undetermined parameters (the story's final fit does both)
     let o = FitOptions {
         free: None,
         start: Some(start),
+        horizon,
+        multistart: 0,
+        act_on_identifiability: false,
         ..opts.fit.clone()
     };
     fit(m, experiments, &o)

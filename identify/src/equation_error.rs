@@ -89,11 +89,6 @@ pub enum EquationErrorError {
     Mechanics(String),
     /// A tape could not be compiled (a symbol without a value).
     Tape(String),
-    /// The experiment is not sampled uniformly (the kernel needs that).
-    NonUniform {
-        /// Experiment name.
-        experiment: String,
-    },
     /// The base parameter vector has the wrong length.
     ParameterCount {
         /// Expected length.
@@ -115,10 +110,6 @@ impl fmt::Display for EquationErrorError {
             EquationErrorError::Sim(e) => write!(f, "{e}"),
             EquationErrorError::Mechanics(m) => write!(f, "equations of motion: {m}"),
             EquationErrorError::Tape(m) => write!(f, "compiling the equation residuals: {m}"),
-            EquationErrorError::NonUniform { experiment } => write!(
-                f,
-                "experiment `{experiment}` is not uniformly sampled; the equation-error ranking needs a fixed sample time"
-            ),
             EquationErrorError::ParameterCount { expected, found } => {
                 write!(f, "expected {expected} base parameter values, got {found}")
             }
@@ -450,6 +441,70 @@ fn least_squares(cols: &[&[f64]], y: &[f64]) -> Lsq {
     }
 }
 
+/// The signals on a uniform grid: unchanged when the stamps are uniform
+/// within 1 %; otherwise resampled at the median period over the same span
+/// (jitter, dropped samples): coordinates by the cubic through the four
+/// nearest stamps, inputs as held (the value logged at the last stamp at or
+/// before the new instant, as the DAC held it).
+pub fn uniform(sig: Signals) -> Signals {
+    let n = sig.len();
+    if n < 4 {
+        return sig;
+    }
+    let dt = sig.sample_time();
+    if sig
+        .t
+        .windows(2)
+        .all(|w| ((w[1] - w[0]) - dt).abs() <= 0.01 * dt)
+    {
+        return sig;
+    }
+    let (t0, t1) = (sig.t[0], sig.t[n - 1]);
+    let len = ((t1 - t0) / dt).floor() as usize + 1;
+    let t: Vec<f64> = (0..len).map(|k| t0 + k as f64 * dt).collect();
+    let idx: Vec<usize> = t
+        .iter()
+        .map(|&x| {
+            sig.t
+                .partition_point(|&s| s <= x)
+                .saturating_sub(1)
+                .min(n - 1)
+        })
+        .collect();
+    let cubic = |y: &[f64], x: f64, i: usize| -> f64 {
+        let a = i.saturating_sub(1).min(n - 4);
+        let pts = &sig.t[a..a + 4];
+        let mut v = 0.0;
+        for j in 0..4 {
+            let mut l = 1.0;
+            for k in 0..4 {
+                if k != j {
+                    l *= (x - pts[k]) / (pts[j] - pts[k]);
+                }
+            }
+            v += l * y[a + j];
+        }
+        v
+    };
+    let q = sig
+        .q
+        .iter()
+        .map(|y| t.iter().zip(&idx).map(|(&x, &i)| cubic(y, x, i)).collect())
+        .collect();
+    let u = sig
+        .u
+        .iter()
+        .map(|y| idx.iter().map(|&i| y[i]).collect())
+        .collect();
+    Signals {
+        name: sig.name,
+        t,
+        q,
+        u,
+        replay: None,
+    }
+}
+
 fn dot(a: &[f64], b: &[f64]) -> f64 {
     a.iter().zip(b).map(|(x, y)| x * y).sum()
 }
@@ -491,20 +546,11 @@ impl EquationError {
         let mut noise_count = 0usize;
         let mut k1_norm = 0.0;
         for e in experiments {
-            let sig = Signals::from_experiment(model, e)?;
+            let sig = uniform(Signals::from_experiment(model, e)?);
             if sig.len() <= 2 * h + 1 {
                 continue;
             }
             let dt = (sig.t[sig.len() - 1] - sig.t[0]) / (sig.len() - 1) as f64;
-            if sig
-                .t
-                .windows(2)
-                .any(|w| ((w[1] - w[0]) - dt).abs() > 0.01 * dt)
-            {
-                return Err(EquationErrorError::NonUniform {
-                    experiment: sig.name.clone(),
-                });
-            }
             let k0 = kernel(h, opts.order, 0, dt)?;
             let k1 = kernel(h, opts.order, 1, dt)?;
             let k2 = kernel(h, opts.order, 2, dt)?;

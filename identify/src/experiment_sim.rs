@@ -48,6 +48,7 @@ use plantc_derive::mechanics::{derive_equations, flat_outputs, small_lu, smooth_
 use plantc_derive::model::Model;
 use plantc_derive::sym::{diff, Expr, SplitTape, Symbol, Tape};
 
+use crate::closed_loop::{LoopEval, LoopLaw, Replay};
 use crate::data::Experiment;
 
 /// How the initial velocities are chosen.
@@ -198,9 +199,60 @@ pub struct Signals {
     pub q: Vec<Vec<f64>>,
     /// Inputs, one vector per model input.
     pub u: Vec<Vec<f64>>,
+    /// The recorded controller replayed on these data (closed-loop
+    /// simulation only).
+    pub replay: Option<Replay>,
 }
 
 impl Signals {
+    /// [`Signals::from_experiment`] for a closed-loop simulation with `law`:
+    /// the inputs the law drives may be absent from the data (the replayed
+    /// law stands for them), its signal columns must be present.
+    pub fn from_experiment_closed(
+        model: &Model,
+        exp: &Experiment,
+        law: &LoopLaw,
+    ) -> Result<Signals, SimError> {
+        let q = model
+            .coordinates
+            .iter()
+            .map(|c| {
+                exp.values(&c.name)
+                    .map(<[f64]>::to_vec)
+                    .ok_or_else(|| SimError::MissingChannel {
+                        experiment: exp.name.clone(),
+                        channel: c.name.clone(),
+                    })
+            })
+            .collect::<Result<Vec<_>, _>>()?;
+        if exp.t.len() < 2 {
+            return Err(SimError::TooFewSamples {
+                experiment: exp.name.clone(),
+                samples: exp.t.len(),
+            });
+        }
+        let replay = law.replay(exp, &q)?;
+        let mut u = Vec::with_capacity(model.inputs.len());
+        for (j, inp) in model.inputs.iter().enumerate() {
+            match law.driven().iter().position(|&d| d == j) {
+                Some(d) => u.push(replay.u[d].clone()),
+                None => u.push(exp.values(&inp.name).map(<[f64]>::to_vec).ok_or_else(|| {
+                    SimError::MissingChannel {
+                        experiment: exp.name.clone(),
+                        channel: inp.name.clone(),
+                    }
+                })?),
+            }
+        }
+        Ok(Signals {
+            name: exp.name.clone(),
+            t: exp.t.clone(),
+            q,
+            u,
+            replay: Some(replay),
+        })
+    }
+
     /// Pick the model's coordinates and inputs out of an experiment by name.
     pub fn from_experiment(model: &Model, exp: &Experiment) -> Result<Signals, SimError> {
         let get = |name: &str| {
@@ -232,6 +284,7 @@ impl Signals {
             t: exp.t.clone(),
             q,
             u,
+            replay: None,
         })
     }
 
@@ -252,7 +305,7 @@ impl Signals {
     }
 
     /// Median sample interval.
-    fn sample_time(&self) -> f64 {
+    pub(crate) fn sample_time(&self) -> f64 {
         let mut d: Vec<f64> = self.t.windows(2).map(|w| w[1] - w[0]).collect();
         d.sort_by(f64::total_cmp);
         d.get(d.len() / 2).copied().unwrap_or(1e-3)
@@ -324,6 +377,48 @@ pub(crate) fn initial_state(sig: &Signals, how: InitialVelocity, offsets: &[f64]
     x
 }
 
+/// The velocity of a measured coordinate at sample `k`: the slope at `t_k`
+/// of a least-squares quadratic through the samples within `half_window`
+/// s of it (one-sided at the ends of the record; at least two samples on
+/// each available side). Works on non-uniform time stamps.
+pub fn velocity_at(t: &[f64], y: &[f64], k: usize, half_window: f64) -> f64 {
+    let n = t.len().min(y.len());
+    if n < 2 || k >= n {
+        return 0.0;
+    }
+    let tk = t[k];
+    let mut a = k;
+    while a > 0 && (tk - t[a - 1] <= half_window || k - a < 2) {
+        a -= 1;
+    }
+    let mut b = k;
+    while b + 1 < n && (t[b + 1] - tk <= half_window || b - k < 2) {
+        b += 1;
+    }
+    // least squares y = c0 + c1 s + c2 s^2 with s = t - t_k
+    let mut m = [[0.0f64; 3]; 3];
+    let mut r = [0.0f64; 3];
+    for i in a..=b {
+        let s = t[i] - tk;
+        let pw = [1.0, s, s * s];
+        for (u, pu) in pw.iter().enumerate() {
+            r[u] += pu * y[i];
+            for (v, pv) in pw.iter().enumerate() {
+                m[u][v] += pu * pv;
+            }
+        }
+    }
+    let order = if b - a >= 2 { 3 } else { 2 };
+    let flat: Vec<f64> = (0..order)
+        .flat_map(|u| (0..order).map(move |v| (u, v)))
+        .map(|(u, v)| m[u][v])
+        .collect();
+    match crate::lm::solve_spd(&flat, order, &r[..order]) {
+        Some(c) => c[1],
+        None => 0.0,
+    }
+}
+
 /// Called at an input switch taken at a sample instant, with the input
 /// index `j`, the state derivative before (`f_old`) and after (`f_new`) the
 /// switch, and the state (to update sensitivities).
@@ -344,54 +439,83 @@ pub(crate) struct Segment {
     pub(crate) end: Option<usize>,
 }
 
-/// RK4 over the sample intervals with zero-order-hold input, each input `j`
-/// delayed by `delays[j] >= 0` s (see the module docs). `rhs(z, u, segment,
-/// dz)` returns false when the dynamics cannot be evaluated (singular mass
-/// matrix). `record(k, z)` is called at every sample instant `k <
-/// n_samples`. A switch that falls on a sample instant (within `1e-9 dt`)
-/// is taken there and reported to `on_switch` (with the state derivatives
+/// RK4 over the sample intervals `range` (block `[k0, k1)`) with
+/// zero-order-hold input, each input `j` delayed by `delays[j] >= 0` s (see
+/// the module docs).
+///
+/// `u[j][k]` is the value input `j` holds from sample `k` on (before its
+/// delay); `at_sample(k, z, u)` is called at every sample instant `k` of the
+/// range with the state there, before the interval that starts at `k` is
+/// integrated: it records the state and may write `u[.][k]` (a controller in
+/// the loop); it returns false when the state cannot go on (non-finite).
+/// `rhs(z, u_held, held, segment, dz)` gets the held input values and the
+/// sample each of them was taken from, and returns false when the dynamics
+/// cannot be evaluated (singular mass matrix). At the start of the block
+/// input `j` holds the latest sample `i <= k0` with `t_i + delay_j <= t_k0`
+/// (sample 0 when there is none: the rig held the first value before the
+/// record). A switch that falls on a sample instant (within `1e-9 dt`) is
+/// taken there and reported to `on_switch` (with the state derivatives
 /// before and after it) when its value changes; a switch inside a sample
 /// interval ends a segment instead. Buffers are allocated once per call,
 /// none per step.
 #[allow(clippy::too_many_arguments)]
 pub(crate) fn integrate(
-    sig: &Signals,
-    n_samples: usize,
+    name: &str,
+    t: &[f64],
+    u: &mut [Vec<f64>],
+    range: std::ops::Range<usize>,
     substep: f64,
     z: &mut [f64],
     delays: &[f64],
-    mut rhs: impl FnMut(&[f64], &[f64], &Segment, &mut [f64]) -> bool,
+    mut rhs: impl FnMut(&[f64], &[f64], &[usize], &Segment, &mut [f64]) -> bool,
     mut on_switch: Option<OnSwitch<'_>>,
-    mut record: impl FnMut(usize, &[f64]),
+    mut at_sample: impl FnMut(usize, &[f64], &mut [Vec<f64>]) -> bool,
 ) -> Result<(), SimError> {
     let dim = z.len();
-    let m = sig.u.len();
-    let mut u = vec![0.0; m];
+    let m = u.len();
+    let k1 = range.end.min(t.len());
+    let k0 = range.start.min(k1);
+    let mut uh = vec![0.0; m];
     let mut u_new = vec![0.0; m];
-    let mut k1 = vec![0.0; dim];
-    let mut k2 = vec![0.0; dim];
-    let mut k3 = vec![0.0; dim];
-    let mut k4 = vec![0.0; dim];
+    let mut k1v = vec![0.0; dim];
+    let mut k2v = vec![0.0; dim];
+    let mut k3v = vec![0.0; dim];
+    let mut k4v = vec![0.0; dim];
     let mut tmp = vec![0.0; dim];
-    let n_samples = n_samples.min(sig.len());
+    let delay = |j: usize| delays.get(j).copied().unwrap_or(0.0);
     // idx[j]: the sample whose value input j currently holds
     let mut idx = vec![0usize; m];
-    for (j, uj) in u.iter_mut().enumerate() {
-        *uj = sig.u[j][0];
+    let mut held_old = vec![0usize; m];
+    if k0 < k1 {
+        let tol0 = 1e-9 * (t.get(k0 + 1).unwrap_or(&t[k0]) - t[k0]).abs();
+        for (j, i) in idx.iter_mut().enumerate() {
+            let target = t[k0] - delay(j) + tol0;
+            // the latest sample i <= k0 with t_i <= t_k0 - delay
+            *i = t[..=k0]
+                .partition_point(|&ti| ti <= target)
+                .saturating_sub(1);
+        }
     }
-    let delay = |j: usize| delays.get(j).copied().unwrap_or(0.0);
-    for k in 0..n_samples {
-        record(k, z);
-        if k + 1 == n_samples {
+    for k in k0..k1 {
+        if !at_sample(k, z, u) {
+            return Err(SimError::Diverged {
+                experiment: name.to_string(),
+                time: t[k],
+            });
+        }
+        if k + 1 == k1 {
             break;
         }
-        let (t_end, dt) = (sig.t[k + 1], sig.t[k + 1] - sig.t[k]);
+        for (j, uj) in uh.iter_mut().enumerate() {
+            *uj = u[j][idx[j]];
+        }
+        let (t_end, dt) = (t[k + 1], t[k + 1] - t[k]);
         let tol = 1e-9 * dt;
-        let mut a = sig.t[k];
+        let mut a = t[k];
         let mut a_input: Option<usize> = None;
         loop {
             let diverged = || SimError::Diverged {
-                experiment: sig.name.clone(),
+                experiment: name.to_string(),
                 time: a,
             };
             // switches due at `a`; the one that ends the previous segment is
@@ -403,29 +527,32 @@ pub(crate) fn integrate(
             };
             for j in 0..m {
                 let mut boundary = a_input == Some(j);
-                while idx[j] + 1 < n_samples && sig.t[idx[j] + 1] + delay(j) <= a + tol {
+                while idx[j] + 1 < k1 && t[idx[j] + 1] + delay(j) <= a + tol {
+                    held_old.copy_from_slice(&idx);
                     idx[j] += 1;
-                    let new = sig.u[j][idx[j]];
+                    let new = u[j][idx[j]];
                     if boundary {
                         boundary = false;
                     } else if let Some(cb) = on_switch.as_mut() {
-                        if new != u[j] {
-                            u_new.copy_from_slice(&u);
+                        if new != uh[j] {
+                            u_new.copy_from_slice(&uh);
                             u_new[j] = new;
-                            if !rhs(z, &u, &seg, &mut k1) || !rhs(z, &u_new, &seg, &mut k2) {
+                            if !rhs(z, &uh, &held_old, &seg, &mut k1v)
+                                || !rhs(z, &u_new, &idx, &seg, &mut k2v)
+                            {
                                 return Err(diverged());
                             }
-                            cb(j, &k1, &k2, z);
+                            cb(j, &k1v, &k2v, z);
                         }
                     }
-                    u[j] = new;
+                    uh[j] = new;
                 }
             }
             // the next switch inside the interval ends the segment
             let mut b = t_end;
             for (j, &held) in idx.iter().enumerate() {
-                if held + 1 < n_samples {
-                    let s = sig.t[held + 1] + delay(j);
+                if held + 1 < k1 {
+                    let s = t[held + 1] + delay(j);
                     if s < b - tol {
                         b = s;
                         seg.end = Some(j);
@@ -436,29 +563,29 @@ pub(crate) fn integrate(
             let steps = ((seg.len / substep) - 1e-9).ceil().max(1.0) as usize;
             let h = seg.len / steps as f64;
             for _ in 0..steps {
-                if !rhs(z, &u, &seg, &mut k1) {
+                if !rhs(z, &uh, &idx, &seg, &mut k1v) {
                     return Err(diverged());
                 }
                 for i in 0..dim {
-                    tmp[i] = z[i] + 0.5 * h * k1[i];
+                    tmp[i] = z[i] + 0.5 * h * k1v[i];
                 }
-                if !rhs(&tmp, &u, &seg, &mut k2) {
+                if !rhs(&tmp, &uh, &idx, &seg, &mut k2v) {
                     return Err(diverged());
                 }
                 for i in 0..dim {
-                    tmp[i] = z[i] + 0.5 * h * k2[i];
+                    tmp[i] = z[i] + 0.5 * h * k2v[i];
                 }
-                if !rhs(&tmp, &u, &seg, &mut k3) {
+                if !rhs(&tmp, &uh, &idx, &seg, &mut k3v) {
                     return Err(diverged());
                 }
                 for i in 0..dim {
-                    tmp[i] = z[i] + h * k3[i];
+                    tmp[i] = z[i] + h * k3v[i];
                 }
-                if !rhs(&tmp, &u, &seg, &mut k4) {
+                if !rhs(&tmp, &uh, &idx, &seg, &mut k4v) {
                     return Err(diverged());
                 }
                 for i in 0..dim {
-                    z[i] += h / 6.0 * (k1[i] + 2.0 * k2[i] + 2.0 * k3[i] + k4[i]);
+                    z[i] += h / 6.0 * (k1v[i] + 2.0 * k2v[i] + 2.0 * k3v[i] + k4v[i]);
                 }
             }
             if z.iter().any(|v| !v.is_finite()) {
@@ -487,25 +614,22 @@ pub fn deadzone(u: f64, w: f64) -> f64 {
     }
 }
 
-/// The signals with each input `j` replaced by `deadzone(u_j[k], widths[j])`
-/// sample by sample (the input is held, so this is exact); borrowed as they
-/// are when every width is zero.
-pub(crate) fn apply_deadzones<'a>(
-    sig: &'a Signals,
-    widths: &[f64],
-) -> std::borrow::Cow<'a, Signals> {
-    if widths.iter().all(|&w| w == 0.0) {
-        return std::borrow::Cow::Borrowed(sig);
-    }
-    let mut out = sig.clone();
-    for (u, &w) in out.u.iter_mut().zip(widths) {
-        if w != 0.0 {
-            for v in u.iter_mut() {
-                *v = deadzone(*v, w);
+/// The held input samples with each input `j` passed through
+/// `deadzone(u, widths[j])` sample by sample (the input is held, so this is
+/// exact): the working copy an integration reads (and, in closed loop,
+/// writes).
+pub(crate) fn held_inputs(sig: &Signals, widths: &[f64]) -> Vec<Vec<f64>> {
+    sig.u
+        .iter()
+        .zip(widths.iter().chain(std::iter::repeat(&0.0)))
+        .map(|(u, &w)| {
+            if w == 0.0 {
+                u.clone()
+            } else {
+                u.iter().map(|&v| deadzone(v, w)).collect()
             }
-        }
-    }
-    std::borrow::Cow::Owned(out)
+        })
+        .collect()
 }
 
 /// Sensor offsets, input delays and deadzone widths of a model, compiled
@@ -587,6 +711,12 @@ impl SignalEffects {
     /// Evaluate at the full parameter vector; a negative or non-finite
     /// delay or deadzone width is an error.
     pub(crate) fn eval(&self, params: &[f64]) -> Result<SignalValues, SimError> {
+        if params.len() != self.tape.inputs().len() {
+            return Err(SimError::ParameterCount {
+                expected: self.tape.inputs().len(),
+                found: params.len(),
+            });
+        }
         let out = self.tape.eval_vec(params);
         let (n, m, p) = (self.n, self.m, self.p);
         let delays = out[n..n + m].to_vec();
@@ -628,17 +758,84 @@ impl SignalEffects {
     }
 }
 
+/// The largest stable RK4 substep for a model's stiffest damping: the
+/// velocity Jacobian of the right-hand side at zero velocity (where smoothed
+/// dry friction `F tanh(v/w)` is steepest, `F/w`), through `M^-1`, bounds
+/// the fastest decay rate `lambda` (largest absolute row sum); RK4 is stable
+/// for real decays up to `2.78/h`, and the substep is kept below
+/// `2.5/lambda`. A gearbox holding the arm (`Fg1 = 0.1 N m` with `w = 1e-3`)
+/// needs about 0.1 ms where the default is 1 ms (notes trap 8).
+#[derive(Clone, Debug)]
+pub(crate) struct StiffnessProbe {
+    n: usize,
+    m: usize,
+    /// `(state, inputs, full parameters)` -> `[M (n*n), d r0/d v (n*n)]`.
+    tape: Tape,
+}
+
+impl StiffnessProbe {
+    pub(crate) fn new(model: &Model, outs: &[Expr]) -> Result<StiffnessProbe, SimError> {
+        let n = model.coordinates.len();
+        let m = model.inputs.len();
+        let mut exprs: Vec<Expr> = outs[..n * n].to_vec();
+        let vs: Vec<Symbol> = model.state_symbols()[n..].to_vec();
+        for i in 0..n {
+            for v in &vs {
+                exprs.push(diff(outs[n * n + i], *v));
+            }
+        }
+        let tape = Tape::compile(&exprs, &tape_inputs(model))
+            .map_err(|e| SimError::Tape(e.to_string()))?;
+        Ok(StiffnessProbe { n, m, tape })
+    }
+
+    /// The substep limit at positions `q`, zero velocities, input `u`.
+    pub(crate) fn limit(&self, q: &[f64], u: &[f64], params: &[f64]) -> f64 {
+        let (n, m) = (self.n, self.m);
+        let mut tin = vec![0.0; 2 * n + m + params.len()];
+        tin[..n].copy_from_slice(&q[..n]);
+        tin[2 * n..2 * n + m].copy_from_slice(&u[..m]);
+        tin[2 * n + m..].copy_from_slice(params);
+        let out = self.tape.eval_vec(&tin);
+        let mut mm = out[..n * n].to_vec();
+        let mut piv = vec![0; n];
+        if !lu_factor(&mut mm, n, &mut piv) {
+            return f64::INFINITY;
+        }
+        let mut tmp = vec![0.0; n];
+        let mut rate = 0.0f64;
+        let mut rows = vec![0.0; n * n];
+        for j in 0..n {
+            let mut col: Vec<f64> = (0..n).map(|i| out[n * n + i * n + j]).collect();
+            lu_solve(&mm, n, &piv, &mut col, &mut tmp);
+            for i in 0..n {
+                rows[i * n + j] = col[i];
+            }
+        }
+        for i in 0..n {
+            rate = rate.max((0..n).map(|j| rows[i * n + j].abs()).sum());
+        }
+        if rate > 0.0 && rate.is_finite() {
+            2.5 / rate
+        } else {
+            f64::INFINITY
+        }
+    }
+}
+
 /// What both simulators do before integrating: check the parameter vector
 /// and the signals against the model's sizes `(n, m, n_params)`, choose the
-/// substep, evaluate the signal effects at `params` and apply the deadzones
-/// to the inputs.
-pub(crate) fn prepare_run<'a>(
-    sig: &'a Signals,
+/// substep, evaluate the signal effects at `params` and make the working
+/// copy of the held inputs with the deadzones applied.
+pub(crate) fn prepare_run(
+    sig: &Signals,
     params: &[f64],
     (n, m, n_params): (usize, usize, usize),
     opts: &SimOptions,
     signals: &SignalEffects,
-) -> Result<(f64, SignalValues, std::borrow::Cow<'a, Signals>), SimError> {
+    probe: &StiffnessProbe,
+    x0: &[f64],
+) -> Result<(f64, SignalValues, Vec<Vec<f64>>), SimError> {
     if params.len() != n_params {
         return Err(SimError::ParameterCount {
             expected: n_params,
@@ -651,10 +848,17 @@ pub(crate) fn prepare_run<'a>(
             sig.name
         )));
     }
-    let h = substep_for(sig, opts)?;
+    let mut h = substep_for(sig, opts)?;
     let effects = signals.eval(params)?;
-    let sig = apply_deadzones(sig, &effects.widths);
-    Ok((h, effects, sig))
+    let u = held_inputs(sig, &effects.widths);
+    if opts.substep.is_none() && x0.len() >= n {
+        let u0: Vec<f64> = u
+            .iter()
+            .map(|v| v.first().copied().unwrap_or(0.0))
+            .collect();
+        h = h.min(probe.limit(x0, &u0, params));
+    }
+    Ok((h, effects, u))
 }
 
 /// The substep for an experiment under `opts`.
@@ -668,6 +872,40 @@ pub(crate) fn substep_for(sig: &Signals, opts: &SimOptions) -> Result<f64, SimEr
     }
 }
 
+/// Where a simulated block of a record starts: the samples it covers, the
+/// true state at its first sample, and per-experiment offsets added to the
+/// measured coordinates (an encoder's zero, on top of the model's
+/// `sensor_offset`s).
+#[derive(Clone, Debug, PartialEq)]
+pub struct BlockStart {
+    /// Samples simulated: `k0..k1` of the record.
+    pub range: std::ops::Range<usize>,
+    /// True state at `t_k0`: positions then velocities.
+    pub x0: Vec<f64>,
+    /// Added to each simulated coordinate to give its measurement (one per
+    /// coordinate, usually zeros).
+    pub offsets: Vec<f64>,
+}
+
+impl BlockStart {
+    /// The whole record from the state the data give: measured positions
+    /// (minus the model's sensor offsets `model_offsets`) and velocities as
+    /// `how` says.
+    pub fn from_data(sig: &Signals, how: InitialVelocity, model_offsets: &[f64]) -> BlockStart {
+        BlockStart {
+            range: 0..sig.len(),
+            x0: initial_state(sig, how, model_offsets),
+            offsets: vec![0.0; sig.q.len()],
+        }
+    }
+}
+
+/// When a simulation with the automatic substep diverges, it is tried once
+/// more with the substep divided by this: stiff dry friction (a gearbox
+/// holding the arm, notes trap 8) needs steps well below 1 ms, while most
+/// records do not.
+pub const REFINE: f64 = 8.0;
+
 /// A compiled simulator of one model.
 #[derive(Clone, Debug)]
 pub struct Simulator {
@@ -680,6 +918,9 @@ pub struct Simulator {
     split: SplitTape,
     signals: SignalEffects,
     opts: SimOptions,
+    /// A recorded controller in the loop.
+    law: Option<LoopLaw>,
+    probe: StiffnessProbe,
 }
 
 /// Slow-input mask of a tape over `(state, inputs, parameters)` with
@@ -688,6 +929,27 @@ pub(crate) fn parameters_slow(n_fast: usize, n_params: usize) -> Vec<bool> {
     let mut slow = vec![false; n_fast];
     slow.resize(n_fast + n_params, true);
     slow
+}
+
+/// Evaluate a recorded law at sample `k` of a block: the measured
+/// coordinates are the state's positions plus `offsets`; writes the held
+/// value of every driven input at `k` (deadzone applied).
+#[allow(clippy::too_many_arguments)] // the loop state of one sample, passed as it is
+pub(crate) fn control_at(
+    law: &LoopLaw,
+    rep: &Replay,
+    ev: &mut LoopEval,
+    k: usize,
+    y: &[f64],
+    fstate: &mut [f64],
+    u_law: &mut [f64],
+    widths: &[f64],
+    u: &mut [Vec<f64>],
+) {
+    ev.step(law, rep, k, y, fstate, u_law, None);
+    for (d, &j) in law.driven().iter().enumerate() {
+        u[j][k] = deadzone(u_law[d], widths.get(j).copied().unwrap_or(0.0));
+    }
 }
 
 impl Simulator {
@@ -714,7 +976,22 @@ impl Simulator {
             split,
             signals: SignalEffects::new(model, &[])?,
             opts,
+            law: None,
+            probe: StiffnessProbe::new(model, &outs)?,
         })
+    }
+
+    /// The same simulator with a recorded controller in the loop: every
+    /// simulation then needs signals made by
+    /// [`Signals::from_experiment_closed`] with the same law.
+    pub fn with_loop(mut self, law: LoopLaw) -> Simulator {
+        self.law = Some(law);
+        self
+    }
+
+    /// The recorded controller in the loop, if any.
+    pub fn law(&self) -> Option<&LoopLaw> {
+        self.law.as_ref()
     }
 
     /// The options in use.
@@ -722,38 +999,81 @@ impl Simulator {
         &self.opts
     }
 
+    /// The model's sensor offsets at `params` (one per coordinate).
+    pub fn model_offsets(&self, params: &[f64]) -> Result<Vec<f64>, SimError> {
+        Ok(self.signals.eval(params)?.offsets)
+    }
+
     /// Simulate the first `n_samples` samples (clamped to the experiment's
     /// length) with parameter values `params` (the `full` vector of
-    /// [`plantc_derive::model::ParameterValues`]: base then derived).
+    /// [`plantc_derive::model::ParameterValues`]: base then derived), from
+    /// the measured initial state with velocities as the options say.
     pub fn simulate(
         &self,
         sig: &Signals,
         params: &[f64],
         n_samples: usize,
     ) -> Result<Trajectory, SimError> {
-        self.run(sig, params, n_samples, false)
+        let mut start = BlockStart::from_data(
+            sig,
+            self.opts.initial_velocity,
+            &self.model_offsets(params)?,
+        );
+        start.range = 0..n_samples.min(sig.len());
+        self.run(sig, params, &start, false)
     }
 
-    /// [`Simulator::simulate`], evaluating the dynamics with the split tape
-    /// (parameter part once per call) or, with `unsplit`, the whole tape at
-    /// every stage: the reference path the tests compare against.
+    /// Simulate one block of a record from a given state; the trajectory
+    /// holds the predicted measurements at samples `k0..k1`.
+    pub fn simulate_block(
+        &self,
+        sig: &Signals,
+        params: &[f64],
+        start: &BlockStart,
+    ) -> Result<Trajectory, SimError> {
+        self.run(sig, params, start, false)
+    }
+
+    /// [`Simulator::simulate_block`], evaluating the dynamics with the split
+    /// tape (parameter part once per call) or, with `unsplit`, the whole
+    /// tape at every stage: the reference path the tests compare against.
     fn run(
         &self,
         sig: &Signals,
         params: &[f64],
-        n_samples: usize,
+        start: &BlockStart,
         unsplit: bool,
     ) -> Result<Trajectory, SimError> {
-        let (h, effects, sig) = prepare_run(
+        match self.run_refined(sig, params, start, unsplit, 1.0) {
+            Err(SimError::Diverged { .. }) if self.opts.substep.is_none() => {
+                self.run_refined(sig, params, start, unsplit, REFINE)
+            }
+            r => r,
+        }
+    }
+
+    /// [`Simulator::run`] with the automatic substep divided by `refine`.
+    fn run_refined(
+        &self,
+        sig: &Signals,
+        params: &[f64],
+        start: &BlockStart,
+        unsplit: bool,
+        refine: f64,
+    ) -> Result<Trajectory, SimError> {
+        let (h, effects, mut u) = prepare_run(
             sig,
             params,
             (self.n, self.m, self.n_params),
             &self.opts,
             &self.signals,
+            &self.probe,
+            &start.x0,
         )?;
-        let sig = &*sig;
+        let h = h / refine;
         let (n, m) = (self.n, self.m);
-        let n_samples = n_samples.min(sig.len());
+        check_start(sig, start, n)?;
+        let (k0, k1) = (start.range.start, start.range.end);
         let mut tin = vec![0.0; 2 * n + m + self.n_params];
         tin[2 * n + m..].copy_from_slice(params);
         let mut out = vec![0.0; self.tape.n_outputs()];
@@ -764,7 +1084,7 @@ impl Simulator {
         let mut piv = vec![0; n];
         let mut acc = vec![0.0; n];
         let mut tmp = vec![0.0; n];
-        let rhs = |x: &[f64], u: &[f64], _: &Segment, dx: &mut [f64]| {
+        let rhs = |x: &[f64], u: &[f64], _: &[usize], _: &Segment, dx: &mut [f64]| {
             tin[..2 * n].copy_from_slice(x);
             tin[2 * n..2 * n + m].copy_from_slice(u);
             if unsplit {
@@ -789,25 +1109,111 @@ impl Simulator {
             dx[n..2 * n].copy_from_slice(&acc);
             true
         };
-        let offsets = &effects.offsets;
-        let mut q = vec![vec![0.0; n_samples]; n];
-        let mut z = initial_state(sig, self.opts.initial_velocity, offsets);
-        let record = |k: usize, z: &[f64]| {
-            for (i, qi) in q.iter_mut().enumerate() {
-                qi[k] = z[i] + offsets[i];
+        let meas_off: Vec<f64> = effects
+            .offsets
+            .iter()
+            .zip(&start.offsets)
+            .map(|(a, b)| a + b)
+            .collect();
+        let mut q = vec![vec![0.0; k1 - k0]; n];
+        let mut z = start.x0.clone();
+        let mut y = vec![0.0; n];
+        let mut closed = self.closed(sig, k0)?;
+        let widths = &effects.widths;
+        let at_sample = |k: usize, z: &[f64], u: &mut [Vec<f64>]| {
+            for i in 0..n {
+                y[i] = z[i] + meas_off[i];
+                q[i][k - k0] = y[i];
             }
+            if let Some((law, rep, ev, fstate, u_law)) = closed.as_mut() {
+                control_at(law, rep, ev, k, &y, fstate, u_law, widths, u);
+            }
+            z.iter().all(|v| v.is_finite())
         };
         integrate(
-            sig,
-            n_samples,
+            &sig.name,
+            &sig.t,
+            &mut u,
+            k0..k1,
             h,
             &mut z,
             &effects.delays,
             rhs,
             None,
-            record,
+            at_sample,
         )?;
         Ok(Trajectory { q })
+    }
+
+    /// The loop's state at the start of a block at `k0`: the law, the
+    /// replay, evaluation buffers, the replayed filter state and a buffer
+    /// for the law's values. None in open loop.
+    #[allow(clippy::type_complexity)]
+    fn closed<'s>(
+        &'s self,
+        sig: &'s Signals,
+        k0: usize,
+    ) -> Result<Option<(&'s LoopLaw, &'s Replay, LoopEval, Vec<f64>, Vec<f64>)>, SimError> {
+        let Some(law) = &self.law else {
+            return Ok(None);
+        };
+        let Some(rep) = &sig.replay else {
+            return Err(SimError::BadOption(format!(
+                "closed-loop simulation of `{}` needs its signals read for recorded controller `{}`",
+                sig.name, law.name
+            )));
+        };
+        let nf2 = rep.coeffs.len() * 2;
+        let fstate = rep.state[k0 * nf2..(k0 + 1) * nf2].to_vec();
+        Ok(Some((
+            law,
+            rep,
+            LoopEval::new(law),
+            fstate,
+            vec![0.0; law.driven().len()],
+        )))
+    }
+}
+
+/// Check a block start against the record.
+pub(crate) fn check_start(sig: &Signals, start: &BlockStart, n: usize) -> Result<(), SimError> {
+    let r = &start.range;
+    if r.start > r.end || r.end > sig.len() {
+        return Err(SimError::BadOption(format!(
+            "block {}..{} does not lie within the {} samples of `{}`",
+            r.start,
+            r.end,
+            sig.len(),
+            sig.name
+        )));
+    }
+    if start.x0.len() != 2 * n || start.offsets.len() != n {
+        return Err(SimError::BadOption(format!(
+            "a block of `{}` needs {} initial state values and {n} offsets",
+            sig.name,
+            2 * n
+        )));
+    }
+    Ok(())
+}
+
+#[cfg(test)]
+impl Simulator {
+    /// The first `n` samples from the measured state, split or not (tests).
+    fn run_n(
+        &self,
+        sig: &Signals,
+        params: &[f64],
+        n: usize,
+        unsplit: bool,
+    ) -> Result<Trajectory, SimError> {
+        let mut start = BlockStart::from_data(
+            sig,
+            self.opts.initial_velocity,
+            &self.model_offsets(params)?,
+        );
+        start.range = 0..n.min(sig.len());
+        self.run(sig, params, &start, unsplit)
     }
 }
 
@@ -854,6 +1260,7 @@ pub(crate) mod tests {
             t,
             q,
             u,
+            replay: None,
         }
     }
 
@@ -884,8 +1291,8 @@ pub(crate) mod tests {
             );
             let sig = signals(&model);
             let p = perturbed(&model);
-            let split = sim.run(&sig, &p, sig.len(), false).expect("simulates");
-            let whole = sim.run(&sig, &p, sig.len(), true).expect("simulates");
+            let split = sim.run_n(&sig, &p, sig.len(), false).expect("simulates");
+            let whole = sim.run_n(&sig, &p, sig.len(), true).expect("simulates");
             assert!(split.q[0].iter().any(|v| (v - split.q[0][0]).abs() > 1e-3));
             let bits = |tr: &Trajectory| -> Vec<Vec<u64>> {
                 tr.q.iter()
@@ -926,10 +1333,10 @@ pub(crate) mod tests {
         let (mut a, mut b) = (Vec::new(), Vec::new());
         for _ in 0..5 {
             a.push(median_seconds(3, || {
-                sim.run(&sig, &p, k, false).expect("simulates");
+                sim.run_n(&sig, &p, k, false).expect("simulates");
             }));
             b.push(median_seconds(3, || {
-                sim.run(&sig, &p, k, true).expect("simulates");
+                sim.run_n(&sig, &p, k, true).expect("simulates");
             }));
         }
         a.sort_by(f64::total_cmp);

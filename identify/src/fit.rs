@@ -1,38 +1,112 @@
-//! Bounded simulation-error fit (single shooting, Levenberg-Marquardt).
+//! Bounded simulation-error fit that never lies.
 //!
-//! The residuals are simulated minus measured coordinates at every sample of
-//! every experiment (all coordinates in their SI units, unweighted). Each free
-//! parameter `p` in its `estimate [lo, hi]` box is written as
-//! `p = lo + (hi - lo) * s(z)` with the logistic `s`, so every LM step stays
-//! inside the box and the unknowns `z` are dimensionless (this also scales
-//! them: near a zero lower bound `dp/dz ~ p`, like a log). The Jacobian comes
-//! from the exact forward sensitivities ([`SensitivitySimulator`]), not from
-//! finite differences.
+//! **Unknowns** ([`crate::problem`]): the free model parameters (in their
+//! `estimate [lo, hi]` boxes), per-experiment nuisance unknowns (initial
+//! velocities by default, initial positions on request, sensor zero
+//! offsets where the data call for them) and, in multiple shooting, the
+//! initial state of every segment.
 //!
-//! The horizon grows (3 s, 8 s, everything by default): single shooting from
-//! table values can stall in a local minimum over the whole record
-//! (identification notes, trap 7), while a short horizon is nearly linear in
-//! the parameters. An intermediate stage is skipped when the estimates of
-//! the previous one already predict the whole record about as well
-//! ([`SKIP_RATIO`]); short stages stop at a loose tolerance, the last one
-//! when a step gains less than a tenth of the residual variance or
-//! [`FINAL_TOLERANCE`] of the SSR.
+//! **Residuals**: simulated minus measured coordinates, each channel
+//! divided by its scale ([`crate::weights`]), so no channel decides alone.
 //!
-//! The experiments are simulated in parallel (one scoped thread each).
+//! **Solver**: Levenberg-Marquardt with Marquardt's scale-invariant damping,
+//! Nielsen's damping update and box constraints handled by projection with
+//! an active set (a parameter at a bound is held only while the gradient
+//! pushes it outwards, so a friction that reached its zero bound can grow
+//! again). The normal equations come from exact forward sensitivities and
+//! are solved with the nuisance unknowns eliminated block by block
+//! ([`crate::lm`]).
 //!
-//! Standard errors come from `sigma^2 (J'J)^-1` with `sigma^2 = SSR/(N - p)`
-//! in physical units. Simulation residuals are strongly correlated in time, so
-//! these are lower bounds on the true uncertainty; the correlations between
-//! estimates are more telling (e.g. `l2` against `J2`, trap 9).
+//! **Stages**:
+//! 1. *Horizon*: by default each experiment is simulated whole (single
+//!    shooting). When the replay at the start values diverges or ends far
+//!    from the data (an unstable plant replayed open loop), the records are
+//!    cut into segments of [`AUTO_SEGMENTS`] seconds (the longest that
+//!    follows the data), each with its own estimated initial state
+//!    (multiple shooting without continuity constraints: k-step-ahead
+//!    prediction error); `--horizon S` sets the segment length. With a
+//!    recorded controller in the loop the replay is closed loop and
+//!    usually stays whole.
+//! 2. *Global scan*: a parameter that moves an input delay or a sensor
+//!    offset is scanned over its box (delays at a quarter of the sample
+//!    period) before the local solver: such objectives have kinks or
+//!    several minima.
+//! 3. *Nuisance*: the nuisance unknowns are fitted at the start parameters;
+//!    the cost there is the honest "before".
+//! 4. *Growing horizons* (single shooting): 3 s, 8 s, everything; a
+//!    shorter stage is nearly linear in the parameters and brings them into
+//!    the basin. After every stage the point is evaluated on the whole
+//!    record and the best one is kept.
+//! 5. *Multi-start* when the local solver stalled far above the noise
+//!    floor with a parameter at a bound.
+//! 6. *Offsets*: per-experiment offsets that are not significant (all
+//!    within two standard errors of zero) are dropped.
+//! 7. *Identifiability* ([`crate::identifiability`]): parameters the data do
+//!    not determine are fixed at their start values and the fit repeated;
+//!    kept when the cost does not rise by more than 1 %.
+//!
+//! The result is the best point evaluated on the whole record, never worse
+//! than the start; its statistics are computed there.
+//!
+//! Standard errors come from `sigma^2 S^-1`, `S` the parameters' information
+//! with the nuisance unknowns marginalised, `sigma^2 = SSR/(N - unknowns)`.
+//! Simulation residuals are correlated in time, so these are lower bounds;
+//! the identifiability analysis and correlations are more telling.
 
 use std::fmt;
 
 use plantc_derive::model::{Model, ParameterValues};
 use serde::Serialize;
 
+use crate::closed_loop::LoopLaw;
 use crate::data::Experiment;
-use crate::experiment_sim::{Signals, SimError, SimOptions, Simulator};
+use crate::experiment_sim::{
+    dynamics_outputs, velocity_at, InitialVelocity, Signals, SimError, SimOptions, Simulator,
+};
+use crate::identifiability::{analyse, to_fix, Fixed, Identifiability, ParamInfo};
+use crate::lm::{global_information, local_variances, predicted_reduction, Damped};
+use crate::problem::{BlockLayout, Point, Problem};
 use crate::sensitivity::{estimated_parameters, SensitivitySimulator};
+use crate::weights::{channel_weights, ChannelWeight};
+
+/// How records are cut for the fit.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub enum Horizon {
+    /// Whole records unless the replay at the start diverges; then segments
+    /// (the longest of [`AUTO_SEGMENTS`] that follows the data).
+    Auto,
+    /// Single shooting over each whole record.
+    Whole,
+    /// Multiple shooting: segments of this many seconds, each starting from
+    /// its own estimated state.
+    Segments(f64),
+}
+
+/// Which coordinates get a per-experiment sensor offset (an encoder zero
+/// of its own in each file).
+#[derive(Clone, Debug, PartialEq)]
+pub enum Offsets {
+    /// The coordinates whose measured value matters (the dynamics or a
+    /// recorded controller depend on it) and that have no `sensor_offset`
+    /// in the model; dropped again when not significant.
+    Auto,
+    /// None.
+    None,
+    /// These coordinates.
+    On(Vec<String>),
+}
+
+/// Which recorded controller, if any, is simulated in the loop.
+#[derive(Clone, Debug, PartialEq)]
+pub enum ClosedLoop {
+    /// The model's recorded controller when it has exactly one and every
+    /// experiment holds the columns it reads; open loop otherwise.
+    Auto,
+    /// Open loop: the logged inputs are replayed.
+    Off,
+    /// This recorded controller (an error when the data lack its columns).
+    Named(String),
+}
 
 /// Options of [`fit`].
 #[derive(Clone, Debug, PartialEq)]
@@ -41,15 +115,37 @@ pub struct FitOptions {
     pub free: Option<Vec<String>>,
     /// Starting base values (model order); `None` means the nominal values.
     pub start: Option<Vec<f64>>,
-    /// Growing fit horizons in s from each experiment's start; the last stage
-    /// should be `f64::INFINITY` (everything).
+    /// Growing horizons in s for single shooting; the last should be
+    /// `f64::INFINITY` (everything).
     pub horizons: Vec<f64>,
-    /// Most LM iterations per horizon stage.
+    /// Whole records or segments.
+    pub horizon: Horizon,
+    /// Most LM iterations per stage.
     pub max_iterations: usize,
-    /// Simulation options.
+    /// Simulation options (`initial_velocity` gives the velocities that are
+    /// not estimated).
     pub sim: SimOptions,
     /// Pairs of estimates with `|corr|` above this are reported.
     pub correlation_threshold: f64,
+    /// Channel weights set by the user `(coordinate, weight per SI unit)`;
+    /// the others are estimated from the data.
+    pub weights: Vec<(String, f64)>,
+    /// Estimate each experiment's initial velocities (on by default).
+    pub estimate_velocities: bool,
+    /// Estimate each experiment's initial positions (off by default: the
+    /// first sample is taken; segments always estimate theirs).
+    pub estimate_positions: bool,
+    /// Per-experiment sensor offsets.
+    pub offsets: Offsets,
+    /// Closed-loop simulation.
+    pub closed_loop: ClosedLoop,
+    /// Scan delay and offset parameters over their box before the local
+    /// solver.
+    pub scan: bool,
+    /// Extra starts tried when the local solver stalls (0: none).
+    pub multistart: usize,
+    /// Fix parameters the data do not determine and refit.
+    pub act_on_identifiability: bool,
 }
 
 impl Default for FitOptions {
@@ -58,12 +154,46 @@ impl Default for FitOptions {
             free: None,
             start: None,
             horizons: vec![3.0, 8.0, f64::INFINITY],
+            horizon: Horizon::Auto,
             max_iterations: 30,
             sim: SimOptions::default(),
             correlation_threshold: 0.95,
+            weights: Vec::new(),
+            estimate_velocities: true,
+            estimate_positions: false,
+            offsets: Offsets::Auto,
+            closed_loop: ClosedLoop::Auto,
+            scan: true,
+            multistart: 4,
+            act_on_identifiability: true,
         }
     }
 }
+
+/// Segment lengths tried (longest first) when the whole-record replay at the
+/// start diverges.
+pub const AUTO_SEGMENTS: [f64; 4] = [2.0, 1.0, 0.5, 0.25];
+
+/// A replay whose weighted RMS exceeds this (residuals twice the channels'
+/// spread: a fit % below -100) counts as diverged.
+pub const DIVERGED_COST: f64 = 2.0;
+
+/// A segment length is accepted when the weighted RMS with the segments'
+/// states fitted is below this (fit % above about 50).
+pub const SEGMENT_COST: f64 = 0.5;
+
+/// An intermediate horizon stage is skipped when the cost over the whole
+/// record is at most this multiple of the cost the previous (shorter) stage
+/// ended with.
+pub const SKIP_RATIO: f64 = 1.5;
+
+/// On the whole record, LM stops when an accepted step lowers the SSR by
+/// less than this fraction.
+pub const FINAL_TOLERANCE: f64 = 5e-5;
+
+/// The identifiability-reduced fit is kept when its cost is at most this
+/// factor above the full one.
+pub const REDUCED_TOLERANCE: f64 = 1.01;
 
 /// Why a fit could not be done.
 #[derive(Clone, Debug, PartialEq)]
@@ -84,13 +214,16 @@ pub enum FitError {
         /// Expected length.
         expected: usize,
     },
-    /// Fewer residuals than free parameters.
+    /// Fewer residuals than unknowns.
     NotEnoughData {
         /// Number of residuals.
         residuals: usize,
-        /// Number of free parameters.
+        /// Number of unknowns.
         parameters: usize,
     },
+    /// An option names something the model does not have, or is out of
+    /// range.
+    BadOption(String),
 }
 
 impl fmt::Display for FitError {
@@ -115,8 +248,9 @@ impl fmt::Display for FitError {
                 parameters,
             } => write!(
                 f,
-                "{residuals} residuals cannot determine {parameters} parameters"
+                "{residuals} residuals cannot determine {parameters} unknowns"
             ),
+            FitError::BadOption(m) => write!(f, "{m}"),
         }
     }
 }
@@ -136,37 +270,124 @@ pub struct Estimate {
     pub name: String,
     /// Estimated value (SI).
     pub value: f64,
-    /// Standard error from `sigma^2 (J'J)^-1` (NaN when `J'J` is singular).
+    /// Standard error (NaN when it cannot be computed, e.g. fixed).
     pub std_error: f64,
     /// Starting value.
     pub start: f64,
     /// True when the estimate sits within 0.1 % of the box width of a bound.
     pub at_bound: bool,
+    /// True when the fit fixed it at its start (not identifiable).
+    pub fixed: bool,
+}
+
+/// A nuisance estimate of one experiment.
+#[derive(Clone, Debug, PartialEq, Serialize)]
+pub struct NuisanceValue {
+    /// What: `theta(0)`, `theta'(0)`, `offset theta`.
+    pub name: String,
+    /// Value (SI).
+    pub value: f64,
+    /// Standard error (NaN when not estimated).
+    pub std_error: f64,
+    /// Whether it was estimated (else taken from the data or fixed).
+    pub estimated: bool,
+}
+
+/// What the fit found per experiment.
+#[derive(Clone, Debug, PartialEq, Serialize)]
+pub struct ExperimentEstimate {
+    /// Experiment name.
+    pub name: String,
+    /// Initial state (of its first block), positions then velocities.
+    pub initial_state: Vec<NuisanceValue>,
+    /// Per-experiment sensor offsets.
+    pub offsets: Vec<NuisanceValue>,
+    /// RMSE per coordinate at the start and at the result (SI).
+    pub rmse_before: Vec<f64>,
+    /// RMSE per coordinate at the result (SI).
+    pub rmse_after: Vec<f64>,
+    /// Fit % per coordinate (as MATLAB's `compare`) at the start (None
+    /// when it could not be simulated or the channel is constant).
+    pub fit_before: Vec<Option<f64>>,
+    /// Fit % per coordinate at the result.
+    pub fit_after: Vec<Option<f64>>,
 }
 
 /// The result of [`fit`].
-#[derive(Clone, Debug, PartialEq)]
+#[derive(Clone, PartialEq)]
 pub struct FitResult {
     /// Estimates of the free parameters, in the order they were given.
     pub parameters: Vec<Estimate>,
     /// All base parameter values after the fit (model order).
     pub base: Vec<f64>,
-    /// RMSE over all coordinates and experiments at the start values.
+    /// The fit's cost (weighted RMS of the residuals, dimensionless) at the
+    /// start (nuisance fitted) and at the result, over the same records,
+    /// horizon and weights: after <= before always.
+    pub before_cost: f64,
+    /// See [`FitResult::before_cost`].
+    pub after_cost: f64,
+    /// Unweighted RMSE over all coordinates and experiments (SI) at the
+    /// start and at the result.
     pub before_rmse: f64,
-    /// RMSE after the fit.
+    /// See [`FitResult::before_rmse`].
     pub after_rmse: f64,
     /// Pairs of estimates with `|corr|` above the threshold: `(a, b, corr)`.
     pub correlations: Vec<(String, String, f64)>,
     /// LM iterations over all stages (each one sensitivity simulation).
     pub iterations: usize,
-    /// Simulations without sensitivities (trial steps and RMSE evaluations).
+    /// Other simulations: trial steps, cost evaluations, and the
+    /// sensitivity simulations of the final statistics.
     pub simulations: usize,
+    /// Per experiment: nuisance estimates and RMSE.
+    pub experiments: Vec<ExperimentEstimate>,
+    /// The channel weights used.
+    pub weights: Vec<ChannelWeight>,
+    /// Segment length in s when the fit used multiple shooting.
+    pub segments: Option<f64>,
+    /// The recorded controller simulated in the loop, if any.
+    pub closed_loop: Option<String>,
+    /// Identifiability of the parameters (and what was fixed).
+    pub identifiability: Identifiability,
+    /// What the fit did beyond the plain solve, in words.
+    pub notes: Vec<String>,
+    /// The simulated measurements at the result, per experiment and
+    /// coordinate (whole records; segments stitched).
+    pub simulated: Vec<Vec<Vec<f64>>>,
+}
+
+impl fmt::Debug for FitResult {
+    /// Everything but the simulated samples (their shape only).
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        f.debug_struct("FitResult")
+            .field("parameters", &self.parameters)
+            .field("base", &self.base)
+            .field("before_cost", &self.before_cost)
+            .field("after_cost", &self.after_cost)
+            .field("before_rmse", &self.before_rmse)
+            .field("after_rmse", &self.after_rmse)
+            .field("correlations", &self.correlations)
+            .field("iterations", &self.iterations)
+            .field("simulations", &self.simulations)
+            .field("experiments", &self.experiments)
+            .field("weights", &self.weights)
+            .field("segments", &self.segments)
+            .field("closed_loop", &self.closed_loop)
+            .field("identifiability", &self.identifiability)
+            .field("notes", &self.notes)
+            .field(
+                "simulated",
+                &format_args!(
+                    "[{} experiments x {} coordinates]",
+                    self.simulated.len(),
+                    self.simulated.first().map_or(0, Vec::len)
+                ),
+            )
+            .finish()
+    }
 }
 
 impl FitResult {
-    /// The JSON form: `{"parameters": {"l2": {"value": .., "std_error": ..}},
-    /// "before": {"rmse": ..}, "after": {"rmse": ..}, "correlations": [..],
-    /// "iterations": ..}`. Non-finite numbers become `null`.
+    /// The JSON form.
     pub fn to_json(&self) -> serde_json::Value {
         let mut params = serde_json::Map::new();
         for e in &self.parameters {
@@ -177,6 +398,7 @@ impl FitResult {
                     "std_error": e.std_error,
                     "start": e.start,
                     "at_bound": e.at_bound,
+                    "fixed": e.fixed,
                 }),
             );
         }
@@ -187,9 +409,17 @@ impl FitResult {
             .collect();
         serde_json::json!({
             "parameters": params,
-            "before": {"rmse": self.before_rmse},
-            "after": {"rmse": self.after_rmse},
+            "before": {"cost": self.before_cost, "rmse": self.before_rmse},
+            "after": {"cost": self.after_cost, "rmse": self.after_rmse},
             "correlations": corr,
+            "identifiable": self.identifiability.is_identifiable(),
+            "identifiability": self.identifiability,
+            "messages": self.identifiability.messages(),
+            "experiments": self.experiments,
+            "weights": self.weights,
+            "segments": self.segments,
+            "closed_loop": self.closed_loop,
+            "notes": self.notes,
             "iterations": self.iterations,
             "simulations": self.simulations,
         })
@@ -202,207 +432,19 @@ impl Serialize for FitResult {
     }
 }
 
-/// An intermediate horizon stage is skipped when the RMSE over the whole
-/// record is at most this multiple of the RMSE the previous (shorter) stage
-/// ended with: the short-horizon estimates already hold over everything.
-pub const SKIP_RATIO: f64 = 1.5;
-
-/// On the whole record, LM stops when an accepted step lowers the SSR by
-/// less than this fraction (the RMSE by less than 0.0025 %).
-pub const FINAL_TOLERANCE: f64 = 5e-5;
-
-fn logistic(z: f64) -> f64 {
-    1.0 / (1.0 + (-z).exp())
-}
-
-/// The problem: model, simulators, data, box.
-struct Problem<'a> {
-    model: &'a Model,
-    sim: Simulator,
-    sens: SensitivitySimulator,
-    sigs: Vec<Signals>,
-    free: Vec<usize>,
-    bounds: Vec<(f64, f64)>,
-    base: Vec<f64>,
-}
-
-impl Problem<'_> {
-    fn theta(&self, z: &[f64]) -> Vec<f64> {
-        let mut b = self.base.clone();
-        for (j, &i) in self.free.iter().enumerate() {
-            let (lo, hi) = self.bounds[j];
-            b[i] = lo + (hi - lo) * logistic(z[j]);
-        }
-        b
-    }
-
-    fn dtheta_dz(&self, z: &[f64]) -> Vec<f64> {
-        z.iter()
-            .zip(&self.bounds)
-            .map(|(z, (lo, hi))| {
-                let s = logistic(*z);
-                (hi - lo) * s * (1.0 - s)
-            })
-            .collect()
-    }
-
-    fn samples(&self, horizon: f64) -> Vec<usize> {
-        self.sigs
-            .iter()
-            .map(|s| s.samples_within(horizon))
-            .collect()
-    }
-
-    /// Sum of squared residuals and their count; Err on divergence. The
-    /// experiments are simulated in parallel.
-    fn ssr(&self, base: Vec<f64>, horizon: f64) -> Result<(f64, usize), SimError> {
-        let p = ParameterValues::from_base(self.model, base);
-        let parts = par_map(&self.sigs, &self.samples(horizon), |sig, n| {
-            let tr = self.sim.simulate(sig, &p.full, n)?;
-            let mut ssr = 0.0;
-            for (q, qs) in sig.q.iter().zip(&tr.q) {
-                for k in 0..n {
-                    ssr += (qs[k] - q[k]).powi(2);
-                }
-            }
-            Ok((ssr, n * sig.q.len()))
-        });
-        let mut ssr = 0.0;
-        let mut count = 0;
-        for part in parts {
-            let (s, c) = part?;
-            ssr += s;
-            count += c;
-        }
-        Ok((ssr, count))
-    }
-
-    /// Normal equations in physical units: `(J'J, J'r, SSR, count)`, the
-    /// experiments' sensitivity simulations in parallel.
-    fn normal(
-        &self,
-        base: Vec<f64>,
-        horizon: f64,
-    ) -> Result<(Vec<f64>, Vec<f64>, f64, usize), SimError> {
-        let np = self.free.len();
-        let p = ParameterValues::from_base(self.model, base);
-        let parts = par_map(&self.sigs, &self.samples(horizon), |sig, n| {
-            let tr = self.sens.simulate(sig, &p.full, n)?;
-            let mut a = vec![0.0; np * np];
-            let mut g = vec![0.0; np];
-            let mut ssr = 0.0;
-            for (i, q) in sig.q.iter().enumerate() {
-                for (k, qk) in q.iter().enumerate().take(n) {
-                    let r = tr.q[i][k] - qk;
-                    ssr += r * r;
-                    for j in 0..np {
-                        let sj = tr.dq[i][j][k];
-                        g[j] += sj * r;
-                        for l in j..np {
-                            a[j * np + l] += sj * tr.dq[i][l][k];
-                        }
-                    }
-                }
-            }
-            Ok((a, g, ssr, n * sig.q.len()))
-        });
-        let mut a = vec![0.0; np * np];
-        let mut g = vec![0.0; np];
-        let mut ssr = 0.0;
-        let mut count = 0;
-        for part in parts {
-            let (pa, pg, ps, pc) = part?;
-            a.iter_mut().zip(&pa).for_each(|(x, y)| *x += y);
-            g.iter_mut().zip(&pg).for_each(|(x, y)| *x += y);
-            ssr += ps;
-            count += pc;
-        }
-        for j in 0..np {
-            for l in 0..j {
-                a[j * np + l] = a[l * np + j];
-            }
-        }
-        Ok((a, g, ssr, count))
-    }
-}
-
-/// `f` over the experiments (with their sample counts), one scoped thread
-/// per experiment after the first (which runs on the calling thread); the
-/// results come back in experiment order.
-fn par_map<T: Send>(
-    sigs: &[Signals],
-    counts: &[usize],
-    f: impl Fn(&Signals, usize) -> T + Sync,
-) -> Vec<T> {
-    if sigs.len() < 2 {
-        return sigs.iter().zip(counts).map(|(s, &n)| f(s, n)).collect();
-    }
-    std::thread::scope(|scope| {
-        let f = &f;
-        let handles: Vec<_> = sigs[1..]
-            .iter()
-            .zip(&counts[1..])
-            .map(|(s, &n)| scope.spawn(move || f(s, n)))
-            .collect();
-        let mut out = vec![f(&sigs[0], counts[0])];
-        for h in handles {
-            match h.join() {
-                Ok(v) => out.push(v),
-                Err(e) => std::panic::resume_unwind(e),
-            }
-        }
-        out
-    })
-}
-
-/// Cholesky solve of the SPD `a x = b` (`n x n`); None if not positive definite.
-fn cholesky_solve(a: &[f64], n: usize, b: &[f64]) -> Option<Vec<f64>> {
-    let mut l = vec![0.0; n * n];
-    for i in 0..n {
-        for j in 0..=i {
-            let mut s = a[i * n + j];
-            for k in 0..j {
-                s -= l[i * n + k] * l[j * n + k];
-            }
-            if i == j {
-                if s.is_nan() || s <= 0.0 || s.is_infinite() {
-                    return None;
-                }
-                l[i * n + i] = s.sqrt();
-            } else {
-                l[i * n + j] = s / l[j * n + j];
-            }
-        }
-    }
-    let mut y = b.to_vec();
-    for i in 0..n {
-        for k in 0..i {
-            y[i] -= l[i * n + k] * y[k];
-        }
-        y[i] /= l[i * n + i];
-    }
-    for i in (0..n).rev() {
-        for k in i + 1..n {
-            y[i] -= l[k * n + i] * y[k];
-        }
-        y[i] /= l[i * n + i];
-    }
-    Some(y)
-}
-
 /// Where a running fit is, reported once per LM iteration by
 /// [`fit_with_progress`].
 #[derive(Clone, Debug, PartialEq)]
 pub struct FitProgress {
-    /// Horizon stage (0-based) and the number of stages.
+    /// Stage (0-based).
     pub stage: usize,
-    /// Number of horizon stages.
+    /// Number of stages planned.
     pub stages: usize,
     /// The stage's horizon in s (`INFINITY` = the whole record).
     pub horizon: f64,
     /// LM iterations so far, over all stages.
     pub iteration: usize,
-    /// RMSE over the stage's horizon at the current estimates.
+    /// Weighted RMS over the stage's horizon at the current estimates.
     pub rmse: f64,
 }
 
@@ -413,6 +455,421 @@ pub fn fit(
     opts: &FitOptions,
 ) -> Result<FitResult, FitError> {
     fit_with_progress(model, experiments, opts, &mut |_| {})
+}
+
+/// The recorded controller to simulate in the loop, by the options and the
+/// data.
+pub fn resolve_closed_loop(
+    model: &Model,
+    experiments: &[Experiment],
+    how: &ClosedLoop,
+) -> Result<Option<LoopLaw>, FitError> {
+    match how {
+        ClosedLoop::Off => Ok(None),
+        ClosedLoop::Named(name) => Ok(Some(LoopLaw::new(model, name)?)),
+        ClosedLoop::Auto => {
+            let usable: Vec<&str> = model
+                .recorded
+                .iter()
+                .filter(|r| {
+                    experiments
+                        .iter()
+                        .all(|e| r.signals.iter().all(|s| e.channel(&s.name).is_some()))
+                })
+                .map(|r| r.name.as_str())
+                .collect();
+            match usable.as_slice() {
+                [] => Ok(None),
+                [one] => Ok(Some(LoopLaw::new(model, one)?)),
+                many => Err(FitError::BadOption(format!(
+                    "the data fit several recorded controllers ({}); choose one with --closed-loop NAME",
+                    many.join(", ")
+                ))),
+            }
+        }
+    }
+}
+
+/// The signals of every experiment, for a closed loop with `law` if given.
+pub fn signals_for(
+    model: &Model,
+    experiments: &[Experiment],
+    law: Option<&LoopLaw>,
+) -> Result<Vec<Signals>, SimError> {
+    experiments
+        .iter()
+        .map(|e| match law {
+            Some(l) => Signals::from_experiment_closed(model, e, l),
+            None => Signals::from_experiment(model, e),
+        })
+        .collect()
+}
+
+/// Coordinates that get per-experiment offsets under `how`.
+fn offset_coordinates(
+    model: &Model,
+    how: &Offsets,
+    law: Option<&LoopLaw>,
+    width: Option<f64>,
+) -> Result<Vec<usize>, FitError> {
+    match how {
+        Offsets::None => Ok(Vec::new()),
+        Offsets::On(names) => names
+            .iter()
+            .map(|n| {
+                model
+                    .coordinates
+                    .iter()
+                    .position(|c| &c.name == n)
+                    .ok_or_else(|| {
+                        FitError::BadOption(format!("offsets: the model has no coordinate `{n}`"))
+                    })
+            })
+            .collect(),
+        Offsets::Auto => {
+            let (_, outs) = dynamics_outputs(model, width)?;
+            let outs: Vec<_> = outs.iter().map(|e| model.expand_derived(*e)).collect();
+            Ok((0..model.coordinates.len())
+                .filter(|&i| {
+                    let q = model.coordinates[i].symbols.q;
+                    let has_model_offset = model.sensors.iter().any(|s| s.coordinate == i);
+                    let in_dynamics = outs.iter().any(|e| e.contains(q));
+                    let read_by_law = law.is_some_and(|l| l.reads_coordinate(model, i));
+                    !has_model_offset && (in_dynamics || read_by_law)
+                })
+                .collect())
+        }
+    }
+}
+
+/// Counters and progress of a fit.
+struct Run<'a> {
+    iterations: usize,
+    simulations: usize,
+    stage: usize,
+    stages: usize,
+    progress: &'a mut dyn FnMut(&FitProgress),
+}
+
+/// How an LM run ended.
+#[derive(Copy, Clone, Debug, PartialEq)]
+enum Stop {
+    Converged,
+    NoDescent,
+    MaxIterations,
+}
+
+/// LM on `pb` from `pt` over `horizon` with the globals where `frozen` is
+/// true held. Returns the SSR and count at the end and why it stopped.
+#[allow(clippy::too_many_arguments)]
+fn lm(
+    pb: &Problem<'_>,
+    pt: &mut Point,
+    horizon: f64,
+    frozen: &[bool],
+    max_iterations: usize,
+    final_stage: bool,
+    lambda: &mut f64,
+    run: &mut Run<'_>,
+) -> Result<(f64, usize, Stop), SimError> {
+    let ng = pb.n_globals();
+    let n_unknowns = frozen.iter().filter(|f| !**f).count()
+        + pb.blocks.iter().map(|b| b.free_state.len()).sum::<usize>();
+    let mut nu = 2.0;
+    let mut last = (f64::NAN, 0usize);
+    for _ in 0..max_iterations {
+        let nrm = pb.normal(pt, horizon)?;
+        run.iterations += 1;
+        (run.progress)(&FitProgress {
+            stage: run.stage,
+            stages: run.stages,
+            horizon,
+            iteration: run.iterations,
+            rmse: (nrm.ssr / nrm.count.max(1) as f64).sqrt(),
+        });
+        let tol = if final_stage {
+            (0.1 / nrm.count.saturating_sub(n_unknowns).max(1) as f64).max(FINAL_TOLERANCE)
+        } else {
+            1e-3
+        };
+        let held: Vec<bool> = (0..ng)
+            .map(|j| {
+                frozen[j]
+                    || (pt.g[j] <= pb.lo[j] && nrm.g_g[j] > 0.0)
+                    || (pt.g[j] >= pb.hi[j] && nrm.g_g[j] < 0.0)
+            })
+            .collect();
+        if held.iter().all(|h| *h) && pb.blocks.iter().all(|b| b.free_state.is_empty()) {
+            return Ok((nrm.ssr, nrm.count, Stop::Converged));
+        }
+        let mut accepted = None;
+        while *lambda < 1e12 {
+            let Some(d) = Damped::solve(&nrm, *lambda, &held) else {
+                *lambda *= 10.0;
+                continue;
+            };
+            let g_new: Vec<f64> = (0..ng)
+                .map(|j| (pt.g[j] + d.dg[j]).clamp(pb.lo[j], pb.hi[j]))
+                .collect();
+            let dg: Vec<f64> = (0..ng).map(|j| g_new[j] - pt.g[j]).collect();
+            let dl = d.locals(&dg);
+            let pred = predicted_reduction(&nrm, &dg, &dl);
+            let trial = Point {
+                g: g_new,
+                l: pt
+                    .l
+                    .iter()
+                    .zip(&dl)
+                    .map(|(l, d)| l.iter().zip(d).map(|(a, b)| a + b).collect())
+                    .collect(),
+            };
+            run.simulations += 1;
+            match pb.cost(&trial, horizon) {
+                Ok((s, _)) if s < nrm.ssr => {
+                    let rho = if pred > 0.0 {
+                        (nrm.ssr - s) / pred
+                    } else {
+                        1.0
+                    };
+                    *lambda =
+                        (*lambda * (1.0f64 / 3.0).max(1.0 - (2.0 * rho - 1.0).powi(3))).max(1e-12);
+                    nu = 2.0;
+                    accepted = Some((trial, s));
+                    break;
+                }
+                _ => {
+                    *lambda *= nu;
+                    nu *= 2.0;
+                }
+            }
+        }
+        let Some((trial, s)) = accepted else {
+            return Ok((nrm.ssr, nrm.count, Stop::NoDescent));
+        };
+        let small = (nrm.ssr - s) < tol * nrm.ssr;
+        *pt = trial;
+        last = (s, nrm.count);
+        if small {
+            return Ok((s, nrm.count, Stop::Converged));
+        }
+    }
+    Ok((last.0, last.1, Stop::MaxIterations))
+}
+
+/// Weighted RMS from an SSR and count.
+fn rms(ssr: f64, count: usize) -> f64 {
+    (ssr / count.max(1) as f64).sqrt()
+}
+
+/// Everything fixed for one fit: model, data, simulators, layout choices.
+pub(crate) struct Setup<'a> {
+    model: &'a Model,
+    pub(crate) sigs: Vec<Signals>,
+    pub(crate) sim: Simulator,
+    sens: SensitivitySimulator,
+    /// Sensitivities to the nuisance unknowns only (the parameters held).
+    sens_nuisance: SensitivitySimulator,
+    weights: Vec<ChannelWeight>,
+    free: Vec<usize>,
+    free_names: Vec<String>,
+    base: Vec<f64>,
+    bounds: Vec<(f64, f64)>,
+    offset_coords: Vec<usize>,
+    opts: &'a FitOptions,
+}
+
+impl<'a> Setup<'a> {
+    /// Check the options, resolve the closed loop, compile the simulators
+    /// with sensitivities to `free_names` (may be empty: nuisance only),
+    /// read the signals and estimate the weights.
+    pub(crate) fn new(
+        model: &'a Model,
+        experiments: &[Experiment],
+        opts: &'a FitOptions,
+        free_names: &[String],
+    ) -> Result<Setup<'a>, FitError> {
+        let n_base = model.parameters.len();
+        let base = match &opts.start {
+            Some(s) if s.len() == n_base && s.iter().all(|v| v.is_finite()) => s.clone(),
+            Some(_) => return Err(FitError::BadStart { expected: n_base }),
+            None => model.parameters.iter().map(|p| p.value).collect(),
+        };
+        let law = resolve_closed_loop(model, experiments, &opts.closed_loop)?;
+        let mut sens = SensitivitySimulator::new(model, free_names, opts.sim)?;
+        let mut sens_nuisance = SensitivitySimulator::new(model, &[], opts.sim)?;
+        let mut sim = Simulator::new(model, opts.sim)?;
+        if let Some(l) = &law {
+            sens = sens.with_loop(l.clone());
+            sens_nuisance = sens_nuisance.with_loop(l.clone());
+            sim = sim.with_loop(l.clone());
+        }
+        let free = sens.free_indices().to_vec();
+        let mut bounds = Vec::with_capacity(free.len());
+        for (&i, name) in free.iter().zip(free_names) {
+            match model.parameters[i].estimate {
+                Some((lo, hi)) if lo < hi && lo.is_finite() && hi.is_finite() => {
+                    bounds.push((lo, hi))
+                }
+                _ => return Err(FitError::NoBounds { name: name.clone() }),
+            }
+        }
+        for (name, w) in &opts.weights {
+            if !model.coordinates.iter().any(|c| &c.name == name) {
+                return Err(FitError::BadOption(format!(
+                    "weight for `{name}`: the model has no coordinate `{name}`"
+                )));
+            }
+            if !(*w > 0.0 && w.is_finite()) {
+                return Err(FitError::BadOption(format!(
+                    "the weight of `{name}` must be a positive number, got {w}"
+                )));
+            }
+        }
+        let sigs = signals_for(model, experiments, law.as_ref())?;
+        let names: Vec<String> = model.coordinates.iter().map(|c| c.name.clone()).collect();
+        let records: Vec<Vec<&[f64]>> = (0..names.len())
+            .map(|i| sigs.iter().map(|s| s.q[i].as_slice()).collect())
+            .collect();
+        let weights = channel_weights(&names, &records, &opts.weights);
+        let offset_coords = offset_coordinates(
+            model,
+            &opts.offsets,
+            law.as_ref(),
+            opts.sim.dry_friction_width,
+        )?;
+        Ok(Setup {
+            model,
+            sigs,
+            sim,
+            sens,
+            sens_nuisance,
+            weights,
+            free,
+            free_names: free_names.to_vec(),
+            base,
+            bounds,
+            offset_coords,
+            opts,
+        })
+    }
+
+    /// [`Setup::problem`] with sensitivities to the nuisance unknowns only
+    /// (for stages that hold the parameters: cheaper).
+    pub(crate) fn nuisance_problem(&self, segments: Option<f64>) -> Problem<'_> {
+        Problem {
+            sens: &self.sens_nuisance,
+            ..self.problem(segments)
+        }
+    }
+
+    /// The problem with blocks cut at `segments` s (None: whole records).
+    pub(crate) fn problem(&self, segments: Option<f64>) -> Problem<'_> {
+        let n = self.model.coordinates.len();
+        let mut blocks = Vec::new();
+        for (e, sig) in self.sigs.iter().enumerate() {
+            let cuts: Vec<usize> = match segments {
+                None => vec![0, sig.len()],
+                Some(h) => {
+                    let mut c = vec![0];
+                    let mut k = 0;
+                    while k < sig.len() {
+                        let t0 = sig.t[k];
+                        let next = k + sig.t[k..].partition_point(|&t| t < t0 + h - 1e-12);
+                        let next = next.max(k + 2).min(sig.len());
+                        // a short tail joins the previous segment
+                        if sig.len() - next < 2 || sig.t[sig.len() - 1] - sig.t[next] < 0.5 * h {
+                            c.push(sig.len());
+                            break;
+                        }
+                        c.push(next);
+                        k = next;
+                    }
+                    c
+                }
+            };
+            for w in cuts.windows(2) {
+                let free_state: Vec<usize> = if segments.is_some() {
+                    (0..2 * n).collect()
+                } else {
+                    let mut v = Vec::new();
+                    if self.opts.estimate_positions {
+                        v.extend(0..n);
+                    }
+                    if self.opts.estimate_velocities {
+                        v.extend(n..2 * n);
+                    }
+                    v
+                };
+                let mut fixed = vec![0.0; 2 * n];
+                if let InitialVelocity::Estimate { .. } = self.opts.sim.initial_velocity {
+                    let x = crate::experiment_sim::initial_state(
+                        sig,
+                        self.opts.sim.initial_velocity,
+                        &vec![0.0; n],
+                    );
+                    fixed[n..].copy_from_slice(&x[n..]);
+                }
+                blocks.push(BlockLayout {
+                    exp: e,
+                    range: w[0]..w[1],
+                    free_state,
+                    fixed,
+                });
+            }
+        }
+        let offsets: Vec<(usize, usize)> = (0..self.sigs.len())
+            .flat_map(|e| self.offset_coords.iter().map(move |&i| (e, i)))
+            .collect();
+        let mut lo: Vec<f64> = self.bounds.iter().map(|b| b.0).collect();
+        let mut hi: Vec<f64> = self.bounds.iter().map(|b| b.1).collect();
+        lo.extend(std::iter::repeat_n(f64::NEG_INFINITY, offsets.len()));
+        hi.extend(std::iter::repeat_n(f64::INFINITY, offsets.len()));
+        Problem {
+            model: self.model,
+            sim: &self.sim,
+            sens: &self.sens,
+            sigs: &self.sigs,
+            weights: self.weights.iter().map(|w| w.weight).collect(),
+            free: self.free.clone(),
+            base: self.base.clone(),
+            offsets,
+            blocks,
+            lo,
+            hi,
+        }
+    }
+
+    /// The start point of `pb` at model parameters `g_model`: offsets zero,
+    /// estimated initial states from the data (measured positions, local
+    /// slopes of the measurements for velocities).
+    pub(crate) fn start_point(&self, pb: &Problem<'_>, g_model: &[f64]) -> Point {
+        let n = self.model.coordinates.len();
+        let mut g = g_model.to_vec();
+        g.extend(std::iter::repeat_n(0.0, pb.offsets.len()));
+        let full = pb.full_at(&g);
+        let model_off = self
+            .sim
+            .model_offsets(&full)
+            .unwrap_or_else(|_| vec![0.0; n]);
+        let l = pb
+            .blocks
+            .iter()
+            .map(|b| {
+                let sig = &self.sigs[b.exp];
+                b.free_state
+                    .iter()
+                    .map(|&c| {
+                        if c < n {
+                            sig.q[c][b.range.start] - model_off[c]
+                        } else {
+                            velocity_at(&sig.t, &sig.q[c - n], b.range.start, 0.01)
+                        }
+                    })
+                    .collect()
+            })
+            .collect();
+        Point { g, l }
+    }
 }
 
 /// [`fit`], calling `progress` after each LM iteration's linearisation (for
@@ -433,227 +890,942 @@ pub fn fit_with_progress(
     if free_names.is_empty() {
         return Err(FitError::NoFreeParameters);
     }
-    let n_base = model.parameters.len();
-    let base = match &opts.start {
-        Some(s) if s.len() == n_base && s.iter().all(|v| v.is_finite()) => s.clone(),
-        Some(_) => return Err(FitError::BadStart { expected: n_base }),
-        None => model.parameters.iter().map(|p| p.value).collect(),
-    };
-    let sens = SensitivitySimulator::new(model, &free_names, opts.sim)?;
-    let free = sens.free_indices().to_vec();
-    let mut bounds = Vec::with_capacity(free.len());
-    for (&i, name) in free.iter().zip(&free_names) {
-        match model.parameters[i].estimate {
-            Some((lo, hi)) if lo < hi && lo.is_finite() && hi.is_finite() => bounds.push((lo, hi)),
-            _ => return Err(FitError::NoBounds { name: name.clone() }),
+    if let Horizon::Segments(h) = opts.horizon {
+        if !(h > 0.0 && h.is_finite()) {
+            return Err(FitError::BadOption(format!(
+                "the horizon must be a positive number of seconds, got {h}"
+            )));
         }
     }
-    let sigs = experiments
-        .iter()
-        .map(|e| Signals::from_experiment(model, e))
-        .collect::<Result<Vec<_>, _>>()?;
-    let pb = Problem {
-        model,
-        sim: Simulator::new(model, opts.sim)?,
-        sens,
-        sigs,
-        free,
-        bounds,
-        base: base.clone(),
-    };
-    let np = pb.free.len();
-    // z from the start values, kept a little inside the box
-    let mut z: Vec<f64> = pb
-        .free
-        .iter()
-        .zip(&pb.bounds)
-        .map(|(&i, &(lo, hi))| {
-            let s = ((base[i] - lo) / (hi - lo)).clamp(1e-6, 1.0 - 1e-6);
-            (s / (1.0 - s)).ln()
-        })
-        .collect();
-    let (ssr0, count) = pb.ssr(pb.theta(&z), f64::INFINITY)?;
-    if count < np {
-        return Err(FitError::NotEnoughData {
-            residuals: count,
-            parameters: np,
-        });
-    }
-    let before_rmse = (ssr0 / count as f64).sqrt();
-    let mut iterations = 0;
-    let mut simulations = 1;
-    // the last stage covering every sample is the final one; later stages
-    // would repeat it
-    let full_at = opts
-        .horizons
-        .iter()
-        .position(|&h| pb.samples(h) == pb.samples(f64::INFINITY))
-        .unwrap_or(opts.horizons.len());
-    let mut stages: Vec<f64> = opts.horizons.iter().take(full_at).copied().collect();
-    stages.push(f64::INFINITY);
-    // (J'J at the last full-horizon linearisation, SSR at the final z) when
-    // the last step taken was negligible: no extra simulation for the
-    // statistics
-    let mut converged: Option<(Vec<f64>, f64)> = None;
-    let mut lambda: f64 = 1e-3;
-    // RMSE at the end of the previous stage, over its horizon
-    let mut stage_rmse: Option<f64> = None;
-    for (stage, &horizon) in stages.iter().enumerate() {
-        let last_stage = stage + 1 == stages.len();
-        if stage > 0 && !last_stage {
-            // when the parameters fitted on the short horizon already
-            // predict the whole record about as well, skip to it
-            simulations += 1;
-            if let (Ok((full, nf)), Some(short)) = (pb.ssr(pb.theta(&z), f64::INFINITY), stage_rmse)
-            {
-                if (full / nf.max(1) as f64).sqrt() <= SKIP_RATIO * short {
-                    continue;
-                }
-            }
-        }
-        // the damping carries over from the previous stage (a hard problem
-        // stays hard when the horizon grows), never below the initial 1e-3
-        lambda = lambda.max(1e-3);
-        converged = None;
-        for _ in 0..opts.max_iterations {
-            let Ok((a, g, ssr, count)) = pb.normal(pb.theta(&z), horizon) else {
-                break;
-            };
-            iterations += 1;
-            progress(&FitProgress {
-                stage,
-                stages: stages.len(),
-                horizon,
-                iteration: iterations,
-                rmse: (ssr / count.max(1) as f64).sqrt(),
-            });
-            // short horizons only bring the parameters into the basin: a
-            // loose relative tolerance there. On the whole record, stop when
-            // a step gains less than a tenth of the residual variance (it
-            // moves the estimates by well under one standard error) or less
-            // than FINAL_TOLERANCE of the SSR (a wrong model with stiff dry
-            // friction otherwise crawls for dozens of iterations)
-            let tol = if last_stage {
-                (0.1 / count.saturating_sub(np).max(1) as f64).max(FINAL_TOLERANCE)
+    let setup = Setup::new(model, experiments, opts, &free_names)?;
+    let law = setup.sim.law().cloned();
+    let free = setup.free.clone();
+    let base = setup.base.clone();
+    let g0: Vec<f64> = free.iter().map(|&i| base[i]).collect();
+    let mut notes = Vec::new();
+    if let Some(l) = &law {
+        notes.push(format!(
+            "closed loop: recorded controller `{}` simulated in the loop, fed by {}",
+            l.name,
+            if l.signal_names().is_empty() {
+                "the measured coordinates".to_string()
             } else {
-                1e-3
-            };
-            // chain rule to z: J_z = J_theta * diag(dtheta/dz)
-            let d = pb.dtheta_dz(&z);
-            let mut az = vec![0.0; np * np];
-            let mut gz = vec![0.0; np];
-            for j in 0..np {
-                gz[j] = g[j] * d[j];
-                for l in 0..np {
-                    az[j * np + l] = a[j * np + l] * d[j] * d[l];
-                }
+                format!("the columns {}", l.signal_names().join(", "))
             }
-            let mut accepted = false;
-            let mut small_step = false;
-            let mut new_ssr = ssr;
-            while lambda < 1e12 {
-                let mut m = az.clone();
-                for j in 0..np {
-                    m[j * np + j] += lambda * az[j * np + j].max(1e-12);
-                }
-                let neg: Vec<f64> = gz.iter().map(|v| -v).collect();
-                let Some(step) = cholesky_solve(&m, np, &neg) else {
-                    lambda *= 10.0;
-                    continue;
-                };
-                let zt: Vec<f64> = z.iter().zip(&step).map(|(a, b)| a + b).collect();
-                simulations += 1;
-                match pb.ssr(pb.theta(&zt), horizon) {
-                    Ok((s, _)) if s < ssr => {
-                        small_step = step.iter().all(|v| v.abs() < 1e-6) || (ssr - s) < tol * ssr;
-                        lambda = (lambda / 3.0).max(1e-9);
-                        z = zt;
-                        new_ssr = s;
-                        accepted = true;
-                        break;
-                    }
-                    _ => lambda *= 4.0,
-                }
-            }
-            if !accepted || small_step {
-                if last_stage {
-                    converged = Some((a, new_ssr));
-                }
-                stage_rmse = Some((new_ssr / count.max(1) as f64).sqrt());
-                break;
-            }
-        }
+        ));
     }
-    // Final statistics over everything, in physical units.
-    let theta = pb.theta(&z);
-    let (a, ssr, count) = match converged {
-        Some((a, ssr)) => (
-            a,
-            ssr,
-            pb.samples(f64::INFINITY)
-                .iter()
-                .zip(&pb.sigs)
-                .map(|(n, s)| n * s.q.len())
-                .sum(),
-        ),
-        None => {
-            let (a, _, ssr, count) = pb.normal(theta.clone(), f64::INFINITY)?;
-            iterations += 1;
-            (a, ssr, count)
+    let mut run = Run {
+        iterations: 0,
+        simulations: 0,
+        stage: 0,
+        stages: 1,
+        progress,
+    };
+
+    // 1. horizon: whole records unless the replay diverges; then segments,
+    // and back to whole records when the segments' estimates follow the data
+    let whole_follows = |g: &[f64], locals: Option<&Outcome<'_>>, run: &mut Run<'_>| -> bool {
+        let pb = setup.problem(None);
+        let mut pt = setup.start_point(&pb, g);
+        if let Some(o) = locals {
+            carry_over(&setup, &pb, &mut pt, o);
+        }
+        run.simulations += 1;
+        match pb.cost(&pt, f64::INFINITY) {
+            Ok((s, c)) => rms(s, c) <= DIVERGED_COST,
+            Err(_) => false,
         }
     };
-    let after_rmse = (ssr / count as f64).sqrt();
-    let dof = count.saturating_sub(np).max(1) as f64;
-    let sigma2 = ssr / dof;
-    // covariance via the column-scaled inverse (conditioning)
-    let sc: Vec<f64> = (0..np)
-        .map(|j| a[j * np + j].sqrt().max(f64::MIN_POSITIVE))
-        .collect();
-    let scaled: Vec<f64> = (0..np * np)
-        .map(|k| a[k] / (sc[k / np] * sc[k % np]))
-        .collect();
-    let mut cov = vec![f64::NAN; np * np];
-    for j in 0..np {
-        let mut e = vec![0.0; np];
-        e[j] = 1.0;
-        if let Some(col) = cholesky_solve(&scaled, np, &e) {
-            for l in 0..np {
-                cov[l * np + j] = sigma2 * col[l] / (sc[l] * sc[j]);
+    let mut out = match opts.horizon {
+        Horizon::Whole => solve(&setup, None, &g0, None, true, &mut run, &mut notes)?,
+        Horizon::Segments(h) => solve(&setup, Some(h), &g0, None, true, &mut run, &mut notes)?,
+        Horizon::Auto if whole_follows(&g0, None, &mut run) => {
+            solve(&setup, None, &g0, None, true, &mut run, &mut notes)?
+        }
+        Horizon::Auto => {
+            let h = choose_segments(&setup, &g0, &mut run);
+            let seg = solve(&setup, Some(h), &g0, None, true, &mut run, &mut notes)?;
+            let g1 = seg.pt.g[..free.len()].to_vec();
+            if whole_follows(&g1, Some(&seg), &mut run) {
+                notes.push(format!(
+                    "the replay of the whole records at the start values diverged or left the data: fitted first on {h} s segments (each from its own estimated state), then on the whole records from there"
+                ));
+                let (before_pt, before) = whole_before(&setup, &g0, &mut run);
+                let mut whole = solve(&setup, None, &g1, Some(&seg), false, &mut run, &mut notes)?;
+                whole.before = before;
+                whole.start_pt = before_pt;
+                whole
+            } else {
+                notes.push(format!(
+                    "the replay of the whole records diverges or leaves the data, also at the fitted values: the fit is on {h} s segments, each from its own estimated state (multiple shooting; set the length with --horizon)"
+                ));
+                seg
+            }
+        }
+    };
+    let segments = out.segments;
+    let pb = setup.problem(segments);
+    let ng = pb.n_globals();
+    let p = free.len();
+    let unknowns = ng + pb.blocks.iter().map(|b| b.free_state.len()).sum::<usize>();
+    let (ssr0, count) = out.before;
+    let before_cost = rms(ssr0, count);
+    let start_pt = out.start_pt.clone();
+    let mut frozen = vec![false; ng];
+    let mut best = (out.pt.clone(), out.ssr);
+    let mut pt = out.pt.clone();
+    let mut lambda: f64;
+    out.pt = Point {
+        g: Vec::new(),
+        l: Vec::new(),
+    };
+
+    // the normal equations at the best point (reused below when the point
+    // does not move)
+    let mut nrm = pb.normal(&pt, f64::INFINITY)?;
+    run.simulations += 1;
+    // 6. per-experiment offsets that are not significant are dropped
+    if matches!(opts.offsets, Offsets::Auto) && !pb.offsets.is_empty() {
+        let (cov, _) = covariance(&nrm, &frozen, unknowns);
+        let mut dropped = Vec::new();
+        let mut q = pt.clone();
+        let mut fz = frozen.clone();
+        for &i in &setup.offset_coords {
+            let idx: Vec<usize> = pb
+                .offsets
+                .iter()
+                .enumerate()
+                .filter(|(_, o)| o.1 == i)
+                .map(|(k, _)| p + k)
+                .collect();
+            // an offset the data cannot determine (NaN standard error, e.g.
+            // the arm's zero under a controller that regulates the measured
+            // angle) is not significant either
+            let significant = idx.iter().any(|&j| {
+                let se = cov[j * ng + j].sqrt();
+                se.is_finite() && pt.g[j].abs() > 2.0 * se
+            });
+            if !significant {
+                for &j in &idx {
+                    q.g[j] = 0.0;
+                    fz[j] = true;
+                }
+                dropped.push(model.coordinates[i].name.clone());
+            }
+        }
+        if !dropped.is_empty() {
+            lambda = 1e-3;
+            let refit = lm(
+                &pb,
+                &mut q,
+                f64::INFINITY,
+                &fz,
+                opts.max_iterations,
+                true,
+                &mut lambda,
+                &mut run,
+            )
+            .ok()
+            .and_then(|_| pb.cost(&q, f64::INFINITY).ok());
+            run.simulations += 1;
+            if let Some((s2, _)) = refit {
+                if s2 <= REDUCED_TOLERANCE * REDUCED_TOLERANCE * best.1 && s2 <= ssr0 {
+                    best = (q, s2);
+                    frozen = fz;
+                    nrm = pb.normal(&best.0, f64::INFINITY)?;
+                    run.simulations += 1;
+                    notes.push(format!(
+                        "per-experiment offsets on {} were dropped: not significant (within 2 standard errors of zero) or not determined by the data",
+                        dropped.join(", ")
+                    ));
+                }
+            }
+        }
+        pt = best.0.clone();
+    }
+
+    // 7. identifiability: fix what the data do not determine, refit
+    let mut ident = identifiability(&setup, &pb, &pt, &nrm, &frozen, unknowns);
+    if opts.act_on_identifiability {
+        let fix = to_fix(&ident);
+        if !fix.is_empty() {
+            let mut q = pt.clone();
+            let mut fz = frozen.clone();
+            for (name, _) in &fix {
+                if let Some(j) = setup.free_names.iter().position(|n| n == name) {
+                    q.g[j] = g0[j];
+                    fz[j] = true;
+                }
+            }
+            lambda = 1e-3;
+            let reduced = lm(
+                &pb,
+                &mut q,
+                f64::INFINITY,
+                &fz,
+                opts.max_iterations,
+                true,
+                &mut lambda,
+                &mut run,
+            )
+            .ok()
+            .and_then(|_| pb.cost(&q, f64::INFINITY).ok());
+            if let Some((s, _)) = reduced {
+                if s <= REDUCED_TOLERANCE * REDUCED_TOLERANCE * best.1 && s <= ssr0 {
+                    notes.push(format!(
+                        "{} fixed at start value(s) (not identifiable); cost {:.4e} against {:.4e} with all free",
+                        fix.iter().map(|f| format!("`{}`", f.0)).collect::<Vec<_>>().join(", "),
+                        rms(s, count),
+                        rms(best.1, count)
+                    ));
+                    best = (q.clone(), s);
+                    frozen = fz;
+                    pt = q;
+                    nrm = pb.normal(&pt, f64::INFINITY)?;
+                    run.simulations += 1;
+                    let fixed: Vec<Fixed> = fix
+                        .iter()
+                        .map(|(name, reason)| Fixed {
+                            name: name.clone(),
+                            value: setup
+                                .free_names
+                                .iter()
+                                .position(|n| n == name)
+                                .map_or(f64::NAN, |j| g0[j]),
+                            reason: reason.clone(),
+                        })
+                        .collect();
+                    ident = identifiability(&setup, &pb, &pt, &nrm, &frozen, unknowns);
+                    ident.fixed = fixed;
+                } else {
+                    notes.push(format!(
+                        "fixing {} (flagged as not identifiable) raised the cost to {:.4e} from {:.4e}: kept free",
+                        fix.iter().map(|f| format!("`{}`", f.0)).collect::<Vec<_>>().join(", "),
+                        rms(s, count),
+                        rms(best.1, count)
+                    ));
+                }
             }
         }
     }
-    let parameters: Vec<Estimate> = pb
-        .free
-        .iter()
-        .enumerate()
-        .map(|(j, &i)| {
-            let (lo, hi) = pb.bounds[j];
-            let v = theta[i];
+    let _ = start_pt;
+
+    // final statistics at the best point
+    let (cov, _) = covariance(&nrm, &frozen, unknowns);
+    let sigma2 = nrm.ssr / nrm.count.saturating_sub(unknowns).max(1) as f64;
+    let lv = local_variances(&nrm);
+    let base_after = pb.base_at(&pt.g);
+    let parameters: Vec<Estimate> = (0..p)
+        .map(|j| {
+            let (lo, hi) = setup.bounds[j];
+            let v = pt.g[j];
             Estimate {
                 name: free_names[j].clone(),
                 value: v,
-                std_error: cov[j * np + j].sqrt(),
-                start: base[i],
+                std_error: if frozen[j] {
+                    f64::NAN
+                } else {
+                    cov[j * ng + j].sqrt()
+                },
+                start: g0[j],
                 at_bound: (v - lo).min(hi - v) < 1e-3 * (hi - lo),
+                fixed: frozen[j],
             }
         })
         .collect();
     let mut correlations = Vec::new();
-    for j in 0..np {
-        for l in j + 1..np {
-            let c = cov[j * np + l] / (cov[j * np + j] * cov[l * np + l]).sqrt();
+    for j in 0..p {
+        for l in j + 1..p {
+            let c = cov[j * ng + l] / (cov[j * ng + j] * cov[l * ng + l]).sqrt();
             if c.abs() > opts.correlation_threshold {
                 correlations.push((free_names[j].clone(), free_names[l].clone(), c));
             }
         }
     }
+    let simulated = pb.predict(&pt)?;
+    let simulated_before = pb.predict(&start_pt).ok();
+    run.simulations += 2;
+    let experiments_out = experiment_estimates(
+        &setup,
+        &pb,
+        &pt,
+        &cov,
+        &lv,
+        sigma2,
+        &simulated,
+        simulated_before.as_ref(),
+    );
+    let (before_rmse, after_rmse) = (
+        simulated_before
+            .as_ref()
+            .map_or(f64::INFINITY, |b| unweighted_rmse(&setup.sigs, b)),
+        unweighted_rmse(&setup.sigs, &simulated),
+    );
     Ok(FitResult {
         parameters,
-        base: theta,
+        base: base_after,
+        before_cost,
+        after_cost: rms(best.1, count),
         before_rmse,
         after_rmse,
         correlations,
-        iterations,
-        simulations,
+        iterations: run.iterations,
+        simulations: run.simulations,
+        experiments: experiments_out,
+        weights: setup.weights.clone(),
+        segments,
+        closed_loop: law.map(|l| l.name.clone()),
+        identifiability: ident,
+        notes,
+        simulated,
     })
+}
+
+/// Where a fit on one layout (whole records or segments) ended.
+struct Outcome<'s> {
+    /// Segment length, None for whole records.
+    segments: Option<f64>,
+    /// The best point on the layout's whole objective.
+    pt: Point,
+    /// Its SSR.
+    ssr: f64,
+    /// The start point (nuisance fitted) and its `(SSR, count)`: the honest
+    /// "before" (SSR infinite when the start could not be simulated).
+    start_pt: Point,
+    before: (f64, usize),
+    _setup: std::marker::PhantomData<&'s ()>,
+}
+
+/// Carry the nuisance of `from` (a fit on another layout) over to `pt` on
+/// `pb`: offsets as they are, initial states of blocks that start at the
+/// same sample (the first segment of an experiment gives its record's).
+fn carry_over(setup: &Setup<'_>, pb: &Problem<'_>, pt: &mut Point, from: &Outcome<'_>) {
+    let p = setup.free.len();
+    if from.pt.g.len() == pt.g.len() {
+        pt.g[p..].copy_from_slice(&from.pt.g[p..]);
+    }
+    let layout = setup.problem(from.segments);
+    for (b, blk) in pb.blocks.iter().enumerate() {
+        let Some(fb) = layout
+            .blocks
+            .iter()
+            .position(|x| x.exp == blk.exp && x.range.start == blk.range.start)
+        else {
+            continue;
+        };
+        for (j, c) in blk.free_state.iter().enumerate() {
+            if let Some(k) = layout.blocks[fb].free_state.iter().position(|x| x == c) {
+                pt.l[b][j] = from.pt.l[fb][k];
+            }
+        }
+    }
+}
+
+/// The longest of [`AUTO_SEGMENTS`] whose segments, with their states
+/// fitted at the start values, follow the data.
+fn choose_segments(setup: &Setup<'_>, g0: &[f64], run: &mut Run<'_>) -> f64 {
+    for &h in &AUTO_SEGMENTS {
+        let pb = setup.nuisance_problem(Some(h));
+        let mut pt = setup.start_point(&pb, g0);
+        let frozen: Vec<bool> = (0..pb.n_globals()).map(|_| true).collect();
+        let mut lambda = 1e-3;
+        if let Ok((s, c, _)) = lm(
+            &pb,
+            &mut pt,
+            f64::INFINITY,
+            &frozen,
+            5,
+            false,
+            &mut lambda,
+            run,
+        ) {
+            if rms(s, c) <= SEGMENT_COST {
+                return h;
+            }
+        }
+    }
+    *AUTO_SEGMENTS.last().unwrap_or(&0.25)
+}
+
+/// The whole-record cost at `g0` with the nuisance fitted: the "before" of
+/// a fit that moved to whole records (SSR infinite when it cannot be
+/// simulated).
+fn whole_before(setup: &Setup<'_>, g0: &[f64], run: &mut Run<'_>) -> (Point, (f64, usize)) {
+    let pb = setup.nuisance_problem(None);
+    let mut pt = setup.start_point(&pb, g0);
+    let p = setup.free.len();
+    let frozen: Vec<bool> = (0..pb.n_globals()).map(|j| j < p).collect();
+    let mut lambda = 1e-3;
+    let _ = lm(
+        &pb,
+        &mut pt,
+        f64::INFINITY,
+        &frozen,
+        10,
+        false,
+        &mut lambda,
+        run,
+    );
+    run.simulations += 1;
+    let count = pb.count_all();
+    let c = pb
+        .cost(&pt, f64::INFINITY)
+        .unwrap_or((f64::INFINITY, count));
+    (pt, c)
+}
+
+/// One fit on one layout: scan (optional), nuisance at the start, growing
+/// horizons (whole records) or one stage (segments), multi-start when
+/// stalled; the best point on the layout's whole objective.
+fn solve<'s>(
+    setup: &'s Setup<'_>,
+    segments: Option<f64>,
+    g_start: &[f64],
+    seed: Option<&Outcome<'_>>,
+    do_scan: bool,
+    run: &mut Run<'_>,
+    notes: &mut Vec<String>,
+) -> Result<Outcome<'s>, FitError> {
+    let opts = setup.opts;
+    let pb = setup.problem(segments);
+    let ng = pb.n_globals();
+    let p = setup.free.len();
+    let count_all = pb.count_all();
+    let unknowns = ng + pb.blocks.iter().map(|b| b.free_state.len()).sum::<usize>();
+    if count_all < unknowns {
+        return Err(FitError::NotEnoughData {
+            residuals: count_all,
+            parameters: unknowns,
+        });
+    }
+    let mut pt = setup.start_point(&pb, g_start);
+    if let Some(o) = seed {
+        carry_over(setup, &pb, &mut pt, o);
+    }
+    let frozen = vec![false; ng];
+    let horizons: Vec<f64> = if segments.is_some() {
+        vec![f64::INFINITY]
+    } else {
+        let full_at = opts
+            .horizons
+            .iter()
+            .position(|&h| (0..pb.blocks.len()).all(|b| pb.block_range(b, h) == pb.blocks[b].range))
+            .unwrap_or(opts.horizons.len());
+        let mut v: Vec<f64> = opts.horizons.iter().take(full_at).copied().collect();
+        v.push(f64::INFINITY);
+        v
+    };
+    run.stages = horizons.len() + 1;
+    run.stage = 0;
+    if do_scan && opts.scan {
+        scan(setup, &pb, &mut pt, run, notes);
+    }
+    // nuisance at the start parameters: the honest "before"
+    let nuisance_frozen: Vec<bool> = (0..ng).map(|j| j < p).collect();
+    let mut lambda = 1e-3;
+    let has_nuisance = ng > p || pb.blocks.iter().any(|b| !b.free_state.is_empty());
+    if has_nuisance {
+        let pbn = setup.nuisance_problem(segments);
+        let _ = lm(
+            &pbn,
+            &mut pt,
+            f64::INFINITY,
+            &nuisance_frozen,
+            10,
+            false,
+            &mut lambda,
+            run,
+        );
+    }
+    run.simulations += 1;
+    let before = pb
+        .cost(&pt, f64::INFINITY)
+        .unwrap_or((f64::INFINITY, count_all));
+    let start_pt = pt.clone();
+    let mut best = (pt.clone(), before.0);
+    // growing horizons, the best point on the whole objective kept
+    lambda = 1e-3;
+    let mut stage_cost: Option<f64> = None;
+    let mut stage_ssr: f64;
+    let mut last_stop = Stop::Converged;
+    for (s, &h) in horizons.iter().enumerate() {
+        run.stage = s + 1;
+        let last = s + 1 == horizons.len();
+        if s > 0 && !last {
+            run.simulations += 1;
+            if let (Ok((full, nf)), Some(short)) = (pb.cost(&pt, f64::INFINITY), stage_cost) {
+                if rms(full, nf) <= SKIP_RATIO * short {
+                    continue;
+                }
+            }
+        }
+        lambda = lambda.max(1e-3);
+        match lm(
+            &pb,
+            &mut pt,
+            h,
+            &frozen,
+            opts.max_iterations,
+            last,
+            &mut lambda,
+            run,
+        ) {
+            Ok((ssr, c, stop)) => {
+                stage_cost = Some(rms(ssr, c));
+                stage_ssr = ssr;
+                last_stop = stop;
+            }
+            Err(_) => {
+                // the stage left the region where the model can be
+                // simulated: go on from the best point so far
+                pt = best.0.clone();
+                continue;
+            }
+        }
+        let full = if !h.is_finite() {
+            // the last stage's cost is the whole record's already
+            stage_ssr
+        } else {
+            run.simulations += 1;
+            pb.cost(&pt, f64::INFINITY).map_or(f64::INFINITY, |x| x.0)
+        };
+        if full < best.1 {
+            best = (pt.clone(), full);
+        } else {
+            pt = best.0.clone();
+        }
+    }
+    // multi-start when stalled far above the floor at a bound
+    let floor = noise_cost(&setup.weights);
+    let at_bound = |g: &[f64]| {
+        (0..p).any(|j| (g[j] - pb.lo[j]).min(pb.hi[j] - g[j]) < 1e-3 * (pb.hi[j] - pb.lo[j]))
+    };
+    if opts.multistart > 0
+        && best.1.is_finite()
+        && rms(best.1, count_all) > 3.0 * floor
+        && (last_stop == Stop::NoDescent || at_bound(&best.0.g))
+    {
+        if let Some(found) = multistart(setup, &pb, &best, &frozen, &horizons, run) {
+            notes.push(format!(
+                "the local solver stalled at {:.3e} with a parameter at a bound; of {} extra starts the best reached {:.3e}",
+                rms(best.1, count_all),
+                opts.multistart,
+                rms(found.1, count_all)
+            ));
+            if found.1 < best.1 {
+                best = found;
+            }
+        }
+    }
+    Ok(Outcome {
+        segments,
+        pt: best.0,
+        ssr: best.1,
+        start_pt,
+        before,
+        _setup: std::marker::PhantomData,
+    })
+}
+
+/// Fit only the nuisance unknowns of `pb` (model parameters held) from
+/// `pt`; true when the result can be simulated.
+pub(crate) fn lm_nuisance(setup: &Setup<'_>, pb: &Problem<'_>, pt: &mut Point) -> bool {
+    let p = setup.free.len();
+    let frozen: Vec<bool> = (0..pb.n_globals()).map(|j| j < p).collect();
+    let mut lambda = 1e-3;
+    let mut sink = |_: &FitProgress| {};
+    let mut run = Run {
+        iterations: 0,
+        simulations: 0,
+        stage: 0,
+        stages: 1,
+        progress: &mut sink,
+    };
+    let _ = lm(
+        pb,
+        pt,
+        f64::INFINITY,
+        &frozen,
+        15,
+        true,
+        &mut lambda,
+        &mut run,
+    );
+    pb.cost(pt, f64::INFINITY).is_ok()
+}
+
+/// Per-experiment nuisance estimates at `pt` (statistics from the normal
+/// equations there; NaN standard errors when they cannot be computed).
+pub(crate) fn nuisance_estimates(
+    setup: &Setup<'_>,
+    pb: &Problem<'_>,
+    pt: &Point,
+) -> Vec<ExperimentEstimate> {
+    let ng = pb.n_globals();
+    let frozen = vec![false; ng];
+    let unknowns = ng + pb.blocks.iter().map(|b| b.free_state.len()).sum::<usize>();
+    let (cov, sigma2, lv) = match pb.normal(pt, f64::INFINITY) {
+        Ok(nrm) => {
+            let (cov, s2) = covariance(&nrm, &frozen, unknowns);
+            (cov, s2, local_variances(&nrm))
+        }
+        Err(_) => (
+            vec![f64::NAN; ng * ng],
+            f64::NAN,
+            pb.blocks
+                .iter()
+                .map(|b| vec![f64::NAN; b.free_state.len()])
+                .collect(),
+        ),
+    };
+    let sim = pb.predict(pt).unwrap_or_else(|_| {
+        setup
+            .sigs
+            .iter()
+            .map(|s| vec![vec![f64::NAN; s.len()]; s.q.len()])
+            .collect()
+    });
+    experiment_estimates(setup, pb, pt, &cov, &lv, sigma2, &sim, None)
+}
+
+/// The weighted RMS that measurement noise alone would leave.
+fn noise_cost(weights: &[ChannelWeight]) -> f64 {
+    let n = weights.len().max(1) as f64;
+    (weights
+        .iter()
+        .map(|w| (w.weight * w.noise).powi(2))
+        .sum::<f64>()
+        / n)
+        .sqrt()
+}
+
+/// Unweighted RMSE of simulated against measured over all coordinates and
+/// samples.
+fn unweighted_rmse(sigs: &[Signals], sim: &[Vec<Vec<f64>>]) -> f64 {
+    let mut ss = 0.0;
+    let mut n = 0usize;
+    for (s, e) in sigs.iter().zip(sim) {
+        for (q, qs) in s.q.iter().zip(e) {
+            for (a, b) in q.iter().zip(qs) {
+                if b.is_finite() {
+                    ss += (a - b).powi(2);
+                    n += 1;
+                }
+            }
+        }
+    }
+    (ss / n.max(1) as f64).sqrt()
+}
+
+/// Covariance of the globals (`ng x ng`, NaN rows/columns for frozen
+/// ones) and `sigma^2`. The information is inverted through its
+/// eigen-decomposition after scaling to a unit diagonal: directions the data
+/// do not determine (eigenvalue below 1e-14 of the largest) are left out,
+/// and the globals that load on them get NaN variances instead of the
+/// whole matrix failing.
+fn covariance(nrm: &crate::lm::Normal, frozen: &[bool], unknowns: usize) -> (Vec<f64>, f64) {
+    let ng = nrm.ng;
+    let sigma2 = nrm.ssr / nrm.count.saturating_sub(unknowns).max(1) as f64;
+    let info = global_information(nrm);
+    let idx: Vec<usize> = (0..ng)
+        .filter(|&j| !frozen[j] && info[j * ng + j] > 0.0 && info[j * ng + j].is_finite())
+        .collect();
+    let nf = idx.len();
+    let mut cov = vec![f64::NAN; ng * ng];
+    if nf == 0 {
+        return (cov, sigma2);
+    }
+    let d: Vec<f64> = idx.iter().map(|&i| info[i * ng + i].sqrt()).collect();
+    let c = nalgebra::DMatrix::from_fn(nf, nf, |a, b| info[idx[a] * ng + idx[b]] / (d[a] * d[b]));
+    let eig = nalgebra::SymmetricEigen::new(c);
+    let lmax = eig.eigenvalues.iter().copied().fold(0.0f64, f64::max);
+    let mut undetermined = vec![false; nf];
+    let mut inv = nalgebra::DMatrix::<f64>::zeros(nf, nf);
+    for k in 0..nf {
+        let l = eig.eigenvalues[k];
+        let v = eig.eigenvectors.column(k);
+        if l > 1e-14 * lmax {
+            inv += (v * v.transpose()) / l;
+        } else {
+            for a in 0..nf {
+                if v[a].abs() > 0.1 {
+                    undetermined[a] = true;
+                }
+            }
+        }
+    }
+    for a in 0..nf {
+        for b in 0..nf {
+            if undetermined[a] || undetermined[b] {
+                continue;
+            }
+            cov[idx[a] * ng + idx[b]] = sigma2 * inv[(a, b)] / (d[a] * d[b]);
+        }
+    }
+    (cov, sigma2)
+}
+
+/// The identifiability analysis of the free model parameters at `pt`.
+fn identifiability(
+    setup: &Setup<'_>,
+    pb: &Problem<'_>,
+    pt: &Point,
+    nrm: &crate::lm::Normal,
+    frozen: &[bool],
+    unknowns: usize,
+) -> Identifiability {
+    let ng = nrm.ng;
+    let p = setup.free.len();
+    let info = global_information(nrm);
+    let (cov, _) = covariance(nrm, frozen, unknowns);
+    let live: Vec<usize> = (0..p).filter(|&j| !frozen[j]).collect();
+    let params: Vec<ParamInfo<'_>> = live
+        .iter()
+        .map(|&j| ParamInfo {
+            name: &setup.free_names[j],
+            value: pt.g[j],
+            lo: pb.lo[j],
+            hi: pb.hi[j],
+            std_error: cov[j * ng + j].sqrt(),
+        })
+        .collect();
+    let nl = live.len();
+    let sub = |m: &[f64]| -> Vec<f64> {
+        live.iter()
+            .flat_map(|&i| live.iter().map(move |&j| (i, j)))
+            .map(|(i, j)| m[i * ng + j])
+            .collect()
+    };
+    let _ = nl;
+    analyse(
+        &params,
+        &sub(&info),
+        &sub(&cov),
+        setup.opts.correlation_threshold,
+    )
+}
+
+/// Per-experiment nuisance estimates and RMSE.
+#[allow(clippy::too_many_arguments)]
+fn experiment_estimates(
+    setup: &Setup<'_>,
+    pb: &Problem<'_>,
+    pt: &Point,
+    cov: &[f64],
+    local_var: &[Vec<f64>],
+    sigma2: f64,
+    sim: &[Vec<Vec<f64>>],
+    before: Option<&Vec<Vec<Vec<f64>>>>,
+) -> Vec<ExperimentEstimate> {
+    let model = setup.model;
+    let n = model.coordinates.len();
+    let ng = pb.n_globals();
+    let p = setup.free.len();
+    let full = pb.full_at(&pt.g);
+    let model_off = setup
+        .sim
+        .model_offsets(&full)
+        .unwrap_or_else(|_| vec![0.0; n]);
+    setup
+        .sigs
+        .iter()
+        .enumerate()
+        .map(|(e, sig)| {
+            let b = pb.blocks.iter().position(|b| b.exp == e).unwrap_or(0);
+            let start = pb.block_start(b, pt, &model_off, pb.blocks[b].range.clone());
+            let blk = &pb.blocks[b];
+            let initial_state = (0..2 * n)
+                .map(|c| {
+                    let name = if c < n {
+                        format!("{}(0)", model.coordinates[c].name)
+                    } else {
+                        format!("{}'(0)", model.coordinates[c - n].name)
+                    };
+                    let j = blk.free_state.iter().position(|&s| s == c);
+                    NuisanceValue {
+                        name,
+                        value: start.x0[c],
+                        std_error: j.map_or(f64::NAN, |j| (sigma2 * local_var[b][j]).sqrt()),
+                        estimated: j.is_some(),
+                    }
+                })
+                .collect();
+            let offsets = pb
+                .offsets
+                .iter()
+                .enumerate()
+                .filter(|(_, o)| o.0 == e)
+                .map(|(k, o)| NuisanceValue {
+                    name: format!("offset {}", model.coordinates[o.1].name),
+                    value: pt.g[p + k],
+                    std_error: cov[(p + k) * ng + p + k].sqrt(),
+                    estimated: true,
+                })
+                .collect();
+            let rmse = |s: &Vec<Vec<f64>>| -> Vec<f64> {
+                (0..n)
+                    .map(|i| {
+                        let (mut ss, mut c) = (0.0, 0usize);
+                        for (a, b) in sig.q[i].iter().zip(&s[i]) {
+                            if b.is_finite() {
+                                ss += (a - b).powi(2);
+                                c += 1;
+                            }
+                        }
+                        (ss / c.max(1) as f64).sqrt()
+                    })
+                    .collect()
+            };
+            let fits = |s: &Vec<Vec<f64>>| -> Vec<Option<f64>> {
+                (0..n)
+                    .map(|i| {
+                        if s[i].iter().any(|v| !v.is_finite()) {
+                            return None;
+                        }
+                        crate::metrics::fit_percent(&sig.q[i], &s[i]).ok().flatten()
+                    })
+                    .collect()
+            };
+            ExperimentEstimate {
+                name: sig.name.clone(),
+                initial_state,
+                offsets,
+                rmse_before: before.map_or(vec![f64::NAN; n], |b| rmse(&b[e])),
+                rmse_after: rmse(&sim[e]),
+                fit_before: before.map_or(vec![None; n], |b| fits(&b[e])),
+                fit_after: fits(&sim[e]),
+            }
+        })
+        .collect()
+}
+
+/// Scan each parameter that moves an input delay or a sensor offset over
+/// its box (others at the start), on the first 3 s (or the segments), and
+/// start from the best value.
+fn scan(
+    setup: &Setup<'_>,
+    pb: &Problem<'_>,
+    pt: &mut Point,
+    run: &mut Run<'_>,
+    notes: &mut Vec<String>,
+) {
+    let full = pb.full_at(&pt.g);
+    let Ok(kinds) = setup.sens.signal_dependencies(&full) else {
+        return;
+    };
+    let dt = setup
+        .sigs
+        .iter()
+        .map(|s| s.sample_time())
+        .fold(f64::INFINITY, f64::min);
+    let horizon = 3.0;
+    for (j, kind) in kinds.iter().enumerate() {
+        let Some(kind) = kind else { continue };
+        let (lo, hi) = (pb.lo[j], pb.hi[j]);
+        let grid: Vec<f64> = match kind {
+            crate::sensitivity::SignalKind::Delay => {
+                let top = hi.min(lo + 40.0 * dt);
+                let steps = ((top - lo) / (0.25 * dt)).ceil().clamp(1.0, 400.0) as usize;
+                (0..=steps)
+                    .map(|k| lo + (top - lo) * k as f64 / steps as f64)
+                    .collect()
+            }
+            crate::sensitivity::SignalKind::Offset => {
+                (0..=40).map(|k| lo + (hi - lo) * k as f64 / 40.0).collect()
+            }
+        };
+        let before = pt.g[j];
+        let mut best = (before, f64::INFINITY);
+        for &v in grid.iter().chain(std::iter::once(&before)) {
+            let mut q = pt.clone();
+            q.g[j] = v;
+            run.simulations += 1;
+            if let Ok((s, _)) = pb.cost(&q, horizon) {
+                if s < best.1 {
+                    best = (v, s);
+                }
+            }
+        }
+        if best.0 != before {
+            pt.g[j] = best.0;
+            notes.push(format!(
+                "`{}` scanned over {} values in [{:.4e}, {:.4e}] before the local solve: start {:.4e} instead of {:.4e}",
+                setup.free_names[j],
+                grid.len(),
+                grid.first().copied().unwrap_or(lo),
+                grid.last().copied().unwrap_or(hi),
+                best.0,
+                before
+            ));
+        }
+    }
+}
+
+/// Extra starts spread over the box (log-uniform for positive boxes that
+/// span more than a decade), each fitted on the first horizon and compared
+/// on the whole record; the best is polished on everything.
+fn multistart(
+    setup: &Setup<'_>,
+    pb: &Problem<'_>,
+    best: &(Point, f64),
+    frozen: &[bool],
+    horizons: &[f64],
+    run: &mut Run<'_>,
+) -> Option<(Point, f64)> {
+    let p = setup.free.len();
+    let mut seed: u64 = 0x9E37_79B9_7F4A_7C15;
+    let mut rnd = move || {
+        seed = seed
+            .wrapping_mul(6364136223846793005)
+            .wrapping_add(1442695040888963407);
+        (seed >> 11) as f64 / (1u64 << 53) as f64
+    };
+    let mut found: Option<(Point, f64)> = None;
+    for _ in 0..setup.opts.multistart {
+        let mut q = best.0.clone();
+        for j in 0..p {
+            if frozen[j] {
+                continue;
+            }
+            let (lo, hi) = (pb.lo[j], pb.hi[j]);
+            let u = 0.05 + 0.9 * rnd();
+            q.g[j] = if lo > 0.0 && hi / lo > 10.0 {
+                (lo.ln() + u * (hi.ln() - lo.ln())).exp()
+            } else {
+                lo + u * (hi - lo)
+            };
+        }
+        let mut lambda = 1e-3;
+        let h = horizons.first().copied().unwrap_or(f64::INFINITY);
+        if lm(pb, &mut q, h, frozen, 10, false, &mut lambda, run).is_err() {
+            continue;
+        }
+        run.simulations += 1;
+        if let Ok((s, _)) = pb.cost(&q, f64::INFINITY) {
+            if found.as_ref().is_none_or(|f| s < f.1) {
+                found = Some((q, s));
+            }
+        }
+    }
+    let (mut q, _) = found?;
+    let mut lambda = 1e-3;
+    lm(
+        pb,
+        &mut q,
+        f64::INFINITY,
+        frozen,
+        setup.opts.max_iterations,
+        true,
+        &mut lambda,
+        run,
+    )
+    .ok()?;
+    run.simulations += 1;
+    let s = pb.cost(&q, f64::INFINITY).ok()?.0;
+    Some((q, s))
+}
+
+/// Base parameter values as a full vector (base then derived).
+pub fn full_parameters(model: &Model, base: Vec<f64>) -> Vec<f64> {
+    ParameterValues::from_base(model, base).full
 }

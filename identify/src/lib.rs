@@ -9,28 +9,45 @@
 //! - [`Simulator`] simulates a model over a measured experiment (ZOH input,
 //!   fixed-step RK4, one compiled tape); [`SensitivitySimulator`] adds exact
 //!   forward sensitivities to the free parameters.
-//! - [`fit()`] estimates bounded parameters by Levenberg-Marquardt on the
-//!   simulation error, with standard errors and correlated pairs.
+//! - [`fit()`] estimates bounded parameters by simulation error on a block
+//!   problem: per-experiment initial states and sensor zeros as nuisance,
+//!   weighted channels, segments when the replay diverges, a recorded
+//!   controller simulated in the loop for closed-loop data ([`LoopLaw`]),
+//!   growing horizons, scans and extra starts; the result is the best point
+//!   on the whole records, with standard errors and [`Identifiability`]
+//!   findings (a degenerate fit says so).
+//! - [`validate()`] checks a fitted model on held-out files: simulation,
+//!   k-step-ahead prediction and residual tests ([`residual_test`]).
 //! - [`EquationError`] ranks candidate effects by equation error (smoothed
 //!   derivatives, BIC gain); [`diagnose()`] confirms the leaders by
 //!   simulation-error refits and names the missing effect or says "adequate".
+//! - [`identify()`] is the whole story (rounds of diagnose -> add the effect
+//!   -> refit, then validation), for the CLI, tests and editors alike.
 //! - [`synthesize`] makes measurement-like data from a model with hidden
 //!   effects ([`synth`]).
+
+// numeric kernels index several arrays in step; index loops read better there
+#![allow(clippy::needless_range_loop)]
 
 mod csv_reader;
 pub mod data;
 pub mod error;
+pub mod identifiability;
+mod lm;
 mod mat_reader;
 pub mod plausibility;
+mod problem;
 pub mod units;
+pub mod weights;
 
 pub use data::{
-    parse_channel_map, read_experiment, read_experiment_with, read_experiments, Channel,
-    ChannelSpec, Experiment, ReadOptions,
+    parse_channel_map, parse_rename, read_experiment, read_experiment_with, read_experiments,
+    Channel, ChannelSpec, Experiment, ReadOptions,
 };
 pub use error::{CellProblem, DataError, DataWarning};
 pub use units::Kind;
 
+pub mod closed_loop;
 pub mod diagnose;
 pub mod effect_edit;
 pub mod equation_error;
@@ -38,25 +55,48 @@ pub mod experiment_sim;
 pub mod fit;
 pub mod metrics;
 pub mod plot;
+pub mod residual_tests;
 pub mod savitzky_golay;
 pub mod sensitivity;
+pub mod story;
 pub mod synth;
+pub mod validate;
 pub mod where_it_fails;
 
+pub use closed_loop::LoopLaw;
 pub use diagnose::{
     candidates, diagnose, diagnose_with, Candidate, DiagnoseError, DiagnoseOptions, Diagnosis,
     Evidence, Ranked,
 };
 pub use effect_edit::{EffectEditError, EffectInstance, EffectKind};
 pub use equation_error::{EquationError, EquationErrorOptions, Regressor, Score, Share};
-pub use experiment_sim::{InitialVelocity, Signals, SimError, SimOptions, Simulator, Trajectory};
-pub use fit::{fit, fit_with_progress, Estimate, FitError, FitOptions, FitProgress, FitResult};
+pub use experiment_sim::{
+    velocity_at, BlockStart, InitialVelocity, Signals, SimError, SimOptions, Simulator, Trajectory,
+};
+pub use fit::{
+    fit, fit_with_progress, resolve_closed_loop, signals_for, ClosedLoop, Estimate,
+    ExperimentEstimate, FitError, FitOptions, FitProgress, FitResult, Horizon, NuisanceValue,
+    Offsets,
+};
+pub use identifiability::Identifiability;
 pub use metrics::{compare, fit_percent, rmse, ChannelFit, ExperimentFit, FitReport, MetricsError};
-pub use plot::{plot_comparison, render_comparison, PlotError};
-pub use sensitivity::{estimated_parameters, SensitivitySimulator, SensitivityTrajectory};
+pub use plot::{
+    plot_comparison, plot_residual_tests, render_comparison, render_residual_tests, PlotError,
+};
+pub use residual_tests::{residual_test, CrossCorrelation, ResidualTest};
+pub use sensitivity::{
+    estimated_parameters, ExtraColumn, SensitivitySimulator, SensitivityTrajectory, SignalKind,
+};
+pub use story::{
+    fitted_instance, identify, Round, Stage, Story, StoryError, StoryOptions, StoryProgress,
+};
 pub use synth::{
     synthesize, EffectSpec, ExperimentSpec, SynthError, SynthOptions, SynthSpec, Synthesized,
 };
+pub use validate::{
+    as_experiments, validate, ChannelScore, ExperimentValidation, ValidateOptions, Validation,
+};
+pub use weights::ChannelWeight;
 pub use where_it_fails::{
     residual_summary, where_it_fails, ChannelDiagnosis, FailOptions, Finding, FindingKind,
     GroupStats, ResidualSummary,

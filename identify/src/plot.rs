@@ -242,3 +242,113 @@ fn decimate(t: &[f64], x: &[f64]) -> Vec<(f64, f64)> {
     }
     out
 }
+
+/// Draws, for each residual test, the residual's autocorrelation and its
+/// cross-correlation with each input against the lag, as stems, with the
+/// 99 % band shaded; writes one SVG to `path`.
+pub fn plot_residual_tests(path: &Path, tests: &[crate::ResidualTest]) -> Result<(), PlotError> {
+    let svg = render_residual_tests(tests)?;
+    plantc_fsio::write_atomic(path, svg).map_err(|e| PlotError::Io {
+        file: path.to_path_buf(),
+        message: e.to_string(),
+    })
+}
+
+/// The SVG text of [`plot_residual_tests`].
+pub fn render_residual_tests(tests: &[crate::ResidualTest]) -> Result<String, PlotError> {
+    if tests.is_empty() {
+        return Err(PlotError::NoChannels);
+    }
+    let cols = 1 + tests.iter().map(|t| t.cross.len()).max().unwrap_or(0);
+    let panel = (480u32, 240u32);
+    let mut buf = String::new();
+    {
+        let root = SVGBackend::with_string(
+            &mut buf,
+            (panel.0 * cols as u32, panel.1 * tests.len() as u32),
+        )
+        .into_drawing_area();
+        root.fill(&WHITE).map_err(draw_err)?;
+        let areas = root.split_evenly((tests.len(), cols));
+        for (r, t) in tests.iter().enumerate() {
+            let auto: Vec<(f64, f64)> = t
+                .autocorrelation
+                .iter()
+                .enumerate()
+                .skip(1)
+                .map(|(k, v)| (k as f64, *v))
+                .collect();
+            let title = format!(
+                "{}: {} autocorrelation ({})",
+                t.experiment,
+                t.channel,
+                if t.white { "white" } else { "not white" }
+            );
+            stems(&areas[r * cols], &title, &auto, t.band, 0.0, t.lags as f64)?;
+            for (c, x) in t.cross.iter().enumerate() {
+                let l = (x.values.len() as f64 - 1.0) / 2.0;
+                let pts: Vec<(f64, f64)> = x
+                    .values
+                    .iter()
+                    .enumerate()
+                    .map(|(k, v)| (k as f64 - l, *v))
+                    .collect();
+                let title = format!(
+                    "{}: {} vs {} ({})",
+                    t.experiment,
+                    t.channel,
+                    x.input,
+                    if x.independent {
+                        "independent"
+                    } else {
+                        "correlated"
+                    }
+                );
+                stems(&areas[r * cols + 1 + c], &title, &pts, t.band, -l, l)?;
+            }
+        }
+        root.present().map_err(draw_err)?;
+    }
+    Ok(buf)
+}
+
+/// One stem panel with the band `+-band` shaded.
+fn stems(
+    area: &DrawingArea<SVGBackend<'_>, plotters::coord::Shift>,
+    title: &str,
+    pts: &[(f64, f64)],
+    band: f64,
+    x0: f64,
+    x1: f64,
+) -> Result<(), PlotError> {
+    let top = pts
+        .iter()
+        .map(|p| p.1.abs())
+        .fold(band * 1.5, f64::max)
+        .clamp(1e-6, 1.05);
+    let mut chart = ChartBuilder::on(area)
+        .caption(title, ("sans-serif", 13))
+        .margin(6)
+        .x_label_area_size(24)
+        .y_label_area_size(48)
+        .build_cartesian_2d((x0 - 0.5)..(x1 + 0.5), -top..top)
+        .map_err(draw_err)?;
+    chart
+        .configure_mesh()
+        .x_desc("lag [samples]")
+        .draw()
+        .map_err(draw_err)?;
+    chart
+        .draw_series(std::iter::once(Rectangle::new(
+            [(x0 - 0.5, -band), (x1 + 0.5, band)],
+            RGBColor(200, 220, 255).filled(),
+        )))
+        .map_err(draw_err)?;
+    chart
+        .draw_series(pts.iter().map(|&(x, y)| {
+            let color = if y.abs() > band { RED } else { BLUE };
+            PathElement::new(vec![(x, 0.0), (x, y)], color.stroke_width(2))
+        }))
+        .map_err(draw_err)?;
+    Ok(())
+}

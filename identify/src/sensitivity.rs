@@ -49,10 +49,46 @@
 use plantc_derive::model::Model;
 use plantc_derive::sym::{diff, Expr, SplitTape, Tape};
 
+use crate::closed_loop::{LoopEval, LoopLaw, LoopSens, Replay};
 use crate::experiment_sim::{
-    dynamics_outputs, initial_state, integrate, lu_factor, lu_solve, parameters_slow, prepare_run,
-    tape_inputs, OnSwitch, Segment, SignalEffects, Signals, SimError, SimOptions,
+    check_start, deadzone, dynamics_outputs, integrate, lu_factor, lu_solve, parameters_slow,
+    prepare_run, tape_inputs, BlockStart, OnSwitch, Segment, SignalEffects, Signals, SimError,
+    SimOptions, StiffnessProbe, REFINE,
 };
+
+/// `y = a x` for the row-major `n x n` matrix `a`.
+#[inline]
+fn mat_vec(a: &[f64], n: usize, x: &[f64], y: &mut [f64]) {
+    for (i, yi) in y.iter_mut().enumerate().take(n) {
+        *yi = a[i * n..(i + 1) * n]
+            .iter()
+            .zip(x)
+            .map(|(p, q)| p * q)
+            .sum();
+    }
+}
+
+/// What a parameter moves among the signal effects.
+#[derive(Copy, Clone, Debug, PartialEq, Eq)]
+pub enum SignalKind {
+    /// An input delay.
+    Delay,
+    /// A sensor offset.
+    Offset,
+}
+
+/// A sensitivity column that is not a model parameter: the derivative with
+/// respect to an initial state component or a per-experiment offset. Its
+/// variational equation has no parametric forcing; it starts at `s0`
+/// (one value per state component) and `direct` (one per coordinate) is
+/// added to the measurement sensitivities (an offset is measured as is).
+#[derive(Clone, Debug, PartialEq)]
+pub struct ExtraColumn {
+    /// `S(0)`, positions then velocities.
+    pub s0: Vec<f64>,
+    /// Direct derivative of each measured coordinate.
+    pub direct: Vec<f64>,
+}
 
 /// Simulated coordinates and their sensitivities at the sample instants.
 #[derive(Clone, Debug, PartialEq)]
@@ -60,7 +96,7 @@ pub struct SensitivityTrajectory {
     /// One vector per model coordinate.
     pub q: Vec<Vec<f64>>,
     /// `dq[i][j][k]`: derivative of coordinate `i` at sample `k` with respect
-    /// to free parameter `j`.
+    /// to column `j` (the free parameters, then any extra columns).
     pub dq: Vec<Vec<Vec<f64>>>,
 }
 
@@ -79,6 +115,8 @@ pub struct SensitivitySimulator {
     split: SplitTape,
     signals: SignalEffects,
     opts: SimOptions,
+    law: Option<LoopLaw>,
+    probe: StiffnessProbe,
 }
 
 /// The parameters a model marks `estimate`, in declaration order.
@@ -131,6 +169,7 @@ impl SensitivitySimulator {
         let tape =
             Tape::compile(&outs, &tape_inputs(model)).map_err(|e| SimError::Tape(e.to_string()))?;
         let signals = SignalEffects::new(model, &idx)?;
+        let probe = StiffnessProbe::new(model, &base)?;
         let (n, m) = (model.coordinates.len(), model.inputs.len());
         let n_params = model.parameter_symbols().len();
         let split = tape.split_by_inputs(&parameters_slow(2 * n + m, n_params));
@@ -144,7 +183,28 @@ impl SensitivitySimulator {
             split,
             signals,
             opts,
+            law: None,
+            probe,
         })
+    }
+
+    /// What each free parameter moves among the signal effects, at the full
+    /// parameter vector `params`: an input delay, a sensor offset, or
+    /// neither (a global scan is worth it for the first two).
+    pub fn signal_dependencies(&self, params: &[f64]) -> Result<Vec<Option<SignalKind>>, SimError> {
+        let v = self.signals.eval(params)?;
+        let (n, m) = (self.n, self.m);
+        Ok((0..self.free.len())
+            .map(|j| {
+                if v.d_delays[j * m..(j + 1) * m].iter().any(|d| *d != 0.0) {
+                    Some(SignalKind::Delay)
+                } else if v.d_offsets[j * n..(j + 1) * n].iter().any(|d| *d != 0.0) {
+                    Some(SignalKind::Offset)
+                } else {
+                    None
+                }
+            })
+            .collect())
     }
 
     /// Names of the free parameters, in sensitivity order.
@@ -158,40 +218,111 @@ impl SensitivitySimulator {
     }
 
     /// Simulate the first `n_samples` samples with sensitivities; `params` is
-    /// the full parameter vector (base then derived).
+    /// the full parameter vector (base then derived). The initial state is
+    /// the measured one (positions minus the model's sensor offsets,
+    /// velocities as the options say).
     pub fn simulate(
         &self,
         sig: &Signals,
         params: &[f64],
         n_samples: usize,
     ) -> Result<SensitivityTrajectory, SimError> {
-        self.run(sig, params, n_samples, false)
+        let offsets = self.signals.eval(params)?.offsets;
+        let mut start = BlockStart::from_data(sig, self.opts.initial_velocity, &offsets);
+        start.range = 0..n_samples.min(sig.len());
+        self.run(sig, params, &start, &vec![true; self.n], &[], false)
     }
 
-    /// [`SensitivitySimulator::simulate`], evaluating the tape split
+    /// The same simulator with a recorded controller in the loop (compile it
+    /// with [`LoopLaw::new`]); signals must then come from
+    /// [`Signals::from_experiment_closed`].
+    pub fn with_loop(mut self, law: LoopLaw) -> SensitivitySimulator {
+        self.law = Some(law);
+        self
+    }
+
+    /// Simulate one block with sensitivities to the free parameters and to
+    /// `extra` columns. `tied[i]` says that the initial position of
+    /// coordinate `i` was taken from its measurement minus the model's
+    /// sensor offset (so a parameter of that offset moves it: `S(0) =
+    /// -dd/dtheta` there). The columns of the result are the free
+    /// parameters, then the extras.
+    pub fn simulate_block(
+        &self,
+        sig: &Signals,
+        params: &[f64],
+        start: &BlockStart,
+        tied: &[bool],
+        extra: &[ExtraColumn],
+    ) -> Result<SensitivityTrajectory, SimError> {
+        self.run(sig, params, start, tied, extra, false)
+    }
+
+    /// [`SensitivitySimulator::simulate_block`], evaluating the tape split
     /// (parameter part once per call) or, with `unsplit`, whole at every
     /// stage: the reference path the tests compare against.
+    #[allow(clippy::too_many_arguments)]
     fn run(
         &self,
         sig: &Signals,
         params: &[f64],
-        n_samples: usize,
+        start: &BlockStart,
+        tied: &[bool],
+        extra: &[ExtraColumn],
         unsplit: bool,
     ) -> Result<SensitivityTrajectory, SimError> {
-        let (h, effects, sig) = prepare_run(
+        match self.run_refined(sig, params, start, tied, extra, unsplit, 1.0) {
+            Err(SimError::Diverged { .. }) if self.opts.substep.is_none() => {
+                self.run_refined(sig, params, start, tied, extra, unsplit, REFINE)
+            }
+            r => r,
+        }
+    }
+
+    /// [`SensitivitySimulator::run`] with the automatic substep divided by
+    /// `refine`.
+    #[allow(clippy::too_many_arguments)]
+    fn run_refined(
+        &self,
+        sig: &Signals,
+        params: &[f64],
+        start: &BlockStart,
+        tied: &[bool],
+        extra: &[ExtraColumn],
+        unsplit: bool,
+        refine: f64,
+    ) -> Result<SensitivityTrajectory, SimError> {
+        let (h, effects, mut u) = prepare_run(
             sig,
             params,
             (self.n, self.m, self.n_params),
             &self.opts,
             &self.signals,
+            &self.probe,
+            &start.x0,
         )?;
-        let sig = &*sig;
-        let d_width = &effects.d_widths;
-        let deadzone_forcing = self.signals.deadzone_depends_on_free;
+        let h = h / refine;
         let (n, m, p) = (self.n, self.m, self.free.len());
+        check_start(sig, start, n)?;
         let nx = 2 * n;
+        for c in extra {
+            if c.s0.len() != nx || c.direct.len() != n {
+                return Err(SimError::BadOption(format!(
+                    "an extra sensitivity column needs {nx} initial values and {n} direct terms"
+                )));
+            }
+        }
+        let nc = p + extra.len();
+        let (k0, k1) = (start.range.start, start.range.end);
+        let d_width = &effects.d_widths;
+        let widths = &effects.widths;
+        let deadzone_forcing = self.signals.deadzone_depends_on_free;
+        let driven: Vec<usize> = self
+            .law
+            .as_ref()
+            .map_or(Vec::new(), |l| l.driven().to_vec());
+        let nd = driven.len();
         let bs = n * n + n + n * m;
-        let n_samples = n_samples.min(sig.len());
         let mut tin = vec![0.0; nx + m + self.n_params];
         tin[nx + m..].copy_from_slice(params);
         let mut out = vec![0.0; self.tape.n_outputs()];
@@ -206,9 +337,13 @@ impl SensitivitySimulator {
         let mut tmp = vec![0.0; n];
         // jd[d * n + i] = d a_i / d z_d, z = (state, free parameters)
         let mut jd = vec![0.0; (nx + p) * n];
+        let mut minv = vec![0.0; n * n];
         let mut du = vec![0.0; m];
+        // closed loop: du_hist[(k - k0) * nd * nc + d * nc + c], the
+        // sensitivity of driven input d held from sample k
+        let du_hist = std::cell::RefCell::new(vec![0.0; (k1 - k0) * nd * nc]);
         let d_delay = &effects.d_delays;
-        let rhs = |z: &[f64], u: &[f64], seg: &Segment, dz: &mut [f64]| {
+        let rhs = |z: &[f64], u: &[f64], held: &[usize], seg: &Segment, dz: &mut [f64]| {
             tin[..nx].copy_from_slice(&z[..nx]);
             tin[nx..nx + m].copy_from_slice(u);
             if unsplit {
@@ -219,13 +354,22 @@ impl SensitivitySimulator {
             lu.copy_from_slice(&out[..n * n]);
             let r0 = &out[n * n..n * n + n];
             let b = &out[n * n + n..bs];
-            for i in 0..n {
-                acc[i] = r0[i] + (0..m).map(|j| b[i * m + j] * u[j]).sum::<f64>();
-            }
             if !lu_factor(&mut lu, n, &mut piv) {
                 return false;
             }
-            lu_solve(&lu, n, &piv, &mut acc, &mut tmp);
+            // M^-1 once; every right-hand side is then a product
+            for c in 0..n {
+                w.iter_mut().for_each(|v| *v = 0.0);
+                w[c] = 1.0;
+                lu_solve(&lu, n, &piv, &mut w, &mut tmp);
+                for i in 0..n {
+                    minv[i * n + c] = w[i];
+                }
+            }
+            for i in 0..n {
+                tmp[i] = r0[i] + (0..m).map(|j| b[i * m + j] * u[j]).sum::<f64>();
+            }
+            mat_vec(&minv, n, &tmp, &mut acc);
             for d in 0..nx + p {
                 let blk = &out[bs * (d + 1)..bs * (d + 2)];
                 let (dm, rest) = blk.split_at(n * n);
@@ -235,39 +379,42 @@ impl SensitivitySimulator {
                     for j in 0..m {
                         s += db[i * m + j] * u[j];
                     }
-                    for k in 0..n {
-                        s -= dm[i * n + k] * acc[k];
+                    let row = &dm[i * n..(i + 1) * n];
+                    for (k, a) in row.iter().zip(acc.iter()) {
+                        s -= k * a;
                     }
                     w[i] = s;
                 }
-                lu_solve(&lu, n, &piv, &mut w, &mut tmp);
-                jd[d * n..d * n + n].copy_from_slice(&w);
+                mat_vec(&minv, n, &w, &mut jd[d * n..d * n + n]);
             }
             dz[..n].copy_from_slice(&z[n..nx]);
             dz[n..nx].copy_from_slice(&acc);
             let s = &z[nx..];
             let ds = &mut dz[nx..];
+            // rows of S: d/dt S_q = S_v; d/dt S_v = (da/dx) S + da/dtheta
+            ds[..n * nc].copy_from_slice(&s[n * nc..nx * nc]);
             for i in 0..n {
-                for j in 0..p {
-                    ds[i * p + j] = s[(n + i) * p + j];
+                let row = &mut ds[(n + i) * nc..(n + i + 1) * nc];
+                for (j, r) in row.iter_mut().enumerate() {
+                    *r = if j < p { jd[(nx + j) * n + i] } else { 0.0 };
                 }
-            }
-            for i in 0..n {
-                for j in 0..p {
-                    let mut v = jd[(nx + j) * n + i];
-                    for k in 0..nx {
-                        v += jd[k * n + i] * s[k * p + j];
+                for k in 0..nx {
+                    let a = jd[k * n + i];
+                    if a != 0.0 {
+                        for (r, sv) in row.iter_mut().zip(&s[k * nc..(k + 1) * nc]) {
+                            *r += a * sv;
+                        }
                     }
-                    ds[(n + i) * p + j] = v;
                 }
             }
-            // deadzone widths: M^-1 B d dz(u)/dtheta, with d dz/dw = -sign(dz)
+            // deadzone widths of inputs from the data: M^-1 B d dz(u)/dtheta,
+            // with d dz/dw = -sign(dz)
             if deadzone_forcing {
                 for j in 0..p {
                     let mut any = false;
                     for l in 0..m {
                         let dw = d_width[j * m + l];
-                        du[l] = if dw != 0.0 && u[l] != 0.0 {
+                        du[l] = if dw != 0.0 && u[l] != 0.0 && !driven.contains(&l) {
                             any = true;
                             -u[l].signum() * dw
                         } else {
@@ -278,11 +425,41 @@ impl SensitivitySimulator {
                         continue;
                     }
                     for i in 0..n {
-                        w[i] = (0..m).map(|l| b[i * m + l] * du[l]).sum::<f64>();
+                        tmp[i] = (0..m).map(|l| b[i * m + l] * du[l]).sum::<f64>();
                     }
-                    lu_solve(&lu, n, &piv, &mut w, &mut tmp);
+                    mat_vec(&minv, n, &tmp, &mut w);
                     for i in 0..n {
-                        ds[(n + i) * p + j] += w[i];
+                        ds[(n + i) * nc + j] += w[i];
+                    }
+                }
+            }
+            // inputs computed in the loop: M^-1 B du/dcolumn of the held sample
+            if nd > 0 {
+                let hist = du_hist.borrow();
+                for j in 0..nc {
+                    let mut any = false;
+                    for l in 0..m {
+                        du[l] = 0.0;
+                    }
+                    for (d, &l) in driven.iter().enumerate() {
+                        let k = held[l];
+                        if k >= k0 {
+                            let v = hist[(k - k0) * nd * nc + d * nc + j];
+                            if v != 0.0 {
+                                du[l] = v;
+                                any = true;
+                            }
+                        }
+                    }
+                    if !any {
+                        continue;
+                    }
+                    for i in 0..n {
+                        tmp[i] = (0..m).map(|l| b[i * m + l] * du[l]).sum::<f64>();
+                    }
+                    mat_vec(&minv, n, &tmp, &mut w);
+                    for i in 0..n {
+                        ds[(n + i) * nc + j] += w[i];
                     }
                 }
             }
@@ -294,8 +471,8 @@ impl SensitivitySimulator {
                         / seg.len;
                     if rate != 0.0 {
                         for i in 0..n {
-                            ds[i * p + j] += z[n + i] * rate;
-                            ds[(n + i) * p + j] += acc[i] * rate;
+                            ds[i * nc + j] += z[n + i] * rate;
+                            ds[(n + i) * nc + j] += acc[i] * rate;
                         }
                     }
                 }
@@ -303,22 +480,70 @@ impl SensitivitySimulator {
             true
         };
         let (off, d_off) = (&effects.offsets, &effects.d_offsets);
-        let mut z = initial_state(sig, self.opts.initial_velocity, off);
-        z.resize(nx + nx * p, 0.0);
+        let meas_off: Vec<f64> = off.iter().zip(&start.offsets).map(|(a, b)| a + b).collect();
+        let mut z = start.x0.clone();
+        z.resize(nx + nx * nc, 0.0);
         for i in 0..n {
-            for j in 0..p {
-                z[nx + i * p + j] = -d_off[j * n + i];
-            }
-        }
-        let mut q = vec![vec![0.0; n_samples]; n];
-        let mut dq = vec![vec![vec![0.0; n_samples]; p]; n];
-        let record = |k: usize, z: &[f64]| {
-            for i in 0..n {
-                q[i][k] = z[i] + off[i];
+            if tied.get(i).copied().unwrap_or(false) {
                 for j in 0..p {
-                    dq[i][j][k] = z[nx + i * p + j] + d_off[j * n + i];
+                    z[nx + i * nc + j] = -d_off[j * n + i];
                 }
             }
+        }
+        for (e, c) in extra.iter().enumerate() {
+            for (i, v) in c.s0.iter().enumerate() {
+                z[nx + i * nc + p + e] = *v;
+            }
+        }
+        // the direct part of each column's measurement sensitivity
+        let mut direct = vec![0.0; n * nc];
+        for i in 0..n {
+            for j in 0..p {
+                direct[i * nc + j] = d_off[j * n + i];
+            }
+            for (e, c) in extra.iter().enumerate() {
+                direct[i * nc + p + e] = c.direct[i];
+            }
+        }
+        let len = k1 - k0;
+        let mut q = vec![vec![0.0; len]; n];
+        let mut dq = vec![vec![vec![0.0; len]; nc]; n];
+        let mut y = vec![0.0; n];
+        let mut dy = vec![0.0; n * nc];
+        let mut du_k = vec![0.0; nd * nc];
+        let mut closed = self.closed(sig, k0, nc)?;
+        let at_sample = |k: usize, z: &[f64], u: &mut [Vec<f64>]| {
+            let kk = k - k0;
+            for i in 0..n {
+                y[i] = z[i] + meas_off[i];
+                q[i][kk] = y[i];
+                for j in 0..nc {
+                    let v = z[nx + i * nc + j] + direct[i * nc + j];
+                    dy[i * nc + j] = v;
+                    dq[i][j][kk] = v;
+                }
+            }
+            if let Some((law, rep, ev, fstate, u_law, ls)) = closed.as_mut() {
+                ev.step(law, rep, k, &y, fstate, u_law, Some((ls, &dy, &mut du_k)));
+                let mut hist = du_hist.borrow_mut();
+                for (d, &l) in driven.iter().enumerate() {
+                    let wl = widths.get(l).copied().unwrap_or(0.0);
+                    let v = deadzone(u_law[d], wl);
+                    u[l][k] = v;
+                    for j in 0..nc {
+                        let mut g = if v == 0.0 && wl > 0.0 {
+                            0.0
+                        } else {
+                            du_k[d * nc + j]
+                        };
+                        if j < p && v != 0.0 {
+                            g -= v.signum() * d_width[j * m + l];
+                        }
+                        hist[kk * nd * nc + d * nc + j] = g;
+                    }
+                }
+            }
+            z.iter().all(|v| v.is_finite())
         };
         // jump of S at a switch of input `l`: (f_old - f_new) dTd_l/dtheta
         let mut jump = |l: usize, f_old: &[f64], f_new: &[f64], z: &mut [f64]| {
@@ -326,7 +551,7 @@ impl SensitivitySimulator {
                 let df = f_old[i] - f_new[i];
                 if df != 0.0 {
                     for j in 0..p {
-                        z[nx + i * p + j] += df * d_delay[j * m + l];
+                        z[nx + i * nc + j] += df * d_delay[j * m + l];
                     }
                 }
             }
@@ -337,16 +562,74 @@ impl SensitivitySimulator {
             None
         };
         integrate(
-            sig,
-            n_samples,
+            &sig.name,
+            &sig.t,
+            &mut u,
+            k0..k1,
             h,
             &mut z,
             &effects.delays,
             rhs,
             on_switch,
-            record,
+            at_sample,
         )?;
         Ok(SensitivityTrajectory { q, dq })
+    }
+
+    /// Loop state at a block starting at `k0` with `nc` sensitivity
+    /// columns; None in open loop.
+    #[allow(clippy::type_complexity)]
+    fn closed<'s>(
+        &'s self,
+        sig: &'s Signals,
+        k0: usize,
+        nc: usize,
+    ) -> Result<
+        Option<(
+            &'s LoopLaw,
+            &'s Replay,
+            LoopEval,
+            Vec<f64>,
+            Vec<f64>,
+            LoopSens,
+        )>,
+        SimError,
+    > {
+        let Some(law) = &self.law else {
+            return Ok(None);
+        };
+        let Some(rep) = &sig.replay else {
+            return Err(SimError::BadOption(format!(
+                "closed-loop simulation of `{}` needs its signals read for recorded controller `{}`",
+                sig.name, law.name
+            )));
+        };
+        let nf2 = rep.coeffs.len() * 2;
+        Ok(Some((
+            law,
+            rep,
+            LoopEval::new(law),
+            rep.state[k0 * nf2..(k0 + 1) * nf2].to_vec(),
+            vec![0.0; law.driven().len()],
+            LoopSens::new(law, nc),
+        )))
+    }
+}
+
+#[cfg(test)]
+impl SensitivitySimulator {
+    /// The first `n` samples from the measured state, split or not (tests).
+    fn run_n(
+        &self,
+        sig: &Signals,
+        params: &[f64],
+        n: usize,
+        unsplit: bool,
+    ) -> Result<SensitivityTrajectory, SimError> {
+        let offsets = self.signals.eval(params)?.offsets;
+        let mut start = BlockStart::from_data(sig, self.opts.initial_velocity, &offsets);
+        start.range = 0..n.min(sig.len());
+        self.run(sig, params, &start, &vec![true; self.n], &[], unsplit)
     }
 }
 
@@ -366,8 +649,8 @@ mod tests {
                 SensitivitySimulator::new(&model, &free, SimOptions::default()).expect("compiles");
             let sig = signals(&model);
             let p = perturbed(&model);
-            let split = sim.run(&sig, &p, sig.len(), false).expect("simulates");
-            let whole = sim.run(&sig, &p, sig.len(), true).expect("simulates");
+            let split = sim.run_n(&sig, &p, sig.len(), false).expect("simulates");
+            let whole = sim.run_n(&sig, &p, sig.len(), true).expect("simulates");
             let flat = |tr: &SensitivityTrajectory| -> Vec<u64> {
                 let q = tr.q.iter().flatten();
                 let dq = tr.dq.iter().flatten().flatten();
@@ -396,10 +679,10 @@ mod tests {
         let (mut a, mut b) = (Vec::new(), Vec::new());
         for _ in 0..5 {
             a.push(median_seconds(3, || {
-                sim.run(&sig, &p, k, false).expect("simulates");
+                sim.run_n(&sig, &p, k, false).expect("simulates");
             }));
             b.push(median_seconds(3, || {
-                sim.run(&sig, &p, k, true).expect("simulates");
+                sim.run_n(&sig, &p, k, true).expect("simulates");
             }));
         }
         a.sort_by(f64::total_cmp);

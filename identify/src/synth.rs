@@ -1030,6 +1030,7 @@ pub fn synthesize(model_text: &str, spec: &SynthSpec) -> Result<Synthesized, Syn
             t: t.clone(),
             q: first.iter().map(|&v| vec![v; n]).collect(),
             u,
+            replay: None,
         };
         let traj = sim.simulate(&sig, &values.full, n)?;
         let mut rng = stream(opts.seed, idx, 2);

@@ -393,12 +393,11 @@ fn equation_error_rejects_bad_requests() {
         EquationError::new(&model, &base[1..], &nuisance, &clean, &opts),
         Err(EquationErrorError::ParameterCount { .. })
     ));
+    // jittered stamps are resampled, not refused (issue 10: every command
+    // accepts non-uniform time)
     let mut jittered = clean[..1].to_vec();
     jittered[0].t[100] += 0.3e-3;
-    assert!(matches!(
-        EquationError::new(&model, &base, &nuisance, &jittered, &opts),
-        Err(EquationErrorError::NonUniform { .. })
-    ));
+    assert!(EquationError::new(&model, &base, &nuisance, &jittered, &opts).is_ok());
     let mut short = clean[..1].to_vec();
     short[0].t.truncate(40);
     for c in &mut short[0].channels {

@@ -86,6 +86,7 @@ fn zero_order_hold_matches_closed_form() {
         t: t.clone(),
         q: vec![vec![0.3; 50]],
         u: vec![f.clone()],
+        replay: None,
     };
     let sim = Simulator::new(&model, SimOptions::default()).expect("compiles");
     let p = ParameterValues::from_base(&model, vec![2.0, 0.0]);
@@ -113,6 +114,7 @@ fn bad_input_is_an_error_not_a_panic() {
         t: vec![0.0, 0.002, 0.004],
         q: vec![vec![0.0; 3], vec![3.0; 3]],
         u: vec![vec![0.0; 3]],
+        replay: None,
     };
     assert!(matches!(
         sim.simulate(&sig, &[1.0, 2.0], 3),

@@ -65,8 +65,11 @@ fn clean_case_recovers_j1_and_l2() {
         .all(|p| p.rmse.is_finite() && p.stage < p.stages));
     let last = seen.last().expect("progress reported");
     assert!(last.horizon.is_infinite() && last.stage + 1 == last.stages);
-    // the same fit without a callback gives the same result
-    assert_eq!(fit(&model, &exps, &opts).expect("fits"), r);
+    // the same fit without a callback gives the same result (compared
+    // through Debug: NaN standard errors of quantities not estimated)
+    let again = fit(&model, &exps, &opts).expect("fits");
+    assert_eq!(format!("{again:?}"), format!("{r:?}"));
+    assert_eq!(again.simulated, r.simulated);
     eprintln!("{}", serde_json::to_string_pretty(&r).expect("json"));
     eprintln!("fit time {elapsed:?}");
     for e in &r.parameters {

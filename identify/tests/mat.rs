@@ -95,6 +95,7 @@ fn write_bytes(test: &str, name: &str, bytes: &[u8]) -> std::path::PathBuf {
 fn opts(map: &str) -> ReadOptions {
     ReadOptions {
         mat_channels: Some(parse_channel_map(map).unwrap()),
+        ..Default::default()
     }
 }
 

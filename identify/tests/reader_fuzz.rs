@@ -67,6 +67,7 @@ fn good_mat(compressed: bool) -> Vec<u8> {
 fn options() -> ReadOptions {
     ReadOptions {
         mat_channels: Some(parse_channel_map("theta,alpha,Vm").unwrap()),
+        rename: Vec::new(),
     }
 }
 

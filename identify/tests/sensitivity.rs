@@ -34,6 +34,7 @@ fn driven_signals() -> Signals {
         t,
         q: vec![vec![0.0; 500], vec![std::f64::consts::PI - 0.3; 500]],
         u: vec![u],
+        replay: None,
     }
 }
 

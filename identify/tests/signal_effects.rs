@@ -52,6 +52,7 @@ fn driven_signals() -> Signals {
         t,
         q: vec![vec![0.0; 500], vec![std::f64::consts::PI - 0.3; 500]],
         u: vec![u],
+        replay: None,
     }
 }
 
@@ -130,6 +131,7 @@ fn mass_signals() -> Signals {
         t,
         q: vec![vec![0.3; 50]],
         u: vec![f],
+        replay: None,
     }
 }
 

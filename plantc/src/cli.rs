@@ -214,6 +214,22 @@ pub struct IdentifyArgs {
     pub model: PathBuf,
     #[command(flatten)]
     pub data: DataArgs,
+    #[command(flatten)]
+    pub control: FitControlArgs,
+    /// Fit horizon: `auto` (whole records; segments when the replay
+    /// diverges), `whole`, or a segment length in s (multiple shooting: each
+    /// segment starts from its own estimated state).
+    #[arg(long, value_name = "auto|whole|SECONDS", default_value = "auto")]
+    pub horizon: String,
+    /// Most effects added in turn (diagnose -> add -> refit rounds).
+    #[arg(long = "max-effects", value_name = "N", default_value_t = 3)]
+    pub max_effects: usize,
+    /// Held-out experiments the model is judged on at each stage.
+    #[arg(long, value_name = "FILE", num_args = 1..)]
+    pub validate: Vec<PathBuf>,
+    /// Prediction horizon in s for the validation (k-step-ahead fit %).
+    #[arg(long, value_name = "S")]
+    pub predict: Option<f64>,
     /// Output directory: `with_effect.plant`, `fitted.plant`, `report.json`
     /// and the figures of each stage. Built aside and swapped in when the run
     /// completes: an interrupted run leaves the previous DIR as it was, and
@@ -289,6 +305,40 @@ pub struct DataArgs {
     /// For MAT files: the signal rows after time, e.g. `theta,alpha,Vm`.
     #[arg(long, value_name = "NAME,...")]
     pub channels: Option<String>,
+    /// Read a channel from a column of another name, e.g. `Vm=plant_input`
+    /// (repeatable, or comma-separated).
+    #[arg(long = "map", value_name = "NAME=COLUMN")]
+    pub map: Vec<String>,
+}
+
+/// How a model is fitted to or judged on measurements (shared by compare,
+/// fit, diagnose and identify).
+#[derive(Debug, Args, Clone)]
+pub struct FitControlArgs {
+    /// Weight of a channel's residual per SI unit, e.g. `alpha=20`
+    /// (repeatable; default: 1 / the channel's spread in the data).
+    #[arg(long = "weight", value_name = "COORD=W")]
+    pub weights: Vec<String>,
+    /// Initial state estimated per experiment: `velocities` (default),
+    /// `positions,velocities`, or `none` (measured positions, zero velocities).
+    #[arg(
+        long = "estimate-initial",
+        value_name = "WHAT",
+        default_value = "velocities"
+    )]
+    pub estimate_initial: String,
+    /// Per-experiment sensor zero offsets: `auto` (coordinates whose value
+    /// matters, kept when significant), `none`, or coordinates `alpha,...`.
+    #[arg(long, value_name = "auto|none|COORD,...", default_value = "auto")]
+    pub offsets: String,
+    /// Recorded controller simulated in the loop: `auto` (the model's, when
+    /// the data hold its columns), `off`, or its name.
+    #[arg(
+        long = "closed-loop",
+        value_name = "auto|off|NAME",
+        default_value = "auto"
+    )]
+    pub closed_loop: String,
 }
 
 /// Arguments of `plantc compare`.
@@ -300,11 +350,20 @@ pub struct CompareArgs {
     pub data: DataArgs,
     #[command(flatten)]
     pub params: ParamArgs,
+    #[command(flatten)]
+    pub control: FitControlArgs,
+    /// Also predict `S` seconds ahead (k-step-ahead prediction from the
+    /// measured state, for unstable plants): fit % of the predictions.
+    #[arg(long, value_name = "S")]
+    pub horizon: Option<f64>,
+    /// Lags of the residual tests (whiteness, input cross-correlation).
+    #[arg(long, value_name = "L", default_value_t = 25)]
+    pub lags: usize,
     /// Print JSON.
     #[arg(long)]
     pub json: bool,
-    /// Write an overlay + residual SVG per experiment into this directory
-    /// (`<experiment>.svg`; existing figures are kept unless --force).
+    /// Write an overlay + residual SVG and a residual-test SVG per experiment
+    /// into this directory (existing figures are kept unless --force).
     #[arg(long, value_name = "DIR")]
     pub plots: Option<PathBuf>,
     /// Overwrite existing figures in the --plots directory.
@@ -324,6 +383,20 @@ pub struct FitArgs {
     /// Parameters to fit (default: those marked `estimate`), e.g. `J1,l2`.
     #[arg(long, value_name = "NAME,...")]
     pub free: Option<String>,
+    #[command(flatten)]
+    pub control: FitControlArgs,
+    /// Fit horizon: `auto` (whole records; segments when the replay
+    /// diverges), `whole`, or a segment length in s (multiple shooting: each
+    /// segment starts from its own estimated state).
+    #[arg(long, value_name = "auto|whole|SECONDS", default_value = "auto")]
+    pub horizon: String,
+    /// Held-out experiments: after the fit, the model is judged on them
+    /// (fit %, prediction fit with --predict, residual tests).
+    #[arg(long, value_name = "FILE", num_args = 1..)]
+    pub validate: Vec<PathBuf>,
+    /// Prediction horizon in s for the validation (k-step-ahead fit %).
+    #[arg(long, value_name = "S")]
+    pub predict: Option<f64>,
     /// Write the model with the fitted values here (never the input file or
     /// an existing file unless --force).
     #[arg(short = 'o', long = "out", value_name = "OUT.plant")]
@@ -343,6 +416,14 @@ pub struct DiagnoseArgs {
     pub model: PathBuf,
     #[command(flatten)]
     pub data: DataArgs,
+    #[command(flatten)]
+    pub control: FitControlArgs,
+    /// Fit horizon: `auto` (whole records; segments when the replay
+    /// diverges), `whole`, or a segment length in s (multiple shooting: each
+    /// segment starts from its own estimated state).
+    #[arg(long, value_name = "auto|whole|SECONDS", default_value = "auto")]
+    pub horizon: String,
+
     /// Print JSON.
     #[arg(long)]
     pub json: bool,

@@ -204,7 +204,17 @@ pub fn channel_spec(model: &plantc_derive::model::Model) -> plantc_identify::Cha
             "N*m" | "Nm" | "N.m" => Kind::Torque,
             _ => Kind::Other,
         };
-        spec = spec.input(&i.name, kind);
+        // an input a recorded controller drives may be absent: the
+        // controller in the loop computes it
+        let driven = model
+            .recorded
+            .iter()
+            .any(|r| r.laws.iter().any(|l| model.inputs[l.0].name == i.name));
+        spec = if driven {
+            spec.optional(&i.name, kind)
+        } else {
+            spec.input(&i.name, kind)
+        };
     }
     spec
 }
@@ -217,7 +227,11 @@ pub fn read_data(
     err: &mut dyn Write,
 ) -> Result<Vec<plantc_identify::Experiment>, CliError> {
     let spec = channel_spec(model);
-    let mut options = plantc_identify::ReadOptions::default();
+    let mut options = plantc_identify::ReadOptions {
+        rename: plantc_identify::parse_rename(&data.map)
+            .map_err(|e| CliError::input(format!("error: --map: {e}")))?,
+        ..plantc_identify::ReadOptions::default()
+    };
     if let Some(c) = &data.channels {
         options.mat_channels = Some(
             plantc_identify::parse_channel_map(c)
@@ -310,4 +324,124 @@ pub fn refuse_to_clobber(out: &Path, input: &Path, force: bool) -> Result<(), Cl
         )));
     }
     check_writable(out)
+}
+
+/// The fit options of `--weight`, `--estimate-initial`, `--offsets`,
+/// `--closed-loop` and (for commands that fit) `--horizon`.
+pub fn fit_options(
+    model: &plantc_derive::model::Model,
+    c: &crate::cli::FitControlArgs,
+    fit_horizon: Option<&str>,
+) -> Result<plantc_identify::FitOptions, CliError> {
+    use plantc_identify::{ClosedLoop, FitOptions, Horizon, InitialVelocity, Offsets};
+    let bad = |m: String| CliError::input(format!("error: {m}"));
+    let horizon = match fit_horizon.unwrap_or("auto").trim() {
+        "auto" => Horizon::Auto,
+        "whole" | "all" => Horizon::Whole,
+        s => match s.trim_end_matches('s').trim().parse::<f64>() {
+            Ok(h) if h > 0.0 && h.is_finite() => Horizon::Segments(h),
+            _ => {
+                return Err(bad(format!(
+                    "--horizon `{s}`: expected `auto`, `whole` or a positive number of seconds"
+                )))
+            }
+        },
+    };
+    let mut weights = Vec::new();
+    for w in c.weights.iter().flat_map(|s| s.split(',')) {
+        let w = w.trim();
+        if w.is_empty() {
+            continue;
+        }
+        let Some((name, v)) = w.split_once('=') else {
+            return Err(bad(format!(
+                "--weight `{w}`: expected COORD=W, e.g. `alpha=20`"
+            )));
+        };
+        let name = name.trim();
+        if !model.coordinates.iter().any(|c| c.name == name) {
+            let known: Vec<&str> = model.coordinates.iter().map(|c| c.name.as_str()).collect();
+            return Err(bad(format!(
+                "--weight `{w}`: the model has no coordinate `{name}`; coordinates: {}",
+                known.join(", ")
+            )));
+        }
+        match v.trim().parse::<f64>() {
+            Ok(x) if x > 0.0 && x.is_finite() => weights.push((name.to_string(), x)),
+            _ => {
+                return Err(bad(format!(
+                    "--weight `{w}`: the weight must be a positive number"
+                )))
+            }
+        }
+    }
+    let (estimate_positions, estimate_velocities) = {
+        let mut p = false;
+        let mut v = false;
+        for part in c.estimate_initial.split(',').map(str::trim) {
+            match part {
+                "positions" => p = true,
+                "velocities" => v = true,
+                "all" => {
+                    p = true;
+                    v = true
+                }
+                "none" => {}
+                other => {
+                    return Err(bad(format!(
+                        "--estimate-initial `{other}`: expected `velocities`, `positions`, `all` or `none`"
+                    )))
+                }
+            }
+        }
+        (p, v)
+    };
+    let offsets = match c.offsets.trim() {
+        "auto" => Offsets::Auto,
+        "none" => Offsets::None,
+        list => {
+            let names: Vec<String> = list
+                .split(',')
+                .map(|s| s.trim().to_string())
+                .filter(|s| !s.is_empty())
+                .collect();
+            for n in &names {
+                if !model.coordinates.iter().any(|c| &c.name == n) {
+                    return Err(bad(format!("--offsets: the model has no coordinate `{n}`")));
+                }
+            }
+            Offsets::On(names)
+        }
+    };
+    let closed_loop = match c.closed_loop.trim() {
+        "auto" => ClosedLoop::Auto,
+        "off" | "none" => ClosedLoop::Off,
+        name => {
+            if model.recorded_controller(name).is_none() {
+                let known: Vec<&str> = model.recorded.iter().map(|r| r.name.as_str()).collect();
+                return Err(bad(format!(
+                    "--closed-loop `{name}`: the model has no recorded controller of that name{}",
+                    if known.is_empty() {
+                        " (it has none)".to_string()
+                    } else {
+                        format!("; it has: {}", known.join(", "))
+                    }
+                )));
+            }
+            ClosedLoop::Named(name.to_string())
+        }
+    };
+    let mut opts = FitOptions {
+        horizon,
+        weights,
+        estimate_positions,
+        estimate_velocities,
+        offsets,
+        closed_loop,
+        ..FitOptions::default()
+    };
+    if !estimate_velocities {
+        opts.sim.initial_velocity = InitialVelocity::Zero;
+    }
+    Ok(opts)
 }

@@ -84,7 +84,15 @@ fn compare_keeps_existing_figures_and_separates_same_named_files() {
         &s(&figs2),
     ]);
     assert_eq!(code, 0, "{err}");
-    assert_eq!(names(&figs2), ["a-exp.svg", "b-exp.svg"]);
+    assert_eq!(
+        names(&figs2),
+        [
+            "a-exp-residual-tests.svg",
+            "a-exp.svg",
+            "b-exp-residual-tests.svg",
+            "b-exp.svg"
+        ]
+    );
     assert!(out.contains("a-exp ") && out.contains("b-exp "), "{out}");
     // --force replaces them
     let (code, _, err) = plantc(&[
@@ -97,7 +105,15 @@ fn compare_keeps_existing_figures_and_separates_same_named_files() {
         "--force",
     ]);
     assert_eq!(code, 0, "{err}");
-    assert_eq!(names(&figs2), ["a-exp.svg", "b-exp.svg"]);
+    assert_eq!(
+        names(&figs2),
+        [
+            "a-exp-residual-tests.svg",
+            "a-exp.svg",
+            "b-exp-residual-tests.svg",
+            "b-exp.svg"
+        ]
+    );
 }
 
 #[test]

@@ -50,7 +50,7 @@ fn compare_json_shape_table_findings_and_plots() {
     assert_eq!(code, 0, "{err}");
     let v: serde_json::Value = serde_json::from_str(&out).unwrap();
     let top: Vec<&String> = v.as_object().unwrap().keys().collect();
-    assert_eq!(top, ["experiments", "rmse"]);
+    assert_eq!(top, ["experiments", "rmse", "validation"]);
     let exps = v["experiments"].as_array().unwrap();
     assert_eq!(exps.len(), 2);
     // The pooled RMSE is over all samples of all channels and experiments:
@@ -224,4 +224,68 @@ fn diagnose_names_a_hidden_spring_and_applies_it() {
     let (code, _, err) = plantc(&args);
     assert_eq!(code, 2);
     assert!(err.contains("already exists"), "{err}");
+}
+
+/// Validation as MATLAB's compare/resid: k-step-ahead prediction, residual
+/// whiteness and input cross-correlation with 99 % bands (2.576 / sqrt(N),
+/// the normal quantile), in JSON and in figures.
+#[test]
+fn compare_prediction_and_residual_tests_in_json_and_figures() {
+    let dir = tmp("compare_validation");
+    let files = synth(
+        &dir,
+        &["--set", "l2=0.165"],
+        &["driven:alpha0=180deg,duration=3"],
+    );
+    let m = model();
+    let plots = dir.join("plots");
+    let ps = s(&plots);
+    let args = vec![
+        "compare",
+        m.as_str(),
+        files[0].as_str(),
+        "--horizon",
+        "0.5",
+        "--plots",
+        ps.as_str(),
+        "--json",
+    ];
+    let (code, out, err) = plantc(&args);
+    assert_eq!(code, 0, "{err}");
+    let v: serde_json::Value = serde_json::from_str(&out).unwrap();
+    let e = &v["validation"]["experiments"][0];
+    let pred = e["prediction"].as_array().expect("prediction per channel");
+    assert_eq!(pred.len(), 2);
+    for c in pred {
+        let f = c["fit_percent"].as_f64().expect("fit %");
+        // 0.5 s ahead from the measured state cannot be worse than the
+        // whole-record simulation of a model with l2 off by 3 %
+        assert!(f > 50.0, "prediction fit {f}");
+    }
+    let tests = e["residual_tests"].as_array().expect("residual tests");
+    assert_eq!(tests.len(), 2);
+    for t in tests {
+        let n = t["samples"].as_f64().unwrap();
+        let band = t["band"].as_f64().unwrap();
+        assert!(
+            (band - 2.576 / n.sqrt()).abs() < 1e-3,
+            "band {band} for {n}"
+        );
+        assert!(t["autocorrelation"].as_array().unwrap().len() > 1);
+        assert!(!t["cross"].as_array().unwrap().is_empty());
+    }
+    let name = std::path::Path::new(&files[0])
+        .file_stem()
+        .unwrap()
+        .to_str()
+        .unwrap()
+        .to_string();
+    for f in [
+        format!("{name}.svg"),
+        format!("{name}-predicted.svg"),
+        format!("{name}-residual-tests.svg"),
+    ] {
+        let svg = std::fs::read_to_string(plots.join(&f)).unwrap_or_default();
+        assert!(svg.starts_with("<svg"), "{f} missing");
+    }
 }

@@ -354,6 +354,77 @@ pub struct Controller {
     pub span: Span,
 }
 
+/// One statement of a `recorded controller` block.
+#[derive(Debug, Clone, PartialEq)]
+pub enum RecordedStmt {
+    /// `signal name [unit] "title"`: a data column the law reads (a
+    /// reference, a feedforward...).
+    Signal {
+        /// Column name.
+        name: Ident,
+        /// Its unit (SI when absent: dimensionless).
+        unit: Option<UnitExpr>,
+        /// Optional description.
+        title: Option<StrLit>,
+        /// Statement span.
+        span: Span,
+    },
+    /// `gain name = value`: a named constant (may carry a unit).
+    Gain {
+        /// Name.
+        name: Ident,
+        /// Value.
+        value: Expr,
+        /// Statement span.
+        span: Span,
+    },
+    /// `let name = expr`: a named intermediate of the law.
+    Let {
+        /// Name.
+        name: Ident,
+        /// Definition.
+        value: Expr,
+        /// Statement span.
+        span: Span,
+    },
+    /// `u = expr`: the value the controller writes to input `u`.
+    Law {
+        /// The input driven.
+        target: Ident,
+        /// Right-hand side.
+        expr: Expr,
+        /// Statement span.
+        span: Span,
+    },
+}
+
+impl RecordedStmt {
+    /// Statement span.
+    pub fn span(&self) -> Span {
+        match self {
+            RecordedStmt::Signal { span, .. }
+            | RecordedStmt::Gain { span, .. }
+            | RecordedStmt::Let { span, .. }
+            | RecordedStmt::Law { span, .. } => *span,
+        }
+    }
+}
+
+/// `recorded controller name "title" { statements }`: the discrete-time law
+/// that drove some inputs while the data were recorded, evaluated at every
+/// sample instant from the measured coordinates and data columns.
+#[derive(Debug, Clone, PartialEq)]
+pub struct RecordedController {
+    /// Name.
+    pub name: Ident,
+    /// Optional description.
+    pub title: Option<StrLit>,
+    /// Statements in order.
+    pub body: Vec<RecordedStmt>,
+    /// Whole block.
+    pub span: Span,
+}
+
 /// A whole model file. Declarations are grouped by kind, each list in source order.
 #[derive(Debug, Clone, PartialEq, Default)]
 pub struct ModelFile {
@@ -383,6 +454,8 @@ pub struct ModelFile {
     pub sets: Vec<ParamSet>,
     /// Controllers.
     pub controllers: Vec<Controller>,
+    /// Controllers that ran while data were recorded.
+    pub recorded: Vec<RecordedController>,
 }
 
 /// Binary operators.

@@ -10,6 +10,9 @@ use super::units::{parse_unit, Dim, Ratio, Unit};
 use std::collections::{BTreeMap, HashMap};
 use std::ops::{Add, Div, Mul, Neg};
 
+#[path = "check_recorded.rs"]
+mod recorded;
+
 /// Result of [`parse_and_check`].
 #[derive(Debug, Clone)]
 pub struct Checked {
@@ -290,6 +293,9 @@ enum Ctx {
     Force,
     /// set value or controller gain: parameters and constants only.
     Constant,
+    /// a recorded controller's law: measured coordinates (no velocities),
+    /// its signals, gains and lets, parameters, `derivative(x, wc)`.
+    Recorded,
 }
 
 struct Infer<'a> {
@@ -382,6 +388,22 @@ impl Infer<'_> {
                         None
                     }
                     SymbolKind::Parameter => s.dim,
+                    _ if self.ctx == Ctx::Recorded && !recorded::readable_in_recorded(s) => {
+                        self.diags.push(
+                            Diagnostic::error(
+                                "plantc::not_measured",
+                                format!(
+                                    "`{n}` is {}; a recorded controller computes inputs, it cannot read them",
+                                    s.kind.describe()
+                                ),
+                                e.span,
+                                "not a measurement",
+                            )
+                            .with_label(s.span, "declared here")
+                            .with_help("the law may read coordinates, its `signal` columns, gains and parameters"),
+                        );
+                        None
+                    }
                     _ if self.ctx == Ctx::Constant => {
                         self.diags.push(
                             Diagnostic::error(
@@ -406,6 +428,18 @@ impl Infer<'_> {
                     return None;
                 };
                 match s.kind {
+                    SymbolKind::Coordinate(_) if self.ctx == Ctx::Recorded => {
+                        self.diags.push(
+                            Diagnostic::error(
+                                "plantc::not_measured",
+                                format!("a recorded controller does not see `{n}{}`: it reads measured positions", "'".repeat(*k as usize)),
+                                e.span,
+                                "not measured",
+                            )
+                            .with_help(format!("use the filtered difference the rig computed, e.g. `derivative({n}, 50 [rad/s])`")),
+                        );
+                        None
+                    }
                     SymbolKind::Coordinate(kind) if self.ctx != Ctx::Constant => {
                         Some(coord_dim(kind).div(Dim::time().powi(*k as i64)))
                     }
@@ -497,6 +531,9 @@ impl Infer<'_> {
     }
 
     fn call(&mut self, e: &Expr, f: &Ident, args: &[Expr]) -> Option<Dim> {
+        if self.ctx == Ctx::Recorded && f.name == "derivative" {
+            return self.derivative_call(e, args);
+        }
         if let Some(eff) = effects::lookup(&f.name) {
             let kw = eff.kind.keyword();
             let help = match eff.kind {
@@ -1105,6 +1142,7 @@ impl Checker {
         }
         self.check_sets(&file);
         self.check_controllers(&file);
+        self.check_recorded(&file);
         self.check_finite(&file);
         file
     }

@@ -37,6 +37,7 @@ pub const KEYWORDS: &[&str] = &[
     "actuator",
     "set",
     "controller",
+    "recorded",
 ];
 
 /// Parses a whole file. Always returns a (possibly partial) tree; syntax
@@ -558,6 +559,24 @@ impl<'a> Parser<'a> {
                     span: Span::new(start, self.prev_end()),
                 });
             }
+            "recorded" => {
+                self.bump();
+                self.keyword("controller")?;
+                let name = self.ident("a controller name")?;
+                let title = self.opt_str();
+                let open = self.expect(Tok::LBrace, "`{`")?;
+                let mut body = Vec::new();
+                self.block(open.span, |p| {
+                    body.push(p.recorded_stmt()?);
+                    Ok(())
+                })?;
+                file.recorded.push(RecordedController {
+                    name,
+                    title,
+                    body,
+                    span: Span::new(start, self.prev_end()),
+                });
+            }
             _ => {
                 let found = self.found(&t);
                 let mut d = Diagnostic::error(
@@ -699,6 +718,74 @@ impl<'a> Parser<'a> {
                     )
                     .with_help(
                         "a controller is `place poles [...]`, `lqr Q [...] R [...]`, `gains K [...]`, or `linearize output y` with `gain name = value` lines and a law `v = ...`",
+                    ),
+                );
+                return Err(());
+            }
+        };
+        Ok(stmt)
+    }
+
+    fn recorded_stmt(&mut self) -> PResult<RecordedStmt> {
+        let t = self.peek_token();
+        let start = t.span.start;
+        let kw = if t.tok == Tok::Ident {
+            self.text(t.span)
+        } else {
+            ""
+        };
+        let stmt = match kw {
+            "signal" if self.peek2() == Tok::Ident => {
+                self.bump();
+                let name = self.ident("a column name")?;
+                let unit = if *self.peek() == Tok::LBracket {
+                    Some(self.unit()?)
+                } else {
+                    None
+                };
+                let title = self.opt_str();
+                RecordedStmt::Signal {
+                    name,
+                    unit,
+                    title,
+                    span: Span::new(start, self.prev_end()),
+                }
+            }
+            "gain" | "let" if self.peek2() == Tok::Ident => {
+                self.bump();
+                let name = self.ident("a name")?;
+                self.expect(Tok::Eq, "`=`")?;
+                self.skip_newlines();
+                let value = self.statement_expr(start)?;
+                let span = Span::new(start, self.prev_end());
+                if kw == "gain" {
+                    RecordedStmt::Gain { name, value, span }
+                } else {
+                    RecordedStmt::Let { name, value, span }
+                }
+            }
+            _ if t.tok == Tok::Ident && self.peek2() == Tok::Eq => {
+                let target = self.ident("an input name")?;
+                self.bump();
+                self.skip_newlines();
+                let expr = self.statement_expr(start)?;
+                RecordedStmt::Law {
+                    target,
+                    expr,
+                    span: Span::new(start, self.prev_end()),
+                }
+            }
+            _ => {
+                let found = self.found(&t);
+                self.error(
+                    Diagnostic::error(
+                        "plantc::unknown_recorded_statement",
+                        format!("expected a recorded-controller statement, found {found}"),
+                        t.span,
+                        "not a recorded-controller statement",
+                    )
+                    .with_help(
+                        "a recorded controller has `signal name [unit]` lines (data columns), `gain name = value`, `let name = expr` and one law per driven input, `Vm = ...`",
                     ),
                 );
                 return Err(());

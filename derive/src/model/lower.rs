@@ -5,13 +5,15 @@ use std::fmt;
 use std::path::Path;
 
 use super::{
-    ActuatorEffect, ActuatorEffectKind, ControllerSpec, Coordinate, CoordinateKind, Derived, Input,
-    Model, Output, Parameter, ParameterSet, SensorEffect, SensorEffectKind,
+    ActuatorEffect, ActuatorEffectKind, ControllerSpec, Coordinate, CoordinateKind,
+    DerivativeFilter, Derived, Input, Model, Output, Parameter, ParameterSet, RecordedController,
+    RecordedSignal, SensorEffect, SensorEffectKind,
 };
 use crate::lang::ast::{self, BinOp, ExprKind};
 use crate::lang::effects;
 use crate::lang::units::parse_unit;
 use crate::lang::{eval_si, parse_and_check, Diagnostic, SourceFile, Symbols};
+use crate::sym::subst::substitute_symbols;
 use crate::sym::{CoordinateSymbols, Expr, Func, Rational, Symbol};
 
 /// A model loaded from a file, with the warnings and notes its checking produced.
@@ -415,6 +417,11 @@ pub fn lower(file: &ast::ModelFile, symbols: Option<&Symbols>) -> Model {
         .iter()
         .map(|c| lower_controller(&mut lw, c))
         .collect();
+    let recorded = file
+        .recorded
+        .iter()
+        .map(|r| lower_recorded(&mut lw, r, &inputs, &nominal))
+        .collect();
     Model {
         name: file
             .model
@@ -436,6 +443,7 @@ pub fn lower(file: &ast::ModelFile, symbols: Option<&Symbols>) -> Model {
         sensors,
         actuators,
         controllers,
+        recorded,
     }
 }
 
@@ -518,5 +526,97 @@ fn lower_controller(lw: &mut Lowerer<'_>, c: &ast::Controller) -> ControllerSpec
         output: output.unwrap_or_default(),
         gains,
         v: law.unwrap_or_else(Expr::zero),
+    }
+}
+
+/// A `recorded controller` block: `derivative(x, wc)` calls become filter
+/// symbols (named `derivative#k@block`, which no model name can be), gains
+/// and local lets are inlined, signals become symbols of their own names.
+fn lower_recorded(
+    lw: &mut Lowerer<'_>,
+    r: &ast::RecordedController,
+    inputs: &[Input],
+    nominal: &HashMap<Symbol, f64>,
+) -> RecordedController {
+    let mut env: HashMap<Symbol, Expr> = HashMap::new();
+    let mut signals = Vec::new();
+    let mut filters: Vec<DerivativeFilter> = Vec::new();
+    let mut laws = Vec::new();
+    let block = r.name.name.clone();
+    // lower an expression, turning derivative calls into filters first
+    let lower_expr = |lw: &mut Lowerer<'_>,
+                      e: &ast::Expr,
+                      env: &HashMap<Symbol, Expr>,
+                      filters: &mut Vec<DerivativeFilter>|
+     -> Expr {
+        let mut e = e.clone();
+        let mut found: Vec<(String, ast::Expr, ast::Expr)> = Vec::new();
+        replace_derivatives(&mut e, &mut |args| {
+            let name = format!("derivative#{}@{block}", filters.len() + found.len() + 1);
+            found.push((name.clone(), args[0].clone(), args[1].clone()));
+            name
+        });
+        for (name, x, wc) in found {
+            let input = substitute_symbols(lw.expr(&x), env);
+            let cutoff = substitute_symbols(lw.expr(&wc), env).eval_map(nominal);
+            filters.push(DerivativeFilter {
+                symbol: Symbol::new(&name),
+                input,
+                cutoff,
+            });
+        }
+        substitute_symbols(lw.expr(&e), env)
+    };
+    for st in &r.body {
+        match st {
+            ast::RecordedStmt::Signal {
+                name, unit, title, ..
+            } => {
+                let symbol = Symbol::new(&name.name);
+                signals.push(RecordedSignal {
+                    name: name.name.clone(),
+                    symbol,
+                    unit: unit.as_ref().map_or(String::new(), |u| u.text.clone()),
+                    description: title.as_ref().map(|t| t.value.clone()),
+                });
+            }
+            ast::RecordedStmt::Gain { name, value, .. }
+            | ast::RecordedStmt::Let { name, value, .. } => {
+                let v = lower_expr(lw, value, &env, &mut filters);
+                env.insert(Symbol::new(&name.name), v);
+            }
+            ast::RecordedStmt::Law { target, expr, .. } => {
+                let Some(j) = inputs.iter().position(|u| u.name == target.name) else {
+                    continue;
+                };
+                let v = lower_expr(lw, expr, &env, &mut filters);
+                laws.push((j, v));
+            }
+        }
+    }
+    RecordedController {
+        name: r.name.name.clone(),
+        description: r.title.as_ref().map(|t| t.value.clone()),
+        signals,
+        filters,
+        laws,
+    }
+}
+
+/// Replace every `derivative(a, b)` call in `e` by a name chosen by `name`
+/// (given the call's arguments).
+fn replace_derivatives(e: &mut ast::Expr, name: &mut dyn FnMut(&[ast::Expr]) -> String) {
+    match &mut e.kind {
+        ExprKind::Call(f, args) if f.name == "derivative" && args.len() == 2 => {
+            let n = name(args);
+            e.kind = ExprKind::Name(n);
+        }
+        ExprKind::Call(_, args) => args.iter_mut().for_each(|a| replace_derivatives(a, name)),
+        ExprKind::Neg(a) => replace_derivatives(a, name),
+        ExprKind::Binary(_, a, b) => {
+            replace_derivatives(a, name);
+            replace_derivatives(b, name);
+        }
+        _ => {}
     }
 }

@@ -150,6 +150,55 @@ impl ControllerSpec {
     }
 }
 
+/// A data column read by a [`RecordedController`].
+#[derive(Clone, Debug, PartialEq)]
+pub struct RecordedSignal {
+    /// Column name.
+    pub name: String,
+    /// Its symbol in the laws.
+    pub symbol: Symbol,
+    /// Unit as written (data are read in SI).
+    pub unit: String,
+    /// Description.
+    pub description: Option<String>,
+}
+
+/// A filtered derivative `derivative(x, wc)` of a [`RecordedController`]:
+/// `wc s/(s + wc)` discretised by backward Euler at the record's sample
+/// period `T`, `y_k = a (x_k - x_{k-1}) + b y_{k-1}` with `b = 1/(1 + wc T)`
+/// and `a = wc b`, started at rest (`x_{-1} = y_{-1} = 0`, as a discrete
+/// filter whose state is zeroed when the controller starts).
+#[derive(Clone, Debug, PartialEq)]
+pub struct DerivativeFilter {
+    /// The symbol standing for the filter's output in the laws.
+    pub symbol: Symbol,
+    /// Its input `x`, over measured coordinates, signals and parameters.
+    pub input: Expr,
+    /// Cutoff `wc` in rad/s (SI), evaluated at the nominal parameters.
+    pub cutoff: f64,
+}
+
+/// The controller that drove some inputs while data were recorded
+/// (`recorded controller` block): a discrete-time law evaluated at every
+/// sample instant from the measured coordinates and data columns. The
+/// simulation of a recording with this controller in the loop reproduces
+/// closed-loop experiments (identification's `--closed-loop`).
+#[derive(Clone, Debug, PartialEq)]
+pub struct RecordedController {
+    /// Name.
+    pub name: String,
+    /// Description.
+    pub description: Option<String>,
+    /// Data columns the laws read.
+    pub signals: Vec<RecordedSignal>,
+    /// Filtered derivatives, in order of appearance.
+    pub filters: Vec<DerivativeFilter>,
+    /// `(input index, law)`: each law is over the coordinates' position
+    /// symbols (the measured values), signal symbols, filter symbols and
+    /// parameters (gains and local `let`s inlined), in SI.
+    pub laws: Vec<(usize, Expr)>,
+}
+
 /// What a `sensor` line does to the measurement of a coordinate.
 #[derive(Clone, Debug, PartialEq)]
 pub enum SensorEffectKind {
@@ -242,6 +291,8 @@ pub struct Model {
     pub actuators: Vec<ActuatorEffect>,
     /// Controllers declared in the file.
     pub controllers: Vec<ControllerSpec>,
+    /// Controllers that ran while data were recorded.
+    pub recorded: Vec<RecordedController>,
 }
 
 impl Model {
@@ -371,5 +422,10 @@ impl Model {
     /// Find a controller by name.
     pub fn controller(&self, name: &str) -> Option<&ControllerSpec> {
         self.controllers.iter().find(|c| c.name() == name)
+    }
+
+    /// Find a recorded controller by name.
+    pub fn recorded_controller(&self, name: &str) -> Option<&RecordedController> {
+        self.recorded.iter().find(|c| c.name == name)
     }
 }

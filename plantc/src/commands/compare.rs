@@ -7,49 +7,15 @@ use std::path::Path;
 
 use plantc_derive::model::Model;
 use plantc_identify::{
-    compare, plot_comparison, where_it_fails, Channel, Experiment, FailOptions, FitReport, Signals,
-    SimOptions, Simulator,
+    as_experiments, compare, plot_comparison, plot_residual_tests, validate, where_it_fails,
+    Experiment, FailOptions, FitReport, ValidateOptions,
 };
 
 use crate::cli::CompareArgs;
 use crate::commands::fit::with_progress;
-use crate::common::{channel_spec, load, num, read_data, values, write_json, CliError};
-
-/// The model simulated over each measured experiment, as experiments with the
-/// same names, files and sample instants (coordinates only).
-pub(crate) fn simulate_experiments(
-    model: &Model,
-    full: &[f64],
-    measured: &[Experiment],
-) -> Result<Vec<Experiment>, CliError> {
-    let sim = Simulator::new(model, SimOptions::default())
-        .map_err(|e| CliError::failure(format!("error: {e}")))?;
-    measured
-        .iter()
-        .map(|m| {
-            let sig = Signals::from_experiment(model, m)
-                .map_err(|e| CliError::input(format!("error: {e}")))?;
-            let tr = sim
-                .simulate(&sig, full, m.len())
-                .map_err(|e| CliError::failure(format!("error: {e}")))?;
-            Ok(Experiment {
-                name: m.name.clone(),
-                file: m.file.clone(),
-                t: m.t.clone(),
-                channels: model
-                    .coordinates
-                    .iter()
-                    .zip(tr.q)
-                    .map(|(c, q)| Channel {
-                        name: c.name.clone(),
-                        unit_note: None,
-                        values: q,
-                    })
-                    .collect(),
-            })
-        })
-        .collect()
-}
+use crate::common::{
+    channel_spec, fit_options, load, num, read_data, values, write_json, CliError,
+};
 
 /// Fit % and RMSE of the model's coordinates over the experiments.
 pub(crate) fn report(
@@ -83,7 +49,11 @@ pub(crate) fn refuse_existing_figures(
             dir.display()
         )));
     }
-    for p in figure_paths(dir, measured) {
+    // the overlay, and the prediction and residual-test figures compare may add
+    let extra = measured.iter().flat_map(|m| {
+        ["predicted", "residual-tests"].map(|k| dir.join(format!("{}-{k}.svg", m.name)))
+    });
+    for p in figure_paths(dir, measured).into_iter().chain(extra) {
         if p.exists() && !force {
             return Err(CliError::input(format!(
                 "error: figure `{}` already exists; pass --force to overwrite it, or choose another --plots directory",
@@ -188,40 +158,147 @@ pub fn run(args: &CompareArgs, out: &mut dyn Write, err: &mut dyn Write) -> Resu
     if let Some(dir) = &args.plots {
         refuse_existing_figures(dir, &measured, args.force)?;
     }
-    let (simulated, rep) = with_progress("simulating", |_| {
-        let simulated = simulate_experiments(model, &vals.full, &measured)?;
-        let rep = report(model, &measured, &simulated)?;
-        Ok::<_, CliError>((simulated, rep))
-    })?;
+    let opts = ValidateOptions {
+        fit: fit_options(model, &args.control, None)?,
+        horizon: args.horizon,
+        lags: args.lags,
+    };
+    let v = with_progress("simulating", |_| {
+        validate(model, &vals.base, &measured, &opts)
+    })
+    .map_err(|e| CliError::failure(format!("error: {e}")))?;
+    let sims: Vec<Option<&Vec<Vec<f64>>>> =
+        v.experiments.iter().map(|e| e.simulated.as_ref()).collect();
+    let simulated = as_experiments(model, &measured, &sims);
+    let all_simulated = sims.iter().all(Option::is_some);
+    let rep = if all_simulated {
+        Some(report(model, &measured, &simulated)?)
+    } else {
+        None
+    };
     if let Some(dir) = &args.plots {
-        write_figures(dir, dir, model, &measured, &simulated, err)?;
+        if all_simulated {
+            write_figures(dir, dir, model, &measured, &simulated, err)?;
+        }
+        if v.horizon.is_some() {
+            let preds: Vec<Option<&Vec<Vec<f64>>>> =
+                v.experiments.iter().map(|e| e.predicted.as_ref()).collect();
+            let predicted = as_experiments(model, &measured, &preds);
+            let names: Vec<&str> = model.coordinates.iter().map(|c| c.name.as_str()).collect();
+            std::fs::create_dir_all(dir).map_err(|e| {
+                CliError::failure(format!("error: cannot create `{}`: {e}", dir.display()))
+            })?;
+            for (m, p) in measured.iter().zip(&predicted) {
+                let path = dir.join(format!("{}-predicted.svg", m.name));
+                plot_comparison(&path, m, p, &names)
+                    .map_err(|e| CliError::failure(format!("error: {e}")))?;
+                let _ = writeln!(err, "figure -> {}", path.display());
+            }
+        }
+        for e in &v.experiments {
+            if e.residual_tests.is_empty() {
+                continue;
+            }
+            let path = dir.join(format!("{}-residual-tests.svg", e.name));
+            plot_residual_tests(&path, &e.residual_tests)
+                .map_err(|e| CliError::failure(format!("error: {e}")))?;
+            let _ = writeln!(err, "figure -> {}", path.display());
+        }
     }
     if args.json {
-        write_json(
-            out,
-            &serde_json::to_value(&rep).map_err(|e| CliError::failure(e.to_string()))?,
-        );
+        // the report (fit % and RMSE per file and channel, pooled RMSE) at
+        // the top level as always; the validation's details (nuisance,
+        // simulation, prediction, residual tests) under `validation`
+        let mut j = match &rep {
+            Some(r) => serde_json::to_value(r).map_err(|e| CliError::failure(e.to_string()))?,
+            None => serde_json::json!({ "experiments": [], "rmse": null }),
+        };
+        j["validation"] = serde_json::to_value(&v).map_err(|e| CliError::failure(e.to_string()))?;
+        write_json(out, &j);
         return Ok(());
     }
     let _ = writeln!(
         out,
-        "`{}` against {} experiment(s):",
+        "`{}` against {} experiment(s){}:",
         model.name,
-        measured.len()
+        measured.len(),
+        match &v.closed_loop {
+            Some(c) => format!(" (closed loop with recorded controller `{c}`)"),
+            None => String::new(),
+        }
     );
-    write_table(out, &rep, &measured);
+    match &rep {
+        Some(rep) => write_table(out, rep, &measured),
+        None => {
+            for e in &v.experiments {
+                if let Some(m) = &e.simulation_error {
+                    let _ = writeln!(out, "{}: {m}", e.name);
+                }
+            }
+        }
+    }
+    // what was estimated per experiment
+    for e in &v.experiments {
+        let est: Vec<String> = e
+            .nuisance
+            .initial_state
+            .iter()
+            .filter(|x| x.estimated)
+            .chain(e.nuisance.offsets.iter())
+            .map(|x| format!("{} = {:.4e}", x.name, x.value))
+            .collect();
+        if !est.is_empty() {
+            let _ = writeln!(out, "  {} (estimated): {}", e.name, est.join(", "));
+        }
+    }
+    if let Some(h) = v.horizon {
+        let _ = writeln!(out, "\n{h} s-ahead prediction (from the measured state):");
+        for e in &v.experiments {
+            let _ = writeln!(
+                out,
+                "  {}: {}",
+                e.name,
+                e.prediction
+                    .iter()
+                    .map(|c| format!(
+                        "{} {}",
+                        c.channel,
+                        c.fit_percent
+                            .map_or("-".to_string(), |f| format!("{f:.1} %"))
+                    ))
+                    .collect::<Vec<_>>()
+                    .join(", ")
+            );
+        }
+    }
+    let _ = writeln!(
+        out,
+        "\nresidual tests ({} residuals, 99 % band):",
+        if v.horizon.is_some() {
+            "prediction"
+        } else {
+            "simulation"
+        }
+    );
+    for e in &v.experiments {
+        for t in &e.residual_tests {
+            let _ = writeln!(out, "  {}: {}", e.name, t.summary());
+        }
+    }
     // Where it fails, in plain words.
-    let mut findings = Vec::new();
-    write_failures(&mut findings, model, &measured, &simulated)?;
-    if !findings.is_empty() {
-        let _ = writeln!(out, "\nwhere it fails:");
-        let _ = out.write_all(&findings);
-    } else {
-        let _ = writeln!(
-            out,
-            "\nwhere it fails: no pattern in the residuals (RMSE {})",
-            num(rep.rmse)
-        );
+    if let Some(rep) = &rep {
+        let mut findings = Vec::new();
+        write_failures(&mut findings, model, &measured, &simulated)?;
+        if !findings.is_empty() {
+            let _ = writeln!(out, "\nwhere it fails:");
+            let _ = out.write_all(&findings);
+        } else {
+            let _ = writeln!(
+                out,
+                "\nwhere it fails: no pattern in the residuals (RMSE {})",
+                num(rep.rmse)
+            );
+        }
     }
     Ok(())
 }

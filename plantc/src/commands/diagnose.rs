@@ -7,30 +7,15 @@
 
 use std::io::Write;
 
-use plantc_identify::{diagnose, Diagnosis, EffectInstance, FitOptions, Ranked};
+use plantc_identify::{diagnose, fitted_instance, Diagnosis, Ranked};
 
 use crate::cli::DiagnoseArgs;
 use crate::commands::fit::with_progress;
 
 use crate::common::{
-    load, read_data, refuse_to_clobber, write_json, write_output, write_parameter_values, CliError,
+    fit_options, load, read_data, refuse_to_clobber, write_json, write_output,
+    write_parameter_values, CliError,
 };
-
-/// The candidate with its parameters at their fitted values (still marked
-/// `estimate`, so the next `plantc fit` refines them).
-pub(crate) fn fitted_instance(r: &Ranked) -> EffectInstance {
-    let mut inst = r.candidate.clone();
-    if let Some(f) = &r.fit {
-        for p in &mut inst.parameters {
-            if let Some(e) = f.parameters.iter().find(|e| e.name == p.name) {
-                // six significant digits: readable in the snippet, and the
-                // next fit refines it anyway
-                p.value = format!("{:.5e}", e.value).parse().unwrap_or(e.value);
-            }
-        }
-    }
-    inst
-}
 
 /// One finding in the JSON shape of `plantc diagnose --json`.
 fn finding_json(r: &Ranked) -> serde_json::Value {
@@ -100,6 +85,7 @@ pub fn run(args: &DiagnoseArgs, out: &mut dyn Write, err: &mut dyn Write) -> Res
     let loaded = load(&args.model, err)?;
     let model = &loaded.model;
     let measured = read_data(model, &args.data, err)?;
+    let fit_opts = fit_options(model, &args.control, Some(&args.horizon))?;
     let text = std::fs::read_to_string(&args.model).map_err(|e| {
         CliError::input(format!(
             "error: cannot read `{}`: {e}",
@@ -111,10 +97,8 @@ pub fn run(args: &DiagnoseArgs, out: &mut dyn Write, err: &mut dyn Write) -> Res
         "refitting the model with each candidate effect on {} experiment(s)...",
         measured.len()
     );
-    let d = with_progress("diagnosing", |_| {
-        diagnose(&text, &measured, &FitOptions::default())
-    })
-    .map_err(|e| CliError::failure(format!("error: {e}")))?;
+    let d = with_progress("diagnosing", |_| diagnose(&text, &measured, &fit_opts))
+        .map_err(|e| CliError::failure(format!("error: {e}")))?;
     let findings = findings(&d);
     if args.apply {
         if let (Some(o), Some(top)) = (&args.out, findings.first()) {

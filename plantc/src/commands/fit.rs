@@ -8,12 +8,14 @@ use std::sync::atomic::{AtomicBool, Ordering};
 use std::sync::Mutex;
 use std::time::{Duration, Instant};
 
-use plantc_identify::{fit_with_progress, FitError, FitOptions, FitProgress, FitResult};
+use plantc_identify::{
+    fit_with_progress, validate, FitError, FitOptions, FitProgress, FitResult, ValidateOptions,
+};
 
 use crate::cli::FitArgs;
 use crate::common::{
-    load, read_data, refuse_to_clobber, values, write_json, write_output, write_parameter_values,
-    CliError,
+    fit_options, load, read_data, refuse_to_clobber, values, write_json, write_output,
+    write_parameter_values, CliError,
 };
 
 /// Runs `work` while showing elapsed time and the latest status that
@@ -61,7 +63,7 @@ pub(crate) fn progress_text(p: &FitProgress) -> String {
         "whole record".to_string()
     };
     format!(
-        "stage {}/{} ({h}), iteration {}, RMSE {:.3e}",
+        "stage {}/{} ({h}), iteration {}, cost {:.3e}",
         p.stage + 1,
         p.stages,
         p.iteration,
@@ -78,27 +80,191 @@ fn fit_error(e: FitError) -> CliError {
     }
 }
 
-/// The JSON shape of `plantc fit --json`.
+/// The JSON shape of `plantc fit --json` (see [`FitResult::to_json`]).
 pub(crate) fn fit_json(r: &FitResult) -> serde_json::Value {
-    let mut params = serde_json::Map::new();
+    r.to_json()
+}
+
+/// A cost for printing: `diverged` when infinite.
+pub(crate) fn cost_text(c: f64) -> String {
+    if c.is_finite() {
+        format!("{c:.4e}")
+    } else {
+        "diverged".to_string()
+    }
+}
+
+/// The fit's result as text: parameters, cost before and after, per
+/// experiment nuisance, identifiability and what the fit did.
+pub(crate) fn write_fit(out: &mut dyn Write, r: &FitResult) {
+    let w = r
+        .parameters
+        .iter()
+        .map(|e| e.name.len())
+        .max()
+        .unwrap_or(4)
+        .max(9);
+    let _ = writeln!(
+        out,
+        "{:<w$}  {:>12}  {:>12}  {:>12}",
+        "parameter", "start", "estimate", "std error"
+    );
     for e in &r.parameters {
-        params.insert(
-            e.name.clone(),
-            serde_json::json!({"value": e.value, "std_error": e.std_error, "at_bound": e.at_bound}),
+        let flag = if e.fixed {
+            "  fixed (not identifiable)"
+        } else if e.at_bound {
+            "  at its bound"
+        } else {
+            ""
+        };
+        let _ = writeln!(
+            out,
+            "{:<w$}  {:>12}  {:>12}  {:>12}{flag}",
+            e.name,
+            format!("{:.5e}", e.start),
+            format!("{:.5e}", e.value),
+            if e.std_error.is_finite() {
+                format!("{:.2e}", e.std_error)
+            } else {
+                "-".to_string()
+            },
         );
     }
-    let corr: Vec<serde_json::Value> = r
-        .correlations
-        .iter()
-        .map(|(a, b, c)| serde_json::json!({"a": a, "b": b, "corr": c}))
-        .collect();
-    serde_json::json!({
-        "parameters": params,
-        "before": {"rmse": r.before_rmse},
-        "after": {"rmse": r.after_rmse},
-        "correlated": corr,
-        "iterations": r.iterations,
-    })
+    let ratio = if r.before_cost.is_finite() {
+        format!(
+            " ({:.2}x lower)",
+            r.before_cost / r.after_cost.max(f64::MIN_POSITIVE)
+        )
+    } else {
+        String::new()
+    };
+    let _ = writeln!(
+        out,
+        "cost (weighted RMS over {}) before {}, after {}{ratio}; RMSE before {}, after {:.3e}",
+        match r.segments {
+            Some(h) => format!("{h} s segments"),
+            None => "whole records".to_string(),
+        },
+        cost_text(r.before_cost),
+        cost_text(r.after_cost),
+        cost_text(r.before_rmse),
+        r.after_rmse
+    );
+    let _ = writeln!(
+        out,
+        "weights: {}",
+        r.weights
+            .iter()
+            .map(|c| format!(
+                "{} {:.3} per SI unit{} (noise floor {:.2e})",
+                c.name,
+                c.weight,
+                if c.overridden { " (set)" } else { "" },
+                c.noise
+            ))
+            .collect::<Vec<_>>()
+            .join(", ")
+    );
+    let coords: Vec<String> = r.weights.iter().map(|w| w.name.clone()).collect();
+    let pct = |v: &Option<f64>| v.map_or("-".to_string(), |f| format!("{f:.1} %"));
+    for e in &r.experiments {
+        let _ = writeln!(
+            out,
+            "  {}: fit {}",
+            e.name,
+            coords
+                .iter()
+                .enumerate()
+                .map(|(i, c)| format!(
+                    "{c} {} -> {}",
+                    pct(e.fit_before.get(i).unwrap_or(&None)),
+                    pct(e.fit_after.get(i).unwrap_or(&None))
+                ))
+                .collect::<Vec<_>>()
+                .join(", ")
+        );
+    }
+    for e in &r.experiments {
+        let mut parts: Vec<String> = e
+            .initial_state
+            .iter()
+            .filter(|v| v.estimated)
+            .map(|v| format!("{} = {:.4}", v.name, v.value))
+            .collect();
+        parts.extend(e.offsets.iter().map(|v| {
+            format!(
+                "{} = {:.4e}{}",
+                v.name,
+                v.value,
+                if v.std_error.is_finite() {
+                    format!(" +- {:.1e}", v.std_error)
+                } else {
+                    String::new()
+                }
+            )
+        }));
+        if !parts.is_empty() {
+            let _ = writeln!(out, "  {}: {}", e.name, parts.join(", "));
+        }
+    }
+    if !r.identifiability.is_identifiable() || !r.identifiability.fixed.is_empty() {
+        let _ = writeln!(
+            out,
+            "warning: not every parameter is identifiable from these data:"
+        );
+    }
+    for m in r.identifiability.messages() {
+        let _ = writeln!(out, "  {m}");
+    }
+    for n in &r.notes {
+        let _ = writeln!(out, "note: {n}");
+    }
+}
+
+/// A validation as text: per experiment, simulation and prediction fit %,
+/// and the residual tests.
+pub(crate) fn write_validation(out: &mut dyn Write, v: &plantc_identify::Validation) {
+    for e in &v.experiments {
+        let sim = if e.simulation.is_empty() {
+            e.simulation_error
+                .clone()
+                .unwrap_or_else(|| "no simulation".to_string())
+        } else {
+            e.simulation
+                .iter()
+                .map(|c| {
+                    format!(
+                        "{} {}",
+                        c.channel,
+                        c.fit_percent
+                            .map_or("-".to_string(), |f| format!("{f:.1} %"))
+                    )
+                })
+                .collect::<Vec<_>>()
+                .join(", ")
+        };
+        let _ = writeln!(out, "  {}: simulation fit {sim}", e.name);
+        if let Some(h) = v.horizon {
+            let _ = writeln!(
+                out,
+                "  {}: {h} s-ahead prediction fit {}",
+                e.name,
+                e.prediction
+                    .iter()
+                    .map(|c| format!(
+                        "{} {}",
+                        c.channel,
+                        c.fit_percent
+                            .map_or("-".to_string(), |f| format!("{f:.1} %"))
+                    ))
+                    .collect::<Vec<_>>()
+                    .join(", ")
+            );
+        }
+        for t in &e.residual_tests {
+            let _ = writeln!(out, "    residuals {}", t.summary());
+        }
+    }
 }
 
 pub fn run(args: &FitArgs, out: &mut dyn Write, err: &mut dyn Write) -> Result<(), CliError> {
@@ -130,10 +296,22 @@ pub fn run(args: &FitArgs, out: &mut dyn Write, err: &mut dyn Write) -> Result<(
         None => None,
     };
     let measured = read_data(model, &args.data, err)?;
+    let held_out = if args.validate.is_empty() {
+        Vec::new()
+    } else {
+        read_data(
+            model,
+            &crate::cli::DataArgs {
+                data: args.validate.clone(),
+                ..args.data.clone()
+            },
+            err,
+        )?
+    };
     let opts = FitOptions {
         free,
         start: Some(vals.base.clone()),
-        ..FitOptions::default()
+        ..fit_options(model, &args.control, Some(&args.horizon))?
     };
     let n_free = opts.free.as_ref().map_or_else(
         || plantc_identify::estimated_parameters(model).len(),
@@ -156,6 +334,23 @@ pub fn run(args: &FitArgs, out: &mut dyn Write, err: &mut dyn Write) -> Result<(
         result.iterations,
         result.simulations
     );
+    let validation = if held_out.is_empty() {
+        None
+    } else {
+        Some(
+            validate(
+                model,
+                &result.base,
+                &held_out,
+                &ValidateOptions {
+                    fit: opts.clone(),
+                    horizon: args.predict,
+                    ..ValidateOptions::default()
+                },
+            )
+            .map_err(fit_error)?,
+        )
+    };
     if let Some(o) = &args.out {
         let text = std::fs::read_to_string(&args.model).map_err(|e| {
             CliError::input(format!(
@@ -177,44 +372,22 @@ pub fn run(args: &FitArgs, out: &mut dyn Write, err: &mut dyn Write) -> Result<(
         let _ = writeln!(err, "fitted model -> {}", o.display());
     }
     if args.json {
-        write_json(out, &fit_json(&result));
+        let mut j = fit_json(&result);
+        if let Some(v) = &validation {
+            j["validation"] =
+                serde_json::to_value(v).map_err(|e| CliError::failure(e.to_string()))?;
+        }
+        write_json(out, &j);
         return Ok(());
     }
-    let w = result
-        .parameters
-        .iter()
-        .map(|e| e.name.len())
-        .max()
-        .unwrap_or(4)
-        .max(9);
-    let _ = writeln!(
-        out,
-        "{:<w$}  {:>12}  {:>12}  {:>12}",
-        "parameter", "start", "estimate", "std error"
-    );
-    for e in &result.parameters {
+    write_fit(out, &result);
+    if let Some(v) = &validation {
         let _ = writeln!(
             out,
-            "{:<w$}  {:>12}  {:>12}  {:>12}{}",
-            e.name,
-            format!("{:.5e}", e.start),
-            format!("{:.5e}", e.value),
-            format!("{:.2e}", e.std_error),
-            if e.at_bound { "  at its bound" } else { "" }
+            "validation on {} held-out experiment(s):",
+            held_out.len()
         );
-    }
-    let _ = writeln!(
-        out,
-        "RMSE before {:.3e}, after {:.3e} ({:.2}x lower)",
-        result.before_rmse,
-        result.after_rmse,
-        result.before_rmse / result.after_rmse.max(f64::MIN_POSITIVE)
-    );
-    for (a, b, c) in &result.correlations {
-        let _ = writeln!(
-            out,
-            "warning: `{a}` and `{b}` are strongly correlated (corr {c:.3}): the data cannot separate them; fix one of them or add an experiment that excites them differently"
-        );
+        write_validation(out, v);
     }
     Ok(())
 }

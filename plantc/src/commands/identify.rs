@@ -10,15 +10,16 @@ use std::io::Write;
 use std::path::{Path, PathBuf};
 use std::time::Instant;
 
-use plantc_derive::model::{Model, ParameterValues};
+use plantc_derive::model::Model;
 use plantc_identify::diagnose::model_from_text;
-use plantc_identify::{diagnose, fit_with_progress, Experiment, FitOptions, FitReport, FitResult};
+use plantc_identify::{
+    identify, Experiment, FitReport, FitResult, StoryOptions, StoryProgress, Validation,
+};
 
 use crate::cli::IdentifyArgs;
-use crate::commands::compare::{report, simulate_experiments, write_failures, write_figures};
-use crate::commands::diagnose::fitted_instance;
+use crate::commands::compare::{write_failures, write_figures};
 use crate::commands::fit::{progress_text, with_progress};
-use crate::common::{load, read_data, write_json, write_output, write_parameter_values, CliError};
+use crate::common::{fit_options, load, read_data, write_json, write_parameter_values, CliError};
 
 /// One stage of the story: its label and its comparison with the data.
 struct Stage {
@@ -30,47 +31,9 @@ fn fail(e: impl std::fmt::Display) -> CliError {
     CliError::failure(format!("error: {e}"))
 }
 
-/// The output directory being written: built aside (`fresh`), named `dir`
-/// in messages, swapped in when the story is complete.
-struct OutDir<'a> {
-    dir: &'a Path,
-    fresh: plantc_fsio::FreshDir,
-}
-
-impl OutDir<'_> {
-    /// Writes `name` (crash-safe) and returns the path shown to the user.
-    fn write(&self, name: &str, text: &str) -> Result<PathBuf, CliError> {
-        write_output(&self.fresh.path().join(name), text)?;
-        Ok(self.dir.join(name))
-    }
-}
-
-/// Simulate, compare and draw one stage into `out`'s `figures` folder.
-fn stage(
-    label: &str,
-    model: &Model,
-    full: &[f64],
-    measured: &[Experiment],
-    (out, figures): (&OutDir, &str),
-    err: &mut dyn Write,
-) -> Result<(Stage, Vec<Experiment>), CliError> {
-    let simulated = simulate_experiments(model, full, measured)?;
-    let rep = report(model, measured, &simulated)?;
-    write_figures(
-        &out.fresh.path().join(figures),
-        &out.dir.join(figures),
-        model,
-        measured,
-        &simulated,
-        err,
-    )?;
-    Ok((
-        Stage {
-            label: label.to_string(),
-            report: rep,
-        },
-        simulated,
-    ))
+fn write_file(path: &Path, text: &str) -> Result<(), CliError> {
+    // crash-safe (temporary file, fsync, rename)
+    plantc_fsio::write_atomic(path, text).map_err(fail)
 }
 
 /// The model text with every fitted parameter written in (lossless).
@@ -144,6 +107,37 @@ pub fn run(args: &IdentifyArgs, out: &mut dyn Write, err: &mut dyn Write) -> Res
     Ok(())
 }
 
+/// A validation's fit % per experiment and channel, one line per experiment.
+fn write_validation_lines(out: &mut dyn Write, v: &Validation) {
+    for e in &v.experiments {
+        let sim = if e.simulation.is_empty() {
+            "simulation diverged".to_string()
+        } else {
+            e.simulation
+                .iter()
+                .map(|c| format!("{} {}", c.channel, pct(c.fit_percent)))
+                .collect::<Vec<_>>()
+                .join(", ")
+        };
+        let pred = match v.horizon {
+            Some(h) => format!(
+                "; {h} s ahead {}",
+                e.prediction
+                    .iter()
+                    .map(|c| format!("{} {}", c.channel, pct(c.fit_percent)))
+                    .collect::<Vec<_>>()
+                    .join(", ")
+            ),
+            None => String::new(),
+        };
+        let _ = writeln!(out, "   held out {}: {sim}{pred}", e.name);
+    }
+}
+
+fn pct(v: Option<f64>) -> String {
+    v.map_or("-".to_string(), |f| format!("{f:.1} %"))
+}
+
 fn story(
     args: &IdentifyArgs,
     out: &mut dyn Write,
@@ -181,223 +175,270 @@ fn story(
         ))
     })?;
     let measured = read_data(model, &args.data, err)?;
+    let held_out = if args.validate.is_empty() {
+        Vec::new()
+    } else {
+        read_data(
+            model,
+            &crate::cli::DataArgs {
+                data: args.validate.clone(),
+                ..args.data.clone()
+            },
+            err,
+        )?
+    };
+    let opts = StoryOptions {
+        fit: fit_options(model, &args.control, Some(&args.horizon))?,
+        max_effects: args.max_effects,
+        validate: held_out.clone(),
+        predict: args.predict,
+        ..StoryOptions::default()
+    };
     // inputs are checked before anything is written; the new directory is
     // built aside and swapped in at the end: a killed run leaves the old one
-    let out_dir = OutDir {
-        dir,
-        fresh: plantc_fsio::FreshDir::create(dir).map_err(fail)?,
-    };
+    let fresh = plantc_fsio::FreshDir::create(dir).map_err(fail)?;
+    let staging = fresh.path().to_path_buf();
     let channels: Vec<&str> = model.coordinates.iter().map(|c| c.name.as_str()).collect();
-    let nominal = ParameterValues::new(model, None, &[]).map_err(fail)?;
+    let s = with_progress("identifying", |set| {
+        identify(&text, &measured, &opts, &mut |p| match p {
+            StoryProgress::Step(s) => set(s.clone()),
+            StoryProgress::Fit(f) => set(progress_text(f)),
+        })
+    })
+    .map_err(fail)?;
 
-    // 1. the nominal model against the data
+    // 1. the nominal model
+    let nominal = &s.stages[0];
     let _ = writeln!(
         out,
-        "1. nominal model `{}` against {} experiment(s)",
+        "1. nominal model `{}` against {} experiment(s) (initial velocities and sensor zeros estimated per experiment)",
         args.model.display(),
         measured.len()
     );
-    let (s1, sim1) = stage(
-        "nominal",
-        model,
-        &nominal.full,
-        &measured,
-        (&out_dir, "1-nominal"),
-        err,
-    )?;
-    let _ = writeln!(out, "   RMSE {:.3e}; where it fails:", s1.report.rmse);
-    if write_failures(out, model, &measured, &sim1)? == 0 {
+    write_stage_figures((&staging, dir), "1-nominal", model, &measured, nominal, err)?;
+    let _ = writeln!(out, "   RMSE {:.3e}; where it fails:", nominal.report.rmse);
+    if write_failures(out, model, &measured, &nominal.simulated)? == 0 {
         let _ = writeln!(out, "  no pattern in the residuals");
     }
-
-    // 2. diagnose (includes the refit of the nominal model)
+    if let Some(v) = &nominal.validation {
+        write_validation_lines(out, v);
+    }
+    // 2. the nominal model refitted (round 1's baseline)
+    let refitted = &s.stages[1];
     let _ = writeln!(
         out,
         "\n2. diagnose: refit the nominal model, rank candidate effects by equation error, refit the leaders"
     );
-    let d = with_progress("diagnosing", |_| {
-        diagnose(&text, &measured, &FitOptions::default())
-    })
-    .map_err(fail)?;
-    let refit_vals = ParameterValues::from_base(model, d.baseline.base.clone());
-    let (s2, sim2) = stage(
-        "nominal, refitted",
+    write_stage_figures(
+        (&staging, dir),
+        "2-refitted",
         model,
-        &refit_vals.full,
         &measured,
-        (&out_dir, "2-refitted"),
+        refitted,
         err,
     )?;
     let _ = writeln!(
         out,
         "   nominal model refitted: RMSE {:.3e}; where it still fails:",
-        s2.report.rmse
+        refitted.report.rmse
     );
-    if write_failures(out, model, &measured, &sim2)? == 0 {
+    if write_failures(out, model, &measured, &refitted.simulated)? == 0 {
         let _ = writeln!(out, "  no pattern in the residuals");
     }
-    for r in d.ranking.iter().filter(|r| r.fit.is_some()) {
-        let _ = writeln!(
-            out,
-            "   candidate {:<28} refit RMSE {:.3e} ({:.2}x), equation-error rank {}, acts: {}",
-            r.candidate.label(),
-            r.fit.as_ref().map_or(f64::NAN, |f| f.after_rmse),
-            r.gain,
-            r.evidence.equation_error_rank,
-            r.evidence.acts_where
-        );
+    if let Some(v) = &refitted.validation {
+        write_validation_lines(out, v);
     }
-    let mut stages = vec![s1, s2];
-    let mut summary = serde_json::json!({
-        "model": args.model.display().to_string(),
-        "verdict": "adequate",
-    });
-    let final_text;
-    match (&d.verdict, d.ranking.first()) {
-        (Some(_), Some(top)) => {
-            // 3. apply the top effect to a copy, at the values of its refit
-            let inst = fitted_instance(top);
+    // 3. the rounds
+    let mut summary_rounds = Vec::new();
+    let mut files = vec!["fitted.plant".to_string()];
+    for (k, round) in s.rounds.iter().enumerate() {
+        let _ = writeln!(out, "\n{}. round {}:", 3 + k, k + 1);
+        for r in round.ranking.iter().filter(|r| r.fit.is_some()) {
             let _ = writeln!(
                 out,
-                "\n3. missing effect: `{}` on `{}`; added to a copy of the model:\n{}",
-                inst.effect,
-                inst.target,
-                indent(&inst.snippet())
+                "   candidate {:<28} refit cost {:.3e} ({:.2}x), equation-error rank {}, acts: {}",
+                r.candidate.label(),
+                r.fit.as_ref().map_or(f64::NAN, |f| f.after_cost),
+                r.gain,
+                r.evidence.equation_error_rank,
+                r.evidence.acts_where
             );
-            let edited = inst.apply(&text).map_err(fail)?;
-            let with_effect = model_from_text("with_effect", &edited).map_err(fail)?;
-            let edited = match &top.fit {
-                Some(f) => with_values(&edited, &with_effect, f)?,
-                None => edited,
-            };
-            let path = out_dir.write("with_effect.plant", &edited)?;
-            let _ = writeln!(err, "model with the effect -> {}", path.display());
-            // 4. fit it
-            let m2 = model_from_text("with_effect", &edited).map_err(fail)?;
-            let start: Vec<f64> = m2.parameters.iter().map(|p| p.value).collect();
-            let f = with_progress("fitting", |set| {
-                fit_with_progress(
+        }
+        match (&round.effect, &round.fit) {
+            (Some(inst), Some(f)) => {
+                let _ = writeln!(
+                    out,
+                    "   missing effect: `{}` on `{}`; added to a copy of the model:\n{}",
+                    inst.effect,
+                    inst.target,
+                    indent(&inst.snippet())
+                );
+                let stage = &s.stages[2 + k];
+                let m2 = model_from_text("stage", &stage.text).map_err(fail)?;
+                let file = if k == 0 {
+                    "with_effect.plant".to_string()
+                } else {
+                    format!("with_effect_{}.plant", k + 1)
+                };
+                let edited = with_values(&stage.text, &m2, f)?;
+                write_file(&staging.join(&file), &edited)?;
+                files.push(file.clone());
+                let _ = writeln!(
+                    err,
+                    "model with the effect -> {}",
+                    dir.join(&file).display()
+                );
+                for e in &f.parameters {
+                    let _ = writeln!(
+                        out,
+                        "   {:<10} = {:.5e}  (std error {:.1e}){}",
+                        e.name,
+                        e.value,
+                        e.std_error,
+                        if e.fixed {
+                            "  fixed (not identifiable)"
+                        } else if e.at_bound {
+                            "  at its bound"
+                        } else {
+                            ""
+                        }
+                    );
+                }
+                for m in f.identifiability.messages() {
+                    let _ = writeln!(out, "   warning: {m}");
+                }
+                write_stage_figures(
+                    (&staging, dir),
+                    &format!("{}-fitted", 3 + k),
                     &m2,
                     &measured,
-                    &FitOptions {
-                        start: Some(start),
-                        ..FitOptions::default()
-                    },
-                    &mut |p| set(progress_text(p)),
-                )
-            })
-            .map_err(fail)?;
-            let fitted = with_values(&edited, &m2, &f)?;
-            let path = out_dir.write("fitted.plant", &fitted)?;
-            let _ = writeln!(
-                out,
-                "\n4. fit of the model with the effect -> {}",
-                path.display()
-            );
-            for e in &f.parameters {
-                let _ = writeln!(
-                    out,
-                    "   {:<10} = {:.5e}  (std error {:.1e}){}",
-                    e.name,
-                    e.value,
-                    e.std_error,
-                    if e.at_bound { "  at its bound" } else { "" }
-                );
+                    stage,
+                    err,
+                )?;
+                if let Some(v) = &stage.validation {
+                    write_validation_lines(out, v);
+                }
+                summary_rounds.push(serde_json::json!({
+                    "effect": inst.effect,
+                    "target": inst.target,
+                    "snippet": inst.snippet(),
+                    "cost_before": round.cost_before,
+                    "cost_after": round.cost_after,
+                    "fit": crate::commands::fit::fit_json(f),
+                    "model": file,
+                }));
             }
-            for (a, b, c) in &f.correlations {
-                let _ = writeln!(
-                    out,
-                    "   warning: `{a}` and `{b}` are strongly correlated ({c:.3})"
-                );
+            _ => {
+                let _ = writeln!(out, "   verdict: {}", s.stop);
             }
-            // 5. compare again
-            let vals = ParameterValues::from_base(&m2, f.base.clone());
-            let (s3, _) = stage(
-                &format!("+ {}, fitted", inst.label()),
-                &m2,
-                &vals.full,
-                &measured,
-                (&out_dir, "3-fitted"),
-                err,
-            )?;
-            stages.push(s3);
-            summary["verdict"] = "missing_effect".into();
-            summary["effect"] = serde_json::json!({
-                "effect": inst.effect,
-                "target": inst.target,
-                "snippet": inst.snippet(),
-            });
-            summary["fit"] = crate::commands::fit::fit_json(&f);
-            final_text = "fitted.plant";
-        }
-        _ => {
-            let _ = writeln!(
-                out,
-                "\n3. verdict: adequate: no candidate effect lowers the RMSE clearly; the refitted nominal model is the result"
-            );
-            let fitted = with_values(&text, model, &d.baseline)?;
-            out_dir.write("fitted.plant", &fitted)?;
-            summary["fit"] = crate::commands::fit::fit_json(&d.baseline);
-            final_text = "fitted.plant";
         }
     }
-    let _ = writeln!(out, "\n5. before and after:");
-    table(out, &stages, &measured, &channels);
-    let first = stages.first().map_or(f64::NAN, |s| s.report.rmse);
-    let last = stages.last().map_or(f64::NAN, |s| s.report.rmse);
+    // the result
+    let final_model = model_from_text("final", &s.text).map_err(fail)?;
+    let fitted = with_values(&s.text, &final_model, &s.fit)?;
+    write_file(&staging.join("fitted.plant"), &fitted)?;
+    let stage_refs: Vec<Stage> = s
+        .stages
+        .iter()
+        .map(|st| Stage {
+            label: st.label.clone(),
+            report: st.report.clone(),
+        })
+        .collect();
+    let _ = writeln!(out, "\nbefore and after:");
+    table(out, &stage_refs, &measured, &channels);
+    let first = stage_refs.first().map_or(f64::NAN, |s| s.report.rmse);
+    let last = stage_refs.last().map_or(f64::NAN, |s| s.report.rmse);
+    let elapsed = started.elapsed().as_secs_f64();
     let _ = writeln!(
         out,
-        "RMSE {first:.3e} -> {last:.3e}: {:.1}x lower; model -> {}, figures -> {}/{{1-nominal,2-refitted{}}}/",
+        "RMSE {first:.3e} -> {last:.3e}: {:.1}x lower; {} ({} effect(s) added); model -> {}, figures -> {}/ ({elapsed:.1} s)",
         first / last.max(f64::MIN_POSITIVE),
-        dir.join(final_text).display(),
+        s.stop,
+        s.rounds.iter().filter(|r| r.effect.is_some()).count(),
+        dir.join("fitted.plant").display(),
         dir.display(),
-        if stages.len() > 2 { ",3-fitted" } else { "" }
     );
-    summary["stages"] = stages
+    let _ = writeln!(err, "done in {elapsed:.1} s");
+    let mut summary = serde_json::json!({
+        "model": args.model.display().to_string(),
+        "verdict": if s.rounds.iter().any(|r| r.effect.is_some()) { "missing_effect" } else { "adequate" },
+        "stop": s.stop,
+        "rounds": summary_rounds,
+        "fit": crate::commands::fit::fit_json(&s.fit),
+        "seconds": elapsed,
+        "files": files,
+    });
+    if let Some(first) = s.rounds.first().and_then(|r| r.effect.as_ref()) {
+        summary["effect"] = serde_json::json!({
+            "effect": first.effect,
+            "target": first.target,
+            "snippet": first.snippet(),
+        });
+    }
+    summary["stages"] = s
+        .stages
         .iter()
-        .map(|s| serde_json::json!({"stage": s.label, "report": s.report}))
+        .map(|st| {
+            let mut j =
+                serde_json::json!({"stage": st.label, "report": st.report, "cost": st.cost});
+            if let Some(v) = &st.validation {
+                j["validation"] = serde_json::to_value(v).unwrap_or_default();
+            }
+            j
+        })
         .collect::<Vec<_>>()
         .into();
     let mut buf = Vec::new();
     write_json(&mut buf, &summary);
-    out_dir.write("report.json", &String::from_utf8_lossy(&buf))?;
+    write_file(&staging.join("report.json"), &String::from_utf8_lossy(&buf))?;
     // swap the complete directory in; entries identify never writes (the
     // user's, with --force) are kept
-    out_dir
-        .fresh
-        .commit_keeping(|n| !IDENTIFY_ENTRIES.iter().any(|k| n == Path::new(k)))
+    fresh
+        .commit_keeping(|n| !is_identify_entry(n))
         .map_err(fail)?;
-    let _ = writeln!(err, "done in {:.1} s", started.elapsed().as_secs_f64());
     Ok(summary)
 }
 
-/// Everything identify writes at the top of its output directory.
-const IDENTIFY_ENTRIES: [&str; 6] = [
-    "report.json",
-    "fitted.plant",
-    "with_effect.plant",
-    "1-nominal",
-    "2-refitted",
-    "3-fitted",
-];
+/// A stage's overlay + residual figures under `dir/sub/`.
+fn write_stage_figures(
+    (dir, shown): (&Path, &Path),
+    sub: &str,
+    model: &Model,
+    measured: &[Experiment],
+    stage: &plantc_identify::Stage,
+    err: &mut dyn Write,
+) -> Result<(), CliError> {
+    write_figures(
+        &dir.join(sub),
+        &shown.join(sub),
+        model,
+        measured,
+        &stage.simulated,
+        err,
+    )
+}
+
+/// Whether a top-level entry of the output directory is one identify writes
+/// (`report.json`, `fitted.plant`, `with_effect*.plant`, `N-<stage>/`
+/// figure folders): those of an earlier run are dropped, others kept.
+fn is_identify_entry(name: &Path) -> bool {
+    let n = name.to_string_lossy();
+    n == "report.json"
+        || n == "fitted.plant"
+        || (n.starts_with("with_effect") && n.ends_with(".plant"))
+        || n.split_once('-').is_some_and(|(k, rest)| {
+            !k.is_empty() && k.bytes().all(|b| b.is_ascii_digit()) && !rest.is_empty()
+        })
+}
 
 /// Whether `dir` holds the output of an earlier `plantc identify` (its
-/// `report.json` has the story's keys, and nothing else is in it): it may be
-/// replaced without asking.
+/// `report.json` has the story's keys): it may be replaced without asking.
 fn made_by_identify(dir: &Path) -> bool {
-    let only_ours = std::fs::read_dir(dir).is_ok_and(|entries| {
-        entries.flatten().all(|e| {
-            let n = e.file_name();
-            IDENTIFY_ENTRIES
-                .iter()
-                .any(|k| n == std::ffi::OsStr::new(k))
-        })
-    });
-    only_ours
-        && std::fs::read_to_string(dir.join("report.json"))
-            .ok()
-            .and_then(|t| serde_json::from_str::<serde_json::Value>(&t).ok())
-            .is_some_and(|v| v.get("stages").is_some() && v.get("verdict").is_some())
+    std::fs::read_to_string(dir.join("report.json"))
+        .ok()
+        .and_then(|t| serde_json::from_str::<serde_json::Value>(&t).ok())
+        .is_some_and(|v| v.get("stages").is_some() && v.get("verdict").is_some())
 }
 
 fn indent(s: &str) -> String {

@@ -1,0 +1,388 @@
+//! The least-squares problem of a fit: which unknowns, which residuals.
+//!
+//! Unknowns come in two levels:
+//! - **globals**: the free model parameters (bounded by their `estimate`
+//!   boxes), then the per-experiment sensor offsets (one per experiment and
+//!   offset coordinate, unbounded);
+//! - **locals**: for each *block* (a whole experiment in single shooting, a
+//!   segment of one in multiple shooting) the components of its initial
+//!   state that are estimated. A block touches only its own locals, so the
+//!   normal equations have a block-arrow structure (solved by a Schur
+//!   complement on the globals, [`crate::lm`]).
+//!
+//! Residuals are `w_i (y_hat_i(t_k) - y_i(t_k))` for every coordinate `i`
+//! and sample `k` of every block, with `w_i` the channel weights
+//! ([`crate::weights`]). A block's initial state is, per component: its
+//! local unknown when estimated; else, for a position, the measurement at
+//! the block's first sample minus the model's and the experiment's offsets
+//! ("tied"); else, for a velocity, a fixed value (zero, or a data
+//! estimate).
+//!
+//! Blocks are simulated in parallel (one worker per core, blocks handed out
+//! in turn).
+
+use std::ops::Range;
+use std::sync::atomic::{AtomicUsize, Ordering};
+use std::sync::Mutex;
+
+use plantc_derive::model::{Model, ParameterValues};
+
+use crate::experiment_sim::{BlockStart, Signals, SimError, Simulator};
+use crate::lm::{BlockNormal, Normal};
+use crate::sensitivity::{ExtraColumn, SensitivitySimulator};
+
+/// How one block is laid out.
+#[derive(Clone, Debug, PartialEq)]
+pub(crate) struct BlockLayout {
+    /// Experiment index.
+    pub exp: usize,
+    /// Samples of the block.
+    pub range: Range<usize>,
+    /// State components estimated as locals (positions `0..n`, velocities
+    /// `n..2n`), in local order.
+    pub free_state: Vec<usize>,
+    /// Values of the velocity components that are not estimated (`2n`
+    /// long; positions are ignored).
+    pub fixed: Vec<f64>,
+}
+
+/// A point of the problem: globals and each block's locals.
+#[derive(Clone, Debug, PartialEq)]
+pub(crate) struct Point {
+    /// Free model parameters, then per-experiment offsets.
+    pub g: Vec<f64>,
+    /// Locals per block.
+    pub l: Vec<Vec<f64>>,
+}
+
+/// The problem.
+pub(crate) struct Problem<'a> {
+    pub model: &'a Model,
+    pub sim: &'a Simulator,
+    pub sens: &'a SensitivitySimulator,
+    pub sigs: &'a [Signals],
+    /// Weight per coordinate.
+    pub weights: Vec<f64>,
+    /// Indices of the free model parameters in the base vector.
+    pub free: Vec<usize>,
+    /// Base parameter values (the free ones are overwritten by the globals).
+    pub base: Vec<f64>,
+    /// `(experiment, coordinate)` of each offset global, after the free
+    /// parameters.
+    pub offsets: Vec<(usize, usize)>,
+    pub blocks: Vec<BlockLayout>,
+    /// Bounds of the globals.
+    pub lo: Vec<f64>,
+    pub hi: Vec<f64>,
+}
+
+/// `f(i)` for `i` in `0..count` on one worker per core; results in order.
+pub(crate) fn par_each<T: Send>(count: usize, f: impl Fn(usize) -> T + Sync) -> Vec<T> {
+    let workers = std::thread::available_parallelism()
+        .map_or(1, |n| n.get())
+        .min(count);
+    if workers <= 1 {
+        return (0..count).map(f).collect();
+    }
+    let next = AtomicUsize::new(0);
+    let slots: Vec<Mutex<Option<T>>> = (0..count).map(|_| Mutex::new(None)).collect();
+    std::thread::scope(|s| {
+        for _ in 0..workers {
+            s.spawn(|| loop {
+                let i = next.fetch_add(1, Ordering::Relaxed);
+                if i >= count {
+                    break;
+                }
+                let v = f(i);
+                if let Ok(mut slot) = slots[i].lock() {
+                    *slot = Some(v);
+                }
+            });
+        }
+    });
+    slots
+        .into_iter()
+        .map(|m| {
+            m.into_inner()
+                .ok()
+                .flatten()
+                .expect("every block was evaluated")
+        })
+        .collect()
+}
+
+impl Problem<'_> {
+    /// Number of coordinates.
+    pub fn n(&self) -> usize {
+        self.model.coordinates.len()
+    }
+
+    /// Number of residuals over every whole block.
+    pub fn count_all(&self) -> usize {
+        self.blocks
+            .iter()
+            .map(|b| (b.range.end - b.range.start) * self.n())
+            .sum()
+    }
+
+    /// Number of globals.
+    pub fn n_globals(&self) -> usize {
+        self.free.len() + self.offsets.len()
+    }
+
+    /// Base parameter vector at globals `g`.
+    pub fn base_at(&self, g: &[f64]) -> Vec<f64> {
+        let mut b = self.base.clone();
+        for (j, &i) in self.free.iter().enumerate() {
+            b[i] = g[j];
+        }
+        b
+    }
+
+    /// Full parameter vector at globals `g`.
+    pub fn full_at(&self, g: &[f64]) -> Vec<f64> {
+        ParameterValues::from_base(self.model, self.base_at(g)).full
+    }
+
+    /// Per-experiment offsets of experiment `e` (one per coordinate).
+    pub fn exp_offsets(&self, g: &[f64], e: usize) -> Vec<f64> {
+        let mut d = vec![0.0; self.n()];
+        for (o, &(ex, i)) in self.offsets.iter().enumerate() {
+            if ex == e {
+                d[i] = g[self.free.len() + o];
+            }
+        }
+        d
+    }
+
+    /// Whether the initial position of coordinate `i` in block `b` is tied
+    /// to its measurement.
+    fn tied(&self, b: usize) -> Vec<bool> {
+        (0..self.n())
+            .map(|i| !self.blocks[b].free_state.contains(&i))
+            .collect()
+    }
+
+    /// The start of block `b` at point `pt`, its range clipped to `range`.
+    pub fn block_start(
+        &self,
+        b: usize,
+        pt: &Point,
+        model_offsets: &[f64],
+        range: Range<usize>,
+    ) -> BlockStart {
+        let blk = &self.blocks[b];
+        let n = self.n();
+        let sig = &self.sigs[blk.exp];
+        let exp_off = self.exp_offsets(&pt.g, blk.exp);
+        let k0 = blk.range.start;
+        let mut x0 = vec![0.0; 2 * n];
+        for (c, x) in x0.iter_mut().enumerate() {
+            *x = if let Some(j) = blk.free_state.iter().position(|&s| s == c) {
+                pt.l[b][j]
+            } else if c < n {
+                sig.q[c][k0] - model_offsets[c] - exp_off[c]
+            } else {
+                blk.fixed[c]
+            };
+        }
+        BlockStart {
+            range,
+            x0,
+            offsets: exp_off,
+        }
+    }
+
+    /// The samples of block `b` within `horizon` s of its start.
+    pub fn block_range(&self, b: usize, horizon: f64) -> Range<usize> {
+        let blk = &self.blocks[b];
+        if !horizon.is_finite() {
+            return blk.range.clone();
+        }
+        let t = &self.sigs[blk.exp].t;
+        let t0 = t[blk.range.start];
+        let end = blk.range.start + t[blk.range.clone()].partition_point(|&x| x <= t0 + horizon);
+        blk.range.start..end.max(blk.range.start + 1).min(blk.range.end)
+    }
+
+    /// Weighted residuals' sum of squares and count over every block
+    /// within `horizon` of its start.
+    pub fn cost(&self, pt: &Point, horizon: f64) -> Result<(f64, usize), SimError> {
+        let full = self.full_at(&pt.g);
+        let model_off = self.sim.model_offsets(&full)?;
+        let parts = par_each(self.blocks.len(), |b| {
+            let blk = &self.blocks[b];
+            let sig = &self.sigs[blk.exp];
+            let start = self.block_start(b, pt, &model_off, self.block_range(b, horizon));
+            let k0 = start.range.start;
+            let tr = self.sim.simulate_block(sig, &full, &start)?;
+            let mut ssr = 0.0;
+            for (i, qs) in tr.q.iter().enumerate() {
+                let w = self.weights[i];
+                for (k, v) in qs.iter().enumerate() {
+                    let r = w * (v - sig.q[i][k0 + k]);
+                    ssr += r * r;
+                }
+            }
+            Ok((ssr, tr.q.len() * tr.q.first().map_or(0, Vec::len)))
+        });
+        let mut ssr = 0.0;
+        let mut count = 0;
+        for p in parts {
+            let (s, c) = p?;
+            ssr += s;
+            count += c;
+        }
+        if !ssr.is_finite() {
+            return Err(SimError::Diverged {
+                experiment: "(cost)".into(),
+                time: f64::NAN,
+            });
+        }
+        Ok((ssr, count))
+    }
+
+    /// Simulated measurements over every block (whole blocks), stitched per
+    /// experiment: `[experiment][coordinate][sample]`.
+    pub fn predict(&self, pt: &Point) -> Result<Vec<Vec<Vec<f64>>>, SimError> {
+        let full = self.full_at(&pt.g);
+        let model_off = self.sim.model_offsets(&full)?;
+        let parts = par_each(self.blocks.len(), |b| {
+            let start = self.block_start(b, pt, &model_off, self.blocks[b].range.clone());
+            self.sim
+                .simulate_block(&self.sigs[self.blocks[b].exp], &full, &start)
+        });
+        let mut out: Vec<Vec<Vec<f64>>> = self
+            .sigs
+            .iter()
+            .map(|s| vec![vec![f64::NAN; s.len()]; self.n()])
+            .collect();
+        for (b, tr) in parts.into_iter().enumerate() {
+            let tr = tr?;
+            let blk = &self.blocks[b];
+            for (i, q) in tr.q.iter().enumerate() {
+                out[blk.exp][i][blk.range.start..blk.range.start + q.len()].copy_from_slice(q);
+            }
+        }
+        Ok(out)
+    }
+
+    /// The normal equations `J'J`, `J'r` in block-arrow form at `pt` over
+    /// every block within `horizon`.
+    pub fn normal(&self, pt: &Point, horizon: f64) -> Result<Normal, SimError> {
+        let full = self.full_at(&pt.g);
+        let model_off = self.sim.model_offsets(&full)?;
+        let (ng, n) = (self.n_globals(), self.n());
+        // the sensitivity simulator has columns for every free parameter
+        // (in `free` order), or none (nuisance-only stages: the parameters'
+        // rows stay zero and the caller holds them)
+        let p = self.sens.free_indices().len();
+        debug_assert!(p == 0 || p == self.free.len());
+        let p_glob = self.free.len();
+        let parts = par_each(self.blocks.len(), |b| {
+            let blk = &self.blocks[b];
+            let sig = &self.sigs[blk.exp];
+            let start = self.block_start(b, pt, &model_off, self.block_range(b, horizon));
+            let k0 = start.range.start;
+            // extra columns: this experiment's offsets, then free state
+            let tied = self.tied(b);
+            let mut extra = Vec::new();
+            let mut map: Vec<Col> = (0..p).map(Col::Global).collect();
+            for (o, &(e, i)) in self.offsets.iter().enumerate() {
+                if e != blk.exp {
+                    continue;
+                }
+                let mut s0 = vec![0.0; 2 * n];
+                if tied[i] {
+                    s0[i] = -1.0;
+                }
+                let mut direct = vec![0.0; n];
+                direct[i] = 1.0;
+                extra.push(ExtraColumn { s0, direct });
+                map.push(Col::Global(p_glob + o));
+            }
+            for (j, &c) in blk.free_state.iter().enumerate() {
+                let mut s0 = vec![0.0; 2 * n];
+                s0[c] = 1.0;
+                extra.push(ExtraColumn {
+                    s0,
+                    direct: vec![0.0; n],
+                });
+                map.push(Col::Local(j));
+            }
+            let tr = self
+                .sens
+                .simulate_block(sig, &full, &start, &tied, &extra)?;
+            let nc = map.len();
+            let mut jtj = vec![0.0; nc * nc];
+            let mut jtr = vec![0.0; nc];
+            let mut ssr = 0.0;
+            let mut count = 0;
+            let mut row = vec![0.0; nc];
+            for i in 0..n {
+                let w = self.weights[i];
+                for (k, v) in tr.q[i].iter().enumerate() {
+                    let r = w * (v - sig.q[i][k0 + k]);
+                    ssr += r * r;
+                    count += 1;
+                    for (c, rc) in row.iter_mut().enumerate() {
+                        *rc = w * tr.dq[i][c][k];
+                    }
+                    for c in 0..nc {
+                        let rc = row[c];
+                        if rc == 0.0 {
+                            continue;
+                        }
+                        jtr[c] += rc * r;
+                        for d in c..nc {
+                            jtj[c * nc + d] += rc * row[d];
+                        }
+                    }
+                }
+            }
+            for c in 0..nc {
+                for d in 0..c {
+                    jtj[c * nc + d] = jtj[d * nc + c];
+                }
+            }
+            Ok((map, jtj, jtr, ssr, count))
+        });
+        let mut nrm = Normal::new(ng, self.blocks.iter().map(|b| b.free_state.len()));
+        for (b, part) in parts.into_iter().enumerate() {
+            let (map, jtj, jtr, ssr, count) = part?;
+            nrm.ssr += ssr;
+            nrm.count += count;
+            let nc = map.len();
+            let bn: &mut BlockNormal = &mut nrm.blocks[b];
+            for c in 0..nc {
+                match map[c] {
+                    Col::Global(gc) => nrm.g_g[gc] += jtr[c],
+                    Col::Local(lc) => bn.g_l[lc] += jtr[c],
+                }
+                for d in 0..nc {
+                    let v = jtj[c * nc + d];
+                    match (map[c], map[d]) {
+                        (Col::Global(a), Col::Global(bb)) => nrm.a_gg[a * ng + bb] += v,
+                        (Col::Global(a), Col::Local(l)) => bn.a_gl[a * bn.l + l] += v,
+                        (Col::Local(l), Col::Local(m)) => bn.a_ll[l * bn.l + m] += v,
+                        (Col::Local(_), Col::Global(_)) => {}
+                    }
+                }
+            }
+        }
+        if !nrm.ssr.is_finite() {
+            return Err(SimError::Diverged {
+                experiment: "(normal equations)".into(),
+                time: f64::NAN,
+            });
+        }
+        Ok(nrm)
+    }
+}
+
+/// Where a block's sensitivity column goes.
+#[derive(Copy, Clone, Debug, PartialEq)]
+enum Col {
+    Global(usize),
+    Local(usize),
+}

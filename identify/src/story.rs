@@ -1,0 +1,351 @@
+//! The whole identification story as one call: the nominal model against
+//! the data, then rounds of diagnose -> add the missing effect -> refit,
+//! until the model is adequate, nothing helps, or the round limit; with the
+//! model judged on held-out experiments at every stage when given.
+//!
+//! The story only computes; writing files and printing is the caller's
+//! (`plantc identify` formats it, tests and the language server read it).
+
+use std::fmt;
+
+use plantc_derive::model::{Model, ParameterValues};
+
+use crate::data::Experiment;
+use crate::diagnose::{diagnose_with, model_from_text, DiagnoseError, DiagnoseOptions, Ranked};
+use crate::effect_edit::EffectInstance;
+use crate::fit::{fit_with_progress, FitError, FitOptions, FitProgress, FitResult, Horizon};
+use crate::metrics::{compare, FitReport};
+use crate::validate::{as_experiments, validate, ValidateOptions, Validation};
+
+/// Options of [`identify`].
+#[derive(Clone, Debug, PartialEq)]
+pub struct StoryOptions {
+    /// How fits are done (closed loop, nuisance, weights, horizon).
+    pub fit: FitOptions,
+    /// How the diagnosis ranks and decides (its `fit` is replaced by `fit`).
+    pub diagnose: DiagnoseOptions,
+    /// Most effects added in turn.
+    pub max_effects: usize,
+    /// Held-out experiments judged at every stage.
+    pub validate: Vec<Experiment>,
+    /// k-step-ahead prediction horizon for the validation (s).
+    pub predict: Option<f64>,
+}
+
+impl Default for StoryOptions {
+    fn default() -> Self {
+        StoryOptions {
+            fit: FitOptions::default(),
+            diagnose: DiagnoseOptions::default(),
+            max_effects: 3,
+            validate: Vec::new(),
+            predict: None,
+        }
+    }
+}
+
+/// One stage of the story: a model at some parameter values against the
+/// data.
+#[derive(Clone, Debug)]
+pub struct Stage {
+    /// `nominal`, `nominal, refitted`, `+ coulomb_friction@alpha, fitted`...
+    pub label: String,
+    /// The model text of the stage (effects added, values written in by the
+    /// caller from `base`).
+    pub text: String,
+    /// Base parameter values.
+    pub base: Vec<f64>,
+    /// Fit % and RMSE per experiment and channel (simulation with the
+    /// nuisance estimated).
+    pub report: FitReport,
+    /// The simulated coordinates as experiments (for figures).
+    pub simulated: Vec<Experiment>,
+    /// The fit's cost (weighted RMS) where a fit made the stage.
+    pub cost: Option<f64>,
+    /// The validation on the held-out experiments.
+    pub validation: Option<Validation>,
+}
+
+/// One round: a diagnosis and, when it named an effect, the refit with it.
+#[derive(Clone, Debug)]
+pub struct Round {
+    /// The diagnosis of the round's starting model.
+    pub ranking: Vec<Ranked>,
+    /// The effect added (None: the model was adequate).
+    pub effect: Option<EffectInstance>,
+    /// The fit of the model with the effect.
+    pub fit: Option<FitResult>,
+    /// Cost before (the round's baseline fit) and after.
+    pub cost_before: f64,
+    /// See [`Round::cost_before`].
+    pub cost_after: Option<f64>,
+}
+
+/// The result of [`identify`].
+#[derive(Clone, Debug)]
+pub struct Story {
+    /// Stages in order: nominal, nominal refitted, then one per effect.
+    pub stages: Vec<Stage>,
+    /// The rounds of diagnosis.
+    pub rounds: Vec<Round>,
+    /// The last fit (the result's parameters, identifiability, nuisance).
+    pub fit: FitResult,
+    /// The final model text (effects added; the caller writes the values
+    /// of `fit` in).
+    pub text: String,
+    /// Why the story stopped.
+    pub stop: String,
+}
+
+/// Why the story could not be told.
+#[derive(Clone, Debug, PartialEq)]
+pub enum StoryError {
+    /// The model does not check.
+    Model(DiagnoseError),
+    /// A fit failed.
+    Fit(FitError),
+    /// The diagnosis failed.
+    Diagnose(DiagnoseError),
+    /// Comparing failed.
+    Compare(String),
+}
+
+impl fmt::Display for StoryError {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        match self {
+            StoryError::Model(e) | StoryError::Diagnose(e) => write!(f, "{e}"),
+            StoryError::Fit(e) => write!(f, "fit: {e}"),
+            StoryError::Compare(m) => write!(f, "compare: {m}"),
+        }
+    }
+}
+
+impl std::error::Error for StoryError {}
+
+/// What the story is doing, for progress displays.
+#[derive(Clone, Debug, PartialEq)]
+pub enum StoryProgress {
+    /// A step started (`diagnosing (round 1)`, `fitting with ...`).
+    Step(String),
+    /// A fit's iteration.
+    Fit(FitProgress),
+}
+
+/// A stage from a model, its parameters and (if a fit made it) the fit's
+/// simulation; otherwise the nuisance is estimated by [`validate`].
+fn stage(
+    label: &str,
+    text: &str,
+    model: &Model,
+    base: &[f64],
+    fitted: Option<&FitResult>,
+    experiments: &[Experiment],
+    opts: &StoryOptions,
+) -> Result<Stage, StoryError> {
+    let names: Vec<&str> = model.coordinates.iter().map(|c| c.name.as_str()).collect();
+    let vopts = ValidateOptions {
+        fit: FitOptions {
+            horizon: Horizon::Whole,
+            ..opts.fit.clone()
+        },
+        horizon: None,
+        ..ValidateOptions::default()
+    };
+    let simulated = match fitted {
+        Some(f) => {
+            let sims: Vec<Option<&Vec<Vec<f64>>>> = f.simulated.iter().map(Some).collect();
+            as_experiments(model, experiments, &sims)
+        }
+        None => {
+            let v = validate(model, base, experiments, &vopts).map_err(StoryError::Fit)?;
+            let sims: Vec<Option<&Vec<Vec<f64>>>> =
+                v.experiments.iter().map(|e| e.simulated.as_ref()).collect();
+            as_experiments(model, experiments, &sims)
+        }
+    };
+    let report =
+        compare(experiments, &simulated, &names).map_err(|e| StoryError::Compare(e.to_string()))?;
+    let validation = if opts.validate.is_empty() {
+        None
+    } else {
+        Some(
+            validate(
+                model,
+                base,
+                &opts.validate,
+                &ValidateOptions {
+                    horizon: opts.predict,
+                    ..vopts
+                },
+            )
+            .map_err(StoryError::Fit)?,
+        )
+    };
+    Ok(Stage {
+        label: label.to_string(),
+        text: text.to_string(),
+        base: base.to_vec(),
+        report,
+        simulated,
+        cost: fitted.map(|f| f.after_cost),
+        validation,
+    })
+}
+
+/// The candidate with its parameters at the values of its refit (still
+/// marked `estimate`, so the next fit refines them).
+pub fn fitted_instance(r: &Ranked) -> EffectInstance {
+    let mut inst = r.candidate.clone();
+    if let Some(f) = &r.fit {
+        for p in &mut inst.parameters {
+            if let Some(e) = f.parameters.iter().find(|e| e.name == p.name) {
+                // six significant digits: readable in the snippet, and the
+                // next fit refines it anyway
+                p.value = format!("{:.5e}", e.value).parse().unwrap_or(e.value);
+            }
+        }
+    }
+    inst
+}
+
+/// Tell the story for `text` (a model file's content) on `experiments`.
+pub fn identify(
+    text: &str,
+    experiments: &[Experiment],
+    opts: &StoryOptions,
+    progress: &mut dyn FnMut(&StoryProgress),
+) -> Result<Story, StoryError> {
+    let model = model_from_text("model", text).map_err(StoryError::Model)?;
+    let nominal =
+        ParameterValues::new(&model, None, &[]).map_err(|e| StoryError::Compare(e.to_string()))?;
+    progress(&StoryProgress::Step("comparing the nominal model".into()));
+    let mut stages = vec![stage(
+        "nominal",
+        text,
+        &model,
+        &nominal.base,
+        None,
+        experiments,
+        opts,
+    )?];
+    let mut rounds: Vec<Round> = Vec::new();
+    let mut current_text = text.to_string();
+    let mut current_fit: Option<FitResult> = None;
+    let stop;
+    loop {
+        let round = rounds.len() + 1;
+        progress(&StoryProgress::Step(format!("diagnosing (round {round})")));
+        let dopts = DiagnoseOptions {
+            fit: match &current_fit {
+                // later rounds start from the last fit's values
+                Some(f) => FitOptions {
+                    start: Some(f.base.clone()),
+                    ..opts.fit.clone()
+                },
+                None => opts.fit.clone(),
+            },
+            ..opts.diagnose.clone()
+        };
+        let d = diagnose_with(&current_text, experiments, &dopts).map_err(StoryError::Diagnose)?;
+        let current_model = model_from_text("model", &current_text).map_err(StoryError::Model)?;
+        if rounds.is_empty() {
+            stages.push(stage(
+                "nominal, refitted",
+                &current_text,
+                &current_model,
+                &d.baseline.base,
+                Some(&d.baseline),
+                experiments,
+                opts,
+            )?);
+            current_fit = Some(d.baseline.clone());
+        }
+        let cost_before = d.baseline.after_cost;
+        let top = d.verdict.as_ref().and_then(|_| d.ranking.first()).cloned();
+        let Some(top) = top else {
+            rounds.push(Round {
+                ranking: d.ranking,
+                effect: None,
+                fit: None,
+                cost_before,
+                cost_after: None,
+            });
+            stop = if round == 1 {
+                "adequate: no candidate effect lowers the cost clearly".to_string()
+            } else {
+                "no further effect lowers the cost clearly".to_string()
+            };
+            break;
+        };
+        let inst = fitted_instance(&top);
+        let edited = inst.apply(&current_text).map_err(|error| {
+            StoryError::Diagnose(DiagnoseError::Edit {
+                which: inst.label(),
+                error,
+            })
+        })?;
+        let m2 = model_from_text("with_effect", &edited).map_err(StoryError::Model)?;
+        // start from the refit's values (the effect's and the model's)
+        let mut start: Vec<f64> = m2.parameters.iter().map(|p| p.value).collect();
+        if let Some(f) = &top.fit {
+            for (i, p) in m2.parameters.iter().enumerate() {
+                if let Some(e) = f.parameters.iter().find(|e| e.name == p.name) {
+                    start[i] = e.value;
+                } else if let Some(j) = current_model
+                    .parameters
+                    .iter()
+                    .position(|q| q.name == p.name)
+                {
+                    if let Some(cf) = &current_fit {
+                        start[i] = cf.base[j];
+                    }
+                }
+            }
+        }
+        progress(&StoryProgress::Step(format!(
+            "fitting with {}",
+            inst.label()
+        )));
+        let f = fit_with_progress(
+            &m2,
+            experiments,
+            &FitOptions {
+                start: Some(start),
+                ..opts.fit.clone()
+            },
+            &mut |p| progress(&StoryProgress::Fit(p.clone())),
+        )
+        .map_err(StoryError::Fit)?;
+        let label = format!("+ {}, fitted", inst.label());
+        stages.push(stage(
+            &label,
+            &edited,
+            &m2,
+            &f.base,
+            Some(&f),
+            experiments,
+            opts,
+        )?);
+        rounds.push(Round {
+            ranking: d.ranking,
+            effect: Some(inst),
+            fit: Some(f.clone()),
+            cost_before,
+            cost_after: Some(f.after_cost),
+        });
+        current_text = edited;
+        current_fit = Some(f);
+        if rounds.len() >= opts.max_effects {
+            stop = format!("stopped after {} effect(s) (--max-effects)", rounds.len());
+            break;
+        }
+    }
+    let fit = current_fit.expect("the first round fits the nominal model");
+    Ok(Story {
+        stages,
+        rounds,
+        fit,
+        text: current_text,
+        stop,
+    })
+}

@@ -1,0 +1,341 @@
+//! Validation of a model on experiments, like MATLAB's `compare` and
+//! `resid`: simulation fit, k-step-ahead prediction fit and residual tests.
+//!
+//! The model's parameters are fixed; only each experiment's nuisance
+//! unknowns (initial velocities, sensor zero offsets, as the options say)
+//! are estimated, as MATLAB's `compare` estimates initial conditions. So a
+//! held-out recording is judged by the model, not by its starting state.
+//!
+//! - **Simulation**: every experiment simulated whole (in closed loop when a
+//!   recorded controller is in the loop) against its measurements: fit %
+//!   and RMSE per channel. An unstable plant replayed open loop diverges:
+//!   then the simulation fit is reported as missing, with the reason.
+//! - **k-step-ahead prediction** (`horizon` in s): from each window start
+//!   `t0` the model is simulated from the measured state (positions as
+//!   measured minus offsets, velocities from a causal local fit of the past
+//!   20 ms; a recorded controller starts from its filter state on the data),
+//!   and the prediction at `t` is taken from the latest window that starts
+//!   at least `horizon` before `t`. Windows start every tenth of the
+//!   horizon, so predictions are between `horizon` and `1.1 horizon` ahead:
+//!   never easier than asked. Samples within the first `horizon` of a record
+//!   have no prediction.
+//! - **Residual tests** ([`crate::residual_tests`]) on the prediction
+//!   residuals when a horizon is given, else on the simulation residuals.
+
+use serde::Serialize;
+
+use plantc_derive::model::Model;
+
+use crate::data::Experiment;
+use crate::experiment_sim::BlockStart;
+use crate::fit::{lm_nuisance, nuisance_estimates, FitError, FitOptions, Offsets, Setup};
+use crate::fit::{ExperimentEstimate, Horizon};
+use crate::metrics::fit_percent;
+use crate::problem::par_each;
+use crate::residual_tests::{residual_test, ResidualTest, DEFAULT_LAGS};
+
+/// Options of [`validate`].
+#[derive(Clone, Debug, PartialEq)]
+pub struct ValidateOptions {
+    /// Nuisance settings (initial state, offsets), weights, closed loop and
+    /// simulation options; `free`, `start` and the fit stages are ignored.
+    pub fit: FitOptions,
+    /// k-step-ahead prediction horizon in s.
+    pub horizon: Option<f64>,
+    /// Lags of the residual tests.
+    pub lags: usize,
+}
+
+impl Default for ValidateOptions {
+    fn default() -> Self {
+        ValidateOptions {
+            fit: FitOptions::default(),
+            horizon: None,
+            lags: DEFAULT_LAGS,
+        }
+    }
+}
+
+/// Fit % and RMSE of one channel.
+#[derive(Clone, Debug, PartialEq, Serialize)]
+pub struct ChannelScore {
+    /// Channel name.
+    pub channel: String,
+    /// Fit % as MATLAB's `compare` (None when the channel is constant or
+    /// there is no prediction).
+    pub fit_percent: Option<f64>,
+    /// RMSE (SI) over the samples that have a prediction.
+    pub rmse: f64,
+    /// Samples scored.
+    pub samples: usize,
+}
+
+/// The validation of one experiment.
+#[derive(Clone, Debug, PartialEq, Serialize)]
+pub struct ExperimentValidation {
+    /// Experiment name.
+    pub name: String,
+    /// Whole-record simulation per coordinate (None when it diverged).
+    #[serde(skip)]
+    pub simulated: Option<Vec<Vec<f64>>>,
+    /// Why the simulation is missing.
+    pub simulation_error: Option<String>,
+    /// Simulation scores per channel (empty when it diverged).
+    pub simulation: Vec<ChannelScore>,
+    /// k-step-ahead predictions per coordinate (NaN where none).
+    #[serde(skip)]
+    pub predicted: Option<Vec<Vec<f64>>>,
+    /// Prediction scores per channel.
+    pub prediction: Vec<ChannelScore>,
+    /// The nuisance estimated on this experiment.
+    pub nuisance: ExperimentEstimate,
+    /// Residual tests per channel.
+    pub residual_tests: Vec<ResidualTest>,
+}
+
+/// The result of [`validate`].
+#[derive(Clone, Debug, PartialEq, Serialize)]
+pub struct Validation {
+    /// Per experiment.
+    pub experiments: Vec<ExperimentValidation>,
+    /// The prediction horizon (s), if asked.
+    pub horizon: Option<f64>,
+    /// The recorded controller in the loop, if any.
+    pub closed_loop: Option<String>,
+}
+
+impl Validation {
+    /// Mean fit % of a channel over the experiments (simulation, or
+    /// prediction with `predicted`); None when no experiment has one.
+    pub fn mean_fit(&self, channel: &str, predicted: bool) -> Option<f64> {
+        let v: Vec<f64> = self
+            .experiments
+            .iter()
+            .filter_map(|e| {
+                let s = if predicted {
+                    &e.prediction
+                } else {
+                    &e.simulation
+                };
+                s.iter()
+                    .find(|c| c.channel == channel)
+                    .and_then(|c| c.fit_percent)
+            })
+            .collect();
+        (!v.is_empty()).then(|| v.iter().sum::<f64>() / v.len() as f64)
+    }
+}
+
+/// Fit % and RMSE over the samples where the prediction is finite.
+fn score(channel: &str, y: &[f64], yhat: &[f64]) -> ChannelScore {
+    let (ys, hs): (Vec<f64>, Vec<f64>) = y
+        .iter()
+        .zip(yhat)
+        .filter(|(_, h)| h.is_finite())
+        .map(|(a, b)| (*a, *b))
+        .unzip();
+    let n = ys.len();
+    let rmse = if n == 0 {
+        f64::NAN
+    } else {
+        (ys.iter()
+            .zip(&hs)
+            .map(|(a, b)| (a - b).powi(2))
+            .sum::<f64>()
+            / n as f64)
+            .sqrt()
+    };
+    ChannelScore {
+        channel: channel.to_string(),
+        fit_percent: if n == 0 {
+            None
+        } else {
+            fit_percent(&ys, &hs).ok().flatten()
+        },
+        rmse,
+        samples: n,
+    }
+}
+
+/// Validate `model` at base parameter values `base` on `experiments`.
+pub fn validate(
+    model: &Model,
+    base: &[f64],
+    experiments: &[Experiment],
+    opts: &ValidateOptions,
+) -> Result<Validation, FitError> {
+    if experiments.is_empty() {
+        return Err(FitError::NoExperiments);
+    }
+    if let Some(h) = opts.horizon {
+        if !(h > 0.0 && h.is_finite()) {
+            return Err(FitError::BadOption(format!(
+                "the prediction horizon must be a positive number of seconds, got {h}"
+            )));
+        }
+    }
+    let fo = FitOptions {
+        free: Some(Vec::new()),
+        start: Some(base.to_vec()),
+        horizon: Horizon::Whole,
+        offsets: match &opts.fit.offsets {
+            // on held-out data every eligible offset is estimated (nothing
+            // is dropped afterwards)
+            Offsets::Auto => Offsets::Auto,
+            o => o.clone(),
+        },
+        ..opts.fit.clone()
+    };
+    let setup = Setup::new(model, experiments, &fo, &[])?;
+    let n = model.coordinates.len();
+    let names: Vec<&str> = model.coordinates.iter().map(|c| c.name.as_str()).collect();
+    let pb = setup.nuisance_problem(None);
+    let mut pt = setup.start_point(&pb, &[]);
+    // nuisance: per experiment (independent), whole records
+    let fitted = lm_nuisance(&setup, &pb, &mut pt);
+    let simulated = if fitted { pb.predict(&pt).ok() } else { None };
+    let estimates = nuisance_estimates(&setup, &pb, &pt);
+    let full = pb.full_at(&pt.g);
+    let model_off = setup.sim.model_offsets(&full).map_err(FitError::Sim)?;
+    let predictions: Vec<Option<Vec<Vec<f64>>>> = match opts.horizon {
+        None => vec![None; experiments.len()],
+        Some(h) => par_each(experiments.len(), |e| {
+            predict_ahead(&setup, &pb.exp_offsets(&pt.g, e), &model_off, &full, e, h)
+        }),
+    };
+    let mut out = Vec::new();
+    for (e, exp) in experiments.iter().enumerate() {
+        let sig = &setup.sigs[e];
+        let sim_e = simulated.as_ref().map(|s| s[e].clone());
+        let simulation: Vec<ChannelScore> = match &sim_e {
+            Some(s) => (0..n).map(|i| score(names[i], &sig.q[i], &s[i])).collect(),
+            None => Vec::new(),
+        };
+        let pred = predictions[e].clone();
+        let prediction: Vec<ChannelScore> = match &pred {
+            Some(p) => (0..n).map(|i| score(names[i], &sig.q[i], &p[i])).collect(),
+            None => Vec::new(),
+        };
+        let resid_source = pred.as_ref().or(sim_e.as_ref());
+        let inputs: Vec<(&str, &[f64])> = model
+            .inputs
+            .iter()
+            .zip(&sig.u)
+            .map(|(i, u)| (i.name.as_str(), u.as_slice()))
+            .collect();
+        let residual_tests = match resid_source {
+            Some(p) => (0..n)
+                .map(|i| {
+                    let r: Vec<f64> = sig.q[i].iter().zip(&p[i]).map(|(a, b)| a - b).collect();
+                    residual_test(
+                        &exp.name,
+                        names[i],
+                        &r,
+                        &inputs,
+                        opts.lags,
+                        sig.sample_time(),
+                    )
+                })
+                .collect(),
+            None => Vec::new(),
+        };
+        out.push(ExperimentValidation {
+            name: exp.name.clone(),
+            simulation_error: sim_e.is_none().then(|| {
+                "the simulation of the whole record diverged (an unstable plant replayed open loop: use a prediction horizon, or a recorded controller in the loop)".to_string()
+            }),
+            simulated: sim_e,
+            simulation,
+            predicted: pred,
+            prediction,
+            nuisance: estimates[e].clone(),
+            residual_tests,
+        });
+    }
+    Ok(Validation {
+        experiments: out,
+        horizon: opts.horizon,
+        closed_loop: setup.sim.law().map(|l| l.name.clone()),
+    })
+}
+
+/// k-step-ahead predictions of experiment `e` (see the module docs).
+fn predict_ahead(
+    setup: &Setup<'_>,
+    exp_off: &[f64],
+    model_off: &[f64],
+    full: &[f64],
+    e: usize,
+    horizon: f64,
+) -> Option<Vec<Vec<f64>>> {
+    let sig = &setup.sigs[e];
+    let n = sig.q.len();
+    let len = sig.len();
+    let mut out = vec![vec![f64::NAN; len]; n];
+    // samples per horizon from the median period
+    let dt = sig.sample_time();
+    let hk = ((horizon / dt).round() as usize).max(1);
+    let stride = (hk / 10).max(1);
+    let mut k0 = 0;
+    while k0 + hk < len {
+        let end = (k0 + hk + stride).min(len);
+        let mut x0 = vec![0.0; 2 * n];
+        for i in 0..n {
+            x0[i] = sig.q[i][k0] - model_off[i] - exp_off[i];
+            x0[n + i] = causal_velocity(&sig.t, &sig.q[i], k0, 0.02);
+        }
+        let start = BlockStart {
+            range: k0..end,
+            x0,
+            offsets: exp_off.to_vec(),
+        };
+        if let Ok(tr) = setup.sim.simulate_block(sig, full, &start) {
+            for i in 0..n {
+                for k in (k0 + hk)..end {
+                    out[i][k] = tr.q[i][k - k0];
+                }
+            }
+        }
+        k0 += stride;
+    }
+    Some(out)
+}
+
+/// Velocity at sample `k` from the samples of the past `window` s only (a
+/// local quadratic's slope at `t_k`); from the first samples forward when
+/// there is no past.
+fn causal_velocity(t: &[f64], y: &[f64], k: usize, window: f64) -> f64 {
+    let a = t[..=k].partition_point(|&x| x < t[k] - window);
+    if k - a < 2 {
+        return crate::experiment_sim::velocity_at(t, y, k, window / 2.0);
+    }
+    crate::experiment_sim::velocity_at(&t[a..=k], &y[a..=k], k - a, window)
+}
+
+/// Simulated (or predicted) coordinates as experiments with the measured
+/// ones' names, files and instants, for figures and where-it-fails.
+pub fn as_experiments(
+    model: &Model,
+    measured: &[Experiment],
+    sim: &[Option<&Vec<Vec<f64>>>],
+) -> Vec<Experiment> {
+    measured
+        .iter()
+        .zip(sim)
+        .map(|(m, s)| Experiment {
+            name: m.name.clone(),
+            file: m.file.clone(),
+            t: m.t.clone(),
+            channels: model
+                .coordinates
+                .iter()
+                .enumerate()
+                .map(|(i, c)| crate::data::Channel {
+                    name: c.name.clone(),
+                    unit_note: None,
+                    values: s.map_or_else(|| vec![f64::NAN; m.len()], |s| s[i].clone()),
+                })
+                .collect(),
+        })
+        .collect()
+}
