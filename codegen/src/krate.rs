@@ -215,14 +215,101 @@ pub fn write_crate(opts: &CrateOptions) -> Result<Vec<PathBuf>, Error> {
         ),
     };
     let files = [
-        (opts.dir.join("Cargo.toml"), cargo),
-        (opts.dir.join("src/lib.rs"), lib),
-        (opts.dir.join("examples/simulate.rs"), sim),
+        ("Cargo.toml", cargo),
+        ("src/lib.rs", lib),
+        ("examples/simulate.rs", sim),
     ];
-    let mut out = Vec::new();
-    for (p, text) in files {
-        write_if_changed(&p, &text)?;
-        out.push(p);
+    write_files(&opts.dir, &files)?;
+    Ok(files.iter().map(|(p, _)| opts.dir.join(p)).collect())
+}
+
+/// Hard-links (or copies) every file below `from` to the same place below
+/// `to`, except the generated ones (`skip`, relative to the crate as `rel`).
+fn carry_over(from: &Path, to: &Path, rel: &Path, skip: &[&Path]) -> std::io::Result<()> {
+    let Ok(entries) = std::fs::read_dir(from) else {
+        return Ok(());
+    };
+    for e in entries {
+        let e = e?;
+        let (src, dst, r) = (e.path(), to.join(e.file_name()), rel.join(e.file_name()));
+        if skip.contains(&r.as_path()) {
+            continue;
+        }
+        if e.file_type()?.is_dir() {
+            carry_over(&src, &dst, &r, skip)?;
+        } else {
+            std::fs::create_dir_all(to)?;
+            if std::fs::hard_link(&src, &dst).is_err() {
+                std::fs::copy(&src, &dst)?;
+            }
+        }
     }
-    Ok(out)
+    Ok(())
+}
+
+/// Top-level entries of a generated crate; anything else in its directory
+/// (`target/`, `Cargo.lock`, the user's files) is kept on regeneration.
+const GENERATED_ENTRIES: [&str; 3] = ["Cargo.toml", "src", "examples"];
+
+/// Writes the crate's files so that a kill at any moment leaves either the
+/// old complete crate or the new complete one: nothing when every file is
+/// unchanged; otherwise a new copy of the directory, swapped in (files whose
+/// content did not change keep their modification time, so cargo does not
+/// rebuild for them; other entries are carried over). In the current
+/// directory, which cannot be swapped, each file is replaced crash-safely.
+fn write_files(dir: &Path, files: &[(&str, String)]) -> Result<(), Error> {
+    let io = |path: &Path| {
+        let path = path.to_path_buf();
+        move |e: &dyn std::fmt::Display| Error::Io {
+            path: path.clone(),
+            message: e.to_string(),
+        }
+    };
+    let unchanged = |rel: &str, text: &str| {
+        std::fs::read(dir.join(rel)).is_ok_and(|old| old == text.as_bytes())
+    };
+    if files.iter().all(|(rel, text)| unchanged(rel, text)) {
+        return Ok(());
+    }
+    let fresh = match plantc_fsio::FreshDir::create(dir) {
+        Ok(f) => f,
+        Err(plantc_fsio::Error::CurrentDirectory { .. }) => {
+            for (rel, text) in files {
+                write_if_changed(&dir.join(rel), text)?;
+            }
+            return Ok(());
+        }
+        Err(e) => return Err(io(dir)(&e)),
+    };
+    // files of the user's inside src/ and examples/ (a `--force` over their
+    // crate) stay: linked (or copied) into the new directory first
+    for sub in ["src", "examples"] {
+        let skip: Vec<&Path> = files.iter().map(|(rel, _)| Path::new(*rel)).collect();
+        carry_over(
+            &dir.join(sub),
+            &fresh.path().join(sub),
+            Path::new(sub),
+            &skip,
+        )
+        .map_err(|e| io(&dir.join(sub))(&e))?;
+    }
+    for (rel, text) in files {
+        let p = fresh.path().join(rel);
+        if let Some(parent) = p.parent() {
+            std::fs::create_dir_all(parent).map_err(|e| io(parent)(&e))?;
+        }
+        plantc_fsio::write_atomic(&p, text).map_err(|e| io(&dir.join(rel))(&e))?;
+        if unchanged(rel, text) {
+            let old = std::fs::metadata(dir.join(rel)).and_then(|m| m.modified());
+            if let Ok(t) = old {
+                let _ = std::fs::File::options()
+                    .write(true)
+                    .open(&p)
+                    .and_then(|f| f.set_modified(t));
+            }
+        }
+    }
+    fresh
+        .commit_keeping(|n| !GENERATED_ENTRIES.iter().any(|g| n == Path::new(g)))
+        .map_err(|e| io(dir)(&e))
 }

@@ -255,25 +255,22 @@ impl Builder {
     }
 }
 
-/// Write `text` to `path` unless it already holds exactly that text.
+/// Write `text` to `path` unless it already holds exactly that text
+/// (creating missing parent directories). The write is crash-safe
+/// (`plantc_fsio::write_if_changed`: temporary file, fsync, rename), so a
+/// build interrupted at any moment never leaves a truncated file.
 /// Returns whether the file was written.
 pub fn write_if_changed(path: &Path, text: &str) -> Result<bool, Error> {
-    if let Ok(old) = std::fs::read(path) {
-        if old == text.as_bytes() {
-            return Ok(false);
-        }
-    }
-    if let Some(parent) = path.parent() {
+    if let Some(parent) = path.parent().filter(|p| !p.as_os_str().is_empty()) {
         std::fs::create_dir_all(parent).map_err(|e| Error::Io {
             path: parent.to_path_buf(),
             message: e.to_string(),
         })?;
     }
-    std::fs::write(path, text).map_err(|e| Error::Io {
+    plantc_fsio::write_if_changed(path, text).map_err(|e| Error::Io {
         path: path.to_path_buf(),
         message: e.to_string(),
-    })?;
-    Ok(true)
+    })
 }
 
 /// Generate the module text (header + body) for a loaded model.

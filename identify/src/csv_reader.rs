@@ -198,6 +198,7 @@ pub(crate) fn read_csv(
     let mut values: Vec<Vec<f64>> = vec![Vec::new(); plans.len()];
     let mut dropped: Vec<Option<u64>> = vec![None; plans.len()];
     let mut record = csv::StringRecord::new();
+    let width = headers.len();
     loop {
         match rdr.read_record(&mut record) {
             Ok(true) => {}
@@ -205,6 +206,19 @@ pub(crate) fn read_csv(
             Err(e) => return Err(csv_err(e)),
         }
         let line = record.position().map(|p| p.line()).unwrap_or(0);
+        if record.len() != width {
+            return Err(DataError::FieldCount {
+                file,
+                line,
+                expected: width,
+                found: record.len(),
+                decimal_comma: if record.len() > width {
+                    decimal_comma(&record)
+                } else {
+                    None
+                },
+            });
+        }
         for (k, plan) in plans.iter().enumerate() {
             let cell = record.get(plan.index).unwrap_or("");
             let parsed = parse_cell(cell);
@@ -275,6 +289,9 @@ pub(crate) fn read_csv(
         });
     }
     warnings.extend(sampling_warning(&file, &t));
+    if plans[0].note.is_none() {
+        warnings.extend(crate::plausibility::time_unit_warning(&file, &t));
+    }
     Ok((
         Experiment {
             name: experiment_name(path),
@@ -294,6 +311,28 @@ pub(crate) fn unit_note(symbol: &str, kind: Kind) -> String {
     } else {
         format!("{symbol} -> {si}")
     }
+}
+
+/// The first pair of adjacent fields that reads like one number written
+/// with a decimal comma (`3` and `14`, or `-0` and `5e-3`): (1-based column
+/// of the first, `3,14`).
+fn decimal_comma(record: &csv::StringRecord) -> Option<(usize, String)> {
+    let int = |s: &str| {
+        let s = s.strip_prefix(['-', '+']).unwrap_or(s);
+        !s.is_empty() && s.bytes().all(|b| b.is_ascii_digit())
+    };
+    let frac = |s: &str| {
+        let digits = s.bytes().take_while(u8::is_ascii_digit).count();
+        digits > 0
+            && (digits == s.len()
+                || (matches!(s.as_bytes()[digits], b'e' | b'E')
+                    && s[digits + 1..].parse::<i32>().is_ok()))
+    };
+    let cells: Vec<&str> = record.iter().collect();
+    cells
+        .windows(2)
+        .position(|w| int(w[0]) && frac(w[1]))
+        .map(|j| (j + 1, format!("{},{}", cells[j], cells[j + 1])))
 }
 
 /// Parses one cell as a finite number.

@@ -238,8 +238,15 @@ pub fn read_experiment_with(
         Some("mat") => crate::mat_reader::read_mat(path, expected, options)?,
         Some("csv") | Some("txt") | None => crate::csv_reader::read_csv(path, expected)?,
         Some(_) => {
-            // Sniff: a MAT v5 file starts with a 116-byte text header "MATLAB 5.0".
-            match std::fs::read(path) {
+            // Sniff: a MAT v5 file starts with a 116-byte text header "MATLAB 5.0"
+            // (only the first bytes are read: the file may be large).
+            let head = std::fs::File::open(path).and_then(|f| {
+                use std::io::Read;
+                let mut head = Vec::with_capacity(6);
+                f.take(6).read_to_end(&mut head)?;
+                Ok(head)
+            });
+            match head {
                 Ok(bytes) if bytes.starts_with(b"MATLAB") => {
                     crate::mat_reader::read_mat(path, expected, options)?
                 }
@@ -263,6 +270,8 @@ pub fn read_experiment_with(
 }
 
 /// Reads several files: one experiment each. Stops at the first error.
+/// Experiment names are unique (see [`unique_names`]): tables and figure
+/// files never merge two experiments.
 pub fn read_experiments<P: AsRef<Path>>(
     paths: &[P],
     expected: &ChannelSpec,
@@ -275,7 +284,36 @@ pub fn read_experiments<P: AsRef<Path>>(
         exps.push(e);
         warnings.extend(w);
     }
+    unique_names(&mut exps);
     Ok((exps, warnings))
+}
+
+/// Makes experiment names unique: files with the same stem from different
+/// folders are named `<folder>-<stem>` (`a/exp.csv`, `b/exp.csv` -> `a-exp`,
+/// `b-exp`); any name still repeated gets `-2`, `-3`, ... Unique names are
+/// left alone.
+pub fn unique_names(exps: &mut [Experiment]) {
+    let count = |exps: &[Experiment], name: &str| exps.iter().filter(|e| e.name == name).count();
+    let repeated: Vec<bool> = exps.iter().map(|e| count(exps, &e.name) > 1).collect();
+    for (e, rep) in exps.iter_mut().zip(repeated) {
+        if rep {
+            if let Some(folder) = e.file.canonicalize().ok().and_then(|p| {
+                p.parent()
+                    .and_then(|d| d.file_name())
+                    .map(|s| s.to_string_lossy().into_owned())
+            }) {
+                e.name = format!("{folder}-{}", e.name);
+            }
+        }
+    }
+    for i in 0..exps.len() {
+        let mut k = 1;
+        let base = exps[i].name.clone();
+        while exps[..i].iter().any(|e| e.name == exps[i].name) {
+            k += 1;
+            exps[i].name = format!("{base}-{k}");
+        }
+    }
 }
 
 /// The experiment name for a file: its stem.

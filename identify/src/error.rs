@@ -136,6 +136,21 @@ pub enum DataError {
         /// What is wrong.
         message: String,
     },
+    /// A row has more (or fewer) fields than the header: a decimal comma
+    /// (`3,14`) or a stray separator would shift every later cell.
+    FieldCount {
+        /// The file.
+        file: PathBuf,
+        /// The line (header is line 1).
+        line: u64,
+        /// Fields in the header.
+        expected: usize,
+        /// Fields in this row.
+        found: usize,
+        /// A pair of fields that reads like a number with a decimal comma:
+        /// (1-based column of its first part, the text `3,14`).
+        decimal_comma: Option<(usize, String)>,
+    },
     /// The file extension is neither `.csv` nor `.mat`.
     UnknownFormat {
         /// The file.
@@ -165,6 +180,7 @@ impl DataError {
             | UnknownUnit { file, .. }
             | IncompatibleUnit { file, .. }
             | Mat { file, .. }
+            | FieldCount { file, .. }
             | UnknownFormat { file } => Some(file),
             ChannelMap { .. } => None,
         }
@@ -175,7 +191,9 @@ impl DataError {
         use DataError::*;
         match self {
             Csv { line, .. } => *line,
-            BadCell { line, .. } | TimeNotIncreasing { line, .. } => Some(*line),
+            BadCell { line, .. } | TimeNotIncreasing { line, .. } | FieldCount { line, .. } => {
+                Some(*line)
+            }
             DuplicateColumn { .. } | UnknownUnit { .. } | IncompatibleUnit { .. } => Some(1),
             // in a text file: the header lacks the column; the file ends
             // after its last sample
@@ -194,6 +212,10 @@ impl DataError {
             | UnknownUnit { column, .. }
             | IncompatibleUnit { column, .. } => Some(*column),
             DuplicateColumn { second, .. } => Some(*second),
+            FieldCount {
+                decimal_comma: Some((c, _)),
+                ..
+            } => Some(*c),
             _ => None,
         }
     }
@@ -259,6 +281,20 @@ impl DataError {
             ),
             Mat { message, .. } => message.clone(),
             ChannelMap { message } => format!("bad channel mapping: {message}"),
+            FieldCount {
+                expected,
+                found,
+                decimal_comma,
+                ..
+            } => {
+                let mut m = format!(
+                    "this row has {found} fields, the header has {expected}: its cells would be read from the wrong columns"
+                );
+                if let Some((_, text)) = decimal_comma {
+                    m.push_str(&format!("; `{text}` looks like a number with a decimal comma"));
+                }
+                m
+            }
             UnknownFormat { .. } => "unknown file format (expected .csv or .mat)".to_string(),
         }
     }
@@ -288,6 +324,13 @@ impl DataError {
             Mat { help, .. } => help.clone(),
             ChannelMap { .. } => {
                 "give the signal rows in order after time, e.g. `--channels theta,alpha,Vm`".into()
+            }
+            FieldCount {
+                decimal_comma: Some(_),
+                ..
+            } => "write numbers with a decimal point (`3.14`): fields are separated by commas".into(),
+            FieldCount { .. } => {
+                "every row needs exactly one field per header column; fix or remove this row (a row cut short by a crash can be deleted)".into()
             }
             UnknownFormat { .. } => "give a .csv file with a header or a MAT v5 .mat file".into(),
         }
@@ -360,6 +403,14 @@ pub enum DataWarning {
         /// The largest interval (s).
         max_dt: f64,
     },
+    /// The time column has no unit suffix and steps so slowly that it is
+    /// probably in milliseconds (or microseconds).
+    LooksLikeMilliseconds {
+        /// The file.
+        file: PathBuf,
+        /// The median step of time as read (s).
+        median_dt: f64,
+    },
     /// Something about a MAT file's layout was assumed.
     MatLayout {
         /// The file.
@@ -409,6 +460,12 @@ impl fmt::Display for DataWarning {
                 f,
                 "{}: warning: irregular sampling: interval from {min_dt} s to {max_dt} s (median {median_dt} s)",
                 file.display()
+            ),
+            DataWarning::LooksLikeMilliseconds { file, median_dt } => write!(
+                f,
+                "{}: warning: time column `t` has no unit suffix and steps by {median_dt} s (a {} Hz sampling rate, implausibly slow for a rig): if it is in milliseconds write `t[ms]` in the header (`t[us]` for microseconds)",
+                file.display(),
+                crate::plausibility::rate_text(*median_dt)
             ),
             DataWarning::MatLayout { file, message } => {
                 write!(f, "{}: warning: {message}", file.display())

@@ -228,6 +228,7 @@ pub(crate) fn read_mat(
         });
     }
     warnings.extend(sampling_warning(&file, &t));
+    warnings.extend(crate::plausibility::time_unit_warning(&file, &t));
     Ok((
         Experiment {
             name: experiment_name(path),

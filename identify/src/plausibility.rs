@@ -24,6 +24,31 @@ use crate::data::{ChannelSpec, Experiment};
 use crate::error::DataWarning;
 use crate::units::Kind;
 
+/// Time steps at least this long (s, i.e. sampling at 2 Hz or slower) in a
+/// time column without unit suffix suggest milliseconds: rigs are sampled at
+/// tens of Hz to kHz (a 500 Hz log in ms steps by 2 "s").
+pub const SLOW_TIME_STEP: f64 = 0.5;
+
+/// A warning when a time column read as seconds (no unit suffix) steps by
+/// [`SLOW_TIME_STEP`] or more.
+pub(crate) fn time_unit_warning(file: &std::path::Path, t: &[f64]) -> Option<DataWarning> {
+    let dt = crate::data::median_dt(t)?;
+    (dt >= SLOW_TIME_STEP).then(|| DataWarning::LooksLikeMilliseconds {
+        file: file.to_path_buf(),
+        median_dt: dt,
+    })
+}
+
+/// `1/dt` for messages, compactly.
+pub(crate) fn rate_text(dt: f64) -> String {
+    let r = 1.0 / dt;
+    if r >= 0.01 {
+        format!("{}", (r * 1000.0).round() / 1000.0)
+    } else {
+        format!("{r:.1e}")
+    }
+}
+
 /// Runs the checks on the expected coordinates that had no unit suffix.
 pub(crate) fn check(exp: &Experiment, spec: &ChannelSpec) -> Vec<DataWarning> {
     let mut out = Vec::new();

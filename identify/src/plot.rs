@@ -87,7 +87,8 @@ pub fn plot_comparison(
     channels: &[&str],
 ) -> Result<(), PlotError> {
     let svg = render_comparison(measured, simulated, channels)?;
-    std::fs::write(path, svg).map_err(|e| PlotError::Io {
+    // crash-safe: an existing figure is replaced whole or not at all
+    plantc_fsio::write_atomic(path, svg).map_err(|e| PlotError::Io {
         file: path.to_path_buf(),
         message: e.to_string(),
     })
@@ -247,7 +248,7 @@ fn decimate(t: &[f64], x: &[f64]) -> Vec<(f64, f64)> {
 /// 99 % band shaded; writes one SVG to `path`.
 pub fn plot_residual_tests(path: &Path, tests: &[crate::ResidualTest]) -> Result<(), PlotError> {
     let svg = render_residual_tests(tests)?;
-    std::fs::write(path, svg).map_err(|e| PlotError::Io {
+    plantc_fsio::write_atomic(path, svg).map_err(|e| PlotError::Io {
         file: path.to_path_buf(),
         message: e.to_string(),
     })

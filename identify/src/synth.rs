@@ -657,9 +657,36 @@ fn time_decimals(rate: f64) -> usize {
         .unwrap_or(9)
 }
 
+/// Most components of a multisine: the cost is samples x components, and
+/// the number of multiples of `1/duration` in the band grows with the
+/// duration (a 2000 s experiment has 11,400 in 0.3-6 Hz: hours of work).
+/// Longer experiments space their components by `m/duration` instead, which
+/// repeats the multisine `m` times over the record (same band, same
+/// amplitudes): linear in the duration.
+pub const MAX_MULTISINE_COMPONENTS: usize = 512;
+
+/// The frequency step and the first and last multiple of it in the band
+/// (see [`MAX_MULTISINE_COMPONENTS`]).
+fn multisine_grid(duration: f64, f_lo: f64, f_hi: f64) -> (f64, usize, usize) {
+    let count = |df: f64| {
+        let k_lo = (f_lo / df - 1e-9).ceil().max(1.0) as usize;
+        let k_hi = (f_hi / df + 1e-9).floor() as usize;
+        (k_lo, k_hi)
+    };
+    let mut df = 1.0 / duration;
+    let (k_lo, k_hi) = count(df);
+    let fitting = (k_hi + 1).saturating_sub(k_lo);
+    if fitting > MAX_MULTISINE_COMPONENTS {
+        df *= fitting.div_ceil(MAX_MULTISINE_COMPONENTS) as f64;
+    }
+    let (k_lo, k_hi) = count(df);
+    (df, k_lo, k_hi)
+}
+
 /// The zero-mean multisine: components at multiples of `1/duration` in
-/// `[f_lo, f_hi]` with equal amplitude and seeded random phases, scaled so
-/// that the RMS over the samples is `rms`.
+/// `[f_lo, f_hi]` (of `m/duration` when more than
+/// [`MAX_MULTISINE_COMPONENTS`] would fit) with equal amplitude and seeded
+/// random phases, scaled so that the RMS over the samples is `rms`.
 fn multisine(
     t: &[f64],
     duration: f64,
@@ -669,9 +696,7 @@ fn multisine(
     rng: &mut SplitMix,
     token: &str,
 ) -> Result<Vec<f64>, SynthError> {
-    let df = 1.0 / duration;
-    let k_lo = (f_lo / df - 1e-9).ceil().max(1.0) as usize;
-    let k_hi = (f_hi / df + 1e-9).floor() as usize;
+    let (df, k_lo, k_hi) = multisine_grid(duration, f_lo, f_hi);
     if k_hi < k_lo {
         return Err(bad(
             token,
@@ -1127,6 +1152,22 @@ pub fn synthesize(model_text: &str, spec: &SynthSpec) -> Result<Synthesized, Syn
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// Reliability reproducer 16b: the components of a 2000 s experiment made
+    /// synth quadratic in the duration; they are capped (linear), and short
+    /// experiments keep every multiple of 1/duration (the bundled data).
+    #[test]
+    fn multisine_components_are_capped_for_long_experiments() {
+        let (df, lo, hi) = multisine_grid(20.0, 0.3, 6.0);
+        assert_eq!((df, lo, hi), (0.05, 6, 120));
+        let (df, lo, hi) = multisine_grid(2000.0, 0.3, 6.0);
+        assert!(hi - lo < MAX_MULTISINE_COMPONENTS, "{lo}..{hi}");
+        // an integer number of periods in the record, the same band
+        let periods = 2000.0 * df;
+        assert!((periods - periods.round()).abs() < 1e-9, "{periods}");
+        assert!(lo as f64 * df >= 0.3 && hi as f64 * df <= 6.0 + 1e-9);
+        assert!((lo as f64 - 1.0) * df < 0.3 && (hi as f64 + 1.0) * df > 6.0);
+    }
 
     #[test]
     fn multisine_is_zero_mean_with_the_asked_rms() {

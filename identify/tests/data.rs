@@ -104,22 +104,68 @@ fn empty_cell_names_line_and_column() {
 }
 
 #[test]
-fn short_row_is_an_empty_cell() {
+fn short_row_is_a_field_count_error() {
     let s = good_csv(20).replacen(",0.500\n", "\n", 1);
-    let (_, msg) = fail("shortrow", &s);
+    let (e, msg) = fail("shortrow", &s);
     assert!(
-        msg.contains("bad.csv:2:4:") && msg.contains("empty cell"),
+        msg.contains("bad.csv:2: ") && msg.contains("this row has 3 fields, the header has 4"),
         "{msg}"
     );
+    assert!(matches!(e, DataError::FieldCount { found: 3, .. }));
+}
+
+/// Reliability reproducer 10: a decimal comma in one cell shifted the row
+/// (alpha read 3, Vm read 14) and the rest was silently dropped.
+#[test]
+fn decimal_comma_row_is_an_error_with_a_hint() {
+    let s = good_csv(20).replacen("3.103000", "3,14", 1);
+    let (e, msg) = fail("decimal_comma", &s);
+    assert!(msg.contains("bad.csv:5:3:"), "{msg}");
+    assert!(
+        msg.contains("this row has 5 fields, the header has 4"),
+        "{msg}"
+    );
+    assert!(
+        msg.contains("`3,14` looks like a number with a decimal comma"),
+        "{msg}"
+    );
+    assert!(msg.contains("decimal point"), "{msg}");
+    assert_eq!((e.line(), e.column()), (Some(5), Some(3)));
+    // an extra field that is no decimal comma: still an error, no hint
+    let s = good_csv(20).replacen(",0.500\n", ",0.500,x\n", 1);
+    let (_, msg) = fail("extra_field", &s);
+    assert!(
+        msg.contains("bad.csv:2: ") && msg.contains("5 fields"),
+        "{msg}"
+    );
+    assert!(!msg.contains("decimal comma"), "{msg}");
+}
+
+/// Reliability reproducer 16a: time logged in ms without a `t[ms]` suffix.
+#[test]
+fn time_in_milliseconds_without_suffix_warns() {
+    let mut s = String::from("t,theta,alpha,Vm\n");
+    s += &rows(20, |k, _| format!("{},0.01,3.1,0.5", 2 * k));
+    let p = write("ms", "ms.csv", &s);
+    let (_, w) = read_experiment(&p, &pendulum_spec()).unwrap();
+    let text: Vec<String> = w.iter().map(|w| w.to_string()).collect();
+    assert!(
+        w.iter().any(|w| matches!(w, DataWarning::LooksLikeMilliseconds { median_dt, .. } if *median_dt == 2.0)),
+        "{text:?}"
+    );
+    assert!(text.iter().any(|t| t.contains("write `t[ms]`")), "{text:?}");
+    // with the suffix, or at a plausible rate, no warning
+    let (_, w) = read_experiment(&write("ms2", "ok.csv", &good_csv(20)), &pendulum_spec()).unwrap();
+    assert!(w.is_empty(), "{w:?}");
 }
 
 #[test]
 fn unparsable_number() {
     let s = good_csv(20).replacen("3.103000", "3,1o3", 1);
     let (_, msg) = fail("unparsable", &s);
-    // The comma splits the cell: alpha reads `3` and Vm reads `1o3`.
-    assert!(msg.contains("bad.csv:5:4:"), "{msg}");
-    assert!(msg.contains("cannot parse `1o3`"), "{msg}");
+    // The comma splits the cell: the row has one field too many.
+    assert!(msg.contains("bad.csv:5: "), "{msg}");
+    assert!(msg.contains("5 fields"), "{msg}");
     let s = good_csv(20).replacen("3.103000", "3.1o3", 1);
     let (_, msg) = fail("unparsable2", &s);
     assert!(

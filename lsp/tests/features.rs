@@ -232,7 +232,12 @@ fn a_change_without_range_replaces_the_text() {
     ));
     let d = out[0].params["diagnostics"].as_array().unwrap();
     assert_eq!(out[0].params["version"], 2);
-    assert_eq!(d[0]["message"], "the model has no kinetic energy");
+    // the new text's own diagnostics (check also requires a coordinate)
+    let messages: Vec<&str> = d.iter().filter_map(|x| x["message"].as_str()).collect();
+    assert!(
+        messages.contains(&"the model has no kinetic energy"),
+        "{messages:?}"
+    );
     // an unknown method is an error reply, not a crash
     let r = s.request(Request::new(
         RequestId::from(1),

@@ -248,10 +248,13 @@ pub struct IdentifyArgs {
     #[arg(long, value_name = "S")]
     pub predict: Option<f64>,
     /// Output directory: `with_effect.plant`, `fitted.plant`, `report.json`
-    /// and the figures of each stage.
+    /// and the figures of each stage. Built aside and swapped in when the run
+    /// completes: an interrupted run leaves the previous DIR as it was, and
+    /// files of an earlier run never survive into the new one.
     #[arg(short = 'o', long = "out", value_name = "DIR")]
     pub out: PathBuf,
-    /// Write into a non-empty DIR (files of the same names are replaced).
+    /// Write into a non-empty DIR that identify did not write, or that holds
+    /// the input model (identify's files are replaced, other entries kept).
     #[arg(long)]
     pub force: bool,
     /// Print the summary as JSON instead of the story.
@@ -377,9 +380,12 @@ pub struct CompareArgs {
     #[arg(long)]
     pub json: bool,
     /// Write an overlay + residual SVG and a residual-test SVG per experiment
-    /// into this directory.
+    /// into this directory (existing figures are kept unless --force).
     #[arg(long, value_name = "DIR")]
     pub plots: Option<PathBuf>,
+    /// Overwrite existing figures in the --plots directory.
+    #[arg(long, requires = "plots")]
+    pub force: bool,
 }
 
 /// Arguments of `plantc fit`.
@@ -455,6 +461,17 @@ pub struct DiagnoseArgs {
     pub force: bool,
 }
 
+/// The integration method of `plantc sim`.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, clap::ValueEnum)]
+pub enum IntegratorKind {
+    /// Explicit unless stiff at the initial state.
+    Auto,
+    /// Dormand-Prince 5(4).
+    Explicit,
+    /// Rosenbrock ROS2 (stiff models).
+    Implicit,
+}
+
 /// Which hardware the loop drives.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, clap::ValueEnum)]
 pub enum BackendKind {
@@ -492,7 +509,10 @@ pub struct RunArgs {
     /// Initial state of the simulator, e.g. `--x0 alpha=5deg`.
     #[arg(long, value_name = "NAME=VALUE,...", allow_hyphen_values = true)]
     pub x0: Option<String>,
-    /// Path of the HIL library (default: hil.dll on Windows, libhil.so elsewhere).
+    /// Path of the HIL library. A bare file name is looked for in the
+    /// current directory first, then on the system library path. Default:
+    /// `hil.dll` (Windows), `libhil.dylib` (macOS), `libhil.so` then
+    /// `/opt/quanser/lib/libhil.so` (Linux).
     #[arg(long, value_name = "PATH")]
     pub hil_lib: Option<PathBuf>,
     /// Board identifier for hil_open.
@@ -681,6 +701,11 @@ pub struct SimArgs {
     /// Relative integrator tolerance (default 1e-8; absolute = rtol/100).
     #[arg(long)]
     pub rtol: Option<f64>,
+    /// Integrator: `auto` (explicit Dormand-Prince unless the model is stiff
+    /// at the initial state, then implicit), `explicit`, or `implicit`
+    /// (Rosenbrock: for stiff models, e.g. a tiny resistance or inertia).
+    #[arg(long, value_enum, default_value_t = IntegratorKind::Auto)]
+    pub integrator: IntegratorKind,
     /// Overwrite existing output files.
     #[arg(long)]
     pub force: bool,

@@ -73,11 +73,16 @@ pub fn parse_overrides(params: &[String]) -> Result<Vec<(String, f64)>, CliError
                     "error: `--param {p}`: expected NAME=VALUE, e.g. `--param l2=0.1685`"
                 ))
             })?;
-            let v: f64 = value.trim().parse().map_err(|_| {
-                CliError::input(format!(
-                    "error: `--param {p}`: `{value}` is not a number (values are in SI units)"
-                ))
-            })?;
+            let v: f64 = value
+                .trim()
+                .parse()
+                .ok()
+                .filter(|v: &f64| v.is_finite())
+                .ok_or_else(|| {
+                    CliError::input(format!(
+                        "error: `--param {p}`: `{value}` is not a finite number (values are in SI units)"
+                    ))
+                })?;
             Ok((name.trim().to_string(), v))
         })
         .collect()
@@ -105,11 +110,13 @@ pub fn parse_assignments(text: &str, names: &[String], what: &str) -> Result<Vec
                 names.join(", ")
             ))
         })?;
-        out[idx] = parse_quantity(value).ok_or_else(|| {
-            CliError::input(format!(
-                "error: `{value}` is not a number (e.g. 0.1, 10deg)"
-            ))
-        })?;
+        out[idx] = parse_quantity(value)
+            .filter(|v| v.is_finite())
+            .ok_or_else(|| {
+                CliError::input(format!(
+                    "error: `{name}={value}`: `{value}` is not a finite number (e.g. 0.1, 10deg)"
+                ))
+            })?;
     }
     Ok(out)
 }
@@ -271,13 +278,39 @@ pub fn declared_value_text(p: &plantc_derive::model::Parameter, si: f64) -> Stri
     plantc_derive::lang::edit::number_text(si / scale)
 }
 
-/// Refuses to write `out` when it exists (the input model included) unless
-/// `force`; never writes over the input model without `force` either.
-pub fn refuse_to_clobber(out: &Path, input: &Path, force: bool) -> Result<(), CliError> {
-    let same = match (out.canonicalize(), input.canonicalize()) {
-        (Ok(a), Ok(b)) => a == b,
+/// Whether `a` and `b` are the same existing file (also through links).
+pub fn same_file(a: &Path, b: &Path) -> bool {
+    #[cfg(unix)]
+    {
+        use std::os::unix::fs::MetadataExt;
+        if let (Ok(x), Ok(y)) = (std::fs::metadata(a), std::fs::metadata(b)) {
+            return x.dev() == y.dev() && x.ino() == y.ino();
+        }
+    }
+    match (a.canonicalize(), b.canonicalize()) {
+        (Ok(x), Ok(y)) => x == y,
         _ => false,
-    };
+    }
+}
+
+/// Writes `bytes` to `path` crash-safely (temporary file, fsync, rename):
+/// a kill at any moment leaves the old complete file or the new one.
+pub fn write_output(path: &Path, bytes: impl AsRef<[u8]>) -> Result<(), CliError> {
+    plantc_fsio::write_atomic(path, bytes).map_err(|e| CliError::failure(format!("error: {e}")))
+}
+
+/// Checks before any work that a file can be written at `path` (its
+/// directory exists and accepts files): a long fit must not end in
+/// "cannot write".
+pub fn check_writable(path: &Path) -> Result<(), CliError> {
+    plantc_fsio::probe_writable(path).map_err(|e| CliError::input(format!("error: {e}")))
+}
+
+/// Refuses to write `out` when it exists (the input model included) unless
+/// `force`; never writes over the input model without `force` either. Also
+/// checks up front that `out` can be written.
+pub fn refuse_to_clobber(out: &Path, input: &Path, force: bool) -> Result<(), CliError> {
+    let same = same_file(out, input);
     if same && !force {
         return Err(CliError::input(format!(
             "error: `{}` is the input model; write the result to another file, or pass --force to replace it",
@@ -290,7 +323,7 @@ pub fn refuse_to_clobber(out: &Path, input: &Path, force: bool) -> Result<(), Cl
             out.display()
         )));
     }
-    Ok(())
+    check_writable(out)
 }
 
 /// The fit options of `--weight`, `--estimate-initial`, `--offsets`,

@@ -29,7 +29,9 @@ fn write(dir: &Path, name: &str, header: &str, rows: &[String]) -> String {
 /// Runs every identification command on `file`; each must exit 2 with
 /// `needle` (a `file:line:col` location or a message) in its error.
 fn assert_rejected(file: &str, needles: &[&str]) {
-    let dir = tmp("out");
+    // one output directory per file: the tests run in parallel
+    let stem = Path::new(file).file_stem().unwrap().to_string_lossy();
+    let dir = tmp(&format!("out-{stem}"));
     let out_model = dir.join("fitted.plant").display().to_string();
     for cmd in [
         vec!["compare", &model(), file],

@@ -76,9 +76,35 @@ fn identify_finds_the_hidden_friction_and_the_error_falls() {
     assert!(fitted.contains("coulomb_friction(Fc_alpha)"));
     // the input model is untouched
     assert_eq!(std::fs::read_to_string(&model).unwrap(), original);
-    // its own output directory may be replaced; a foreign one may not
+    // its own output directory may be replaced; a foreign one may not.
+    // The re-run replaces the directory as a whole: a stale figure of an
+    // earlier run (other data) does not survive (reliability reproducer 07)
+    std::fs::write(out.join("3-fitted/old_data.svg"), "<svg/>").unwrap();
     let (code, _, err) = plantc_bin(&args);
     assert_eq!(code, 0, "{err}");
+    assert!(!out.join("3-fitted/old_data.svg").exists());
+    assert!(out.join("3-fitted/driven.svg").is_file());
+    // refining the fitted model into the same directory would replace the
+    // input model: refused without --force, nothing touched (reproducer 01)
+    let fitted_in_out = out.join("fitted.plant");
+    std::fs::write(&fitted_in_out, format!("{fitted}# my notes\n")).unwrap();
+    let report_before = std::fs::read(out.join("report.json")).unwrap();
+    let (code, _, err) = plantc_bin(&[
+        "identify",
+        fitted_in_out.to_str().unwrap(),
+        swing.to_str().unwrap(),
+        "-o",
+        o,
+    ]);
+    assert_eq!(code, 2, "{err}");
+    assert!(err.contains("lies inside the output directory"), "{err}");
+    assert!(std::fs::read_to_string(&fitted_in_out)
+        .unwrap()
+        .ends_with("# my notes\n"));
+    assert_eq!(
+        std::fs::read(out.join("report.json")).unwrap(),
+        report_before
+    );
     let foreign = dir.join("foreign");
     std::fs::create_dir_all(&foreign).unwrap();
     std::fs::write(foreign.join("notes.txt"), "mine").unwrap();

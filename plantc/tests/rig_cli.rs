@@ -538,9 +538,107 @@ fn rig_crate_on_the_fake_board_and_against_the_interpreter() {
     // Same seed, same generated code: the compiled log equals the rig binary's.
     assert_eq!(volts(&log), volts(&root.join("fl_arm_compiled.csv")));
 
+    #[cfg(unix)]
+    signals_stop_the_rig_safely(&bin, &hil, &model, &root);
+
     println!(
         "rig test total: {:.1} s wall clock",
         started.elapsed().as_secs_f64()
     );
     let _ = std::fs::remove_dir_all(&root);
+}
+
+#[cfg(unix)]
+extern "C" {
+    fn kill(pid: i32, sig: i32) -> i32;
+}
+
+/// Starts `cmd`, waits until `log` has rows, sends SIGTERM to that process
+/// only and returns (exit code, stderr, last log row's Vm and state).
+#[cfg(unix)]
+fn sigterm_after_rows(mut cmd: Command, log: &Path) -> (i32, String, f64, String) {
+    use std::io::Read;
+    use std::process::Stdio;
+    use std::time::Duration;
+    let mut child = cmd
+        .stdout(Stdio::null())
+        .stderr(Stdio::piped())
+        .spawn()
+        .unwrap();
+    let start = Instant::now();
+    while std::fs::read_to_string(log).map_or(0, |t| t.lines().count()) < 300 {
+        if let Ok(Some(status)) = child.try_wait() {
+            panic!("run ended before the signal: {status}");
+        }
+        assert!(start.elapsed() < Duration::from_secs(300), "no log rows");
+        std::thread::sleep(Duration::from_millis(20));
+    }
+    // SAFETY: plain kill(2) on our own child.
+    assert_eq!(unsafe { kill(child.id() as i32, 15) }, 0);
+    let start = Instant::now();
+    let status = loop {
+        if let Some(status) = child.try_wait().unwrap() {
+            break status;
+        }
+        if start.elapsed() > Duration::from_secs(30) {
+            let _ = child.kill();
+            panic!("SIGTERM did not stop the run within 30 s");
+        }
+        std::thread::sleep(Duration::from_millis(10));
+    };
+    let mut err = String::new();
+    child
+        .stderr
+        .take()
+        .unwrap()
+        .read_to_string(&mut err)
+        .unwrap();
+    let text = std::fs::read_to_string(log).unwrap();
+    let header: Vec<&str> = text.lines().next().unwrap().split(',').collect();
+    let last: Vec<&str> = text.lines().last().unwrap().split(',').collect();
+    let col = |name: &str| header.iter().position(|h| h.starts_with(name)).unwrap();
+    (
+        status.code().unwrap_or(-1),
+        err,
+        last[col("Vm")].parse().unwrap(),
+        last[col("state")].to_string(),
+    )
+}
+
+/// Reliability (issue 12): SIGTERM stops the rig binary like Ctrl-C (0 V,
+/// board closed, log flushed, exit 143), and a SIGTERM sent to
+/// `plantc run --compiled` alone is passed on to the binary it runs.
+#[cfg(unix)]
+fn signals_stop_the_rig_safely(bin: &Path, hil: &Path, model: &str, root: &Path) {
+    let log = root.join("sigterm_rig.csv");
+    let trace = root.join("sigterm_rig.trace");
+    let mut cmd = Command::new(bin);
+    cmd.args(["--controller", "fl_arm", "--backend", "q2usb", "--hil-lib"])
+        .arg(hil)
+        .args(["--duration", "100000", "--log"])
+        .arg(&log)
+        .env("PLANTC_FAKE_HIL", "alpha0=5deg")
+        .env("PLANTC_FAKE_HIL_TRACE", &trace);
+    let (code, err, vm, state) = sigterm_after_rows(cmd, &log);
+    println!("[SIGTERM to the rig binary] exit {code}, last Vm {vm}, {state}\n{err}");
+    assert_eq!(code, 143, "{err}");
+    assert!(err.contains("stopped by SIGTERM"), "{err}");
+    assert_eq!((vm, state.as_str()), (0.0, "fault:stopped"));
+    assert_eq!(close_output(&trace), Some(0.0), "output at close");
+
+    let log = root.join("sigterm_compiled.csv");
+    let mut cmd = Command::new(env!("CARGO_BIN_EXE_plantc"));
+    cmd.args(["run", model, "--set", "thesis", "--controller", "fl_arm"])
+        .args(["--x0", "alpha=5deg", "--realtime", "--duration", "100000"])
+        .arg("--log")
+        .arg(&log)
+        .arg("--compiled")
+        .arg(root.join("compiled"))
+        .env("CARGO_TARGET_DIR", rig_target())
+        .env("CARGO_NET_OFFLINE", "true");
+    let (code, err, vm, state) = sigterm_after_rows(cmd, &log);
+    println!("[SIGTERM to plantc run --compiled] exit {code}, last Vm {vm}, {state}\n{err}");
+    assert_eq!(code, 143, "{err}");
+    assert!(err.contains("stopped by SIGTERM"), "{err}");
+    assert_eq!((vm, state.as_str()), (0.0, "fault:stopped"));
 }

@@ -103,6 +103,15 @@ pub enum BackendError {
     NotStarted,
     /// The backend was already closed.
     Closed,
+    /// The simulated plant's state is no longer finite (NaN or infinite):
+    /// the simulation diverged (stiff or unstable parameters, a huge initial
+    /// state). Real encoders cannot report this.
+    PlantDiverged {
+        /// Simulated time (s).
+        t: f64,
+        /// The state, named: `alpha = NaN, theta = 3.2e308, ...`.
+        state: String,
+    },
 }
 
 impl fmt::Display for BackendError {
@@ -126,6 +135,12 @@ impl fmt::Display for BackendError {
             BackendError::InvalidConfig(s) => write!(f, "invalid backend configuration: {s}"),
             BackendError::NotStarted => write!(f, "backend not started"),
             BackendError::Closed => write!(f, "backend already closed"),
+            BackendError::PlantDiverged { t, state } => write!(
+                f,
+                "the simulated plant diverged at t = {t} s (state no longer finite: {state}); \
+                 check the parameter values (a tiny mass, inertia or resistance makes the model stiff) \
+                 and the initial state"
+            ),
         }
     }
 }

@@ -408,7 +408,11 @@ fn cycle_loop(
 
         if !sup.state().is_fault() {
             if let Err(e) = backend.read_encoders(&mut counts) {
-                emit(sup.fault(t, FaultKind::ReadError), transitions);
+                let kind = match e {
+                    BackendError::PlantDiverged { .. } => FaultKind::PlantDiverged,
+                    _ => FaultKind::ReadError,
+                };
+                emit(sup.fault(t, kind), transitions);
                 fault_detail = Some(e);
             }
         }

@@ -181,27 +181,74 @@ unsafe fn req<T: Copy>(lib: &Library, name: &'static str) -> Result<T, BackendEr
     sym(lib, name).ok_or(BackendError::MissingSymbol(name))
 }
 
+/// Where a configured library path is loaded from: a bare file name
+/// (`libhil.so`, no directory) names a file in the current directory when
+/// one exists there (the loader alone would search only the system library
+/// path, and could load a system library of the same name); otherwise the
+/// name is left to the system search. Paths with a directory are used as
+/// given.
+pub fn resolve_library_path(path: &Path) -> PathBuf {
+    let bare = path.parent().is_some_and(|d| d.as_os_str().is_empty());
+    if bare {
+        let local = Path::new(".").join(path);
+        if local.is_file() {
+            return std::fs::canonicalize(&local).unwrap_or(local);
+        }
+    }
+    path.to_path_buf()
+}
+
 impl HilApi {
-    /// Loads the HIL library from `path`, or from the default names if `None`.
+    /// Loads the HIL library from `path` (see [`resolve_library_path`]), or
+    /// from the default names if `None`. A library without the HIL API is a
+    /// [`BackendError::Load`] naming what was loaded.
     pub fn load(path: Option<&Path>) -> Result<Self, BackendError> {
         let candidates = match path {
-            Some(p) => vec![p.to_path_buf()],
+            Some(p) => vec![resolve_library_path(p)],
             None => default_library_candidates(),
         };
-        let mut last_err = None;
-        for p in candidates {
+        let mut tried = Vec::new();
+        for p in &candidates {
             // SAFETY: loading a library runs its initialisers; this is the
             // HIL library the user configured, which is the point.
-            match unsafe { Library::new(&p) } {
-                Ok(lib) => return Self::from_library(lib, p),
-                Err(e) => last_err = Some((p, e.to_string())),
+            match unsafe { Library::new(p) } {
+                Ok(lib) => {
+                    return Self::from_library(lib, p.clone()).map_err(|e| match e {
+                        BackendError::MissingSymbol(s) => BackendError::Load {
+                            path: p.display().to_string(),
+                            reason: format!("it loaded, but is not a HIL library (no `{s}`)"),
+                        },
+                        e => e,
+                    })
+                }
+                Err(e) => tried.push((p.display().to_string(), e.to_string())),
             }
         }
-        let (p, reason) = last_err.unwrap_or_else(|| (PathBuf::new(), "no candidate".into()));
-        Err(BackendError::Load {
-            path: p.display().to_string(),
-            reason,
-        })
+        let path = tried
+            .iter()
+            .map(|(p, _)| p.as_str())
+            .collect::<Vec<_>>()
+            .join(", then ");
+        let mut reason = tried
+            .last()
+            .map_or_else(|| "no candidate".to_string(), |(_, r)| r.clone());
+        if path.is_empty() || candidates.len() > 1 {
+            reason.push_str(" (give the library with --hil-lib PATH)");
+        }
+        Err(BackendError::Load { path, reason })
+    }
+
+    /// Where the library was loaded from, for a note: the path and whether
+    /// the system's library search found it.
+    pub fn origin(&self) -> String {
+        if self.path.parent().is_some_and(|d| d.as_os_str().is_empty()) {
+            format!(
+                "`{}` (found on the system library path)",
+                self.path.display()
+            )
+        } else {
+            format!("`{}`", self.path.display())
+        }
     }
 
     fn from_library(lib: Library, path: PathBuf) -> Result<Self, BackendError> {

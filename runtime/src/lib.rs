@@ -67,7 +67,9 @@ pub use control_loop::{run, run_with_estimator, run_with_events, RunConfig, MAX_
 pub use controller::{Controller, Mode, StateFeedback};
 pub use error::RuntimeError;
 pub use estimator::{DerivativeEstimator, VelocityEstimator};
-pub use interrupt::stop_on_ctrl_c;
+pub use interrupt::{
+    forward_stop, stop_completed, stop_on_ctrl_c, stop_on_signals, stop_signal, StopSignal,
+};
 pub use log::{LogError, LogWriter};
 #[cfg(feature = "model")]
 pub use model_plant::{ModelController, ModelPlant};

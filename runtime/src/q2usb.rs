@@ -161,6 +161,7 @@ impl Q2Usb {
             config,
             api,
         };
+        me.notes.push(format!("HIL library: {}", me.api.origin()));
         // On error `me` is dropped, which writes 0 V and closes the card.
         me.initialise()?;
         Ok(me)

@@ -185,7 +185,8 @@ pub enum RigError {
     Failure(String),
     /// The run ended in a supervisor fault (exit code 1).
     Fault(SupervisorState),
-    /// Stopped by Ctrl-C (exit code 130).
+    /// Stopped by Ctrl-C or a terminating signal (exit code 128 + signal:
+    /// 130 SIGINT, 143 SIGTERM, 129 SIGHUP, 131 SIGQUIT).
     Stopped,
 }
 
@@ -195,7 +196,9 @@ impl RigError {
         match self {
             RigError::Usage(_) => 2,
             RigError::Failure(_) | RigError::Fault(_) => 1,
-            RigError::Stopped => 130,
+            RigError::Stopped => crate::interrupt::stop_signal()
+                .and_then(|s| u8::try_from(s.exit_code).ok())
+                .unwrap_or(130),
         }
     }
 }
@@ -205,7 +208,11 @@ impl fmt::Display for RigError {
         match self {
             RigError::Usage(m) | RigError::Failure(m) => write!(f, "error: {m}"),
             RigError::Fault(s) => write!(f, "run ended in {s}"),
-            RigError::Stopped => write!(f, "stopped by Ctrl-C (0 V written, log flushed)"),
+            RigError::Stopped => write!(
+                f,
+                "stopped by {} (0 V written, board closed, log flushed)",
+                crate::interrupt::stop_signal().map_or("Ctrl-C", |s| s.name)
+            ),
         }
     }
 }
@@ -855,7 +862,7 @@ pub fn execute(
     if let Err(e) = crate::interrupt::stop_on_ctrl_c(config.stop.clone()) {
         let _ = writeln!(
             err,
-            "note: Ctrl-C handler not installed ({e}); Ctrl-C will kill the process without the 0 V stop"
+            "note: signal handlers not installed ({e}); Ctrl-C or kill will end the process without the 0 V stop"
         );
     }
     let mut probe = AllocProbe {
@@ -915,6 +922,9 @@ pub fn rig_main(model: &dyn RigModel) -> std::process::ExitCode {
         Ok(RigCommand::Run(args)) => match execute(&args, model, &mut out, &mut err) {
             Ok(_) => 0,
             Err(e) => {
+                // board and log were released inside `execute`: a waiting
+                // Windows console handler may let the process end now
+                crate::interrupt::stop_completed();
                 let _ = writeln!(err, "{e}");
                 e.exit_code()
             }

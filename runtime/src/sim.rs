@@ -191,13 +191,25 @@ impl Backend for SimBackend {
     }
 
     fn read_encoders(&mut self, counts: &mut [i32]) -> Result<(), BackendError> {
+        if !self.x.iter().all(|v| v.is_finite()) {
+            // a diverged simulation is a fault naming it, never counts of 0
+            // (which read as a pendulum balanced at rest)
+            let names = self.plant.state_names();
+            let state = names
+                .iter()
+                .zip(&self.x)
+                .map(|(n, v)| format!("{n} = {v:e}"))
+                .collect::<Vec<_>>()
+                .join(", ");
+            return Err(BackendError::PlantDiverged { t: self.t, state });
+        }
         let npos = self.maps.len();
         for (i, c) in counts.iter_mut().enumerate().take(npos) {
             let mut v = self.x[i] / (2.0 * PI) * self.config.counts_per_rev;
             if let (Some(rng), Some(nz)) = (self.rng.as_mut(), self.config.noise) {
                 v += nz.counts_std * rng.next_gaussian();
             }
-            // `as` saturates, and NaN becomes 0: no panic on a diverged plant.
+            // finite here; `as` saturates a huge angle instead of wrapping
             *c = v.round() as i32;
         }
         Ok(())

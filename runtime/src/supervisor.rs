@@ -42,6 +42,9 @@ pub enum FaultKind {
     SpeedLimit,
     /// The controller entered a swing-up mode, but swing-up is not allowed.
     SwingUpNotAllowed,
+    /// The simulated plant diverged (its state is no longer finite): a
+    /// modelling or parameter problem, not the encoder's.
+    PlantDiverged,
 }
 
 impl FaultKind {
@@ -61,6 +64,7 @@ impl FaultKind {
             FaultKind::Stopped => "stopped",
             FaultKind::SpeedLimit => "speed_limit",
             FaultKind::SwingUpNotAllowed => "swing_up_not_allowed",
+            FaultKind::PlantDiverged => "plant_diverged",
         }
     }
 }
@@ -103,6 +107,7 @@ impl SupervisorState {
                 FaultKind::Stopped => "fault:stopped",
                 FaultKind::SpeedLimit => "fault:speed_limit",
                 FaultKind::SwingUpNotAllowed => "fault:swing_up_not_allowed",
+                FaultKind::PlantDiverged => "fault:plant_diverged",
             },
         }
     }

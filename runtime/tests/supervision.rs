@@ -180,3 +180,71 @@ fn q2usb_without_library_is_a_load_error() {
         Ok(_) => panic!("opened a nonexistent library"),
     }
 }
+
+/// The reference pendulum, until its dynamics blow up at `t_bad` (as a stiff
+/// or badly parameterised model does): derivatives become NaN.
+struct Diverging {
+    inner: RotaryPendulumReference,
+    calls: std::sync::atomic::AtomicU64,
+    bad_after_calls: u64,
+}
+
+impl plantc_runtime::Plant for Diverging {
+    fn state_names(&self) -> &[&str] {
+        self.inner.state_names()
+    }
+    fn input_names(&self) -> &[&str] {
+        self.inner.input_names()
+    }
+    fn derivatives(&self, x: &[f64], u: &[f64], dx: &mut [f64]) {
+        let calls = self.calls.fetch_add(1, Ordering::Relaxed) + 1;
+        self.inner.derivatives(x, u, dx);
+        if calls > self.bad_after_calls {
+            dx.fill(f64::NAN);
+        }
+    }
+    fn input_limits(&self) -> &[(f64, f64)] {
+        self.inner.input_limits()
+    }
+}
+
+/// Reliability reproducer 04: a diverged simulation read as encoder counts
+/// of 0 (a pendulum balanced at rest), ending "engaged" with exit 0, or later
+/// as `fault:encoder_stuck`. It is now a fault naming the divergence, at the
+/// first sample after it, with 0 V written.
+#[test]
+fn a_diverged_simulation_is_a_fault_naming_it() {
+    let plant = Diverging {
+        inner: RotaryPendulumReference::default(),
+        calls: std::sync::atomic::AtomicU64::new(0),
+        // 4 RK4 stages x 1 substep per 1 ms sample: diverges after 0.5 s
+        bad_after_calls: 2_000,
+    };
+    let mut be = SimBackend::new(
+        Box::new(plant),
+        vec![0.0, 5f64.to_radians(), 0.0, 0.0],
+        SimConfig::default(),
+    )
+    .unwrap();
+    let log_path = tmp_path("diverged.csv");
+    let mut log = LogWriter::create(&log_path).unwrap();
+    let mut ctl = StateFeedback::new(K_THESIS.to_vec());
+    let report = run(&cfg(5.0), &mut be, &mut ctl, Some(&mut log)).unwrap();
+    drop(log);
+    assert_eq!(
+        report.final_state,
+        SupervisorState::Fault(FaultKind::PlantDiverged),
+        "{report}"
+    );
+    let detail = report.fault_detail.as_deref().unwrap_or_default();
+    assert!(
+        detail.contains("diverged") && detail.contains("alpha = NaN"),
+        "{detail}"
+    );
+    let rows = parse_log(&std::fs::read_to_string(&log_path).unwrap(), false).unwrap();
+    let last = rows.last().unwrap();
+    assert_eq!(last.state, "fault:plant_diverged");
+    assert_eq!(last.vm, 0.0);
+    assert!(last.t <= 0.6, "{}", last.t);
+    assert_eq!(be.last_written(), 0.0);
+}

@@ -48,6 +48,8 @@ pub enum LinearizeError {
     },
     /// The mass matrix is singular at the operating point.
     SingularMassMatrix,
+    /// The model has no coordinates: there is nothing to linearize.
+    NoCoordinates,
     /// A Jacobian entry is not finite at the operating point.
     NotFinite {
         /// Which entry, e.g. `dr_theta/dalpha`.
@@ -70,6 +72,9 @@ impl fmt::Display for LinearizeError {
             }
             LinearizeError::SingularMassMatrix => {
                 write!(f, "the mass matrix is singular at the operating point")
+            }
+            LinearizeError::NoCoordinates => {
+                write!(f, "the model has no coordinates: nothing to linearize")
             }
             LinearizeError::NotFinite { entry } => {
                 write!(f, "{entry} is not finite at the operating point")
@@ -126,6 +131,9 @@ pub fn linearize(
 ) -> Result<Linearization, LinearizeError> {
     let n = eqs.coords.len();
     let m = eqs.inputs.len();
+    if n == 0 {
+        return Err(LinearizeError::NoCoordinates);
+    }
     if op.x.len() != 2 * n {
         return Err(LinearizeError::WrongSize {
             expected: 2 * n,

@@ -677,6 +677,18 @@ impl Infer<'_> {
     }
 }
 
+fn negative(kind: &str, name: &str, span: Span) -> Diagnostic {
+    Diagnostic::warning(
+        "plantc::negative_value",
+        format!("`{name}` is a {kind} and is negative"),
+        span,
+        "negative",
+    )
+    .with_help(format!(
+        "a {kind} is positive; a negative one makes the mass matrix indefinite and the simulation meaningless"
+    ))
+}
+
 fn unit_error(u: &UnitExpr, err: super::units::UnitError) -> Diagnostic {
     let s = u.span.start + err.start.min(u.text.len());
     let e = (u.span.start + err.end.min(u.text.len())).max(s);
@@ -929,6 +941,21 @@ impl Checker {
                 .with_help("start the file with `model my_model \"description\"`"),
             );
         }
+        if let (true, Some(decl)) = (file.coordinates.is_empty(), &file.model) {
+            // nothing could be derived, linearized or simulated
+            let at = decl.name.span;
+            self.diags.push(
+                Diagnostic::error(
+                    "plantc::no_coordinates",
+                    "the model declares no coordinate",
+                    at,
+                    "a model needs at least one generalised coordinate",
+                )
+                .with_help(
+                    "declare one, e.g. `coordinate theta : angle` or `coordinate x : length`",
+                ),
+            );
+        }
         // declarations
         for c in &file.coordinates {
             self.declare(
@@ -1175,9 +1202,11 @@ impl Checker {
                     forced.insert(q.name.clone(), f.span);
                 }
             }
-            let errors_before = self.diags.iter().filter(|d| d.is_error()).count();
+            // only the diagnostics of this line are looked at (counting all
+            // of them per line made many force lines quadratic)
+            let diags_before = self.diags.len();
             f.expr = self.expand_effects(&f.written, &q);
-            let effect_error = self.diags.iter().filter(|d| d.is_error()).count() > errors_before;
+            let effect_error = self.diags[diags_before..].iter().any(|d| d.is_error());
             if kind == Some(CoordKind::Angle) {
                 self.check_cogging_periods(&f.written, &q, &estimated);
             }
@@ -1221,6 +1250,7 @@ impl Checker {
         self.check_sets(&file);
         self.check_controllers(&file);
         self.check_recorded(&file);
+        self.check_finite(&file);
         file
     }
 
@@ -1804,5 +1834,111 @@ impl Checker {
                 }
             }
         }
+    }
+
+    fn check_finite(&mut self, file: &ModelFile) {
+        let none = Symbols::default();
+        let mut exprs: Vec<&Expr> = Vec::new();
+        exprs.extend(file.lets.iter().map(|l| &l.expr));
+        exprs.extend(file.outputs.iter().filter_map(|o| o.expr.as_ref()));
+        exprs.extend(file.kinetic.iter().chain(&file.potential).map(|e| &e.expr));
+        exprs.extend(file.forces.iter().map(|f| &f.written));
+        exprs.extend(file.sensors.iter().chain(&file.actuators).map(|s| &s.call));
+        exprs.extend(
+            file.sets
+                .iter()
+                .flat_map(|s| s.entries.iter().map(|e| &e.value)),
+        );
+        for c in &file.controllers {
+            for s in &c.body {
+                match s {
+                    ControllerStmt::Gain { value, .. } => exprs.push(value),
+                    ControllerStmt::Law { expr, .. } => exprs.push(expr),
+                    _ => {}
+                }
+            }
+        }
+        let mut found = Vec::new();
+        for e in &exprs {
+            e.walk(&mut |x| {
+                if let ExprKind::Binary(BinOp::Div, _, b) = &x.kind {
+                    if eval_si(b, &none) == Some(0.0) {
+                        found.push(
+                            Diagnostic::error(
+                                "plantc::division_by_zero",
+                                "division by zero",
+                                b.span,
+                                "this is 0",
+                            )
+                            .with_label(x.span, "not a finite number")
+                            .with_help("every value of a model must be finite"),
+                        );
+                    }
+                }
+            });
+        }
+        // constant values: set entries and gains, with the nominal values
+        let mut constants: Vec<(&Expr, String)> = Vec::new();
+        for s in &file.sets {
+            for e in &s.entries {
+                constants.push((
+                    &e.value,
+                    format!("`{}` in set `{}`", e.name.name, s.name.name),
+                ));
+            }
+        }
+        for c in &file.controllers {
+            for s in &c.body {
+                if let ControllerStmt::Gain { name, value, .. } = s {
+                    constants.push((value, format!("gain `{}` of `{}`", name.name, c.name.name)));
+                }
+            }
+        }
+        let reported: Vec<Span> = found.iter().map(|d| d.primary).collect();
+        for (e, what) in constants {
+            let Some(v) = eval_si(e, &self.syms) else {
+                continue;
+            };
+            let inside = |s: &Span| e.span.start <= s.start && s.end <= e.span.end;
+            if !v.is_finite() && !reported.iter().any(inside) {
+                found.push(
+                    Diagnostic::error(
+                        "plantc::not_finite",
+                        format!("the value of {what} is not finite ({v})"),
+                        e.span,
+                        format!("evaluates to {v}"),
+                    )
+                    .with_help("every value of a model must be finite"),
+                );
+            }
+        }
+        // negative masses and inertias
+        let physical = |d: Dim| {
+            if d == Dim::mass() {
+                Some("mass")
+            } else if d == Dim::mass().mul(Dim::length().powi(2)) {
+                Some("moment of inertia")
+            } else {
+                None
+            }
+        };
+        for p in &file.parameters {
+            let Some(pv) = self.syms.parameters.get(&p.name.name) else {
+                continue;
+            };
+            if let Some(kind) = physical(pv.unit.dim) {
+                if pv.si_value < 0.0 {
+                    found.push(negative(kind, &p.name.name, p.value.span));
+                }
+                for s in &file.sets {
+                    for e in s.entries.iter().filter(|e| e.name.name == p.name.name) {
+                        if eval_si(&e.value, &self.syms).is_some_and(|v| v < 0.0) {
+                            found.push(negative(kind, &p.name.name, e.value.span));
+                        }
+                    }
+                }
+            }
+        }
+        self.diags.extend(found);
     }
 }

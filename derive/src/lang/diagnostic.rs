@@ -159,15 +159,26 @@ impl miette::Diagnostic for Diagnostic {
     }
 }
 
+/// At most this many diagnostics are rendered in full by [`render`]; the
+/// summary line still counts them all.
+pub const MAX_RENDERED: usize = 200;
+
 /// Renders diagnostics as deterministic plain text (no colour, no terminal
 /// width): a header `severity[code]: message`, a `--> file:line:col` line, the
 /// source lines involved with `^` under the primary span and `-` under
-/// secondary spans, then the help line. Ends with a count summary.
+/// secondary spans, then the help line. Ends with a count summary. Beyond
+/// [`MAX_RENDERED`] diagnostics only the count is printed.
 pub fn render(source: &SourceFile, diagnostics: &[Diagnostic]) -> String {
     let mut out = String::new();
-    for d in diagnostics {
+    for d in diagnostics.iter().take(MAX_RENDERED) {
         render_one(source, d, &mut out);
         out.push('\n');
+    }
+    if diagnostics.len() > MAX_RENDERED {
+        out.push_str(&format!(
+            "... {} more diagnostics not shown (the first {MAX_RENDERED} are above; fix them first)\n",
+            diagnostics.len() - MAX_RENDERED
+        ));
     }
     let count = |s: Severity| diagnostics.iter().filter(|d| d.severity == s).count();
     let (e, w, n) = (
@@ -222,7 +233,13 @@ pub fn render_one(source: &SourceFile, d: &Diagnostic, out: &mut String) {
         let text: String = source
             .line_text(li)
             .chars()
-            .map(|c| if c == '\t' { ' ' } else { c })
+            .map(|c| match c {
+                '\t' => ' ',
+                // invisible or terminal-garbling characters: one visible
+                // column each, so the caret stays aligned
+                c if super::lexer::invisible_name(c).is_some() => '\u{fffd}',
+                c => c,
+            })
             .collect();
         out.push_str(&format!("{:>gw$} | {}\n", li + 1, text.trim_end()));
         let mut on_line: Vec<_> = marks.iter().filter(|m| m.0 == li).collect();

@@ -181,16 +181,25 @@ fn find_param<'m>(m: &'m ModelFile, name: &str) -> Result<&'m super::ast::Parame
         })
 }
 
-/// Offset just after the end of the line containing `offset` (after its `\n`).
+/// Offset just after the end of the line containing `offset` (after its
+/// `\n`, `\r\n` or lone `\r`).
 fn after_line(text: &str, offset: usize) -> usize {
-    text[offset..]
-        .find('\n')
-        .map_or(text.len(), |i| offset + i + 1)
+    let b = text.as_bytes();
+    match text[offset..].find(['\n', '\r']) {
+        None => text.len(),
+        Some(i) if b[offset + i] == b'\r' && b.get(offset + i + 1) == Some(&b'\n') => {
+            offset + i + 2
+        }
+        Some(i) => offset + i + 1,
+    }
 }
 
+/// The file's line ending: `\r\n`, a lone `\r` (classic Mac) or `\n`.
 fn line_ending(text: &str) -> &'static str {
     if text.contains("\r\n") {
         "\r\n"
+    } else if text.contains('\r') && !text.contains('\n') {
+        "\r"
     } else {
         "\n"
     }
@@ -200,7 +209,7 @@ fn line_ending(text: &str) -> &'static str {
 fn insert_line(text: &str, offset: usize, line: &str) -> (Span, String) {
     let nl = line_ending(text);
     let at = after_line(text, offset);
-    if at == text.len() && !text.is_empty() && !text.ends_with('\n') {
+    if at == text.len() && !text.is_empty() && !text.ends_with(['\n', '\r']) {
         (Span::new(at, at), format!("{nl}{line}"))
     } else {
         (Span::new(at, at), format!("{line}{nl}"))

@@ -142,17 +142,27 @@ pub fn lex(text: &str, diags: &mut Vec<Diagnostic>) -> Vec<Token> {
             continue;
         }
         let kind = match c {
-            ' ' | '\t' | '\r' => {
+            // a byte-order mark opening the file (Windows editors write one)
+            '\u{feff}' if i == 0 => {
+                i += c.len_utf8();
+                continue;
+            }
+            ' ' | '\t' => {
+                i += 1;
+                continue;
+            }
+            // `\r\n` ends a line at its `\n`; a lone `\r` (classic Mac) too
+            '\r' if i + 1 < n && bytes[i + 1] == b'\n' => {
                 i += 1;
                 continue;
             }
             '#' => {
-                while i < n && bytes[i] != b'\n' {
+                while i < n && bytes[i] != b'\n' && bytes[i] != b'\r' {
                     i += 1;
                 }
                 continue;
             }
-            '\n' => single(Tok::Newline),
+            '\n' | '\r' => single(Tok::Newline),
             '(' => single(Tok::LParen),
             ')' => single(Tok::RParen),
             '[' => single(Tok::LBracket),
@@ -186,7 +196,7 @@ pub fn lex(text: &str, diags: &mut Vec<Diagnostic>) -> Vec<Token> {
             let mut closed = false;
             while i < n {
                 let ch = at(i);
-                if ch == '\n' {
+                if ch == '\n' || ch == '\r' {
                     break;
                 }
                 i += ch.len_utf8();
@@ -204,12 +214,8 @@ pub fn lex(text: &str, diags: &mut Vec<Diagnostic>) -> Vec<Token> {
                 }
                 value.push(ch);
             }
-            let mut end = i;
+            let end = i;
             if !closed {
-                // do not include a trailing '\r' in the span
-                if end > start + 1 && bytes[end - 1] == b'\r' {
-                    end -= 1;
-                }
                 diags.push(
                     Diagnostic::error(
                         "plantc::unterminated_string",
@@ -249,9 +255,24 @@ pub fn lex(text: &str, diags: &mut Vec<Diagnostic>) -> Vec<Token> {
                 }
             }
             let mut tok = Tok::Number;
+            let digits_end = i;
             if i < n && bytes[i] == b'i' && !(i + 1 < n && is_ident_continue(at(i + 1))) {
                 i += 1;
                 tok = Tok::Imag;
+            }
+            if text[start..digits_end]
+                .parse::<f64>()
+                .is_ok_and(f64::is_infinite)
+            {
+                diags.push(
+                    Diagnostic::error(
+                        "plantc::number_out_of_range",
+                        format!("`{}` is too large for a number", &text[start..digits_end]),
+                        Span::new(start, digits_end),
+                        "beyond 1.8e308: would be infinite",
+                    )
+                    .with_help("numbers must be finite; check the exponent"),
+                );
             }
             toks.push(Token {
                 tok,
@@ -272,13 +293,15 @@ pub fn lex(text: &str, diags: &mut Vec<Diagnostic>) -> Vec<Token> {
         i += c.len_utf8();
         let help = if c.is_alphabetic() {
             "names use ASCII letters, digits and `_` only (e.g. `alpha`, not `α`)"
+        } else if invisible_name(c).is_some() {
+            "delete it (it is invisible in most editors: delete the characters around the caret and type them again)"
         } else {
             "remove it; comments start with `#`"
         };
         diags.push(
             Diagnostic::error(
                 "plantc::unexpected_character",
-                format!("unexpected character `{c}`"),
+                format!("unexpected character {}", describe_char(c)),
                 Span::new(start, i),
                 "not part of the model language",
             )
@@ -290,4 +313,34 @@ pub fn lex(text: &str, diags: &mut Vec<Diagnostic>) -> Vec<Token> {
         span: Span::new(n, n),
     });
     toks
+}
+
+/// The name of a character that shows as nothing (or garbles a terminal):
+/// control characters, zero-width and direction marks, byte-order marks.
+pub fn invisible_name(c: char) -> Option<&'static str> {
+    Some(match c {
+        '\0' => "NUL",
+        '\u{200b}' => "zero-width space",
+        '\u{200c}' => "zero-width non-joiner",
+        '\u{200d}' => "zero-width joiner",
+        '\u{2060}' => "word joiner",
+        '\u{feff}' => "byte-order mark / zero-width no-break space",
+        '\u{00a0}' => "no-break space",
+        '\u{00ad}' => "soft hyphen",
+        '\u{200e}' | '\u{200f}' | '\u{202a}'..='\u{202e}' | '\u{2066}'..='\u{2069}' => {
+            "text-direction mark"
+        }
+        c if c.is_control() => "control character",
+        _ => return None,
+    })
+}
+
+/// A character for a message: `` `x` `` when visible, else its code point
+/// and name (`U+200B (zero-width space)`), so nothing invisible or raw
+/// control bytes reach the terminal.
+pub fn describe_char(c: char) -> String {
+    match invisible_name(c) {
+        Some(name) => format!("U+{:04X} ({name})", c as u32),
+        None => format!("`{c}`"),
+    }
 }

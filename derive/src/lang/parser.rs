@@ -11,6 +11,17 @@ use super::span::Span;
 /// Maximum nesting of expressions (guards the stack on hostile input).
 const MAX_DEPTH: usize = 200;
 
+/// Chains of `+`/`-` (or `*`/`/`) with more operands than this become a
+/// balanced tree instead of a left-deep one, so a 100,000-term sum is about
+/// 20 levels deep for every recursive pass (checking, lowering, printing,
+/// dropping) rather than 100,000. Shorter chains keep the usual left-deep
+/// shape.
+const CHAIN_BALANCE: usize = 32;
+
+/// Maximum height of an expression tree (parentheses, chains, calls and
+/// powers together): what the recursive passes after parsing may meet.
+pub const MAX_HEIGHT: usize = 400;
+
 /// The statement keywords.
 pub const KEYWORDS: &[&str] = &[
     "model",
@@ -225,7 +236,7 @@ impl<'a> Parser<'a> {
     }
 
     fn column(&self, offset: usize) -> usize {
-        let line_start = self.src[..offset].rfind('\n').map_or(0, |i| i + 1);
+        let line_start = self.src[..offset].rfind(['\n', '\r']).map_or(0, |i| i + 1);
         offset - line_start
     }
 
@@ -1114,7 +1125,20 @@ impl<'a> Parser<'a> {
         self.enter()?;
         let r = self.additive();
         self.depth -= 1;
-        r
+        let e = r?;
+        if self.depth == 0 && height(&e) > MAX_HEIGHT {
+            self.error(
+                Diagnostic::error(
+                    "plantc::too_deep",
+                    "expression nested too deeply",
+                    e.span,
+                    format!("more than {MAX_HEIGHT} levels of nesting"),
+                )
+                .with_help("split it with `let` definitions"),
+            );
+            return Err(());
+        }
+        Ok(e)
     }
 
     fn continuation_line(&mut self) -> bool {
@@ -1138,7 +1162,8 @@ impl<'a> Parser<'a> {
     }
 
     fn additive(&mut self) -> PResult<Expr> {
-        let mut lhs = self.term()?;
+        let first = self.term()?;
+        let mut rest = Vec::new();
         loop {
             let t = self.peek().clone();
             let op = match t {
@@ -1149,15 +1174,14 @@ impl<'a> Parser<'a> {
             };
             let op_tok = self.bump();
             self.skip_after_operator(op_tok.span)?;
-            let rhs = self.term()?;
-            let span = lhs.span.to(rhs.span);
-            lhs = Expr::new(ExprKind::Binary(op, Box::new(lhs), Box::new(rhs)), span);
+            rest.push((op, self.term()?));
         }
-        Ok(lhs)
+        Ok(chain(first, rest))
     }
 
     fn term(&mut self) -> PResult<Expr> {
-        let mut lhs = self.unary()?;
+        let first = self.unary()?;
+        let mut rest = Vec::new();
         loop {
             let op = match self.peek() {
                 Tok::Star => BinOp::Mul,
@@ -1166,11 +1190,9 @@ impl<'a> Parser<'a> {
             };
             let op_tok = self.bump();
             self.skip_after_operator(op_tok.span)?;
-            let rhs = self.unary()?;
-            let span = lhs.span.to(rhs.span);
-            lhs = Expr::new(ExprKind::Binary(op, Box::new(lhs), Box::new(rhs)), span);
+            rest.push((op, self.unary()?));
         }
-        Ok(lhs)
+        Ok(chain(first, rest))
     }
 
     fn unary(&mut self) -> PResult<Expr> {
@@ -1339,4 +1361,73 @@ impl<'a> Parser<'a> {
             _ => self.unexpected("an expression"),
         }
     }
+}
+
+/// `first op1 e1 op2 e2 ...` of one precedence level (`+`/`-` or `*`/`/`):
+/// left-deep for short chains, balanced for long ones (see [`CHAIN_BALANCE`]).
+fn chain(first: Expr, rest: Vec<(BinOp, Expr)>) -> Expr {
+    if rest.len() < CHAIN_BALANCE {
+        return rest.into_iter().fold(first, |lhs, (op, rhs)| {
+            let span = lhs.span.to(rhs.span);
+            Expr::new(ExprKind::Binary(op, Box::new(lhs), Box::new(rhs)), span)
+        });
+    }
+    let mut items: Vec<(BinOp, Option<Expr>)> = Vec::with_capacity(rest.len() + 1);
+    let positive = match rest[0].0 {
+        BinOp::Add | BinOp::Sub => BinOp::Add,
+        _ => BinOp::Mul,
+    };
+    items.push((positive, Some(first)));
+    items.extend(rest.into_iter().map(|(op, e)| (op, Some(e))));
+    balanced(&mut items, false)
+}
+
+/// The inverse operator: `-` for `+`, `/` for `*`.
+fn inverse(op: BinOp) -> BinOp {
+    match op {
+        BinOp::Add => BinOp::Sub,
+        BinOp::Sub => BinOp::Add,
+        BinOp::Mul => BinOp::Div,
+        BinOp::Div => BinOp::Mul,
+        BinOp::Pow => BinOp::Pow,
+    }
+}
+
+/// The value of `items` (the first operand taken positively, every later
+/// operator inverted when `flip`) as a balanced tree:
+/// `a - b + c - d = (a - b) + (c - d)`, `a - b - c + d = (a - b) - (c - d)`.
+fn balanced(items: &mut [(BinOp, Option<Expr>)], flip: bool) -> Expr {
+    if items.len() == 1 {
+        return items[0].1.take().expect("each operand is used once");
+    }
+    let mid = items.len() / 2;
+    let (left, right) = items.split_at_mut(mid);
+    let lhs = balanced(left, flip);
+    let op = if flip {
+        inverse(right[0].0)
+    } else {
+        right[0].0
+    };
+    let rhs = balanced(right, flip ^ matches!(op, BinOp::Sub | BinOp::Div));
+    let span = lhs.span.to(rhs.span);
+    Expr::new(ExprKind::Binary(op, Box::new(lhs), Box::new(rhs)), span)
+}
+
+/// Height of an expression tree, without recursion.
+pub fn height(e: &Expr) -> usize {
+    let mut max = 0;
+    let mut stack = vec![(e, 1usize)];
+    while let Some((e, h)) = stack.pop() {
+        max = max.max(h);
+        match &e.kind {
+            ExprKind::Neg(a) => stack.push((a, h + 1)),
+            ExprKind::Binary(_, a, b) => {
+                stack.push((a, h + 1));
+                stack.push((b, h + 1));
+            }
+            ExprKind::Call(_, args) => stack.extend(args.iter().map(|a| (a, h + 1))),
+            _ => {}
+        }
+    }
+    max
 }

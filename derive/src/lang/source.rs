@@ -16,9 +16,11 @@ impl SourceFile {
     /// Wraps a text under a display name.
     pub fn new(name: impl Into<String>, text: impl Into<String>) -> SourceFile {
         let text = text.into();
+        // `\n`, `\r\n` and a lone `\r` (classic Mac files) end lines
         let mut line_starts = vec![0];
-        for (i, b) in text.bytes().enumerate() {
-            if b == b'\n' {
+        let bytes = text.as_bytes();
+        for (i, &b) in bytes.iter().enumerate() {
+            if b == b'\n' || (b == b'\r' && bytes.get(i + 1) != Some(&b'\n')) {
                 line_starts.push(i + 1);
             }
         }
@@ -58,6 +60,7 @@ impl SourceFile {
         if end > start && self.text.as_bytes()[end - 1] == b'\r' {
             end -= 1;
         }
+        // a lone `\r` ended the line: `end` is already before it
         Span::new(start, end.max(start))
     }
 

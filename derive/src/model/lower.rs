@@ -112,11 +112,43 @@ impl std::error::Error for LoadError {}
 
 /// Read, check and lower the model file at `path`.
 pub fn load_model(path: &Path) -> Result<LoadedModel, LoadError> {
-    let text = std::fs::read_to_string(path).map_err(|e| LoadError::Io {
+    let text = read_source(path)?;
+    load_model_text(&path.display().to_string(), &text)
+}
+
+/// The text of a model file. A file that is not UTF-8 is an error at the
+/// line and column of its first bad byte (UTF-16 files are named as such).
+pub fn read_source(path: &Path) -> Result<String, LoadError> {
+    let bytes = std::fs::read(path).map_err(|e| LoadError::Io {
         path: path.display().to_string(),
         message: e.to_string(),
     })?;
-    load_model_text(&path.display().to_string(), &text)
+    match String::from_utf8(bytes) {
+        Ok(text) => Ok(text),
+        Err(e) => {
+            let bytes = e.as_bytes();
+            let at = e.utf8_error().valid_up_to();
+            let utf16 = bytes.starts_with(&[0xff, 0xfe]) || bytes.starts_with(&[0xfe, 0xff]);
+            let text = String::from_utf8_lossy(bytes).into_owned();
+            // the valid prefix is the same in the lossy text; the bad byte
+            // became U+FFFD (3 bytes)
+            let d = Diagnostic::error(
+                "plantc::invalid_utf8",
+                if utf16 {
+                    "the file is UTF-16, not UTF-8".to_string()
+                } else {
+                    format!("the file is not valid UTF-8 (byte 0x{:02X})", bytes[at])
+                },
+                crate::lang::Span::new(at, at + '\u{fffd}'.len_utf8()),
+                "this byte is not UTF-8",
+            )
+            .with_help("save the model file as UTF-8 (plain text; names and numbers are ASCII)");
+            Err(LoadError::Invalid {
+                source: SourceFile::new(path.display().to_string(), text),
+                diagnostics: vec![d],
+            })
+        }
+    }
 }
 
 /// Check and lower model text (`name` is used in diagnostics).

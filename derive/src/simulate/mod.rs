@@ -29,6 +29,7 @@
 
 mod controller;
 pub mod rk;
+pub mod rosenbrock;
 
 use std::fmt;
 
@@ -36,6 +37,7 @@ pub use controller::{
     gain_names, set_gains, wrap_angle, ControllerEval, ControllerWorkspace, InputSignal, ModeInfo,
 };
 use rk::{DormandPrince, RkError, RkOptions, RkStats};
+use rosenbrock::Rosenbrock;
 
 use crate::mechanics::{has_sign, Equations, NumericDynamics, NumericError, Workspace};
 use crate::model::{Model, ParameterValues};
@@ -228,6 +230,43 @@ pub struct SimOptions {
     pub saturate: bool,
     /// Step budget between two consecutive events.
     pub max_steps: usize,
+    /// Which integrator: explicit Dormand-Prince, implicit Rosenbrock, or
+    /// chosen from the stiffness at the initial state (the default).
+    pub integrator: Integrator,
+}
+
+/// The integration method of [`simulate`].
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub enum Integrator {
+    /// Explicit unless the model is stiff at the initial state (an explicit
+    /// method would need more than [`STIFF_STEPS`] steps): then implicit.
+    #[default]
+    Auto,
+    /// Dormand-Prince 5(4) ([`rk::DormandPrince`]).
+    Explicit,
+    /// Rosenbrock ROS2 ([`rosenbrock::Rosenbrock`]), for stiff models.
+    Implicit,
+}
+
+/// Above this many explicit steps (estimated from the fastest mode at the
+/// initial state) [`Integrator::Auto`] integrates implicitly.
+pub const STIFF_STEPS: f64 = 1e6;
+
+/// How stiff a problem is at its initial state.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Stiffness {
+    /// Largest |eigenvalue| of the closed-loop Jacobian `df/dx` (1/s).
+    pub fastest_mode: f64,
+    /// Steps an explicit method needs for the whole duration (its stability
+    /// bound, `|lambda| h < 3.3`).
+    pub explicit_steps: f64,
+}
+
+impl Stiffness {
+    /// Whether [`Integrator::Auto`] integrates it implicitly.
+    pub fn is_stiff(&self) -> bool {
+        self.explicit_steps > STIFF_STEPS
+    }
 }
 
 impl Default for SimOptions {
@@ -240,6 +279,7 @@ impl Default for SimOptions {
             sample_rate: None,
             saturate: true,
             max_steps: 100_000,
+            integrator: Integrator::Auto,
         }
     }
 }
@@ -271,6 +311,10 @@ pub struct Trajectory {
     pub modes: Vec<usize>,
     /// Mode switches `(t, from, to)` in time order.
     pub switches: Vec<(f64, usize, usize)>,
+    /// The method used (never `Auto`).
+    pub integrator: Integrator,
+    /// The stiffness at the initial state (estimated for `Auto`).
+    pub stiffness: Option<Stiffness>,
 }
 
 impl Trajectory {
@@ -415,6 +459,107 @@ fn event_times(rate: f64, end: f64, what: &str) -> Result<Vec<f64>, SimError> {
     Ok((0..=count).map(|i| i as f64 / rate).collect())
 }
 
+/// One of the two integrators.
+enum Stepper {
+    Explicit(DormandPrince),
+    Implicit(Rosenbrock),
+}
+
+impl Stepper {
+    fn restart(&mut self) {
+        match self {
+            Stepper::Explicit(r) => r.restart(),
+            Stepper::Implicit(r) => r.restart(),
+        }
+    }
+
+    fn advance<E, F>(
+        &mut self,
+        f: &mut F,
+        t0: f64,
+        t1: f64,
+        x: &mut [f64],
+    ) -> Result<(), RkError<E>>
+    where
+        F: FnMut(f64, &[f64], &mut [f64]) -> Result<(), E>,
+    {
+        match self {
+            Stepper::Explicit(r) => r.advance(f, t0, t1, x),
+            Stepper::Implicit(r) => r.advance(f, t0, t1, x),
+        }
+    }
+
+    fn stats(&self) -> RkStats {
+        match self {
+            Stepper::Explicit(r) => r.stats,
+            Stepper::Implicit(r) => r.stats,
+        }
+    }
+}
+
+/// The stiffness of `problem` at its initial state: the spectral radius of
+/// the Jacobian of the closed loop (the controller inside, as in continuous
+/// time; the plant alone with the initial input held when sampled or open
+/// loop), by forward differences. Velocities below 1e-3 are taken as 1e-3:
+/// at exactly 0 the jump of dry friction's `sign()` would read as an
+/// infinitely fast mode.
+pub fn stiffness(problem: &SimProblem, options: &SimOptions) -> Result<Stiffness, SimError> {
+    problem.check()?;
+    let d = &problem.dynamics;
+    let (n, m) = (d.n_states(), d.n_inputs());
+    let mut plant = Plant {
+        p: problem,
+        saturate: options.saturate,
+        ws: d.workspace(),
+        cws: match &problem.control {
+            Control::Feedback(c) => Some(c.workspace(problem.params.len())),
+            Control::OpenLoop(_) => None,
+        },
+        u_raw: vec![0.0; m],
+        u: vec![0.0; m],
+        held: !matches!(problem.control, Control::Feedback(_)) || options.sample_rate.is_some(),
+    };
+    match &problem.control {
+        Control::OpenLoop(sig) => {
+            plant.u_raw.copy_from_slice(sig.sample(None));
+            plant.apply_limits();
+        }
+        Control::Feedback(_) => plant.demand(0.0, &problem.x0)?,
+    }
+    let mut x0 = problem.x0.clone();
+    for v in &mut x0[n / 2..] {
+        if v.abs() < 1e-3 {
+            *v = if *v < 0.0 { -1e-3 } else { 1e-3 };
+        }
+    }
+    let x0 = &x0;
+    let mut f0 = vec![0.0; n];
+    plant.rhs(0.0, x0, &mut f0)?;
+    let mut jac = nalgebra::DMatrix::<f64>::zeros(n, n);
+    let (mut xt, mut fx) = (x0.clone(), vec![0.0; n]);
+    for j in 0..n {
+        let h = f64::EPSILON.sqrt() * x0[j].abs().max(1.0);
+        xt[j] = x0[j] + h;
+        plant.rhs(0.0, &xt, &mut fx)?;
+        xt[j] = x0[j];
+        for i in 0..n {
+            jac[(i, j)] = (fx[i] - f0[i]) / h;
+        }
+    }
+    let fastest_mode = if jac.iter().all(|v| v.is_finite()) {
+        jac.complex_eigenvalues()
+            .iter()
+            .map(|l| l.norm())
+            .fold(0.0, f64::max)
+    } else {
+        f64::INFINITY
+    };
+    Ok(Stiffness {
+        fastest_mode,
+        explicit_steps: problem.duration * fastest_mode / 3.3,
+    })
+}
+
 /// Simulate `problem`.
 pub fn simulate(problem: &SimProblem, options: &SimOptions) -> Result<Trajectory, SimError> {
     problem.check()?;
@@ -455,7 +600,19 @@ pub fn simulate(problem: &SimProblem, options: &SimOptions) -> Result<Trajectory
         max_steps: options.max_steps,
         ..RkOptions::default()
     };
-    let mut rk = DormandPrince::new(n, rk_opts);
+    let stiff = match options.integrator {
+        Integrator::Auto => Some(stiffness(problem, options)?),
+        _ => None,
+    };
+    let method = match (options.integrator, stiff) {
+        (Integrator::Auto, Some(s)) if s.is_stiff() => Integrator::Implicit,
+        (Integrator::Auto, _) => Integrator::Explicit,
+        (m, _) => m,
+    };
+    let mut rk = match method {
+        Integrator::Implicit => Stepper::Implicit(Rosenbrock::new(n, rk_opts)),
+        _ => Stepper::Explicit(DormandPrince::new(n, rk_opts)),
+    };
     let mut traj = Trajectory {
         t: Vec::with_capacity(outs.len()),
         states: Vec::with_capacity(outs.len()),
@@ -472,6 +629,8 @@ pub fn simulate(problem: &SimProblem, options: &SimOptions) -> Result<Trajectory
         },
         modes: Vec::new(),
         switches: Vec::new(),
+        integrator: method,
+        stiffness: stiff,
     };
     let mut switches = Vec::new();
     let n_y = problem.output_tape.n_outputs();
@@ -564,11 +723,17 @@ pub fn simulate(problem: &SimProblem, options: &SimOptions) -> Result<Trajectory
                  sticking joint collapses the step: simulate with regularised friction \
                  (`mechanics::smooth_signs`, `plantc sim --smooth-sign WIDTH`)"
             )),
+            other if method == Integrator::Explicit && stiff.is_none() => {
+                SimError::Integrator(format!(
+                    "{other}; if the model is stiff (a tiny resistance, mass or inertia), \
+                     try the implicit integrator (`plantc sim --integrator implicit`)"
+                ))
+            }
             other => SimError::Integrator(other.to_string()),
         })?;
         t = next;
     }
-    traj.stats = rk.stats;
+    traj.stats = rk.stats();
     traj.switches = switches;
     Ok(traj)
 }

@@ -12,6 +12,7 @@ use plantc_identify::{
 };
 
 use crate::cli::CompareArgs;
+use crate::commands::fit::with_progress;
 use crate::common::{
     channel_spec, fit_options, load, num, read_data, values, write_json, CliError,
 };
@@ -26,9 +27,49 @@ pub(crate) fn report(
     compare(measured, simulated, &names).map_err(|e| CliError::failure(format!("error: {e}")))
 }
 
-/// An overlay + residual SVG per experiment, `<dir>/<experiment>.svg`.
+/// The figure file of each experiment: `<dir>/<experiment>.svg` (experiment
+/// names are unique: see `plantc_identify::read_experiments`).
+pub(crate) fn figure_paths(dir: &Path, measured: &[Experiment]) -> Vec<std::path::PathBuf> {
+    measured
+        .iter()
+        .map(|m| dir.join(format!("{}.svg", m.name)))
+        .collect()
+}
+
+/// Refuses, before any work, figures that would replace existing files
+/// (unless `force`), and a `dir` that is not a directory.
+pub(crate) fn refuse_existing_figures(
+    dir: &Path,
+    measured: &[Experiment],
+    force: bool,
+) -> Result<(), CliError> {
+    if dir.exists() && !dir.is_dir() {
+        return Err(CliError::input(format!(
+            "error: --plots `{}` is a file, not a directory",
+            dir.display()
+        )));
+    }
+    // the overlay, and the prediction and residual-test figures compare may add
+    let extra = measured.iter().flat_map(|m| {
+        ["predicted", "residual-tests"].map(|k| dir.join(format!("{}-{k}.svg", m.name)))
+    });
+    for p in figure_paths(dir, measured).into_iter().chain(extra) {
+        if p.exists() && !force {
+            return Err(CliError::input(format!(
+                "error: figure `{}` already exists; pass --force to overwrite it, or choose another --plots directory",
+                p.display()
+            )));
+        }
+    }
+    Ok(())
+}
+
+/// An overlay + residual SVG per experiment, `<dir>/<experiment>.svg`;
+/// `shown` is the directory named in the messages (the final place when
+/// `dir` is a staging directory).
 pub(crate) fn write_figures(
     dir: &Path,
+    shown: &Path,
     model: &Model,
     measured: &[Experiment],
     simulated: &[Experiment],
@@ -37,10 +78,17 @@ pub(crate) fn write_figures(
     std::fs::create_dir_all(dir)
         .map_err(|e| CliError::failure(format!("error: cannot create `{}`: {e}", dir.display())))?;
     let names: Vec<&str> = model.coordinates.iter().map(|c| c.name.as_str()).collect();
-    for (m, s) in measured.iter().zip(simulated) {
-        let p = dir.join(format!("{}.svg", m.name));
+    for ((m, s), p) in measured
+        .iter()
+        .zip(simulated)
+        .zip(figure_paths(dir, measured))
+    {
         plot_comparison(&p, m, s, &names).map_err(|e| CliError::failure(format!("error: {e}")))?;
-        let _ = writeln!(err, "figure -> {}", p.display());
+        let _ = writeln!(
+            err,
+            "figure -> {}",
+            shown.join(p.file_name().unwrap_or_default()).display()
+        );
     }
     Ok(())
 }
@@ -105,14 +153,20 @@ pub fn run(args: &CompareArgs, out: &mut dyn Write, err: &mut dyn Write) -> Resu
     let loaded = load(&args.model, err)?;
     let model = &loaded.model;
     let vals = values(&loaded, &args.params)?;
-    let measured = read_data(model, &args.data, err)?;
+    // long records take seconds: a progress line on a terminal
+    let measured = with_progress("reading", |_| read_data(model, &args.data, err))?;
+    if let Some(dir) = &args.plots {
+        refuse_existing_figures(dir, &measured, args.force)?;
+    }
     let opts = ValidateOptions {
         fit: fit_options(model, &args.control, None)?,
         horizon: args.horizon,
         lags: args.lags,
     };
-    let v = validate(model, &vals.base, &measured, &opts)
-        .map_err(|e| CliError::failure(format!("error: {e}")))?;
+    let v = with_progress("simulating", |_| {
+        validate(model, &vals.base, &measured, &opts)
+    })
+    .map_err(|e| CliError::failure(format!("error: {e}")))?;
     let sims: Vec<Option<&Vec<Vec<f64>>>> =
         v.experiments.iter().map(|e| e.simulated.as_ref()).collect();
     let simulated = as_experiments(model, &measured, &sims);
@@ -124,7 +178,7 @@ pub fn run(args: &CompareArgs, out: &mut dyn Write, err: &mut dyn Write) -> Resu
     };
     if let Some(dir) = &args.plots {
         if all_simulated {
-            write_figures(dir, model, &measured, &simulated, err)?;
+            write_figures(dir, dir, model, &measured, &simulated, err)?;
         }
         if v.horizon.is_some() {
             let preds: Vec<Option<&Vec<Vec<f64>>>> =

@@ -13,7 +13,8 @@ use crate::cli::DiagnoseArgs;
 use crate::commands::fit::with_progress;
 
 use crate::common::{
-    fit_options, load, read_data, refuse_to_clobber, write_json, write_parameter_values, CliError,
+    fit_options, load, read_data, refuse_to_clobber, write_json, write_output,
+    write_parameter_values, CliError,
 };
 
 /// One finding in the JSON shape of `plantc diagnose --json`.
@@ -110,9 +111,7 @@ pub fn run(args: &DiagnoseArgs, out: &mut dyn Write, err: &mut dyn Write) -> Res
                 let values = f.parameters.iter().map(|e| (e.name.as_str(), e.value));
                 edited = write_parameter_values(&edited, model, values)?;
             }
-            std::fs::write(o, edited).map_err(|e| {
-                CliError::failure(format!("error: cannot write `{}`: {e}", o.display()))
-            })?;
+            write_output(o, edited)?;
             let _ = writeln!(
                 err,
                 "model with {} added -> {}",

@@ -14,8 +14,8 @@ use plantc_identify::{
 
 use crate::cli::FitArgs;
 use crate::common::{
-    fit_options, load, read_data, refuse_to_clobber, values, write_json, write_parameter_values,
-    CliError,
+    fit_options, load, read_data, refuse_to_clobber, values, write_json, write_output,
+    write_parameter_values, CliError,
 };
 
 /// Runs `work` while showing elapsed time and the latest status that
@@ -368,9 +368,7 @@ pub fn run(args: &FitArgs, out: &mut dyn Write, err: &mut dyn Write) -> Result<(
             }
         });
         let text = write_parameter_values(&text, model, values)?;
-        std::fs::write(o, text).map_err(|e| {
-            CliError::failure(format!("error: cannot write `{}`: {e}", o.display()))
-        })?;
+        write_output(o, text)?;
         let _ = writeln!(err, "fitted model -> {}", o.display());
     }
     if args.json {

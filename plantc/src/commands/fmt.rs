@@ -72,11 +72,8 @@ pub fn run(
                 "{name}: not formatted (first difference on line {line})"
             );
         } else {
-            write_atomic(path, &formatted).map_err(|e| {
-                CliError::failure(format!(
-                    "error: cannot write {name}: {e} (the file is unchanged)"
-                ))
-            })?;
+            write_atomic(path, &formatted)
+                .map_err(|e| CliError::failure(format!("error: {e} (the file is unchanged)")))?;
             let _ = writeln!(out, "formatted {name}");
         }
     }
@@ -141,38 +138,9 @@ fn first_difference(a: &str, b: &str) -> usize {
         + 1
 }
 
-/// Replaces `path` by `text` atomically: a temporary file in the same
-/// directory, synced, then renamed over the original (keeping its
-/// permissions). A crash leaves either the old or the new file.
-// TODO(lead): switch to the shared atomic-write helper of issue 12 once merged.
-fn write_atomic(path: &Path, text: &str) -> std::io::Result<()> {
-    // through a symbolic link: replace the file it points to, keep the link
-    let resolved = std::fs::canonicalize(path).unwrap_or_else(|_| path.to_path_buf());
-    let path = resolved.as_path();
-    let dir = path
-        .parent()
-        .filter(|d| !d.as_os_str().is_empty())
-        .unwrap_or(Path::new("."));
-    let name = path
-        .file_name()
-        .map_or("model".into(), |n| n.to_string_lossy().into_owned());
-    let tmp = dir.join(format!(".{name}.plantc-fmt.{}.tmp", std::process::id()));
-    let result = (|| {
-        let mut f = std::fs::File::create(&tmp)?;
-        f.write_all(text.as_bytes())?;
-        if let Ok(meta) = std::fs::metadata(path) {
-            f.set_permissions(meta.permissions())?;
-        }
-        f.sync_all()?;
-        drop(f);
-        std::fs::rename(&tmp, path)?;
-        if let Ok(d) = std::fs::File::open(dir) {
-            let _ = d.sync_all();
-        }
-        Ok(())
-    })();
-    if result.is_err() {
-        let _ = std::fs::remove_file(&tmp);
-    }
-    result
+/// Replaces `path` by `text` crash-safely through `plantc-fsio` (a
+/// temporary file in the same directory, synced, renamed over the original;
+/// permissions kept, a symbolic link keeps pointing at the replaced file).
+fn write_atomic(path: &Path, text: &str) -> Result<(), plantc_fsio::Error> {
+    plantc_fsio::write_atomic(path, text)
 }

@@ -32,7 +32,8 @@ fn fail(e: impl std::fmt::Display) -> CliError {
 }
 
 fn write_file(path: &Path, text: &str) -> Result<(), CliError> {
-    std::fs::write(path, text).map_err(|e| fail(format!("cannot write `{}`: {e}", path.display())))
+    // crash-safe (temporary file, fsync, rename)
+    plantc_fsio::write_atomic(path, text).map_err(fail)
 }
 
 /// The model text with every fitted parameter written in (lossless).
@@ -149,9 +150,20 @@ fn story(
         && !made_by_identify(dir)
     {
         return Err(CliError::input(format!(
-            "error: `{}` exists, is not empty and was not written by `plantc identify`; choose a new directory or pass --force (files of the same names are replaced)",
+            "error: `{}` exists, is not empty and was not written by `plantc identify`; choose a new directory or pass --force (identify's files are replaced, others kept)",
             dir.display()
         )));
+    }
+    // the output directory is replaced as a whole: never the input model
+    if let (Ok(m), Ok(d)) = (args.model.canonicalize(), dir.canonicalize()) {
+        if m.starts_with(&d) && !args.force {
+            return Err(CliError::input(format!(
+                "error: the input model `{}` lies inside the output directory `{}`, which identify replaces; copy the model elsewhere (e.g. `cp {} model.plant`) or choose another -o, or pass --force to replace it",
+                args.model.display(),
+                dir.display(),
+                args.model.display()
+            )));
+        }
     }
     let started = Instant::now();
     let loaded = load(&args.model, err)?;
@@ -182,9 +194,10 @@ fn story(
         predict: args.predict,
         ..StoryOptions::default()
     };
-    // inputs are checked before anything is written
-    std::fs::create_dir_all(dir)
-        .map_err(|e| fail(format!("cannot create `{}`: {e}", dir.display())))?;
+    // inputs are checked before anything is written; the new directory is
+    // built aside and swapped in at the end: a killed run leaves the old one
+    let fresh = plantc_fsio::FreshDir::create(dir).map_err(fail)?;
+    let staging = fresh.path().to_path_buf();
     let channels: Vec<&str> = model.coordinates.iter().map(|c| c.name.as_str()).collect();
     let s = with_progress("identifying", |set| {
         identify(&text, &measured, &opts, &mut |p| match p {
@@ -202,7 +215,7 @@ fn story(
         args.model.display(),
         measured.len()
     );
-    write_stage_figures(dir, "1-nominal", model, &measured, nominal, err)?;
+    write_stage_figures((&staging, dir), "1-nominal", model, &measured, nominal, err)?;
     let _ = writeln!(out, "   RMSE {:.3e}; where it fails:", nominal.report.rmse);
     if write_failures(out, model, &measured, &nominal.simulated)? == 0 {
         let _ = writeln!(out, "  no pattern in the residuals");
@@ -216,7 +229,14 @@ fn story(
         out,
         "\n2. diagnose: refit the nominal model, rank candidate effects by equation error, refit the leaders"
     );
-    write_stage_figures(dir, "2-refitted", model, &measured, refitted, err)?;
+    write_stage_figures(
+        (&staging, dir),
+        "2-refitted",
+        model,
+        &measured,
+        refitted,
+        err,
+    )?;
     let _ = writeln!(
         out,
         "   nominal model refitted: RMSE {:.3e}; where it still fails:",
@@ -261,7 +281,7 @@ fn story(
                     format!("with_effect_{}.plant", k + 1)
                 };
                 let edited = with_values(&stage.text, &m2, f)?;
-                write_file(&dir.join(&file), &edited)?;
+                write_file(&staging.join(&file), &edited)?;
                 files.push(file.clone());
                 let _ = writeln!(
                     err,
@@ -288,7 +308,7 @@ fn story(
                     let _ = writeln!(out, "   warning: {m}");
                 }
                 write_stage_figures(
-                    dir,
+                    (&staging, dir),
                     &format!("{}-fitted", 3 + k),
                     &m2,
                     &measured,
@@ -316,7 +336,7 @@ fn story(
     // the result
     let final_model = model_from_text("final", &s.text).map_err(fail)?;
     let fitted = with_values(&s.text, &final_model, &s.fit)?;
-    write_file(&dir.join("fitted.plant"), &fitted)?;
+    write_file(&staging.join("fitted.plant"), &fitted)?;
     let stage_refs: Vec<Stage> = s
         .stages
         .iter()
@@ -371,20 +391,45 @@ fn story(
         .into();
     let mut buf = Vec::new();
     write_json(&mut buf, &summary);
-    write_file(&dir.join("report.json"), &String::from_utf8_lossy(&buf))?;
+    write_file(&staging.join("report.json"), &String::from_utf8_lossy(&buf))?;
+    // swap the complete directory in; entries identify never writes (the
+    // user's, with --force) are kept
+    fresh
+        .commit_keeping(|n| !is_identify_entry(n))
+        .map_err(fail)?;
     Ok(summary)
 }
 
 /// A stage's overlay + residual figures under `dir/sub/`.
 fn write_stage_figures(
-    dir: &Path,
+    (dir, shown): (&Path, &Path),
     sub: &str,
     model: &Model,
     measured: &[Experiment],
     stage: &plantc_identify::Stage,
     err: &mut dyn Write,
 ) -> Result<(), CliError> {
-    write_figures(&dir.join(sub), model, measured, &stage.simulated, err)
+    write_figures(
+        &dir.join(sub),
+        &shown.join(sub),
+        model,
+        measured,
+        &stage.simulated,
+        err,
+    )
+}
+
+/// Whether a top-level entry of the output directory is one identify writes
+/// (`report.json`, `fitted.plant`, `with_effect*.plant`, `N-<stage>/`
+/// figure folders): those of an earlier run are dropped, others kept.
+fn is_identify_entry(name: &Path) -> bool {
+    let n = name.to_string_lossy();
+    n == "report.json"
+        || n == "fitted.plant"
+        || (n.starts_with("with_effect") && n.ends_with(".plant"))
+        || n.split_once('-').is_some_and(|(k, rest)| {
+            !k.is_empty() && k.bytes().all(|b| b.is_ascii_digit()) && !rest.is_empty()
+        })
 }
 
 /// Whether `dir` holds the output of an earlier `plantc identify` (its

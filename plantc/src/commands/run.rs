@@ -7,7 +7,7 @@ use plantc_derive::control::{resolve, Derivation, ResolvedController};
 use plantc_derive::mechanics::NumericDynamics;
 use plantc_derive::model::{Model, ParameterValues};
 use plantc_runtime::{
-    run_with_events, stop_on_ctrl_c, Backend, FaultKind, LogWriter, ModelController, ModelPlant,
+    run_with_events, stop_on_signals, Backend, FaultKind, LogWriter, ModelController, ModelPlant,
     ObserverSpec, Q2Usb, Q2UsbConfig, RunConfig, SimBackend, SimConfig, SupervisorState,
     SwingUpLimits,
 };
@@ -157,10 +157,10 @@ pub fn run(args: &RunArgs, out: &mut dyn Write, err: &mut dyn Write) -> Result<(
         "running `{}` on {:?} at {} Hz for {} s",
         args.controller, args.backend, args.rate, args.duration
     );
-    if let Err(e) = stop_on_ctrl_c(config.stop.clone()) {
+    if let Err(e) = stop_on_signals(config.stop.clone()) {
         let _ = writeln!(
             err,
-            "note: Ctrl-C handler not installed ({e}); Ctrl-C will kill the process without the 0 V stop"
+            "note: signal handlers not installed ({e}); Ctrl-C or kill will end the process without the 0 V stop"
         );
     }
     let report = run_with_events(
@@ -171,14 +171,21 @@ pub fn run(args: &RunArgs, out: &mut dyn Write, err: &mut dyn Write) -> Result<(
         &mut |t| {
             let _ = writeln!(err, "supervisor: {t}");
         },
-    )
-    .map_err(|e| fail(&e))?;
+    );
+    // the safe stop is complete once the board is closed and the log flushed
+    drop(backend);
+    drop(log);
+    plantc_runtime::stop_completed();
+    let report = report.map_err(|e| fail(&e))?;
     let _ = writeln!(out, "{report}");
     if report.final_state == SupervisorState::Fault(FaultKind::Stopped) {
-        // Exit code of a process ended by SIGINT, by convention.
+        // Exit code of a process ended by the signal, by convention
+        // (128 + signal number: 130 SIGINT, 143 SIGTERM, 129 SIGHUP, 131 SIGQUIT).
+        let (name, code) = plantc_runtime::stop_signal()
+            .map_or(("a stop request", 130), |s| (s.name, s.exit_code));
         return Err(CliError {
-            message: "stopped by Ctrl-C (0 V written, log flushed)".to_string(),
-            code: 130,
+            message: format!("stopped by {name} (0 V written, board closed, log flushed)"),
+            code,
         });
     }
     if report.fault_detail.is_some() || matches!(report.final_state, SupervisorState::Fault(_)) {

@@ -210,10 +210,12 @@ pub fn run(args: &RunArgs, out: &mut dyn Write, err: &mut dyn Write) -> Result<(
     }
 
     // The first Ctrl-C reaches the binary too (same process group), which
-    // stops at 0 V and exits 130; plantc stays to report it.
-    let _ = stop_on_ctrl_c(Arc::new(AtomicBool::new(false)));
+    // stops at 0 V and exits 130; a SIGTERM/SIGHUP/SIGQUIT sent to plantc
+    // alone is passed on to the binary. plantc stays to report it.
+    let stop = Arc::new(AtomicBool::new(false));
+    let _ = stop_on_ctrl_c(stop.clone());
     let _ = writeln!(err, "running {}", binary.display());
-    let code = run_forwarding(&binary, &child_args, out, err)?;
+    let code = run_forwarding(&binary, &child_args, &stop, out, err)?;
 
     if args.compare {
         if let Some(log) = &args.log {
@@ -230,9 +232,12 @@ pub fn run(args: &RunArgs, out: &mut dyn Write, err: &mut dyn Write) -> Result<(
     }
     match code {
         0 => Ok(()),
-        130 => Err(CliError {
-            message: "stopped by Ctrl-C (0 V written, log flushed)".to_string(),
-            code: 130,
+        129..=131 | 143 => Err(CliError {
+            message: format!(
+                "stopped by {} (0 V written, board closed, log flushed)",
+                plantc_runtime::stop_signal().map_or("Ctrl-C", |s| s.name)
+            ),
+            code,
         }),
         2 => Err(CliError::input(
             "error: the rig binary refused its options (see above)",
@@ -248,6 +253,7 @@ pub fn run(args: &RunArgs, out: &mut dyn Write, err: &mut dyn Write) -> Result<(
 fn run_forwarding(
     binary: &std::path::Path,
     args: &[String],
+    stop: &AtomicBool,
     out: &mut dyn Write,
     err: &mut dyn Write,
 ) -> Result<i32, CliError> {
@@ -277,9 +283,20 @@ fn run_forwarding(
         threads.push(pipe(Box::new(e), true, tx.clone()));
     }
     drop(tx);
-    for (is_err, line) in rx {
-        let w: &mut dyn Write = if is_err { &mut *err } else { &mut *out };
-        let _ = writeln!(w, "{line}");
+    let mut forwarded = false;
+    loop {
+        match rx.recv_timeout(std::time::Duration::from_millis(50)) {
+            Ok((is_err, line)) => {
+                let w: &mut dyn Write = if is_err { &mut *err } else { &mut *out };
+                let _ = writeln!(w, "{line}");
+            }
+            Err(mpsc::RecvTimeoutError::Timeout) => {}
+            Err(mpsc::RecvTimeoutError::Disconnected) => break,
+        }
+        if !forwarded && stop.load(std::sync::atomic::Ordering::SeqCst) {
+            // a second signal to the same child is ignored by its handler
+            forwarded = plantc_runtime::forward_stop(child.id());
+        }
     }
     for t in threads {
         let _ = t.join();

@@ -8,19 +8,50 @@ use std::time::Instant;
 use plantc_derive::control::{resolve, Derivation};
 use plantc_derive::mechanics::smooth_signs;
 use plantc_derive::simulate::{
-    set_gains, simulate, Control, ControllerEval, SimError, SimOptions, SimProblem, Trajectory,
+    set_gains, simulate, Control, ControllerEval, Integrator, SimError, SimOptions, SimProblem,
+    Trajectory,
 };
 
-use crate::cli::SimArgs;
+use crate::cli::{IntegratorKind, SimArgs};
 use crate::common::{
-    load, num, parse_assignments, parse_quantity, values, warn_ignored_effects, CliError,
+    check_writable, load, num, parse_assignments, parse_quantity, same_file, values,
+    warn_ignored_effects, write_output, CliError,
 };
 
+/// Refuses an existing `path` unless `force`, and checks that it can be
+/// written (before any work).
 pub(crate) fn refuse_overwrite(path: &Path, force: bool, what: &str) -> Result<(), CliError> {
     if path.exists() && !force {
         return Err(CliError::input(format!(
             "error: {what} `{}` already exists; pass --force to overwrite it",
             path.display()
+        )));
+    }
+    check_writable(path)
+}
+
+/// Two outputs of one command must be different files (`-o x.csv --plot
+/// x.csv` would replace the trajectory by the figure).
+pub(crate) fn distinct_outputs(a: &Path, b: &Path) -> Result<(), CliError> {
+    let lexical = |p: &Path| {
+        let abs = std::env::current_dir().map_or(p.to_path_buf(), |d| d.join(p));
+        let mut n = std::path::PathBuf::new();
+        for c in abs.components() {
+            match c {
+                std::path::Component::CurDir => {}
+                std::path::Component::ParentDir => {
+                    n.pop();
+                }
+                c => n.push(c),
+            }
+        }
+        n
+    };
+    if lexical(a) == lexical(b) || same_file(a, b) {
+        return Err(CliError::input(format!(
+            "error: the trajectory (-o) and the figure (--plot) would both go to `{}`; give the figure its own file, e.g. `--plot {}`",
+            b.display(),
+            b.with_extension("svg").display()
         )));
     }
     Ok(())
@@ -71,24 +102,39 @@ fn headers(traj: &Trajectory) -> Vec<String> {
 }
 
 fn write_csv(path: &Path, traj: &Trajectory) -> Result<(), CliError> {
-    let mut text = headers(traj).join(",");
-    text.push('\n');
+    let fail = |e: &dyn std::fmt::Display| CliError::failure(format!("error: {e}"));
+    let mut f = plantc_fsio::AtomicFile::create(path).map_err(|e| fail(&e))?;
+    let io = |e: std::io::Error| {
+        CliError::failure(format!("error: cannot write `{}`: {e}", path.display()))
+    };
+    writeln!(f, "{}", headers(traj).join(",")).map_err(io)?;
     for k in 0..traj.len() {
-        let row: Vec<String> = std::iter::once(traj.t[k])
+        let row = std::iter::once(traj.t[k])
             .chain(traj.states[k].iter().copied())
             .chain(traj.inputs[k].iter().copied())
-            .chain(traj.outputs[k].iter().copied())
-            .map(|x| format!("{x}"))
-            .chain(traj.modes.get(k).map(|m| traj.mode_names[*m].clone()))
-            .collect();
-        text.push_str(&row.join(","));
-        text.push('\n');
+            .chain(traj.outputs[k].iter().copied());
+        for (i, x) in row.enumerate() {
+            if i > 0 {
+                f.write_all(b",").map_err(io)?;
+            }
+            write!(f, "{x}").map_err(io)?;
+        }
+        if let Some(m) = traj.modes.get(k) {
+            write!(f, ",{}", traj.mode_names[*m]).map_err(io)?;
+        }
+        f.write_all(b"\n").map_err(io)?;
     }
-    std::fs::write(path, text)
-        .map_err(|e| CliError::failure(format!("error: cannot write `{}`: {e}", path.display())))
+    f.commit().map_err(|e| fail(&e))
 }
 
-fn plot(path: &Path, traj: &Trajectory, units: &[String], title: &str) -> Result<(), String> {
+/// The figure as SVG text.
+fn plot(traj: &Trajectory, units: &[String], title: &str) -> Result<String, String> {
+    let mut svg = String::new();
+    draw(&mut svg, traj, units, title)?;
+    Ok(svg)
+}
+
+fn draw(svg: &mut String, traj: &Trajectory, units: &[String], title: &str) -> Result<(), String> {
     use plotters::prelude::*;
     // Panels: angles in degrees (arm, pendulum, ...), then each input.
     let n = traj.state_names.len() / 2;
@@ -109,7 +155,7 @@ fn plot(path: &Path, traj: &Trajectory, units: &[String], title: &str) -> Result
     }
     let t_end = traj.t.last().copied().unwrap_or(1.0).max(1e-9);
     let height = 240 * panels.len() as u32 + 40;
-    let root = SVGBackend::new(path, (900, height)).into_drawing_area();
+    let root = SVGBackend::with_string(svg, (900, height)).into_drawing_area();
     root.fill(&WHITE).map_err(|e| e.to_string())?;
     let root = root
         .titled(title, ("sans-serif", 20))
@@ -152,6 +198,7 @@ fn plot(path: &Path, traj: &Trajectory, units: &[String], title: &str) -> Result
 pub fn run(args: &SimArgs, out: &mut dyn Write, err: &mut dyn Write) -> Result<(), CliError> {
     refuse_overwrite(&args.output, args.force, "output file")?;
     if let Some(p) = &args.plot {
+        distinct_outputs(&args.output, p)?;
         refuse_overwrite(p, args.force, "plot file")?;
     }
     if !(args.duration.is_finite() && args.duration > 0.0) {
@@ -193,6 +240,11 @@ pub fn run(args: &SimArgs, out: &mut dyn Write, err: &mut dyn Write) -> Result<(
     let mut options = SimOptions {
         output_rate: args.output_rate,
         sample_rate: args.sample_rate,
+        integrator: match args.integrator {
+            IntegratorKind::Auto => Integrator::Auto,
+            IntegratorKind::Explicit => Integrator::Explicit,
+            IntegratorKind::Implicit => Integrator::Implicit,
+        },
         ..SimOptions::default()
     };
     if let Some(r) = args.rtol {
@@ -202,6 +254,15 @@ pub fn run(args: &SimArgs, out: &mut dyn Write, err: &mut dyn Write) -> Result<(
     let started = Instant::now();
     let traj = simulate(&problem, &options).map_err(sim_error)?;
     let elapsed = started.elapsed();
+    if let Some(s) = traj.stiffness.filter(|s| s.is_stiff()) {
+        let _ = writeln!(
+            err,
+            "note: the model is stiff at the initial state (fastest mode {:.2e} 1/s: an explicit integrator needs about {:.1e} steps for {} s), so it was integrated with the implicit Rosenbrock method; check the parameter values if that is not expected (`--integrator explicit` forces Dormand-Prince)",
+            s.fastest_mode,
+            s.explicit_steps,
+            num(args.duration)
+        );
+    }
     write_csv(&args.output, &traj)?;
     let mode = match args.sample_rate {
         Some(r) => format!("sampled at {} Hz, zero-order hold", num(r)),
@@ -246,8 +307,9 @@ pub fn run(args: &SimArgs, out: &mut dyn Write, err: &mut dyn Write) -> Result<(
     if let Some(p) = &args.plot {
         let title = format!("{}: {} ({mode})", model.name, args.controller);
         let units: Vec<String> = model.inputs.iter().map(|i| i.unit.clone()).collect();
-        plot(p, &traj, &units, &title)
+        let svg = plot(&traj, &units, &title)
             .map_err(|e| CliError::failure(format!("error: cannot draw `{}`: {e}", p.display())))?;
+        write_output(p, svg)?;
         let _ = writeln!(out, "figure -> {}", p.display());
     }
     Ok(())

@@ -9,7 +9,8 @@ use plantc_identify::synth::{
 };
 
 use crate::cli::SynthArgs;
-use crate::common::{num, parse_quantity, CliError};
+use crate::commands::fit::with_progress;
+use crate::common::{num, parse_quantity, write_output, CliError};
 
 fn synth_error(e: SynthError) -> CliError {
     match e {
@@ -51,12 +52,8 @@ pub fn run(args: &SynthArgs, out: &mut dyn Write, _err: &mut dyn Write) -> Resul
             }
         }
     }
-    let text = std::fs::read_to_string(&args.model).map_err(|e| {
-        CliError::input(format!(
-            "error: cannot read `{}`: {e}",
-            args.model.display()
-        ))
-    })?;
+    let text =
+        plantc_derive::model::read_source(&args.model).map_err(|e| CliError::input(e.render()))?;
     let case = args.case.clone().unwrap_or_else(|| {
         args.out
             .file_name()
@@ -100,20 +97,27 @@ pub fn run(args: &SynthArgs, out: &mut dyn Write, _err: &mut dyn Write) -> Resul
             }
         }
     }
-    let data = synthesize(&text, &spec).map_err(synth_error)?;
-    std::fs::create_dir_all(&args.out).map_err(|e| {
-        CliError::failure(format!(
-            "error: cannot create `{}`: {e}",
-            args.out.display()
-        ))
-    })?;
-    let write = |name: &str, content: &str| {
-        let p = args.out.join(name);
-        std::fs::write(&p, content)
-            .map_err(|e| CliError::failure(format!("error: cannot write `{}`: {e}", p.display())))
+    // All files appear together: written into a copy of DIR swapped in at
+    // the end (other entries of DIR are kept). In the current directory,
+    // which cannot be swapped, each file is still replaced crash-safely.
+    let fresh = match plantc_fsio::FreshDir::create(&args.out) {
+        Ok(f) => Some(f),
+        Err(plantc_fsio::Error::CurrentDirectory { .. }) => None,
+        Err(e) => return Err(CliError::failure(format!("error: {e}"))),
     };
+    // long experiments take seconds: a progress line on a terminal
+    let data = with_progress("synthesizing", |_| synthesize(&text, &spec)).map_err(synth_error)?;
+    let staging = fresh.as_ref().map_or(args.out.as_path(), |f| f.path());
+    let write = |name: &str, content: &str| write_output(&staging.join(name), content);
     for f in &data.files {
         write(&f.file_name, &f.text)?;
+    }
+    write("truth.json", &data.truth)?;
+    if let Some(f) = fresh {
+        f.commit_keeping(|n| !names.iter().any(|w| n == std::path::Path::new(w)))
+            .map_err(|e| CliError::failure(format!("error: {e}")))?;
+    }
+    for f in &data.files {
         let _ = writeln!(
             out,
             "{}: {} samples",
@@ -121,7 +125,6 @@ pub fn run(args: &SynthArgs, out: &mut dyn Write, _err: &mut dyn Write) -> Resul
             f.text.lines().count().saturating_sub(1)
         );
     }
-    write("truth.json", &data.truth)?;
     let effects: Vec<String> = spec
         .effects
         .iter()

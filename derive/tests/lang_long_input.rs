@@ -1,0 +1,214 @@
+//! Hostile but legal input (reliability reproducers 05, 12, 13, 16): very
+//! long sums and products, very deep parentheses, thousands of duplicate
+//! lines, line endings and encodings. Nothing may overflow the stack, and
+//! long chains must keep their value (they are parsed as balanced trees).
+
+use plantc_derive::lang::ast::{BinOp, Expr, ExprKind};
+use plantc_derive::lang::parser::{height, parse_expr, MAX_HEIGHT};
+use plantc_derive::lang::{parse_and_check, render, SourceFile};
+use plantc_derive::model::{load_model, load_model_text};
+use proptest::prelude::*;
+
+const FIXTURE: &str = include_str!("fixtures/rotary_pendulum.plant");
+
+/// Value of a numbers-only expression, by recursion (fine for balanced trees).
+fn eval(e: &Expr) -> f64 {
+    match &e.kind {
+        ExprKind::Number(n) => n.value(),
+        ExprKind::Neg(a) => -eval(a),
+        ExprKind::Binary(op, a, b) => {
+            let (a, b) = (eval(a), eval(b));
+            match op {
+                BinOp::Add => a + b,
+                BinOp::Sub => a - b,
+                BinOp::Mul => a * b,
+                BinOp::Div => a / b,
+                BinOp::Pow => a.powf(b),
+            }
+        }
+        k => panic!("unexpected {k:?}"),
+    }
+}
+
+/// `x0 op1 x1 op2 x2 ...` evaluated left to right, as written.
+fn left_to_right(first: f64, rest: &[(char, f64)]) -> f64 {
+    rest.iter().fold(first, |acc, (op, x)| match op {
+        '+' => acc + x,
+        '-' => acc - x,
+        '*' => acc * x,
+        _ => acc / x,
+    })
+}
+
+fn text(first: f64, rest: &[(char, f64)]) -> String {
+    let mut s = format!("{first}");
+    for (op, x) in rest {
+        s.push_str(&format!(" {op} {x}"));
+    }
+    s
+}
+
+proptest! {
+    #![proptest_config(ProptestConfig { cases: 200, ..ProptestConfig::default() })]
+
+    /// Chains longer than the balancing threshold have the value of the
+    /// left-to-right reading (exactly for sums of small integers; products
+    /// and quotients of numbers near 1 within rounding).
+    #[test]
+    fn balanced_sums_keep_their_value(
+        first in -9i32..10,
+        rest in proptest::collection::vec((prop_oneof![Just('+'), Just('-')], -9i32..10), 0..300),
+    ) {
+        let rest: Vec<(char, f64)> = rest.into_iter().map(|(o, x)| (o, f64::from(x))).collect();
+        let e = parse_expr(&text(f64::from(first), &rest)).unwrap();
+        prop_assert_eq!(eval(&e), left_to_right(f64::from(first), &rest));
+        prop_assert!(height(&e) <= 40, "height {}", height(&e));
+    }
+
+    #[test]
+    fn balanced_products_keep_their_value(
+        rest in proptest::collection::vec((prop_oneof![Just('*'), Just('/')], 0.5f64..2.0), 0..300),
+    ) {
+        let e = parse_expr(&text(1.5, &rest)).unwrap();
+        let (got, want) = (eval(&e), left_to_right(1.5, &rest));
+        prop_assert!((got / want - 1.0).abs() < 1e-12, "{} vs {}", got, want);
+    }
+}
+
+proptest! {
+    #![proptest_config(ProptestConfig { cases: 2, ..ProptestConfig::default() })]
+
+    /// A 100,000-term sum in a `let` of the reference model checks and loads
+    /// (reproducer 05: 8,000 terms overflowed the stack of `check`), on a
+    /// test thread's small stack.
+    #[test]
+    fn a_100000_term_sum_checks_and_loads(signs in proptest::collection::vec(any::<bool>(), 100_000)) {
+        let mut sum = String::from("let c   = m2*L1*l2");
+        for plus in &signs {
+            sum.push_str(if *plus { " + 0*m2*L1*l2" } else { " - 0*m2*L1*l2" });
+        }
+        let text = FIXTURE.replace("let c   = m2*L1*l2", &sum);
+        prop_assert!(text.len() > 1_000_000);
+        let c = parse_and_check("sum.plant", &text);
+        prop_assert!(!c.has_errors(), "{}", render(&SourceFile::new("sum.plant", text.clone()), &c.diagnostics));
+        let loaded = load_model_text("sum.plant", &text);
+        prop_assert!(loaded.is_ok());
+    }
+
+    /// 10,000 nested parentheses around random content: a clean error at a
+    /// span, never a stack overflow.
+    #[test]
+    fn ten_thousand_nested_parentheses_are_a_clean_error(inner in "[a-z0-9+*/ -]{1,20}", unary in any::<bool>()) {
+        let open = if unary { "-(" } else { "(" };
+        let text = format!("model m\nlet x = {}{inner}{}\n", open.repeat(10_000), ")".repeat(10_000));
+        let c = parse_and_check("deep.plant", &text);
+        prop_assert!(c.errors().any(|d| d.code == "plantc::too_deep"), "{:?}", c.diagnostics.first());
+        let rendered = render(&SourceFile::new("deep.plant", text.clone()), &c.diagnostics);
+        prop_assert!(rendered.contains("deep.plant:2:"));
+    }
+}
+
+#[test]
+fn long_continuation_sums_and_products_are_fine() {
+    // 50,000 continuation lines (reproducer 05), dimensionally right
+    let cont: String = (0..50_000).map(|_| "\n    + 0*J2h*theta'^2").collect();
+    let text = FIXTURE.replacen("*theta'*alpha'", &format!("*theta'*alpha'{cont}"), 1);
+    let c = parse_and_check("cont.plant", &text);
+    assert!(!c.has_errors(), "{:?}", c.errors().next());
+    // a 100,000-factor product
+    let text = FIXTURE.replace(
+        "let c   = m2*L1*l2",
+        &format!("let c   = m2*L1*l2{}", "*1".repeat(100_000)),
+    );
+    assert!(load_model_text("prod.plant", &text).is_ok());
+}
+
+#[test]
+fn height_limit_catches_deep_left_nesting_of_chains() {
+    // parentheses (up to the parser's depth limit) each opening a chain:
+    // the tree would be far taller than either alone
+    let chain = " + x".repeat(30);
+    let text = format!(
+        "model m\nlet x = {}1{}\n",
+        "(".repeat(150),
+        format!("{chain})").repeat(150)
+    );
+    let c = parse_and_check("tall.plant", &text);
+    assert!(c.errors().any(|d| d.code == "plantc::too_deep"));
+    let e = parse_expr(&format!(
+        "{}1{}",
+        "(".repeat(10),
+        format!("{chain})").repeat(10)
+    ))
+    .unwrap();
+    assert!(height(&e) <= MAX_HEIGHT);
+}
+
+/// Reproducer 12: 150,000 lines `force alpha = ...` after the real one. Each
+/// is reported (the check is linear in the lines: it was quadratic), and the
+/// rendering stops after `MAX_RENDERED` diagnostics.
+#[test]
+fn many_duplicate_force_lines_are_reported_and_rendering_is_capped() {
+    let n = 150_000;
+    let text = format!(
+        "{FIXTURE}{}",
+        "force alpha = viscous_friction(b2)\n".repeat(n)
+    );
+    let c = parse_and_check("dup.plant", &text);
+    let dups = c
+        .errors()
+        .filter(|d| d.code == "plantc::duplicate_force")
+        .count();
+    assert_eq!(dups, n);
+    let rendered = render(&SourceFile::new("dup.plant", text.clone()), &c.diagnostics);
+    assert!(
+        rendered.lines().count() < 3_000,
+        "{} lines",
+        rendered.lines().count()
+    );
+    assert!(rendered.contains(&format!("{} more diagnostics not shown", n - 200)));
+    assert!(rendered.ends_with(&format!("dup.plant: {n} errors, 0 warnings, 0 notes\n")));
+}
+
+#[test]
+fn line_endings_and_byte_order_mark() {
+    let lf = load_model_text("lf.plant", FIXTURE).unwrap();
+    let cr = load_model_text("cr.plant", &FIXTURE.replace('\n', "\r")).unwrap();
+    let crlf = load_model_text("crlf.plant", &FIXTURE.replace('\n', "\r\n")).unwrap();
+    let bom = load_model_text("bom.plant", &format!("\u{feff}{FIXTURE}")).unwrap();
+    for m in [&cr, &crlf, &bom] {
+        assert_eq!(format!("{:?}", m.model), format!("{:?}", lf.model));
+    }
+    // positions in a CR-only file are lines, not one long line
+    let bad = FIXTURE
+        .replace('\n', "\r")
+        .replace("let c   = m2*L1*l2", "let c = m2*L1*l3");
+    let e = load_model_text("cr.plant", &bad).unwrap_err().render();
+    let line = FIXTURE
+        .lines()
+        .position(|l| l.starts_with("let c   = "))
+        .unwrap()
+        + 1;
+    assert!(e.contains(&format!("cr.plant:{line}:")), "{e}");
+}
+
+#[test]
+fn invalid_utf8_names_line_and_column() {
+    let dir = std::env::temp_dir().join(format!("plantc-utf8-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).unwrap();
+    let p = dir.join("latin1.plant");
+    // `é` in Latin-1 (0xE9) inside a comment on line 3, column 14
+    let mut bytes = b"model m\ncoordinate q : angle\n# masse du pendule \xe9\n".to_vec();
+    bytes.extend_from_slice(b"parameter J = 1 [kg*m^2]\n");
+    std::fs::write(&p, &bytes).unwrap();
+    let e = load_model(&p).unwrap_err().render();
+    assert!(e.contains("latin1.plant:3:20"), "{e}");
+    assert!(e.contains("not valid UTF-8 (byte 0xE9)"), "{e}");
+    let p16 = dir.join("utf16.plant");
+    let mut b16 = vec![0xff, 0xfe];
+    b16.extend("model m\n".encode_utf16().flat_map(u16::to_le_bytes));
+    std::fs::write(&p16, &b16).unwrap();
+    let e = load_model(&p16).unwrap_err().render();
+    assert!(e.contains("UTF-16"), "{e}");
+    std::fs::remove_dir_all(&dir).unwrap();
+}
