@@ -15,7 +15,8 @@
 set -euo pipefail
 cd "$(dirname "$0")/.."
 repeats="${1:-5}"
-cargo build --quiet --release -p plantc -p plantc-identify --example fit_timing
+cargo build --quiet --release -p plantc
+cargo build --quiet --release -p plantc-identify --example fit_timing
 dir=target/bench-fit-speed
 rm -rf "$dir"
 ./target/release/plantc synth models/rotary_pendulum.plant \
