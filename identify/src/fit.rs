@@ -1489,7 +1489,7 @@ pub(crate) fn nuisance_estimates(
 }
 
 /// The weighted RMS that measurement noise alone would leave.
-fn noise_cost(weights: &[ChannelWeight]) -> f64 {
+pub(crate) fn noise_cost(weights: &[ChannelWeight]) -> f64 {
     let n = weights.len().max(1) as f64;
     (weights
         .iter()
