@@ -528,13 +528,8 @@ fn sensor_offsets_from_nuisance(
             .cloned()
             .collect();
         let without = FitOptions {
-            free: None,
-            start: Some(baseline.base.clone()),
-            horizon,
-            multistart: 0,
-            act_on_identifiability: false,
             offsets: Offsets::On(others),
-            ..opts.fit.clone()
+            ..screening(opts, baseline.base.clone(), horizon)
         };
         let Ok(a) = fit(model, experiments, &without) else {
             continue;
@@ -559,24 +554,29 @@ fn sensor_offsets_from_nuisance(
                 }
             }
         };
-        let gain = a.after_cost / b.after_cost.max(f64::MIN_POSITIVE);
-        r.gain = gain;
         r.evidence.rmse_before = a.after_cost;
-        r.evidence.rmse_after = Some(b.after_cost);
-        r.evidence.gain = Some(gain);
         r.evidence.acts_where = format!(
             "the per-experiment offsets of {coord} agree (mean {mean:.4e}): one sensor offset; {}",
             r.evidence.acts_where
         );
-        r.parameters = b
-            .parameters
-            .iter()
-            .filter(|e| r.candidate.parameters.iter().any(|p| p.name == e.name))
-            .cloned()
-            .collect();
-        r.fit = Some(b);
-        r.error = None;
+        credit(r, b, a.after_cost);
     }
+}
+
+/// Record candidate `r`'s refit `f`, judged against a baseline cost.
+fn credit(r: &mut Ranked, f: FitResult, baseline_cost: f64) {
+    let gain = baseline_cost / f.after_cost.max(f64::MIN_POSITIVE);
+    r.gain = gain;
+    r.evidence.rmse_after = Some(f.after_cost);
+    r.evidence.gain = Some(gain);
+    r.parameters = f
+        .parameters
+        .iter()
+        .filter(|e| r.candidate.parameters.iter().any(|p| p.name == e.name))
+        .cloned()
+        .collect();
+    r.fit = Some(f);
+    r.error = None;
 }
 
 /// A refit gain above which a second start is not tried.
@@ -618,19 +618,7 @@ fn refit(
         };
     }
     match outcome {
-        Ok(f) => {
-            let gain = baseline.after_cost / f.after_cost.max(f64::MIN_POSITIVE);
-            r.gain = gain;
-            r.evidence.rmse_after = Some(f.after_cost);
-            r.evidence.gain = Some(gain);
-            r.parameters = f
-                .parameters
-                .iter()
-                .filter(|e| r.candidate.parameters.iter().any(|p| p.name == e.name))
-                .cloned()
-                .collect();
-            r.fit = Some(f);
-        }
+        Ok(f) => credit(r, f, baseline.after_cost),
         Err(e) => r.error = Some(e.to_string()),
     }
 }
@@ -661,15 +649,19 @@ fn refit_from(
             }
         }
     }
-    // a candidate's refit is a screening: no extra starts, no refit without
-    // undetermined parameters (the story's final fit does both)
-    let o = FitOptions {
+    fit(m, experiments, &screening(opts, start, horizon))
+}
+
+/// The fit options of a screening refit: every `estimate` parameter free
+/// from `start`, no extra starts, no refit without undetermined parameters
+/// (the story's final fit does both).
+fn screening(opts: &DiagnoseOptions, start: Vec<f64>, horizon: Horizon) -> FitOptions {
+    FitOptions {
         free: None,
         start: Some(start),
         horizon,
         multistart: 0,
         act_on_identifiability: false,
         ..opts.fit.clone()
-    };
-    fit(m, experiments, &o)
+    }
 }

@@ -1345,16 +1345,16 @@ fn solve<'s>(
     let mut best = (pt.clone(), before.0);
     // growing horizons, the best point on the whole objective kept
     lambda = 1e-3;
-    let mut stage_cost: Option<f64> = None;
-    let mut stage_ssr: f64;
+    // SSR and count of the last stage
+    let mut stage: Option<(f64, usize)> = None;
     let mut last_stop = Stop::Converged;
     for (s, &h) in horizons.iter().enumerate() {
         run.stage = s + 1;
         let last = s + 1 == horizons.len();
         if s > 0 && !last {
             run.simulations += 1;
-            if let (Ok((full, nf)), Some(short)) = (pb.cost(&pt, f64::INFINITY), stage_cost) {
-                if rms(full, nf) <= SKIP_RATIO * short {
+            if let (Ok((full, nf)), Some((ssr, c))) = (pb.cost(&pt, f64::INFINITY), stage) {
+                if rms(full, nf) <= SKIP_RATIO * rms(ssr, c) {
                     continue;
                 }
             }
@@ -1371,8 +1371,7 @@ fn solve<'s>(
             run,
         ) {
             Ok((ssr, c, stop)) => {
-                stage_cost = Some(rms(ssr, c));
-                stage_ssr = ssr;
+                stage = Some((ssr, c));
                 last_stop = stop;
             }
             Err(_) => {
@@ -1384,7 +1383,7 @@ fn solve<'s>(
         }
         let full = if !h.is_finite() {
             // the last stage's cost is the whole record's already
-            stage_ssr
+            stage.map_or(f64::INFINITY, |(ssr, _)| ssr)
         } else {
             run.simulations += 1;
             pb.cost(&pt, f64::INFINITY).map_or(f64::INFINITY, |x| x.0)

@@ -4,70 +4,21 @@
 //! sample by sample from the definition `sign(u) * max(|u| - w, 0)`), and
 //! from central finite differences of the plain simulation.
 
-use std::path::Path;
+mod common;
 
-use plantc_derive::model::{load_model_text, Model, ParameterValues};
+use common::simulated::{
+    check_sensitivities, driven_signals, max_diff, model, pendulum_text, pendulum_with, simulate,
+};
+
+use plantc_derive::model::{load_model_text, ParameterValues};
 use plantc_identify::experiment_sim::deadzone;
-use plantc_identify::{EffectInstance, EffectKind, SensitivitySimulator, Signals, SimError};
+use plantc_identify::{EffectInstance, EffectKind, SimError};
 use plantc_identify::{SimOptions, Simulator};
-
-fn pendulum_text() -> String {
-    let path = Path::new(env!("CARGO_MANIFEST_DIR")).join("../models/rotary_pendulum.plant");
-    std::fs::read_to_string(path).expect("model text")
-}
-
-fn model(text: &str) -> Model {
-    match load_model_text("test.plant", text) {
-        Ok(m) => m.model,
-        Err(e) => panic!("{}", e.render()),
-    }
-}
-
-/// The pendulum with extra lines appended.
-fn pendulum_with(extra: &str) -> Model {
-    model(&(pendulum_text() + "\n" + extra))
-}
-
-fn nominal(m: &Model) -> Vec<f64> {
-    ParameterValues::from_base(m, m.parameters.iter().map(|p| p.value).collect()).full
-}
-
-/// A driven experiment: pendulum hanging, a multisine voltage (peak about
-/// 2.3 V, so a 0.6 V deadzone removes a good part of it), 1 s at 500 Hz.
-fn driven_signals() -> Signals {
-    let t: Vec<f64> = (0..500).map(|k| k as f64 * 0.002).collect();
-    let u = t
-        .iter()
-        .map(|t| 1.5 * (2.0 * std::f64::consts::PI * 1.3 * t).sin() + 0.8 * (17.0 * t).cos())
-        .collect();
-    Signals {
-        name: "synthetic".into(),
-        t,
-        q: vec![vec![0.0; 500], vec![std::f64::consts::PI - 0.3; 500]],
-        u: vec![u],
-        replay: None,
-    }
-}
 
 /// `sign(u) * max(|u| - w, 0)` written as in the issue (the reference for
 /// the simulator's [`deadzone`]).
 fn dz_reference(u: f64, w: f64) -> f64 {
     u.signum() * (u.abs() - w).max(0.0)
-}
-
-fn max_diff(a: &[Vec<f64>], b: &[Vec<f64>]) -> f64 {
-    a.iter()
-        .zip(b)
-        .flat_map(|(x, y)| x.iter().zip(y).map(|(p, q)| (p - q).abs()))
-        .fold(0.0, f64::max)
-}
-
-fn simulate(m: &Model, sig: &Signals) -> Vec<Vec<f64>> {
-    Simulator::new(m, SimOptions::default())
-        .expect("compiles")
-        .simulate(sig, &nominal(m), sig.len())
-        .expect("simulates")
-        .q
 }
 
 #[test]
@@ -155,44 +106,6 @@ fn negative_width_in_the_parameter_vector_is_an_error() {
             assert_eq!(value, -0.2);
         }
         other => panic!("{other:?}"),
-    }
-}
-
-/// Sensitivities against central differences of the plain simulation; the
-/// tolerance is relative to the largest |S| of each coordinate.
-fn check_sensitivities(m: &Model, sig: &Signals, free: &[&str], steps: &[f64], tol: f64) {
-    let free: Vec<String> = free.iter().map(|s| s.to_string()).collect();
-    let sens = SensitivitySimulator::new(m, &free, SimOptions::default()).expect("compiles");
-    let sim = Simulator::new(m, SimOptions::default()).expect("compiles");
-    let base: Vec<f64> = m.parameters.iter().map(|p| p.value).collect();
-    let full = ParameterValues::from_base(m, base.clone()).full;
-    let st = sens.simulate(sig, &full, sig.len()).expect("simulates");
-    let plain = sim.simulate(sig, &full, sig.len()).expect("simulates");
-    assert!(max_diff(&st.q, &plain.q) < 1e-12);
-    for (j, &pi) in sens.free_indices().iter().enumerate() {
-        let h = steps[j];
-        let run = |delta: f64| {
-            let mut b = base.clone();
-            b[pi] += delta;
-            sim.simulate(sig, &ParameterValues::from_base(m, b).full, sig.len())
-                .expect("simulates")
-        };
-        let (yp, ym) = (run(h), run(-h));
-        for i in 0..m.coordinates.len() {
-            let scale = st.dq[i][j].iter().fold(1e-12_f64, |a, v| a.max(v.abs()));
-            let mut worst = 0.0_f64;
-            for k in 0..sig.len() {
-                let fd = (yp.q[i][k] - ym.q[i][k]) / (2.0 * h);
-                worst = worst.max((fd - st.dq[i][j][k]).abs());
-            }
-            eprintln!(
-                "{} coord {i}: max |S| {scale:.3e}, max error {worst:.3e} ({:.1e} relative)",
-                free[j],
-                worst / scale
-            );
-            assert!(scale > 1e-6, "{} coord {i}: no sensitivity", free[j]);
-            assert!(worst <= tol * scale, "{} coord {i}", free[j]);
-        }
     }
 }
 

@@ -50,6 +50,20 @@ struct Rec {
     zero: [f64; 2],
 }
 
+impl Rec {
+    /// A recording with uniform stamps and both encoder zeros at 0.
+    fn clean(name: &'static str, x0: [f64; 4], u: fn(f64) -> f64, duration: f64) -> Rec {
+        Rec {
+            name,
+            x0,
+            u,
+            duration,
+            jitter: 0.0,
+            zero: [0.0, 0.0],
+        }
+    }
+}
+
 /// Simulate `truth` (base values `base`) for each recording, measure it
 /// like the rig: 4096 counts per revolution, stamps at 500 Hz with jitter.
 fn record(truth: &Model, base: &[f64], recs: &[Rec]) -> Vec<Experiment> {
@@ -258,22 +272,8 @@ fn coulomb_near_its_zero_bound_recovers() {
         ],
     );
     let recs = [
-        Rec {
-            name: "large",
-            x0: [0.0, PI - 1.0, 0.0, 0.0],
-            u: zero,
-            duration: 8.0,
-            jitter: 0.0,
-            zero: [0.0, 0.0],
-        },
-        Rec {
-            name: "small",
-            x0: [0.0, PI - 0.2, 0.0, 0.0],
-            u: zero,
-            duration: 8.0,
-            jitter: 0.0,
-            zero: [0.0, 0.0],
-        },
+        Rec::clean("large", [0.0, PI - 1.0, 0.0, 0.0], zero, 8.0),
+        Rec::clean("small", [0.0, PI - 0.2, 0.0, 0.0], zero, 8.0),
     ];
     let exps = record(&m, &truth, &recs);
     for start in [5e-5, 0.0] {
@@ -307,14 +307,7 @@ fn input_delay_from_a_far_start() {
     });
     let m = model(&text);
     let truth = base_of(&m, &[("Td", 4e-3), ("Fg1", 0.015)]);
-    let recs = [Rec {
-        name: "driven",
-        x0: [0.0, PI, 0.0, 0.0],
-        u: drive,
-        duration: 10.0,
-        jitter: 0.0,
-        zero: [0.0, 0.0],
-    }];
+    let recs = [Rec::clean("driven", [0.0, PI, 0.0, 0.0], drive, 10.0)];
     let exps = record(&m, &truth, &recs);
     let mut s = base_of(&m, &[("Fg1", 0.015)]);
     let i = m
@@ -355,22 +348,8 @@ fn undetermined_parameters_are_reported_and_fixed() {
         &[("l2", 0.162), ("b2", 8e-4), ("J2", 1.1e-3), ("Fg1", 0.1)],
     );
     let recs = [
-        Rec {
-            name: "large",
-            x0: [0.0, PI - 1.0, 0.0, 0.0],
-            u: zero,
-            duration: 8.0,
-            jitter: 0.0,
-            zero: [0.0, 0.0],
-        },
-        Rec {
-            name: "small",
-            x0: [0.0, PI - 0.3, 0.0, 0.0],
-            u: zero,
-            duration: 8.0,
-            jitter: 0.0,
-            zero: [0.0, 0.0],
-        },
+        Rec::clean("large", [0.0, PI - 1.0, 0.0, 0.0], zero, 8.0),
+        Rec::clean("small", [0.0, PI - 0.3, 0.0, 0.0], zero, 8.0),
     ];
     let exps = record(&m, &truth, &recs);
     let opts = FitOptions {
@@ -437,22 +416,8 @@ fn staged_horizons_never_end_worse() {
         }
     }
     let recs = [
-        Rec {
-            name: "late",
-            x0: [0.0, PI, 0.0, 0.0],
-            u: late,
-            duration: 12.0,
-            jitter: 0.0,
-            zero: [0.0, 0.0],
-        },
-        Rec {
-            name: "swing",
-            x0: [0.0, PI - 0.8, 0.0, 0.0],
-            u: zero,
-            duration: 12.0,
-            jitter: 0.0,
-            zero: [0.0, 0.0],
-        },
+        Rec::clean("late", [0.0, PI, 0.0, 0.0], late, 12.0),
+        Rec::clean("swing", [0.0, PI - 0.8, 0.0, 0.0], zero, 12.0),
     ];
     let exps = record(&m, &truth, &recs);
     // a start far off in the arm's parameters

@@ -8,28 +8,16 @@
 
 mod common;
 
-use std::path::Path;
+use common::simulated::{check_sensitivities, model, pendulum_text};
 
-use plantc_derive::model::{load_model_text, Model, ParameterValues};
+use plantc_derive::model::{Model, ParameterValues};
 use plantc_identify::diagnose::{candidates, model_from_text, regressor_for, DiagnoseOptions};
 use plantc_identify::effect_edit::label_of;
 use plantc_identify::synth::{parse_effect_spec, parse_experiment_spec};
 use plantc_identify::{
     read_experiment, synthesize, EffectInstance, EffectKind, EquationError, EquationErrorOptions,
-    Experiment, SensitivitySimulator, Signals, SimOptions, Simulator, SynthOptions, SynthSpec,
+    Experiment, Signals, SimOptions, Simulator, SynthOptions, SynthSpec,
 };
-
-fn pendulum_text() -> String {
-    let path = Path::new(env!("CARGO_MANIFEST_DIR")).join("../models/rotary_pendulum.plant");
-    std::fs::read_to_string(path).expect("model text")
-}
-
-fn model(text: &str) -> Model {
-    match load_model_text("test.plant", text) {
-        Ok(m) => m.model,
-        Err(e) => panic!("{}", e.render()),
-    }
-}
 
 /// The pendulum with extra declarations and extra terms on the arm's force.
 fn pendulum_with(decls: &str, arm_terms: &str, lines: &str) -> Model {
@@ -54,51 +42,6 @@ fn driven_signals() -> Signals {
         q: vec![vec![0.0; 750], vec![std::f64::consts::PI - 0.3; 750]],
         u: vec![u],
         replay: None,
-    }
-}
-
-fn max_diff(a: &[Vec<f64>], b: &[Vec<f64>]) -> f64 {
-    a.iter()
-        .zip(b)
-        .flat_map(|(x, y)| x.iter().zip(y).map(|(p, q)| (p - q).abs()))
-        .fold(0.0, f64::max)
-}
-
-/// Sensitivities against central differences of the plain simulation,
-/// relative to the largest |S| of each coordinate.
-fn check_sensitivities(m: &Model, sig: &Signals, free: &[&str], steps: &[f64], tol: f64) {
-    let free: Vec<String> = free.iter().map(|s| s.to_string()).collect();
-    let sens = SensitivitySimulator::new(m, &free, SimOptions::default()).expect("compiles");
-    let sim = Simulator::new(m, SimOptions::default()).expect("compiles");
-    let base: Vec<f64> = m.parameters.iter().map(|p| p.value).collect();
-    let full = ParameterValues::from_base(m, base.clone()).full;
-    let st = sens.simulate(sig, &full, sig.len()).expect("simulates");
-    let plain = sim.simulate(sig, &full, sig.len()).expect("simulates");
-    assert!(max_diff(&st.q, &plain.q) < 1e-12);
-    for (j, &pi) in sens.free_indices().iter().enumerate() {
-        let h = steps[j];
-        let run = |delta: f64| {
-            let mut b = base.clone();
-            b[pi] += delta;
-            sim.simulate(sig, &ParameterValues::from_base(m, b).full, sig.len())
-                .expect("simulates")
-        };
-        let (yp, ym) = (run(h), run(-h));
-        for i in 0..m.coordinates.len() {
-            let scale = st.dq[i][j].iter().fold(1e-12_f64, |a, v| a.max(v.abs()));
-            let mut worst = 0.0_f64;
-            for k in 0..sig.len() {
-                let fd = (yp.q[i][k] - ym.q[i][k]) / (2.0 * h);
-                worst = worst.max((fd - st.dq[i][j][k]).abs());
-            }
-            eprintln!(
-                "{} coord {i}: max |S| {scale:.3e}, max error {worst:.3e} ({:.1e} relative)",
-                free[j],
-                worst / scale
-            );
-            assert!(scale > 1e-6, "{} coord {i}: no sensitivity", free[j]);
-            assert!(worst <= tol * scale, "{} coord {i}", free[j]);
-        }
     }
 }
 

@@ -4,7 +4,12 @@
 //! `clip(u, -L, L)`, computed here sample by sample from the definition),
 //! and from central finite differences of the plain simulation.
 
-use std::path::{Path, PathBuf};
+mod common;
+
+use common::simulated::{
+    driven_signals, max_diff, model, nominal, pendulum_text, pendulum_with, simulate,
+};
+use std::path::PathBuf;
 
 use plantc_derive::model::{load_model_text, Model, ParameterValues};
 use plantc_identify::experiment_sim::{deadzone, saturation};
@@ -12,43 +17,6 @@ use plantc_identify::{
     Channel, EffectInstance, EffectKind, Experiment, LoopLaw, SensitivitySimulator, Signals,
     SimError, SimOptions, Simulator,
 };
-
-fn pendulum_text() -> String {
-    let path = Path::new(env!("CARGO_MANIFEST_DIR")).join("../models/rotary_pendulum.plant");
-    std::fs::read_to_string(path).expect("model text")
-}
-
-fn model(text: &str) -> Model {
-    match load_model_text("test.plant", text) {
-        Ok(m) => m.model,
-        Err(e) => panic!("{}", e.render()),
-    }
-}
-
-fn pendulum_with(extra: &str) -> Model {
-    model(&(pendulum_text() + "\n" + extra))
-}
-
-fn nominal(m: &Model) -> Vec<f64> {
-    ParameterValues::from_base(m, m.parameters.iter().map(|p| p.value).collect()).full
-}
-
-/// A driven experiment: pendulum hanging, a multisine voltage (peak about
-/// 2.3 V, so a 1.2 V limit clips a good part of it), 1 s at 500 Hz.
-fn driven_signals() -> Signals {
-    let t: Vec<f64> = (0..500).map(|k| k as f64 * 0.002).collect();
-    let u = t
-        .iter()
-        .map(|t| 1.5 * (2.0 * std::f64::consts::PI * 1.3 * t).sin() + 0.8 * (17.0 * t).cos())
-        .collect();
-    Signals {
-        name: "synthetic".into(),
-        t,
-        q: vec![vec![0.0; 500], vec![std::f64::consts::PI - 0.3; 500]],
-        u: vec![u],
-        replay: None,
-    }
-}
 
 /// `min(max(u, -L), L)` written out (the reference for [`saturation`]).
 fn sat_reference(u: f64, l: f64) -> f64 {
@@ -59,21 +27,6 @@ fn sat_reference(u: f64, l: f64) -> f64 {
     } else {
         u
     }
-}
-
-fn max_diff(a: &[Vec<f64>], b: &[Vec<f64>]) -> f64 {
-    a.iter()
-        .zip(b)
-        .flat_map(|(x, y)| x.iter().zip(y).map(|(p, q)| (p - q).abs()))
-        .fold(0.0, f64::max)
-}
-
-fn simulate(m: &Model, sig: &Signals) -> Vec<Vec<f64>> {
-    Simulator::new(m, SimOptions::default())
-        .expect("compiles")
-        .simulate(sig, &nominal(m), sig.len())
-        .expect("simulates")
-        .q
 }
 
 #[test]

@@ -1,6 +1,8 @@
 //! Helpers shared by the integration tests.
 #![allow(dead_code)]
 
+pub mod simulated;
+
 use std::path::PathBuf;
 
 use plantc_identify::{ChannelSpec, Kind};
