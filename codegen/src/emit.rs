@@ -458,20 +458,6 @@ fn controller(model: &Model, rc: &ResolvedController) -> Result<TokenStream, Err
         )));
     }
     let sname = format_ident!("{}", type_name);
-    let sat = |u: Vec<TokenStream>| -> Result<Vec<TokenStream>, Error> {
-        u.into_iter()
-            .zip(&model.inputs)
-            .map(|(v, inp)| {
-                Ok(match inp.limits {
-                    Some((lo, hi)) => {
-                        let (lo, hi) = (lit(lo)?, lit(hi)?);
-                        quote!(math::saturate(#v, #lo, #hi))
-                    }
-                    None => v,
-                })
-            })
-            .collect()
-    };
     let limits_doc = model
         .inputs
         .iter()
@@ -516,7 +502,7 @@ fn controller(model: &Model, rc: &ResolvedController) -> Result<TokenStream, Err
                 us.push(t);
             }
             let law = us.clone();
-            let sat_u = sat(us)?;
+            let sat_u = saturated(model, us)?;
             let n_states = 2 * model.coordinates.len();
             let gain_names: Vec<String> = (0..k.len())
                 .flat_map(|i| {

@@ -6,7 +6,7 @@
 //! The simulator and the fake board run in virtual time, so a 30 s run takes
 //! well under real time (printed by each test).
 
-use std::path::{Path, PathBuf};
+use std::path::Path;
 use std::sync::Mutex;
 use std::time::Instant;
 
@@ -14,53 +14,11 @@ use plantc_identify::{read_experiment, ChannelSpec, Kind};
 
 mod common;
 
-use common::{model, plantc, repo, tmp};
+use common::{fake_hil_lib, model, plantc, tmp};
 
 /// The fake HIL card is a process-wide singleton configured through the
 /// environment, so q2usb runs in this binary take turns.
 static FAKE_HIL: Mutex<()> = Mutex::new(());
-
-/// Builds (once) and locates the fake HIL cdylib, as the runtime's own tests do.
-fn fake_hil_lib() -> PathBuf {
-    use std::sync::OnceLock;
-    static PATH: OnceLock<Result<PathBuf, String>> = OnceLock::new();
-    PATH.get_or_init(|| {
-        let status = std::process::Command::new(env!("CARGO"))
-            .args(["build", "-p", "plantc-fake-hil"])
-            .current_dir(repo())
-            .status()
-            .map_err(|e| format!("running cargo: {e}"))?;
-        if !status.success() {
-            return Err(format!("cargo build -p plantc-fake-hil: {status}"));
-        }
-        let name = format!(
-            "{}plantc_fake_hil{}",
-            std::env::consts::DLL_PREFIX,
-            std::env::consts::DLL_SUFFIX
-        );
-        let mut candidates = Vec::new();
-        if let Ok(exe) = std::env::current_exe() {
-            // target/<profile>/deps/<test> -> target/<profile>/, then target/debug/
-            if let Some(dir) = exe.parent().and_then(|d| d.parent()) {
-                candidates.push(dir.join(&name));
-                if let Some(target) = dir.parent() {
-                    candidates.push(target.join("debug").join(&name));
-                }
-            }
-        }
-        if let Ok(t) = std::env::var("CARGO_TARGET_DIR") {
-            candidates.push(PathBuf::from(t).join("debug").join(&name));
-        }
-        candidates.push(repo().join("target/debug").join(&name));
-        candidates
-            .iter()
-            .find(|p| p.is_file())
-            .cloned()
-            .ok_or_else(|| format!("{name} not found in {candidates:?}"))
-    })
-    .clone()
-    .unwrap_or_else(|e| panic!("cannot build/locate the fake HIL: {e}"))
-}
 
 /// What a log says, read through the identification data reader.
 struct LogSummary {

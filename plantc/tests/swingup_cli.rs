@@ -8,57 +8,16 @@
 //! the arm within 100 deg, and at 15 s |alpha| < 0.01 rad, |theta| < 3 deg;
 //! the log shows each mode switch. Sliding mode: balances from 10 deg for 30 s.
 
-use std::path::{Path, PathBuf};
+use std::path::Path;
 use std::sync::Mutex;
 
 mod common;
 
-use common::{model, plantc, repo, tmp};
+use common::{fake_hil_lib, model, plantc, repo, tmp};
 
 /// The fake HIL card is configured through the environment: q2usb runs in
 /// this binary take turns.
 static FAKE_HIL: Mutex<()> = Mutex::new(());
-
-/// Builds (once) and locates the fake HIL cdylib (as `run_cli.rs` does).
-fn fake_hil_lib() -> PathBuf {
-    use std::sync::OnceLock;
-    static PATH: OnceLock<Result<PathBuf, String>> = OnceLock::new();
-    PATH.get_or_init(|| {
-        let status = std::process::Command::new(env!("CARGO"))
-            .args(["build", "-p", "plantc-fake-hil"])
-            .current_dir(repo())
-            .status()
-            .map_err(|e| format!("running cargo: {e}"))?;
-        if !status.success() {
-            return Err(format!("cargo build -p plantc-fake-hil: {status}"));
-        }
-        let name = format!(
-            "{}plantc_fake_hil{}",
-            std::env::consts::DLL_PREFIX,
-            std::env::consts::DLL_SUFFIX
-        );
-        let mut candidates = Vec::new();
-        if let Ok(exe) = std::env::current_exe() {
-            if let Some(dir) = exe.parent().and_then(|d| d.parent()) {
-                candidates.push(dir.join(&name));
-                if let Some(target) = dir.parent() {
-                    candidates.push(target.join("debug").join(&name));
-                }
-            }
-        }
-        if let Ok(t) = std::env::var("CARGO_TARGET_DIR") {
-            candidates.push(PathBuf::from(t).join("debug").join(&name));
-        }
-        candidates.push(repo().join("target/debug").join(&name));
-        candidates
-            .iter()
-            .find(|p| p.is_file())
-            .cloned()
-            .ok_or_else(|| format!("{name} not found in {candidates:?}"))
-    })
-    .clone()
-    .unwrap_or_else(|e| panic!("cannot build/locate the fake HIL: {e}"))
-}
 
 fn wrap(a: f64) -> f64 {
     let tau = std::f64::consts::TAU;
