@@ -15,10 +15,18 @@
 //!    the equation-error estimates. They are ranked by their RMSE with a
 //!    penalty of [`DiagnoseOptions::per_parameter_gain`] per effect parameter
 //!    (an extra parameter must buy a clear gain, trap 6).
+//!    When none of the leaders explains the residual and the baseline sits
+//!    well above the noise floor, screening goes on down the whole list
+//!    (and over every candidate when the ranking is blind: see
+//!    [`EquationError::blind`]).
 //! 4. **Verdict**: the best refitted candidate is accepted only if it divides
 //!    the baseline RMSE by at least [`MIN_GAIN`], or brings it down to the
-//!    noise floor ([`FLOOR_REACHED`]) from well above it ([`FLOOR_BASELINE`]);
-//!    otherwise the model is adequate.
+//!    noise floor ([`FLOOR_REACHED`]) from well above it ([`FLOOR_BASELINE`]),
+//!    and only if the model without it, restarted from the candidate's
+//!    values, does not get there too (the gain is measured against the best
+//!    baseline, not a worse restart). Otherwise the model is *adequate* when
+//!    the baseline is within [`FLOOR_BASELINE`] of the noise floor, and the
+//!    residual *unexplained* ([`Unexplained`]) when it is not.
 //!
 //! [`MIN_GAIN`] = 3, checked on the three reference recordings of the
 //! diagnosis tests (`tests/diagnose.rs`, release build): with the right
@@ -226,8 +234,72 @@ pub struct Diagnosis {
     /// Candidates, best first: the refitted ones by penalised RMSE, then the
     /// others in equation-error order.
     pub ranking: Vec<Ranked>,
-    /// The accepted candidate, or None: the model is adequate.
+    /// The accepted candidate, or None: no candidate explains the residual
+    /// (adequate when the baseline is near the noise floor, otherwise see
+    /// `unexplained`).
     pub verdict: Option<Candidate>,
+    /// The weighted cost measurement noise alone would leave (encoder
+    /// quantum, high-frequency content; in the units of
+    /// `baseline.after_cost`).
+    pub floor: f64,
+    /// Without a verdict, when the baseline sits well above the noise floor
+    /// ([`FLOOR_BASELINE`] times or more): the model is not adequate, the
+    /// residual is unexplained by every candidate tried.
+    pub unexplained: Option<Unexplained>,
+    /// What the diagnosis noticed on the way (a scale held fixed, a blind
+    /// equation-error ranking, screening extended beyond the leaders, a
+    /// baseline improved by a restart), in words.
+    pub notes: Vec<String>,
+}
+
+/// A residual well above the noise floor that no candidate explains.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Unexplained {
+    /// Baseline cost over the noise floor.
+    pub above_floor: f64,
+    /// How many candidates were refitted by simulation error.
+    pub refitted: usize,
+    /// The best of them: label and its gain.
+    pub best: Option<(String, f64)>,
+}
+
+impl Diagnosis {
+    /// One line for the verdict: the missing effect, `adequate` (near the
+    /// floor) or `unexplained residual` (well above it).
+    pub fn verdict_line(&self) -> String {
+        if let Some(v) = &self.verdict {
+            let gain = self
+                .ranking
+                .iter()
+                .find(|r| r.candidate.label() == v.label())
+                .map_or(0.0, |r| r.gain);
+            return format!(
+                "missing effect `{}` on `{}` (RMSE {gain:.2}x lower with it)",
+                v.effect, v.target
+            );
+        }
+        match &self.unexplained {
+            Some(u) => {
+                let best = u
+                    .best
+                    .as_ref()
+                    .map(|(l, g)| format!("; the best, {l}, gains {g:.2}x"))
+                    .unwrap_or_default();
+                format!(
+                    "unexplained residual: {:.1}x the noise floor, and none of the {} candidates refitted lowers it by {MIN_GAIN}x or to the floor{best}: an effect outside the vocabulary, or a nominal model too far off",
+                    u.above_floor, u.refitted
+                )
+            }
+            None => format!(
+                "adequate: the residual is within {FLOOR_BASELINE}x the noise floor ({:.2}x) and no candidate lowers it by {MIN_GAIN}x or more",
+                if self.floor > 0.0 {
+                    self.baseline.after_cost / self.floor
+                } else {
+                    f64::NAN
+                }
+            ),
+        }
+    }
 }
 
 /// The columns of a candidate for the equation-error ranking. Effects that
@@ -346,6 +418,10 @@ pub fn diagnose_with(
         experiments,
         &opts.equation_error,
     )?;
+    let mut notes = Vec::new();
+    if let Some(sf) = ee.scale_fixed() {
+        notes.push(format!("equation-error ranking: {sf}"));
+    }
     // equation-error scores
     let mut scored = Vec::new();
     for c in candidates(&model) {
@@ -358,10 +434,16 @@ pub fn diagnose_with(
         scored.push((c, m, score));
     }
     scored.sort_by(|a, b| b.2.bic_gain.total_cmp(&a.2.bic_gain));
+    let informative = |s: &Score| s.columns > 0 && s.bic_gain > 0.0;
+    let blind = ee.blind() || !scored.iter().any(|(_, _, s)| informative(s));
     let mut ranking = Vec::new();
+    let mut edited_models = Vec::new();
+    let mut useful = Vec::new();
+    let mut has_columns = Vec::new();
     for (rank, (c, m, score)) in scored.into_iter().enumerate() {
-        let informative = score.columns > 0 && score.bic_gain > 0.0;
-        let mut r = Ranked {
+        useful.push(informative(&score));
+        has_columns.push(score.columns > 0);
+        ranking.push(Ranked {
             parameters: score
                 .estimates
                 .iter()
@@ -389,60 +471,217 @@ pub fn diagnose_with(
             fit: None,
             error: None,
             gain: 0.0,
-        };
-        // refit the leaders that explain anything at all (a candidate whose
-        // columns the model's own parameters already span, e.g. viscous
-        // friction where a damping is estimated, adds nothing)
-        if rank < opts.refit && informative {
-            refit(&mut r, &m, &model, &baseline, experiments, opts);
+        });
+        edited_models.push(m);
+    }
+    let floor = crate::fit::noise_cost(&baseline.weights);
+    let above_floor = floor > 0.0 && baseline.after_cost >= FLOOR_BASELINE * floor;
+    if blind && above_floor {
+        notes.push(
+            "the equation-error ranking cannot discriminate (no candidate explains any of the torque residual): every candidate is screened by simulation error instead".to_string(),
+        );
+    }
+    // Refit the leaders that explain anything at all (a candidate whose
+    // columns the model's own parameters already span, e.g. viscous
+    // friction where a damping is estimated, adds nothing). When none of
+    // them explains the residual and the residual sits well above the noise
+    // floor, the equation-error ranking has missed (its columns are
+    // linearised, its noise is that of q''), so screening goes on down the
+    // whole list: "adequate" is never said far above the floor without
+    // trying every candidate.
+    let mut refitted = 0usize;
+    let mut extended = false;
+    for idx in 0..ranking.len() {
+        // past the leaders, every candidate that adds a column is screened
+        // (a low or negative BIC is no proof: at 100 Hz the q'' noise buries
+        // a Coulomb friction the refit then finds)
+        let screened = refitted >= opts.refit && has_columns[idx];
+        if !(useful[idx] || blind || screened) {
+            continue;
         }
-        ranking.push(r);
+        if refitted >= opts.refit {
+            let found = ranking[..idx]
+                .iter()
+                .any(|r| passes(r, baseline.after_cost, floor, opts.min_gain));
+            if !above_floor || found {
+                break;
+            }
+            if !extended && !blind {
+                notes.push(format!(
+                    "none of the {} equation-error leaders explains the residual ({:.1}x the noise floor): the other candidates were refitted too",
+                    opts.refit,
+                    baseline.after_cost / floor
+                ));
+            }
+            extended = true;
+        }
+        refit(
+            &mut ranking[idx],
+            &edited_models[idx],
+            &model,
+            &baseline,
+            experiments,
+            opts,
+        );
+        refitted += 1;
+    }
+    // a candidate that explains the residual competes with the simpler
+    // effect it contains (Stribeck friction with `Fs = Fc` is Coulomb
+    // friction): that one is refitted too, so the per-parameter penalty can
+    // prefer it
+    for idx in 0..ranking.len() {
+        if !passes(&ranking[idx], baseline.after_cost, floor, opts.min_gain) {
+            continue;
+        }
+        let c = ranking[idx].candidate.clone();
+        for (outer, inner) in NESTED {
+            if c.effect != *outer {
+                continue;
+            }
+            if let Some(j) = ranking.iter().position(|r| {
+                r.candidate.effect == *inner && r.candidate.target == c.target && r.fit.is_none()
+            }) {
+                refit(
+                    &mut ranking[j],
+                    &edited_models[j],
+                    &model,
+                    &baseline,
+                    experiments,
+                    opts,
+                );
+            }
+        }
     }
     // a sensor offset is absorbed by the per-experiment offsets of the
     // baseline: judged against the baseline without them instead
     sensor_offsets_from_nuisance(&mut ranking, text, &model, &baseline, experiments, opts);
-    // refitted first, by RMSE with a per-parameter penalty; the RMSE is the
-    // baseline's divided by the candidate's gain (the same as the refit's
-    // RMSE, except for a sensor offset judged against another baseline)
-    let base_cost = baseline.after_cost;
-    let penalised = |r: &Ranked| match &r.fit {
-        Some(f) => {
-            let cost = if r.gain > 0.0 {
-                base_cost / r.gain
-            } else {
-                f.after_cost
-            };
-            cost / (1.0 - opts.per_parameter_gain).powi(r.candidate.parameters.len() as i32)
+    let mut baseline = baseline;
+    let verdict = decide(
+        &mut ranking,
+        &model,
+        &mut baseline,
+        floor,
+        experiments,
+        opts,
+        &mut notes,
+    );
+    let unexplained = (verdict.is_none() && above_floor).then(|| {
+        let best = ranking
+            .iter()
+            .filter(|r| r.fit.is_some())
+            .max_by(|a, b| a.gain.total_cmp(&b.gain))
+            .map(|r| (r.candidate.label(), r.gain));
+        Unexplained {
+            above_floor: baseline.after_cost / floor,
+            refitted: ranking.iter().filter(|r| r.fit.is_some()).count(),
+            best,
         }
-        None => f64::INFINITY,
-    };
-    ranking.sort_by(|a, b| {
-        penalised(a).total_cmp(&penalised(b)).then(
-            a.evidence
-                .equation_error_rank
-                .cmp(&b.evidence.equation_error_rank),
-        )
     });
-    // the 3x rule cannot be met when the baseline sits less than 3x above
-    // the noise floor: a candidate that brings the cost down to the floor
-    // from at least twice the floor is credited too
-    let floor = crate::fit::noise_cost(&baseline.weights);
-    let reaches_floor = |r: &Ranked| {
-        r.fit.as_ref().is_some_and(|f| {
-            floor > 0.0
-                && base_cost >= FLOOR_BASELINE * floor
-                && f.after_cost <= FLOOR_REACHED * floor
-        })
-    };
-    let verdict = ranking
-        .first()
-        .filter(|r| r.fit.is_some() && (r.gain >= opts.min_gain || reaches_floor(r)))
-        .map(|r| r.candidate.clone());
     Ok(Diagnosis {
         baseline,
         ranking,
         verdict,
+        floor,
+        unexplained,
+        notes,
     })
+}
+
+/// Does refitted candidate `r` explain the residual against a baseline
+/// cost: [`MIN_GAIN`], or down to the noise floor from well above it?
+fn passes(r: &Ranked, base_cost: f64, floor: f64, min_gain: f64) -> bool {
+    r.fit.as_ref().is_some_and(|f| {
+        r.gain >= min_gain
+            || (floor > 0.0
+                && base_cost >= FLOOR_BASELINE * floor
+                && f.after_cost <= FLOOR_REACHED * floor)
+    })
+}
+
+/// Rank the refitted candidates and pick the verdict.
+///
+/// Refitted candidates come first, by cost with a per-parameter penalty
+/// (the cost is the baseline's divided by the gain: the same as the refit's
+/// except for a sensor offset judged against another baseline). The best
+/// one that [`passes`] is then checked against the *best* baseline: the
+/// model without the effect is refitted from the candidate's values of the
+/// model's own parameters. A refit restarted from other nominal values can
+/// land in a better minimum that the effect has no part in (a spring of
+/// 1e-95 N m/rad credited with 3.9x); if the model without the effect gets
+/// there too, the gain was the restart's, not the effect's, and the
+/// baseline is replaced by the better fit.
+fn decide(
+    ranking: &mut [Ranked],
+    model: &Model,
+    baseline: &mut FitResult,
+    floor: f64,
+    experiments: &[Experiment],
+    opts: &DiagnoseOptions,
+    notes: &mut Vec<String>,
+) -> Option<Candidate> {
+    let mut checked: Vec<String> = Vec::new();
+    loop {
+        let base_cost = baseline.after_cost;
+        let penalised = |r: &Ranked| match &r.fit {
+            Some(f) => {
+                let cost = if r.gain > 0.0 {
+                    base_cost / r.gain
+                } else {
+                    f.after_cost
+                };
+                cost / (1.0 - opts.per_parameter_gain).powi(r.candidate.parameters.len() as i32)
+            }
+            None => f64::INFINITY,
+        };
+        ranking.sort_by(|a, b| {
+            penalised(a).total_cmp(&penalised(b)).then(
+                a.evidence
+                    .equation_error_rank
+                    .cmp(&b.evidence.equation_error_rank),
+            )
+        });
+        prefer_nested(ranking, base_cost, floor, opts.min_gain);
+        let top = ranking.first()?;
+        if !passes(top, base_cost, floor, opts.min_gain) {
+            return None;
+        }
+        let label = top.candidate.label();
+        if checked.contains(&label) {
+            return Some(top.candidate.clone());
+        }
+        checked.push(label.clone());
+        // the model without the effect, from the candidate's values
+        let f = top.fit.as_ref().expect("passes implies refitted");
+        let start: Vec<f64> = model
+            .parameters
+            .iter()
+            .zip(&baseline.base)
+            .map(|(p, b)| {
+                f.parameters
+                    .iter()
+                    .find(|e| e.name == p.name)
+                    .map_or(*b, |e| e.value)
+            })
+            .collect();
+        let horizon = baseline.segments.map_or(Horizon::Whole, Horizon::Segments);
+        let Ok(again) = fit(model, experiments, &screening(opts, start, horizon)) else {
+            return Some(top.candidate.clone());
+        };
+        if again.after_cost >= 0.999 * base_cost {
+            return Some(top.candidate.clone());
+        }
+        notes.push(format!(
+            "the model without {label}, refitted from that candidate's values, reaches a cost {:.3}x lower than the first baseline: the better baseline is kept and every gain is measured against it",
+            base_cost / again.after_cost
+        ));
+        let ratio = again.after_cost / base_cost;
+        for r in ranking.iter_mut().filter(|r| r.fit.is_some()) {
+            r.gain *= ratio;
+            r.evidence.gain = Some(r.gain);
+            r.evidence.rmse_before *= ratio;
+        }
+        *baseline = again;
+    }
 }
 
 /// The coordinates whose per-experiment offsets in `baseline` agree: every
@@ -577,6 +816,41 @@ fn credit(r: &mut Ranked, f: FitResult, baseline_cost: f64) {
         .collect();
     r.fit = Some(f);
     r.error = None;
+}
+
+/// (effect, the simpler effect it contains on the same target).
+const NESTED: &[(&str, &str)] = &[("stribeck_friction", "coulomb_friction")];
+
+/// How much lower the cost of an effect has to be than that of the simpler
+/// effect it contains ([`NESTED`]) for the bigger one to be preferred.
+/// Measured on Coulomb-only data (tests/diagnose_robust.rs, Furuta case):
+/// Stribeck 9.59x against Coulomb 8.65x (1.11), the extra `Fs`, `vs` fitting
+/// the smoothed stick-slip transition; on the vocabulary's Stribeck case the
+/// two differ by far more.
+pub const NESTED_GAIN: f64 = 1.25;
+
+/// Move the simpler effect to the top when the top one contains it and
+/// does not beat it by [`NESTED_GAIN`].
+fn prefer_nested(ranking: &mut [Ranked], base_cost: f64, floor: f64, min_gain: f64) {
+    let Some(top) = ranking.first() else {
+        return;
+    };
+    for (outer, inner) in NESTED {
+        if top.candidate.effect != *outer {
+            continue;
+        }
+        let Some(j) = ranking.iter().position(|r| {
+            r.candidate.effect == *inner
+                && r.candidate.target == top.candidate.target
+                && passes(r, base_cost, floor, min_gain)
+        }) else {
+            continue;
+        };
+        if ranking[0].gain < NESTED_GAIN * ranking[j].gain {
+            ranking[..=j].rotate_right(1);
+            return;
+        }
+    }
 }
 
 /// A refit gain above which a second start is not tried.

@@ -8,9 +8,19 @@
 //! are handled as follows:
 //!
 //! - **Quantisation noise** (trap 1): `q`, `q'`, `q''` are the value and
-//!   derivatives of a local Savitzky-Golay polynomial (61 samples, order 5 at
-//!   500 Hz by default; the kernel is derived in [`crate::savitzky_golay`]).
-//!   The first and last half windows of each experiment are dropped.
+//!   derivatives of a local Savitzky-Golay polynomial (order 5 over +-60 ms
+//!   by default, 61 samples at 500 Hz; the kernel is derived in
+//!   [`crate::savitzky_golay`]). The first and last half windows of each
+//!   experiment are dropped.
+//! - **Sample rate** (reproducer 15 of the reliability set): every window
+//!   and threshold is in physical time, and records faster than
+//!   [`EquationErrorOptions::row_rate`] are first reduced to about that rate
+//!   by block means (the ZOH-centred input and the coordinates alike, so
+//!   both sides stay aligned). The rows of the regression, and with them the
+//!   BIC, then count the same seconds of data at 500 Hz and at 10 kHz, and
+//!   the noise of `q''` does not grow with the rate (at a fixed window in
+//!   samples it grew as `rate^2.5` and fed columns such as an added inertia
+//!   `J q''` that match it: errors in variables).
 //! - **Zero-order hold** (trap 2): `u[k]` acts over `[t_k, t_k + T)`, so the
 //!   input centred on sample `k` is the average `(u[k-1] + u[k]) / 2`; using
 //!   `u[k]` shows up as a false half-sample (1 ms) delay.
@@ -61,8 +71,12 @@ mod rig_effects;
 /// Options of the equation-error ranking.
 #[derive(Clone, Debug, PartialEq)]
 pub struct EquationErrorOptions {
-    /// Savitzky-Golay half width `h` (window `2h + 1` samples).
-    pub half_width: usize,
+    /// Savitzky-Golay half window in seconds (window `2h + 1` samples with
+    /// `h = round(half_window / dt)`, at least `order + 1`).
+    pub half_window: f64,
+    /// Records sampled faster than this (Hz) are reduced to about this rate
+    /// by block means before smoothing.
+    pub row_rate: f64,
     /// Savitzky-Golay polynomial degree.
     pub order: usize,
     /// A joint counts as stuck where its estimated speed is below this many
@@ -76,7 +90,8 @@ pub struct EquationErrorOptions {
 impl Default for EquationErrorOptions {
     fn default() -> Self {
         EquationErrorOptions {
-            half_width: 30,
+            half_window: 0.06,
+            row_rate: 500.0,
             order: 5,
             stuck_speed_factor: 5.0,
             friction_width: None,
@@ -285,11 +300,14 @@ struct Smoothed {
     /// `keep[i][k]`: sample `k` is used in equation `i`.
     keep: Vec<Vec<bool>>,
     /// The measured coordinates and commanded inputs over the whole record
-    /// (sample `k` of the smoothed signals is sample `k + h` here) and the
-    /// smoothing kernel, for columns that are nonlinear functions of them
-    /// (smoothed after the function, like the states).
+    /// at the recorded (uniform) rate, the block length of the reduction and
+    /// the smoothing kernel, for columns that are nonlinear functions of them
+    /// (the function is applied at the recorded rate, then the signal is
+    /// reduced and smoothed like the states: [`Smoothed::coordinate_like`],
+    /// [`Smoothed::input_like`]).
     raw_q: Vec<Vec<f64>>,
     raw_u: Vec<Vec<f64>>,
+    block: usize,
     k0: Vec<f64>,
 }
 
@@ -297,6 +315,37 @@ impl Smoothed {
     fn len(&self) -> usize {
         self.q.first().map_or(0, Vec::len)
     }
+
+    /// A function of the coordinates at the recorded rate, reduced and
+    /// smoothed like the coordinates (index `k` = smoothed sample `k`).
+    fn coordinate_like(&self, y: &[f64]) -> Vec<f64> {
+        apply(&self.k0, &block_means(y, self.block))
+    }
+
+    /// A function of the inputs at the recorded rate, ZOH-centred, reduced
+    /// and smoothed like the inputs.
+    fn input_like(&self, x: &[f64]) -> Vec<f64> {
+        apply(&self.k0, &block_means(&zoh_centred(x), self.block))
+    }
+}
+
+/// `u[k]` acts over `[t_k, t_k + T)`: the input centred on sample `k` is
+/// `(u[k-1] + u[k]) / 2` (trap 2).
+fn zoh_centred(u: &[f64]) -> Vec<f64> {
+    (0..u.len())
+        .map(|k| 0.5 * (u[k.saturating_sub(1)] + u[k]))
+        .collect()
+}
+
+/// Means of consecutive blocks of `b` samples (a trailing partial block is
+/// dropped); `b <= 1` returns the signal unchanged.
+fn block_means(y: &[f64], b: usize) -> Vec<f64> {
+    if b <= 1 {
+        return y.to_vec();
+    }
+    y.chunks_exact(b)
+        .map(|c| c.iter().sum::<f64>() / b as f64)
+        .collect()
 }
 
 /// The prepared equation-error problem of a baseline model on a set of
@@ -328,6 +377,114 @@ pub struct EquationError {
     rss0: f64,
     /// Low-speed threshold per coordinate (for the `by_speed` shares).
     slow: Vec<f64>,
+    /// The scale held fixed, if the residual was homogeneous.
+    scale: Option<ScaleFixed>,
+    /// The nuisance columns before the scale was fixed (only then).
+    nuisance_full: Option<Vec<Vec<f64>>>,
+    /// The nuisance columns span the residual even with the scale fixed.
+    blind: bool,
+}
+
+/// Relative residual below which the nuisance columns count as spanning
+/// the residual exactly (an algebraic identity leaves 1e-20 or so; a real
+/// fit, even a perfect one on noise-free data, leaves smoothing error).
+const SCALE_TOLERANCE: f64 = 1e-9;
+
+/// Relative residual below which a candidate column counts as spanned by
+/// the nuisance columns (a duplicate of a model parameter's column).
+const SPANNED: f64 = 1e-9;
+
+/// The scale degeneracy of the equation error, when it has one.
+///
+/// The torque residual `M(q) q'' + bias - Q` is often homogeneous in the
+/// estimated parameters: with the inertias, a length, the dampings and an
+/// input gain all marked `estimate`, scaling them together scales the
+/// residual (Euler: `sum_j p_j dr/dp_j = r`), so the residual is an exact
+/// combination of its own nuisance columns and the regression drives every
+/// parameter to 0 (RSS 0: every candidate scores 0, a silent blind spot).
+/// The ranking then keeps the common scale: the nuisance may move the
+/// parameters only in directions `x` (relative changes `dp_j / p_j`) with
+/// `sum_j a_j x_j = 0`, where `a` (relative) is the homogeneity direction:
+/// for a residual of degree 1 in all of them, the geometric mean of the
+/// parameters is held.
+#[derive(Clone, Debug, PartialEq)]
+pub struct ScaleFixed {
+    /// The nuisance parameters that carry the scale, with their weight in
+    /// the homogeneity direction (relative; the largest is 1).
+    pub parameters: Vec<(String, f64)>,
+}
+
+impl fmt::Display for ScaleFixed {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        let names: Vec<&str> = self.parameters.iter().map(|(n, _)| n.as_str()).collect();
+        write!(
+            f,
+            "the equations are homogeneous in {}: scaled together they leave the motion unchanged, so the data fix only their ratios; the ranking held their common scale",
+            names.join(", ")
+        )
+    }
+}
+
+/// Remove the homogeneity direction from the nuisance columns when they span
+/// the residual `r` exactly (see [`ScaleFixed`]).
+fn fix_scale(
+    cols: Vec<Vec<f64>>,
+    r: &[f64],
+    names: &[String],
+    values: &[f64],
+) -> (Vec<Vec<f64>>, Option<ScaleFixed>) {
+    let rr = dot(r, r);
+    if cols.is_empty() || !(rr > 0.0) {
+        return (cols, None);
+    }
+    let refs: Vec<&[f64]> = cols.iter().map(Vec::as_slice).collect();
+    let fit = least_squares(&refs, r);
+    if fit.rss > SCALE_TOLERANCE * rr {
+        return (cols, None);
+    }
+    // relative columns N_j s_j (s_j = |p_j|, or the column's inverse norm
+    // for a parameter at 0) and the direction a_rel with r = sum a_rel_j N_j s_j
+    let s: Vec<f64> = cols
+        .iter()
+        .zip(values)
+        .map(|(c, v)| {
+            if *v != 0.0 && v.is_finite() {
+                v.abs()
+            } else {
+                let nc = dot(c, c).sqrt();
+                if nc > 0.0 {
+                    1.0 / nc
+                } else {
+                    1.0
+                }
+            }
+        })
+        .collect();
+    let a: Vec<f64> = fit.coef.iter().zip(&s).map(|(b, s)| b / s).collect();
+    let Some(star) = (0..a.len()).max_by(|&i, &j| a[i].abs().total_cmp(&a[j].abs())) else {
+        return (cols, None);
+    };
+    if a[star] == 0.0 {
+        return (cols, None);
+    }
+    // basis of {x : a . x = 0}: e_j - (a_j / a_star) e_star, j != star
+    let rel = |j: usize| -> Vec<f64> { cols[j].iter().map(|x| x * s[j]).collect() };
+    let c_star = rel(star);
+    let out: Vec<Vec<f64>> = (0..cols.len())
+        .filter(|&j| j != star)
+        .map(|j| {
+            let f = a[j] / a[star];
+            rel(j).iter().zip(&c_star).map(|(x, y)| x - f * y).collect()
+        })
+        .collect();
+    let a_star = a[star];
+    let parameters = names
+        .iter()
+        .zip(&a)
+        .filter(|(_, aj)| aj.abs() > 1e-6 * a_star.abs())
+        .map(|(n, aj)| (n.clone(), aj / a_star))
+        .collect();
+    (out, Some(ScaleFixed { parameters }))
 }
 
 fn has_sign(e: Expr) -> bool {
@@ -587,47 +744,56 @@ impl EquationError {
             });
         }
         let (n, m) = (model.coordinates.len(), model.inputs.len());
-        let h = opts.half_width;
         let mut exps = Vec::new();
         let mut noise = vec![0.0f64; n];
         let mut noise_count = 0usize;
         let mut k1_norm = 0.0;
         for e in experiments {
             let sig = uniform(Signals::from_experiment(model, e)?);
-            if sig.len() <= 2 * h + 1 {
+            if sig.len() < 4 {
                 continue;
             }
-            let dt = (sig.t[sig.len() - 1] - sig.t[0]) / (sig.len() - 1) as f64;
+            let dt0 = (sig.t[sig.len() - 1] - sig.t[0]) / (sig.len() - 1) as f64;
+            // reduce fast records to about `row_rate` by block means
+            let block = if opts.row_rate > 0.0 && dt0 > 0.0 {
+                ((1.0 / opts.row_rate) / dt0).round().max(1.0) as usize
+            } else {
+                1
+            };
+            let dt = dt0 * block as f64;
+            let h = ((opts.half_window / dt).round() as usize).max(opts.order + 1);
+            let q_red: Vec<Vec<f64>> = sig.q.iter().map(|y| block_means(y, block)).collect();
+            if q_red.first().map_or(0, Vec::len) <= 2 * h + 1 {
+                continue;
+            }
             let k0 = kernel(h, opts.order, 0, dt)?;
             let k1 = kernel(h, opts.order, 1, dt)?;
             let k2 = kernel(h, opts.order, 2, dt)?;
             k1_norm = dot(&k1, &k1).sqrt().max(k1_norm);
-            let q: Vec<Vec<f64>> = sig.q.iter().map(|y| apply(&k0, y)).collect();
+            let q: Vec<Vec<f64>> = q_red.iter().map(|y| apply(&k0, y)).collect();
             for i in 0..n {
-                let d = rms(q[i].iter().zip(&sig.q[i][h..]).map(|(a, b)| a - b));
+                let d = rms(q[i].iter().zip(&q_red[i][h..]).map(|(a, b)| a - b));
                 noise[i] += d * d;
             }
             noise_count += 1;
             let zoh: Vec<Vec<f64>> = sig
                 .u
                 .iter()
-                .map(|u| {
-                    (0..u.len())
-                        .map(|k| 0.5 * (u[k.saturating_sub(1)] + u[k]))
-                        .collect()
-                })
+                .map(|u| block_means(&zoh_centred(u), block))
                 .collect();
+            let keep_len = q[0].len();
             exps.push(Smoothed {
-                raw_q: sig.q.clone(),
-                raw_u: sig.u.clone(),
-                k0: k0.clone(),
                 name: sig.name.clone(),
-                qd: sig.q.iter().map(|y| apply(&k1, y)).collect(),
-                qdd: sig.q.iter().map(|y| apply(&k2, y)).collect(),
+                qd: q_red.iter().map(|y| apply(&k1, y)).collect(),
+                qdd: q_red.iter().map(|y| apply(&k2, y)).collect(),
                 u: zoh.iter().map(|y| apply(&k0, y)).collect(),
                 ud: zoh.iter().map(|y| apply(&k1, y)).collect(),
-                keep: vec![vec![true; q[0].len()]; n],
+                keep: vec![vec![true; keep_len]; n],
                 q,
+                raw_q: sig.q,
+                raw_u: sig.u,
+                block,
+                k0,
             });
         }
         if exps.is_empty() {
@@ -652,6 +818,7 @@ impl EquationError {
             let limit = (opts.stuck_speed_factor * noise_i).max(width);
             for ex in &mut exps {
                 let len = ex.len();
+                let h = ex.k0.len() / 2;
                 let stuck: Vec<bool> = ex.qd[i].iter().map(|v| v.abs() < limit).collect();
                 for (k, &s) in stuck.iter().enumerate() {
                     if s {
@@ -740,9 +907,23 @@ impl EquationError {
         let dq: Vec<Vec<f64>> = raw_dq.into_iter().map(wt).collect();
         let du: Vec<Vec<f64>> = raw_du.into_iter().map(wt).collect();
         let dr_du: Vec<Vec<f64>> = raw_dr_du.into_iter().map(wt).collect();
+        let values: Vec<f64> = nuisance
+            .iter()
+            .map(|name| {
+                model
+                    .parameters
+                    .iter()
+                    .position(|p| &p.name == name)
+                    .map_or(0.0, |i| base[i])
+            })
+            .collect();
+        let full = nuisance_cols.clone();
+        let (nuisance_cols, scale) = fix_scale(nuisance_cols, &r, nuisance, &values);
+        let nuisance_full = scale.is_some().then_some(full);
         let cols: Vec<&[f64]> = nuisance_cols.iter().map(Vec::as_slice).collect();
         let fit0 = least_squares(&cols, &r);
         let r0 = residual(&r, &cols, &fit0.coef);
+        let blind = dot(&r, &r) > 0.0 && fit0.rss <= SCALE_TOLERANCE * dot(&r, &r);
         let slow = (0..n)
             .map(|i| 0.25 * rms(exps.iter().flat_map(|e| e.qd[i].iter().copied())))
             .collect();
@@ -767,7 +948,24 @@ impl EquationError {
             rss0: fit0.rss,
             r0,
             slow,
+            scale,
+            nuisance_full,
+            blind,
         })
+    }
+
+    /// The common scale held fixed during the ranking, when the residual is
+    /// homogeneous in the nuisance parameters (see [`ScaleFixed`]).
+    pub fn scale_fixed(&self) -> Option<&ScaleFixed> {
+        self.scale.as_ref()
+    }
+
+    /// True when the nuisance columns still span the residual after the
+    /// scale is fixed: no candidate can explain anything, the ranking cannot
+    /// discriminate (another exact dependency among the estimated
+    /// parameters).
+    pub fn blind(&self) -> bool {
+        self.blind
     }
 
     /// Number of (sample, equation) rows in the regression.
@@ -853,6 +1051,26 @@ impl EquationError {
             Regressor::SpeedLimit { coordinate, names } => {
                 return self.score_speed_limit(*coordinate, names);
             }
+        };
+        // with the scale held fixed, a candidate column the model's own
+        // parameters already span (viscous friction on a joint whose damping
+        // is estimated, an added inertia where the inertia is) would only
+        // give the scale back: it adds nothing
+        let cand: Vec<Vec<f64>> = match &self.nuisance_full {
+            Some(full) => {
+                let refs: Vec<&[f64]> = full.iter().map(Vec::as_slice).collect();
+                cand.into_iter()
+                    .map(|c| {
+                        let cc = dot(&c, &c);
+                        if cc > 0.0 && least_squares(&refs, &c).rss <= SPANNED * cc {
+                            vec![0.0; c.len()]
+                        } else {
+                            c
+                        }
+                    })
+                    .collect()
+            }
+            None => cand,
         };
         let mut cols: Vec<&[f64]> = self.nuisance.iter().map(Vec::as_slice).collect();
         let nn = cols.len();

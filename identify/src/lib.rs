@@ -66,10 +66,12 @@ pub mod where_it_fails;
 pub use closed_loop::LoopLaw;
 pub use diagnose::{
     candidates, diagnose, diagnose_with, Candidate, DiagnoseError, DiagnoseOptions, Diagnosis,
-    Evidence, Ranked,
+    Evidence, Ranked, Unexplained,
 };
 pub use effect_edit::{EffectEditError, EffectInstance, EffectKind};
-pub use equation_error::{EquationError, EquationErrorOptions, Regressor, Score, Share};
+pub use equation_error::{
+    EquationError, EquationErrorOptions, Regressor, ScaleFixed, Score, Share,
+};
 pub use experiment_sim::{
     velocity_at, BlockStart, InitialVelocity, Signals, SimError, SimOptions, Simulator, Trajectory,
 };

@@ -96,7 +96,7 @@ pub fn degrees_reason(t: &[f64], x: &[f64]) -> Option<String> {
             "max |value| = {max_abs:.4} exceeds 20 revolutions in radians"
         ));
     }
-    if let Some(q) = quantum(x) {
+    if let Some(q) = crate::weights::quantum(x) {
         let deg_n = 360.0 / q;
         let rad_n = 2.0 * PI / q;
         let is_int = |n: f64| (n - n.round()).abs() < 0.05;
@@ -140,31 +140,4 @@ fn usual_resolution(n: f64) -> bool {
     ];
     let pow2 = (8..=20).any(|k| n == f64::from(1u32 << k));
     pow2 || OTHERS.contains(&n)
-}
-
-/// The quantisation step of a signal, if it is quantised: the smallest nonzero
-/// step q (above print rounding, 1e-7) such that at least 90 % of the nonzero
-/// steps are integer multiples of q within 2 %.
-pub fn quantum(x: &[f64]) -> Option<f64> {
-    let steps: Vec<f64> = x
-        .windows(2)
-        .map(|w| (w[1] - w[0]).abs())
-        .filter(|d| *d > 1e-7)
-        .collect();
-    if steps.len() < 10 {
-        return None;
-    }
-    let q = steps.iter().copied().fold(f64::INFINITY, f64::min);
-    let on_grid = steps
-        .iter()
-        .filter(|d| {
-            let m = *d / q;
-            (m - m.round()).abs() < 0.02
-        })
-        .count();
-    if on_grid as f64 >= 0.9 * steps.len() as f64 {
-        Some(q)
-    } else {
-        None
-    }
 }

@@ -263,6 +263,7 @@ pub fn identify(
         let cost_before = d.baseline.after_cost;
         let top = d.verdict.as_ref().and_then(|_| d.ranking.first()).cloned();
         let Some(top) = top else {
+            let line = d.verdict_line();
             rounds.push(Round {
                 ranking: d.ranking,
                 effect: None,
@@ -270,10 +271,10 @@ pub fn identify(
                 cost_before,
                 cost_after: None,
             });
-            stop = if round == 1 {
-                "adequate: no candidate effect lowers the cost clearly".to_string()
-            } else {
-                "no further effect lowers the cost clearly".to_string()
+            stop = match (&d.unexplained, round) {
+                (Some(_), _) => line,
+                (None, 1) => "adequate: no candidate effect lowers the cost clearly".to_string(),
+                (None, _) => "no further effect lowers the cost clearly".to_string(),
             };
             break;
         };

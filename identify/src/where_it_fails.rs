@@ -284,7 +284,7 @@ fn diagnose(
         .unwrap_or(1.0)
         .max(f64::MIN_POSITIVE);
     let unit = o.units.get(channel).cloned().unwrap_or_default();
-    let floor = crate::plausibility::quantum(y).map(|q| q / 12f64.sqrt());
+    let floor = crate::weights::quantum(y).map(|q| q / 12f64.sqrt());
 
     // Time segments.
     let nseg = o.segments.clamp(1, n.max(1));

@@ -45,8 +45,8 @@
 use plantc_derive::model::Model;
 
 use super::{
-    apply, dot, least_squares, residual, EquationError, EquationErrorError, LinearEstimate,
-    Regressor, Score,
+    dot, least_squares, residual, EquationError, EquationErrorError, LinearEstimate, Regressor,
+    Score,
 };
 use crate::effect_edit::label_of;
 
@@ -293,7 +293,7 @@ impl EquationError {
             .iter()
             .map(|e| {
                 let y: Vec<f64> = e.raw_q[i].iter().map(|&q| f(q)).collect();
-                apply(&e.k0, &y)
+                e.coordinate_like(&y)
             })
             .collect();
         idx.iter()
@@ -436,10 +436,7 @@ impl EquationError {
                 .map(|e| {
                     let u = &e.raw_u[j];
                     let x: Vec<f64> = u.iter().map(|&v| v - v.clamp(-l, l)).collect();
-                    let zoh: Vec<f64> = (0..x.len())
-                        .map(|k| 0.5 * (x[k.saturating_sub(1)] + x[k]))
-                        .collect();
-                    apply(&e.k0, &zoh)
+                    e.input_like(&x)
                 })
                 .collect();
             self.rows

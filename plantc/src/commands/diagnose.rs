@@ -127,7 +127,17 @@ pub fn run(args: &DiagnoseArgs, out: &mut dyn Write, err: &mut dyn Write) -> Res
     }
     if args.json {
         let v = serde_json::json!({
-            "verdict": if findings.is_empty() { "adequate" } else { "missing_effect" },
+            "verdict": if !findings.is_empty() {
+                "missing_effect"
+            } else if d.unexplained.is_some() {
+                "unexplained_residual"
+            } else {
+                "adequate"
+            },
+            "verdict_line": d.verdict_line(),
+            "noise_floor_cost": d.floor,
+            "baseline_cost": d.baseline.after_cost,
+            "notes": d.notes,
             "findings": findings.iter().map(|r| finding_json(r)).collect::<Vec<_>>(),
             "baseline": {"rmse": d.baseline.after_rmse},
             "candidates": d.ranking.iter().map(|r| serde_json::json!({
@@ -171,6 +181,9 @@ pub fn run(args: &DiagnoseArgs, out: &mut dyn Write, err: &mut dyn Write) -> Res
             r.evidence.acts_where
         );
     }
+    for n in &d.notes {
+        let _ = writeln!(out, "note: {n}");
+    }
     match findings.first() {
         Some(top) => {
             let inst = fitted_instance(top);
@@ -184,11 +197,7 @@ pub fn run(args: &DiagnoseArgs, out: &mut dyn Write, err: &mut dyn Write) -> Res
             );
         }
         None => {
-            let _ = writeln!(
-                out,
-                "\nverdict: adequate: no candidate lowers the RMSE by {}x or more",
-                plantc_identify::diagnose::MIN_GAIN
-            );
+            let _ = writeln!(out, "\nverdict: {}", d.verdict_line());
         }
     }
     Ok(())
