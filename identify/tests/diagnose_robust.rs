@@ -238,3 +238,104 @@ fn a_restart_is_not_credited_to_an_effect() {
     show("clean data, baseline cut short", &d);
     assert_eq!(verdict(&d), None, "nothing is missing from these data");
 }
+
+/// The rig of the vocabulary test: base parameters off nominal.
+const RIG: &[(&str, f64)] = &[
+    ("J1", 1.35e-3),
+    ("l2", 0.161),
+    ("b1", 2.9e-3),
+    ("b2", 6e-4),
+    ("Fg1", 0.013),
+];
+
+const THREE_RUNS: &[&str] = &[
+    "free_swing:alpha0=120deg,duration=8,name=large",
+    "free_swing:alpha0=160deg,duration=8,name=small",
+    "driven:alpha0=180deg,duration=8,seed=7,rms=1.2,name=driven",
+];
+
+/// Acceptance (issue 11): a 4 ms input delay is found and estimated within
+/// 10 % (it used to rank first by equation error and stall at 3 ms in the
+/// refit, 1.53x, so the verdict was "adequate" 10x above the floor).
+#[test]
+fn a_4_ms_input_delay_is_found_within_10_percent() {
+    let text = pendulum_text();
+    let exps = synth(
+        "delay",
+        &text,
+        &["input_delay:Vm=4e-3"],
+        RIG,
+        THREE_RUNS,
+        500.0,
+    );
+    let d = diagnose_with(&text, &exps, &DiagnoseOptions::default()).expect("diagnoses");
+    show("4 ms input delay", &d);
+    assert_eq!(verdict(&d).as_deref(), Some("input_delay@Vm"));
+    let td = d.ranking[0]
+        .parameters
+        .iter()
+        .find(|e| e.name.starts_with("Td"))
+        .expect("Td estimated")
+        .value;
+    eprintln!("Td = {td:.4e} s (truth 4e-3)");
+    assert!((td / 4e-3 - 1.0).abs() < 0.1, "Td = {td}");
+}
+
+/// Acceptance (issue 11): two effects at once, Coulomb friction on the
+/// pendulum and a 4 ms input delay, are named in turn by `identify`, and
+/// the residual ends near the noise floor.
+///
+/// Coulomb friction with quadratic drag on the pendulum (the issue's
+/// example) was tried first: with drag 1e-5 N m s^2 the re-estimated
+/// viscous damping absorbs the drag and Coulomb alone ends below the floor
+/// (3.04e-3 against 3.18e-3); with 1e-4, Stribeck friction plus the
+/// re-estimated damping ends below the floor too (2.94e-3 against 3.21e-3).
+/// On these runs the data cannot tell those apart, so one effect is the
+/// right answer there.
+#[test]
+fn two_effects_are_named_in_turn_and_the_residual_ends_near_the_floor() {
+    let text = pendulum_text();
+    let exps = synth(
+        "two",
+        &text,
+        &["coulomb_friction:alpha=4e-4", "input_delay:Vm=4e-3"],
+        RIG,
+        THREE_RUNS,
+        500.0,
+    );
+    let opts = plantc_identify::StoryOptions {
+        max_effects: 3,
+        ..Default::default()
+    };
+    let story = plantc_identify::identify(&text, &exps, &opts, &mut |_| {}).expect("identifies");
+    let named: Vec<String> = story
+        .rounds
+        .iter()
+        .filter_map(|r| r.effect.as_ref().map(|e| e.label()))
+        .collect();
+    let w = &story.fit.weights;
+    let floor = (w.iter().map(|c| (c.weight * c.noise).powi(2)).sum::<f64>()
+        / w.len().max(1) as f64)
+        .sqrt();
+    for (k, r) in story.rounds.iter().enumerate() {
+        eprintln!(
+            "round {}: {:?}, cost {:.3e} -> {:?} (floor {floor:.3e})",
+            k + 1,
+            r.effect.as_ref().map(|e| e.label()),
+            r.cost_before,
+            r.cost_after
+        );
+    }
+    eprintln!("stop: {}", story.stop);
+    assert!(
+        named.len() >= 2
+            && named[..2].contains(&"coulomb_friction@alpha".to_string())
+            && named[..2].contains(&"input_delay@Vm".to_string()),
+        "{named:?}"
+    );
+    assert!(
+        story.fit.after_cost <= 1.3 * floor,
+        "final cost {:.3e} vs floor {floor:.3e}",
+        story.fit.after_cost
+    );
+}
