@@ -180,8 +180,13 @@ fn run_case(dir: &Path, case: &Case) -> (String, Option<f64>) {
     assert_eq!(code, 0, "diagnose {name}: {err}");
     let v: serde_json::Value = serde_json::from_str(&out).expect("JSON");
     let Some(top) = v["findings"].as_array().and_then(|f| f.first()) else {
-        assert_eq!(v["verdict"], "adequate");
-        return ("adequate".into(), None);
+        // "adequate" near the noise floor, "unexplained_residual" above it
+        let verdict = v["verdict"].as_str().unwrap_or("?").to_string();
+        assert!(
+            verdict == "adequate" || verdict == "unexplained_residual",
+            "{verdict}"
+        );
+        return (verdict, None);
     };
     assert_eq!(v["verdict"], "missing_effect");
     let label = format!(
