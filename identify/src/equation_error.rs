@@ -434,7 +434,7 @@ fn fix_scale(
     values: &[f64],
 ) -> (Vec<Vec<f64>>, Option<ScaleFixed>) {
     let rr = dot(r, r);
-    if cols.is_empty() || !(rr > 0.0) {
+    if cols.is_empty() || rr.is_nan() || rr <= 0.0 {
         return (cols, None);
     }
     let refs: Vec<&[f64]> = cols.iter().map(Vec::as_slice).collect();
