@@ -26,7 +26,7 @@
 //!    values, does not get there too (the gain is measured against the best
 //!    baseline, not a worse restart). Otherwise the model is *adequate* when
 //!    the baseline is within [`FLOOR_BASELINE`] of the noise floor, and the
-//!    residual *unexplained* ([`Unexplained`]) when it is not.
+//!    residual *unexplained* ([`Diagnosis::unexplained`]) when it is not.
 //!
 //! [`MIN_GAIN`] = 3, checked on the three reference recordings of the
 //! diagnosis tests (`tests/diagnose.rs`, release build): with the right
@@ -246,35 +246,36 @@ pub struct Diagnosis {
     /// others in equation-error order.
     pub ranking: Vec<Ranked>,
     /// The accepted candidate, or None: no candidate explains the residual
-    /// (adequate when the baseline is near the noise floor, otherwise see
-    /// `unexplained`).
+    /// (adequate when the baseline is near the noise floor, otherwise
+    /// [`Diagnosis::unexplained`]).
     pub verdict: Option<Candidate>,
     /// The weighted cost measurement noise alone would leave (encoder
     /// quantum, high-frequency content; in the units of
     /// `baseline.after_cost`).
     pub floor: f64,
-    /// Without a verdict, when the baseline sits well above the noise floor
-    /// ([`FLOOR_BASELINE`] times or more): the model is not adequate, the
-    /// residual is unexplained by every candidate tried.
-    pub unexplained: Option<Unexplained>,
     /// What the diagnosis noticed on the way (a scale held fixed, a blind
     /// equation-error ranking, screening extended beyond the leaders, a
     /// baseline improved by a restart), in words.
     pub notes: Vec<String>,
 }
 
-/// A residual well above the noise floor that no candidate explains.
-#[derive(Clone, Debug, PartialEq)]
-pub struct Unexplained {
-    /// Baseline cost over the noise floor.
-    pub above_floor: f64,
-    /// How many candidates were refitted by simulation error.
-    pub refitted: usize,
-    /// The best of them: label and its gain.
-    pub best: Option<(String, f64)>,
-}
-
 impl Diagnosis {
+    /// Baseline cost over the noise floor (NaN without a floor).
+    pub fn above_floor(&self) -> f64 {
+        if self.floor > 0.0 {
+            self.baseline.after_cost / self.floor
+        } else {
+            f64::NAN
+        }
+    }
+
+    /// No verdict while the baseline sits well above the noise floor
+    /// ([`FLOOR_BASELINE`] times or more): the model is not adequate, the
+    /// residual is unexplained by every candidate tried.
+    pub fn unexplained(&self) -> bool {
+        self.verdict.is_none() && self.above_floor() >= FLOOR_BASELINE
+    }
+
     /// One line for the verdict: the missing effect, `adequate` (near the
     /// floor) or `unexplained residual` (well above it).
     pub fn verdict_line(&self) -> String {
@@ -289,26 +290,23 @@ impl Diagnosis {
                 v.effect, v.target
             );
         }
-        match &self.unexplained {
-            Some(u) => {
-                let best = u
-                    .best
-                    .as_ref()
-                    .map(|(l, g)| format!("; the best, {l}, gains {g:.2}x"))
-                    .unwrap_or_default();
-                format!(
-                    "unexplained residual: {:.1}x the noise floor, and none of the {} candidates refitted lowers it clearly ({MIN_GAIN}x, to the floor, or {PARTIAL_GAIN}x far above it){best}: an effect outside the vocabulary, or a nominal model too far off",
-                    u.above_floor, u.refitted
-                )
-            }
-            None => format!(
+        if self.unexplained() {
+            let refitted: Vec<&Ranked> = self.ranking.iter().filter(|r| r.fit.is_some()).collect();
+            let best = refitted
+                .iter()
+                .max_by(|a, b| a.gain.total_cmp(&b.gain))
+                .map(|r| format!("; the best, {}, gains {:.2}x", r.candidate.label(), r.gain))
+                .unwrap_or_default();
+            format!(
+                "unexplained residual: {:.1}x the noise floor, and none of the {} candidates refitted lowers it clearly ({MIN_GAIN}x, to the floor, or {PARTIAL_GAIN}x far above it){best}: an effect outside the vocabulary, or a nominal model too far off",
+                self.above_floor(),
+                refitted.len()
+            )
+        } else {
+            format!(
                 "adequate: the residual is within {FLOOR_BASELINE}x the noise floor ({:.2}x) and no candidate lowers it by {MIN_GAIN}x or more",
-                if self.floor > 0.0 {
-                    self.baseline.after_cost / self.floor
-                } else {
-                    f64::NAN
-                }
-            ),
+                self.above_floor()
+            )
         }
     }
 }
@@ -448,12 +446,11 @@ pub fn diagnose_with(
     let informative = |s: &Score| s.columns > 0 && s.bic_gain > 0.0;
     let blind = ee.blind() || !scored.iter().any(|(_, _, s)| informative(s));
     let mut ranking = Vec::new();
-    let mut edited_models = Vec::new();
-    let mut useful = Vec::new();
-    let mut has_columns = Vec::new();
+    // per ranked candidate: its edited model and its equation-error score's
+    // standing (informative; adds a column at all)
+    let mut edited = Vec::new();
     for (rank, (c, m, score)) in scored.into_iter().enumerate() {
-        useful.push(informative(&score));
-        has_columns.push(score.columns > 0);
+        let standing = (informative(&score), score.columns > 0);
         ranking.push(Ranked {
             parameters: score
                 .estimates
@@ -483,7 +480,7 @@ pub fn diagnose_with(
             error: None,
             gain: 0.0,
         });
-        edited_models.push(m);
+        edited.push((m, standing));
     }
     let floor = crate::fit::noise_cost(&baseline.weights);
     let above_floor = floor > 0.0 && baseline.after_cost >= FLOOR_BASELINE * floor;
@@ -494,47 +491,52 @@ pub fn diagnose_with(
     }
     // Refit the leaders that explain anything at all (a candidate whose
     // columns the model's own parameters already span, e.g. viscous
-    // friction where a damping is estimated, adds nothing). When none of
-    // them explains the residual and the residual sits well above the noise
-    // floor, the equation-error ranking has missed (its columns are
-    // linearised, its noise is that of q''), so screening goes on down the
-    // whole list: "adequate" is never said far above the floor without
-    // trying every candidate.
-    let mut refitted = 0usize;
-    let mut extended = false;
-    for idx in 0..ranking.len() {
-        // past the leaders, every candidate that adds a column is screened
-        // (a low or negative BIC is no proof: at 100 Hz the q'' noise buries
-        // a Coulomb friction the refit then finds)
-        let screened = refitted >= opts.refit && has_columns[idx];
-        if !(useful[idx] || blind || screened) {
-            continue;
-        }
-        if refitted >= opts.refit {
-            let found = ranking[..idx]
+    // friction where a damping is estimated, adds nothing); all candidates
+    // are eligible when the ranking is blind.
+    let refit_at = |ranking: &mut [Ranked], idx: usize| {
+        refit(
+            &mut ranking[idx],
+            &edited[idx].0,
+            &model,
+            &baseline,
+            experiments,
+            opts,
+        );
+    };
+    let leaders: Vec<usize> = (0..ranking.len())
+        .filter(|&i| blind || edited[i].1 .0)
+        .take(opts.refit)
+        .collect();
+    for &idx in &leaders {
+        refit_at(&mut ranking, idx);
+    }
+    // When none of them explains the residual and the residual sits well
+    // above the noise floor, the equation-error ranking has missed (its
+    // columns are linearised, its noise is that of q''), so screening goes
+    // on down the list, every candidate that adds a column (a low or
+    // negative BIC is no proof: at 100 Hz the q'' noise buries a Coulomb
+    // friction the refit then finds), until one explains it: "adequate" is
+    // never said far above the floor without trying every candidate.
+    if leaders.len() == opts.refit && above_floor {
+        let rest: Vec<usize> = (leaders.last().map_or(0, |l| l + 1)..ranking.len())
+            .filter(|&i| blind || edited[i].1 .1)
+            .collect();
+        for (k, idx) in rest.into_iter().enumerate() {
+            if ranking[..idx]
                 .iter()
-                .any(|r| passes(r, baseline.after_cost, floor, opts.min_gain));
-            if !above_floor || found {
+                .any(|r| passes(r, baseline.after_cost, floor, opts.min_gain))
+            {
                 break;
             }
-            if !extended && !blind {
+            if k == 0 && !blind {
                 notes.push(format!(
                     "none of the {} equation-error leaders explains the residual ({:.1}x the noise floor): the other candidates were refitted too",
                     opts.refit,
                     baseline.after_cost / floor
                 ));
             }
-            extended = true;
+            refit_at(&mut ranking, idx);
         }
-        refit(
-            &mut ranking[idx],
-            &edited_models[idx],
-            &model,
-            &baseline,
-            experiments,
-            opts,
-        );
-        refitted += 1;
     }
     // a candidate that explains the residual competes with the simpler
     // effect it contains (Stribeck friction with `Fs = Fc` is Coulomb
@@ -552,14 +554,7 @@ pub fn diagnose_with(
             if let Some(j) = ranking.iter().position(|r| {
                 r.candidate.effect == *inner && r.candidate.target == c.target && r.fit.is_none()
             }) {
-                refit(
-                    &mut ranking[j],
-                    &edited_models[j],
-                    &model,
-                    &baseline,
-                    experiments,
-                    opts,
-                );
+                refit_at(&mut ranking, j);
             }
         }
     }
@@ -576,24 +571,11 @@ pub fn diagnose_with(
         opts,
         &mut notes,
     );
-    let unexplained = (verdict.is_none() && above_floor).then(|| {
-        let best = ranking
-            .iter()
-            .filter(|r| r.fit.is_some())
-            .max_by(|a, b| a.gain.total_cmp(&b.gain))
-            .map(|r| (r.candidate.label(), r.gain));
-        Unexplained {
-            above_floor: baseline.after_cost / floor,
-            refitted: ranking.iter().filter(|r| r.fit.is_some()).count(),
-            best,
-        }
-    });
     Ok(Diagnosis {
         baseline,
         ranking,
         verdict,
         floor,
-        unexplained,
         notes,
     })
 }

@@ -381,18 +381,14 @@ pub struct EquationError {
     scale: Option<ScaleFixed>,
     /// The nuisance columns before the scale was fixed (only then).
     nuisance_full: Option<Vec<Vec<f64>>>,
-    /// The nuisance columns span the residual even with the scale fixed.
-    blind: bool,
 }
 
-/// Relative residual below which the nuisance columns count as spanning
-/// the residual exactly (an algebraic identity leaves 1e-20 or so; a real
-/// fit, even a perfect one on noise-free data, leaves smoothing error).
+/// Relative residual below which columns count as spanning a vector
+/// exactly: the nuisance columns the residual, or a candidate column (a
+/// duplicate of a model parameter's). An algebraic identity leaves 1e-20 or
+/// so; a real fit, even a perfect one on noise-free data, leaves smoothing
+/// error.
 const SCALE_TOLERANCE: f64 = 1e-9;
-
-/// Relative residual below which a candidate column counts as spanned by
-/// the nuisance columns (a duplicate of a model parameter's column).
-const SPANNED: f64 = 1e-9;
 
 /// The scale degeneracy of the equation error, when it has one.
 ///
@@ -425,23 +421,22 @@ impl fmt::Display for ScaleFixed {
     }
 }
 
-/// Remove the homogeneity direction from the nuisance columns when they span
-/// the residual `r` exactly (see [`ScaleFixed`]).
+/// Columns whose least-squares fit of `r` leaves `rss` span `r` exactly
+/// (to [`SCALE_TOLERANCE`]).
+fn spans(rss: f64, r: &[f64]) -> bool {
+    let rr = dot(r, r);
+    rr > 0.0 && rss <= SCALE_TOLERANCE * rr
+}
+
+/// The nuisance columns without the homogeneity direction (see
+/// [`ScaleFixed`]), given the coefficients `coef` with which they span the
+/// residual exactly. None when no parameter carries the scale.
 fn fix_scale(
-    cols: Vec<Vec<f64>>,
-    r: &[f64],
+    cols: &[Vec<f64>],
+    coef: &[f64],
     names: &[String],
     values: &[f64],
-) -> (Vec<Vec<f64>>, Option<ScaleFixed>) {
-    let rr = dot(r, r);
-    if cols.is_empty() || rr.is_nan() || rr <= 0.0 {
-        return (cols, None);
-    }
-    let refs: Vec<&[f64]> = cols.iter().map(Vec::as_slice).collect();
-    let fit = least_squares(&refs, r);
-    if fit.rss > SCALE_TOLERANCE * rr {
-        return (cols, None);
-    }
+) -> Option<(Vec<Vec<f64>>, ScaleFixed)> {
     // relative columns N_j s_j (s_j = |p_j|, or the column's inverse norm
     // for a parameter at 0) and the direction a_rel with r = sum a_rel_j N_j s_j
     let s: Vec<f64> = cols
@@ -460,12 +455,10 @@ fn fix_scale(
             }
         })
         .collect();
-    let a: Vec<f64> = fit.coef.iter().zip(&s).map(|(b, s)| b / s).collect();
-    let Some(star) = (0..a.len()).max_by(|&i, &j| a[i].abs().total_cmp(&a[j].abs())) else {
-        return (cols, None);
-    };
+    let a: Vec<f64> = coef.iter().zip(&s).map(|(b, s)| b / s).collect();
+    let star = (0..a.len()).max_by(|&i, &j| a[i].abs().total_cmp(&a[j].abs()))?;
     if a[star] == 0.0 {
-        return (cols, None);
+        return None;
     }
     // basis of {x : a . x = 0}: e_j - (a_j / a_star) e_star, j != star
     let rel = |j: usize| -> Vec<f64> { cols[j].iter().map(|x| x * s[j]).collect() };
@@ -484,7 +477,7 @@ fn fix_scale(
         .filter(|(_, aj)| aj.abs() > 1e-6 * a_star.abs())
         .map(|(n, aj)| (n.clone(), aj / a_star))
         .collect();
-    (out, Some(ScaleFixed { parameters }))
+    Some((out, ScaleFixed { parameters }))
 }
 
 fn has_sign(e: Expr) -> bool {
@@ -917,13 +910,21 @@ impl EquationError {
                     .map_or(0.0, |i| base[i])
             })
             .collect();
-        let full = nuisance_cols.clone();
-        let (nuisance_cols, scale) = fix_scale(nuisance_cols, &r, nuisance, &values);
-        let nuisance_full = scale.is_some().then_some(full);
         let cols: Vec<&[f64]> = nuisance_cols.iter().map(Vec::as_slice).collect();
-        let fit0 = least_squares(&cols, &r);
+        let mut fit0 = least_squares(&cols, &r);
+        // the nuisance columns span the residual: hold the scale fixed
+        let fixed = spans(fit0.rss, &r)
+            .then(|| fix_scale(&nuisance_cols, &fit0.coef, nuisance, &values))
+            .flatten();
+        let (nuisance_cols, scale, nuisance_full) = match fixed {
+            Some((cols, scale)) => (cols, Some(scale), Some(nuisance_cols)),
+            None => (nuisance_cols, None, None),
+        };
+        let cols: Vec<&[f64]> = nuisance_cols.iter().map(Vec::as_slice).collect();
+        if scale.is_some() {
+            fit0 = least_squares(&cols, &r);
+        }
         let r0 = residual(&r, &cols, &fit0.coef);
-        let blind = dot(&r, &r) > 0.0 && fit0.rss <= SCALE_TOLERANCE * dot(&r, &r);
         let slow = (0..n)
             .map(|i| 0.25 * rms(exps.iter().flat_map(|e| e.qd[i].iter().copied())))
             .collect();
@@ -950,7 +951,6 @@ impl EquationError {
             slow,
             scale,
             nuisance_full,
-            blind,
         })
     }
 
@@ -965,7 +965,7 @@ impl EquationError {
     /// discriminate (another exact dependency among the estimated
     /// parameters).
     pub fn blind(&self) -> bool {
-        self.blind
+        spans(self.rss0, &self.r)
     }
 
     /// Number of (sample, equation) rows in the regression.
@@ -1061,8 +1061,7 @@ impl EquationError {
                 let refs: Vec<&[f64]> = full.iter().map(Vec::as_slice).collect();
                 cand.into_iter()
                     .map(|c| {
-                        let cc = dot(&c, &c);
-                        if cc > 0.0 && least_squares(&refs, &c).rss <= SPANNED * cc {
+                        if spans(least_squares(&refs, &c).rss, &c) {
                             vec![0.0; c.len()]
                         } else {
                             c

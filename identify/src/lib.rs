@@ -66,7 +66,7 @@ pub mod where_it_fails;
 pub use closed_loop::LoopLaw;
 pub use diagnose::{
     candidates, diagnose, diagnose_with, Candidate, DiagnoseError, DiagnoseOptions, Diagnosis,
-    Evidence, Ranked, Unexplained,
+    Evidence, Ranked,
 };
 pub use effect_edit::{EffectEditError, EffectInstance, EffectKind};
 pub use equation_error::{

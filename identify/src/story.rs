@@ -263,7 +263,13 @@ pub fn identify(
         let cost_before = d.baseline.after_cost;
         let top = d.verdict.as_ref().and_then(|_| d.ranking.first()).cloned();
         let Some(top) = top else {
-            let line = d.verdict_line();
+            stop = if d.unexplained() {
+                d.verdict_line()
+            } else if round == 1 {
+                "adequate: no candidate effect lowers the cost clearly".to_string()
+            } else {
+                "no further effect lowers the cost clearly".to_string()
+            };
             rounds.push(Round {
                 ranking: d.ranking,
                 effect: None,
@@ -271,11 +277,6 @@ pub fn identify(
                 cost_before,
                 cost_after: None,
             });
-            stop = match (&d.unexplained, round) {
-                (Some(_), _) => line,
-                (None, 1) => "adequate: no candidate effect lowers the cost clearly".to_string(),
-                (None, _) => "no further effect lowers the cost clearly".to_string(),
-            };
             break;
         };
         let inst = fitted_instance(&top);

@@ -129,7 +129,7 @@ pub fn run(args: &DiagnoseArgs, out: &mut dyn Write, err: &mut dyn Write) -> Res
         let v = serde_json::json!({
             "verdict": if !findings.is_empty() {
                 "missing_effect"
-            } else if d.unexplained.is_some() {
+            } else if d.unexplained() {
                 "unexplained_residual"
             } else {
                 "adequate"
