@@ -32,7 +32,7 @@ pub(crate) fn idx(i: usize) -> proc_macro2::Literal {
     proc_macro2::Literal::usize_unsuffixed(i)
 }
 
-fn camel(name: &str) -> String {
+pub(crate) fn camel(name: &str) -> String {
     name.split(['_', '-'])
         .filter(|s| !s.is_empty())
         .map(|s| {
