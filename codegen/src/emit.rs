@@ -503,13 +503,7 @@ fn controller(model: &Model, rc: &ResolvedController) -> Result<TokenStream, Err
             }
             let law = us.clone();
             let sat_u = saturated(model, us)?;
-            let n_states = 2 * model.coordinates.len();
-            let gain_names: Vec<String> = (0..k.len())
-                .flat_map(|i| {
-                    (0..n_states)
-                        .map(move |j| plantc_derive::control::state_feedback_gain_name(model, i, j))
-                })
-                .collect();
+            let gain_names = plantc_derive::control::state_feedback_gain_names(model, k.len());
             let d = doc(&format!(
                 "Controller `{name}` of the model: state feedback `u = u0 - K (x - x0)` \
                  with `K` designed at generation time on the linearization about 0 \
@@ -999,12 +993,9 @@ fn hybrid_controller(
         gain_get.push(quote!(#mode_name => Control::gain(&self.#field, gain),));
         gain_set.push(quote!(#mode_name => Control::set_gain(&mut self.#field, gain, value),));
         let own: Vec<String> = match &m.controller {
-            ResolvedController::StateFeedback { k, .. } => (0..k.len())
-                .flat_map(|i| {
-                    (0..nx)
-                        .map(move |j| plantc_derive::control::state_feedback_gain_name(model, i, j))
-                })
-                .collect(),
+            ResolvedController::StateFeedback { k, .. } => {
+                plantc_derive::control::state_feedback_gain_names(model, k.len())
+            }
             ResolvedController::FeedbackLinearization { gains, .. }
             | ResolvedController::SlidingMode { gains, .. }
             | ResolvedController::Direct { gains, .. } => {

@@ -253,12 +253,7 @@ impl ControllerEval {
                 }
                 Kind::StateFeedback {
                     k: k.iter().flatten().copied().collect(),
-                    k_names: (0..m)
-                        .flat_map(|i| {
-                            (0..n)
-                                .map(move |j| crate::control::state_feedback_gain_name(model, i, j))
-                        })
-                        .collect(),
+                    k_names: crate::control::state_feedback_gain_names(model, m),
                     x0: x0.clone(),
                     u0: u0.clone(),
                 }
