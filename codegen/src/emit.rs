@@ -672,6 +672,21 @@ fn saturated(model: &Model, u: Vec<TokenStream>) -> Result<Vec<TokenStream>, Err
         .collect()
 }
 
+/// A controller's graph: the state `x[..]` (per call) and the plant
+/// parameters `self.params`, with the model's symbols bound to them.
+fn controller_graph(model: &Model) -> Result<(Graph, crate::ir::Env), Error> {
+    let mut g = Graph::new();
+    let xs: Vec<_> = (0..2 * model.coordinates.len())
+        .map(|i| {
+            let i = idx(i);
+            g.input(quote!(x[#i]), Level::Call)
+        })
+        .collect();
+    let ps = crate::plant::param_inputs(&mut g, model, &quote!(self.params));
+    let env = crate::plant::env(&mut g, model, &xs, &[], &ps)?;
+    Ok((g, env))
+}
+
 /// A controller given by laws over the state, parameters and named gains:
 /// parameter- and gain-only subexpressions live in `k`, recomputed by the setters.
 fn law_controller(
@@ -682,16 +697,7 @@ fn law_controller(
     laws: &[Expr],
     gains: &[(Symbol, f64)],
 ) -> Result<TokenStream, Error> {
-    let nx = 2 * model.coordinates.len();
-    let mut g = Graph::new();
-    let xs: Vec<_> = (0..nx)
-        .map(|i| {
-            let i = idx(i);
-            g.input(quote!(x[#i]), Level::Call)
-        })
-        .collect();
-    let ps = crate::plant::param_inputs(&mut g, model, &quote!(self.params));
-    let mut env = crate::plant::env(&mut g, model, &xs, &[], &ps)?;
+    let (mut g, mut env) = controller_graph(model)?;
     // gain accessors: `wn()` / `set_wn()`, prefixed `gain_` where a
     // name would clash with the controller's own methods
     let reserved = [
@@ -921,18 +927,9 @@ fn hybrid_controller(
     wrap: &[usize],
     limits_doc: &str,
 ) -> Result<TokenStream, Error> {
-    let nx = 2 * model.coordinates.len();
     let nm = idx(modes.len());
     // margins of every comparison, in switch order
-    let mut g = Graph::new();
-    let xs: Vec<_> = (0..nx)
-        .map(|i| {
-            let i = idx(i);
-            g.input(quote!(x[#i]), Level::Call)
-        })
-        .collect();
-    let ps = crate::plant::param_inputs(&mut g, model, &quote!(self.params));
-    let mut env = crate::plant::env(&mut g, model, &xs, &[], &ps)?;
+    let (mut g, mut env) = controller_graph(model)?;
     let mut mvs = Vec::new();
     for s in switches {
         for (_, e) in s.when.margins() {
