@@ -32,7 +32,7 @@ pub(crate) fn idx(i: usize) -> proc_macro2::Literal {
     proc_macro2::Literal::usize_unsuffixed(i)
 }
 
-fn camel(name: &str) -> String {
+pub(crate) fn camel(name: &str) -> String {
     name.split(['_', '-'])
         .filter(|s| !s.is_empty())
         .map(|s| {
@@ -503,13 +503,7 @@ fn controller(model: &Model, rc: &ResolvedController) -> Result<TokenStream, Err
             }
             let law = us.clone();
             let sat_u = saturated(model, us)?;
-            let n_states = 2 * model.coordinates.len();
-            let gain_names: Vec<String> = (0..k.len())
-                .flat_map(|i| {
-                    (0..n_states)
-                        .map(move |j| plantc_derive::control::state_feedback_gain_name(model, i, j))
-                })
-                .collect();
+            let gain_names = plantc_derive::control::state_feedback_gain_names(model, k.len());
             let d = doc(&format!(
                 "Controller `{name}` of the model: state feedback `u = u0 - K (x - x0)` \
                  with `K` designed at generation time on the linearization about 0 \
@@ -678,6 +672,21 @@ fn saturated(model: &Model, u: Vec<TokenStream>) -> Result<Vec<TokenStream>, Err
         .collect()
 }
 
+/// A controller's graph: the state `x[..]` (per call) and the plant
+/// parameters `self.params`, with the model's symbols bound to them.
+fn controller_graph(model: &Model) -> Result<(Graph, crate::ir::Env), Error> {
+    let mut g = Graph::new();
+    let xs: Vec<_> = (0..2 * model.coordinates.len())
+        .map(|i| {
+            let i = idx(i);
+            g.input(quote!(x[#i]), Level::Call)
+        })
+        .collect();
+    let ps = crate::plant::param_inputs(&mut g, model, &quote!(self.params));
+    let env = crate::plant::env(&mut g, model, &xs, &[], &ps)?;
+    Ok((g, env))
+}
+
 /// A controller given by laws over the state, parameters and named gains:
 /// parameter- and gain-only subexpressions live in `k`, recomputed by the setters.
 fn law_controller(
@@ -688,16 +697,7 @@ fn law_controller(
     laws: &[Expr],
     gains: &[(Symbol, f64)],
 ) -> Result<TokenStream, Error> {
-    let nx = 2 * model.coordinates.len();
-    let mut g = Graph::new();
-    let xs: Vec<_> = (0..nx)
-        .map(|i| {
-            let i = idx(i);
-            g.input(quote!(x[#i]), Level::Call)
-        })
-        .collect();
-    let ps = crate::plant::param_inputs(&mut g, model, &quote!(self.params));
-    let mut env = crate::plant::env(&mut g, model, &xs, &[], &ps)?;
+    let (mut g, mut env) = controller_graph(model)?;
     // gain accessors: `wn()` / `set_wn()`, prefixed `gain_` where a
     // name would clash with the controller's own methods
     let reserved = [
@@ -927,18 +927,9 @@ fn hybrid_controller(
     wrap: &[usize],
     limits_doc: &str,
 ) -> Result<TokenStream, Error> {
-    let nx = 2 * model.coordinates.len();
     let nm = idx(modes.len());
     // margins of every comparison, in switch order
-    let mut g = Graph::new();
-    let xs: Vec<_> = (0..nx)
-        .map(|i| {
-            let i = idx(i);
-            g.input(quote!(x[#i]), Level::Call)
-        })
-        .collect();
-    let ps = crate::plant::param_inputs(&mut g, model, &quote!(self.params));
-    let mut env = crate::plant::env(&mut g, model, &xs, &[], &ps)?;
+    let (mut g, mut env) = controller_graph(model)?;
     let mut mvs = Vec::new();
     for s in switches {
         for (_, e) in s.when.margins() {
@@ -999,12 +990,9 @@ fn hybrid_controller(
         gain_get.push(quote!(#mode_name => Control::gain(&self.#field, gain),));
         gain_set.push(quote!(#mode_name => Control::set_gain(&mut self.#field, gain, value),));
         let own: Vec<String> = match &m.controller {
-            ResolvedController::StateFeedback { k, .. } => (0..k.len())
-                .flat_map(|i| {
-                    (0..nx)
-                        .map(move |j| plantc_derive::control::state_feedback_gain_name(model, i, j))
-                })
-                .collect(),
+            ResolvedController::StateFeedback { k, .. } => {
+                plantc_derive::control::state_feedback_gain_names(model, k.len())
+            }
             ResolvedController::FeedbackLinearization { gains, .. }
             | ResolvedController::SlidingMode { gains, .. }
             | ResolvedController::Direct { gains, .. } => {

@@ -270,6 +270,15 @@ pub fn state_feedback_gain_name(model: &Model, input: usize, state: usize) -> St
     }
 }
 
+/// The names of all entries of a state-feedback gain with `inputs` rows,
+/// row-major (see [`state_feedback_gain_name`]).
+pub fn state_feedback_gain_names(model: &Model, inputs: usize) -> Vec<String> {
+    let states = model.state_names().len();
+    (0..inputs)
+        .flat_map(|i| (0..states).map(move |j| state_feedback_gain_name(model, i, j)))
+        .collect()
+}
+
 /// Resolve the controller `name` of `model` with parameter `values`.
 pub fn resolve(
     model: &Model,

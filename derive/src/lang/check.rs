@@ -12,6 +12,22 @@ use std::ops::{Add, Div, Mul, Neg};
 
 mod controllers;
 pub use controllers::CONTROLLER_FUNCTIONS;
+
+/// The error for a call of `function` with `found` arguments where it
+/// takes `arity` (e.g. `2` or `1 or 2`).
+pub(super) fn wrong_arity(
+    function: &str,
+    arity: impl std::fmt::Display,
+    found: usize,
+    span: Span,
+) -> Diagnostic {
+    Diagnostic::error(
+        "plantc::wrong_arity",
+        format!("`{function}` takes {arity} argument(s), found {found}"),
+        span,
+        "wrong number of arguments",
+    )
+}
 #[path = "check_recorded.rs"]
 mod recorded;
 
@@ -623,16 +639,8 @@ impl Infer<'_> {
         };
         let dims: Vec<Option<Dim>> = args.iter().map(|a| self.infer(a)).collect();
         if args.len() != arity {
-            self.diags.push(Diagnostic::error(
-                "plantc::wrong_arity",
-                format!(
-                    "`{}` takes {arity} argument(s), found {}",
-                    f.name,
-                    args.len()
-                ),
-                e.span,
-                "wrong number of arguments",
-            ));
+            self.diags
+                .push(wrong_arity(&f.name, arity, args.len(), e.span));
             return None;
         }
         let d0 = dims[0]?;
@@ -789,6 +797,68 @@ fn zero_at(span: Span) -> Expr {
         }),
         span,
     )
+}
+
+/// The sign a signal effect's argument must have (checked once its unit is right).
+struct SignRule {
+    code: &'static str,
+    /// What the argument is (`delay`).
+    what: &'static str,
+    /// What is wrong with it (`negative`).
+    wrong: &'static str,
+    /// After the value in the label.
+    unit: &'static str,
+    help: &'static str,
+    /// `> 0` rather than `>= 0`.
+    positive: bool,
+}
+
+impl SignRule {
+    fn violated_by(&self, v: f64) -> bool {
+        if self.positive {
+            v.partial_cmp(&0.0) != Some(std::cmp::Ordering::Greater)
+        } else {
+            v.is_nan() || v < 0.0
+        }
+    }
+}
+
+fn sign_rule(unit: ArgUnit) -> Option<SignRule> {
+    Some(match unit {
+        ArgUnit::Time => SignRule {
+            code: "plantc::negative_delay",
+            what: "delay",
+            wrong: "negative",
+            unit: " s",
+            help: "a delay is a time >= 0 s by which the plant receives the input late",
+            positive: false,
+        },
+        ArgUnit::TargetNonNegative => SignRule {
+            code: "plantc::negative_width",
+            what: "deadzone width",
+            wrong: "negative",
+            unit: " (SI)",
+            help: "a deadzone half-width w >= 0: inputs with |u| <= w do not reach the plant",
+            positive: false,
+        },
+        ArgUnit::TargetPositive => SignRule {
+            code: "plantc::nonpositive_level",
+            what: "saturation level",
+            wrong: "not positive",
+            unit: " (SI)",
+            help: "a saturation level L > 0: the plant receives the input clipped to [-L, L]",
+            positive: true,
+        },
+        ArgUnit::Inertia => SignRule {
+            code: "plantc::negative_inertia",
+            what: "added inertia",
+            wrong: "negative",
+            unit: " (SI)",
+            help: "an added inertia J >= 0 adds 1/2*J*q'^2 to the kinetic energy; to lower an inertia, change the parameter that holds it",
+            positive: false,
+        },
+        _ => return None,
+    })
 }
 
 /// `effect` (of kind `is`) written in a line of kind `line`, on `target`.
@@ -1471,62 +1541,16 @@ impl Checker {
                     diag = diag.with_label(t.span, format!("`{}` is {expected}", t.name));
                 }
                 self.diags.push(diag);
-            } else if *unit == ArgUnit::Time {
-                if let Some(v) = eval_si(a, &self.syms).filter(|v| v.is_nan() || *v < 0.0) {
+            } else if let Some(rule) = sign_rule(*unit) {
+                if let Some(v) = eval_si(a, &self.syms).filter(|v| rule.violated_by(*v)) {
                     self.diags.push(
                         Diagnostic::error(
-                            "plantc::negative_delay",
-                            format!("the delay of `{}` is negative", t.name),
+                            rule.code,
+                            format!("the {} of `{}` is {}", rule.what, t.name, rule.wrong),
                             a.span,
-                            format!("= {} s", fmt_num(v)),
+                            format!("= {}{}", fmt_num(v), rule.unit),
                         )
-                        .with_help(
-                            "a delay is a time >= 0 s by which the plant receives the input late",
-                        ),
-                    );
-                }
-            } else if *unit == ArgUnit::TargetNonNegative {
-                if let Some(v) = eval_si(a, &self.syms).filter(|v| v.is_nan() || *v < 0.0) {
-                    self.diags.push(
-                        Diagnostic::error(
-                            "plantc::negative_width",
-                            format!("the deadzone width of `{}` is negative", t.name),
-                            a.span,
-                            format!("= {} (SI)", fmt_num(v)),
-                        )
-                        .with_help(
-                            "a deadzone half-width w >= 0: inputs with |u| <= w do not reach the plant",
-                        ),
-                    );
-                }
-            } else if *unit == ArgUnit::TargetPositive {
-                if let Some(v) = eval_si(a, &self.syms)
-                    .filter(|v| v.partial_cmp(&0.0) != Some(std::cmp::Ordering::Greater))
-                {
-                    self.diags.push(
-                        Diagnostic::error(
-                            "plantc::nonpositive_level",
-                            format!("the saturation level of `{}` is not positive", t.name),
-                            a.span,
-                            format!("= {} (SI)", fmt_num(v)),
-                        )
-                        .with_help(
-                            "a saturation level L > 0: the plant receives the input clipped to [-L, L]",
-                        ),
-                    );
-                }
-            } else if *unit == ArgUnit::Inertia {
-                if let Some(v) = eval_si(a, &self.syms).filter(|v| v.is_nan() || *v < 0.0) {
-                    self.diags.push(
-                        Diagnostic::error(
-                            "plantc::negative_inertia",
-                            format!("the added inertia of `{}` is negative", t.name),
-                            a.span,
-                            format!("= {} (SI)", fmt_num(v)),
-                        )
-                        .with_help(
-                            "an added inertia J >= 0 adds 1/2*J*q'^2 to the kinetic energy; to lower an inertia, change the parameter that holds it",
-                        ),
+                        .with_help(rule.help),
                     );
                 }
             }
@@ -1610,13 +1634,7 @@ impl Checker {
                     Ok(x) => x,
                     Err(d) => {
                         self.diags.push(d);
-                        Expr::new(
-                            ExprKind::Number(NumLit {
-                                text: "0".into(),
-                                span: e.span,
-                            }),
-                            e.span,
-                        )
+                        zero_at(e.span)
                     }
                 };
             }

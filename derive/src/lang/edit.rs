@@ -252,15 +252,7 @@ pub fn add_force_term(text: &str, coordinate: &str, term_text: &str) -> Result<S
         return Err(EditError::WouldBreak(Vec::new()));
     }
     let (m, before) = parse_ok(text)?;
-    if !m.coordinates.iter().any(|c| c.name.name == coordinate) {
-        return Err(EditError::UnknownCoordinate {
-            name: coordinate.to_string(),
-            suggestions: suggest(
-                coordinate,
-                m.coordinates.iter().map(|c| c.name.name.as_str()),
-            ),
-        });
-    }
+    require_coordinate(&m, coordinate)?;
     let edit = match m.forces.iter().find(|f| f.coordinate.name == coordinate) {
         Some(f) => {
             let t = if term.starts_with('+') || term.starts_with('-') {
@@ -372,20 +364,38 @@ pub fn add_sensor_effect(
     coordinate: &str,
     call_text: &str,
 ) -> Result<String, EditError> {
+    add_coordinate_effect(text, "sensor", coordinate, call_text)
+}
+
+/// Adds the line `<keyword> <coordinate> = <call>` after the last force,
+/// sensor, actuator or inertia line (see [`add_sensor_effect`] and
+/// [`add_inertia_effect`]).
+fn add_coordinate_effect(
+    text: &str,
+    keyword: &str,
+    coordinate: &str,
+    call_text: &str,
+) -> Result<String, EditError> {
     let call = check_call(call_text)?;
     let (m, before) = parse_ok(text)?;
-    if !m.coordinates.iter().any(|c| c.name.name == coordinate) {
-        return Err(EditError::UnknownCoordinate {
-            name: coordinate.to_string(),
-            suggestions: suggest(
-                coordinate,
-                m.coordinates.iter().map(|c| c.name.name.as_str()),
-            ),
-        });
-    }
+    require_coordinate(&m, coordinate)?;
     let anchor = effect_anchor(&m, text);
-    let edit = insert_line(text, anchor, &format!("sensor {coordinate} = {call}"));
+    let edit = insert_line(text, anchor, &format!("{keyword} {coordinate} = {call}"));
     apply(text, &before, vec![edit])
+}
+
+/// The error when `coordinate` is not a coordinate of `m`.
+fn require_coordinate(m: &ModelFile, coordinate: &str) -> Result<(), EditError> {
+    if m.coordinates.iter().any(|c| c.name.name == coordinate) {
+        return Ok(());
+    }
+    Err(EditError::UnknownCoordinate {
+        name: coordinate.to_string(),
+        suggestions: suggest(
+            coordinate,
+            m.coordinates.iter().map(|c| c.name.name.as_str()),
+        ),
+    })
 }
 
 /// Adds the line `actuator <input> = <call>` (e.g. `input_delay(Td_Vm)`)
@@ -514,18 +524,5 @@ pub fn add_inertia_effect(
     coordinate: &str,
     call_text: &str,
 ) -> Result<String, EditError> {
-    let call = check_call(call_text)?;
-    let (m, before) = parse_ok(text)?;
-    if !m.coordinates.iter().any(|c| c.name.name == coordinate) {
-        return Err(EditError::UnknownCoordinate {
-            name: coordinate.to_string(),
-            suggestions: suggest(
-                coordinate,
-                m.coordinates.iter().map(|c| c.name.name.as_str()),
-            ),
-        });
-    }
-    let anchor = effect_anchor(&m, text);
-    let edit = insert_line(text, anchor, &format!("inertia {coordinate} = {call}"));
-    apply(text, &before, vec![edit])
+    add_coordinate_effect(text, "inertia", coordinate, call_text)
 }

@@ -368,17 +368,10 @@ pub fn resolve_call(call: &Expr) -> Result<(&'static Effect, &[Expr]), Diagnosti
         } else {
             format!("{lo} or {hi}")
         };
-        return Err(Diagnostic::error(
-            "plantc::wrong_arity",
-            format!(
-                "`{}` takes {expected} argument(s), found {}",
-                effect.name,
-                args.len()
-            ),
-            call.span,
-            "wrong number of arguments",
-        )
-        .with_help(format!("{}: {}", effect.signature(), effect.doc)));
+        return Err(
+            super::check::wrong_arity(effect.name, expected, args.len(), call.span)
+                .with_help(format!("{}: {}", effect.signature(), effect.doc)),
+        );
     }
     Ok((effect, args))
 }

@@ -787,27 +787,25 @@ impl<'a> Parser<'a> {
 
     /// `cmp (and cmp)* (or cmp (and cmp)*)*`.
     fn guard(&mut self) -> PResult<Guard> {
-        let mut lhs = self.guard_and()?;
-        while self.is_kw("or") {
-            self.bump();
-            let rhs = self.guard_and()?;
-            let span = lhs.span.to(rhs.span);
-            lhs = Guard {
-                kind: GuardKind::Or(Box::new(lhs), Box::new(rhs)),
-                span,
-            };
-        }
-        Ok(lhs)
+        self.guard_chain("or", GuardKind::Or, |p| {
+            p.guard_chain("and", GuardKind::And, Self::comparison)
+        })
     }
 
-    fn guard_and(&mut self) -> PResult<Guard> {
-        let mut lhs = self.comparison()?;
-        while self.is_kw("and") {
+    /// `operand (keyword operand)*`, grouped to the left.
+    fn guard_chain(
+        &mut self,
+        keyword: &str,
+        join: fn(Box<Guard>, Box<Guard>) -> GuardKind,
+        mut operand: impl FnMut(&mut Self) -> PResult<Guard>,
+    ) -> PResult<Guard> {
+        let mut lhs = operand(self)?;
+        while self.is_kw(keyword) {
             self.bump();
-            let rhs = self.comparison()?;
+            let rhs = operand(self)?;
             let span = lhs.span.to(rhs.span);
             lhs = Guard {
-                kind: GuardKind::And(Box::new(lhs), Box::new(rhs)),
+                kind: join(Box::new(lhs), Box::new(rhs)),
                 span,
             };
         }

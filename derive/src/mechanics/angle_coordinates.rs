@@ -88,11 +88,9 @@ fn trig_arguments(e: Expr, coords: &[Symbol], out: &mut HashMap<Vec<Rational>, u
     true
 }
 
-/// Inverse of a square rational matrix (`None` if singular or on overflow).
-fn invert(m: &[Vec<Rational>]) -> Option<Vec<Vec<Rational>>> {
-    let n = m.len();
-    let mut a: Vec<Vec<Rational>> = m.to_vec();
-    let mut inv: Vec<Vec<Rational>> = (0..n)
+/// The `n x n` identity matrix.
+fn identity(n: usize) -> Vec<Vec<Rational>> {
+    (0..n)
         .map(|i| {
             (0..n)
                 .map(|j| {
@@ -104,7 +102,14 @@ fn invert(m: &[Vec<Rational>]) -> Option<Vec<Vec<Rational>>> {
                 })
                 .collect()
         })
-        .collect();
+        .collect()
+}
+
+/// Inverse of a square rational matrix (`None` if singular or on overflow).
+fn invert(m: &[Vec<Rational>]) -> Option<Vec<Vec<Rational>>> {
+    let n = m.len();
+    let mut a: Vec<Vec<Rational>> = m.to_vec();
+    let mut inv = identity(n);
     for col in 0..n {
         let p = (col..n).find(|r| !a[*r][col].is_zero())?;
         a.swap(col, p);
@@ -176,26 +181,10 @@ pub fn angle_coordinates(model: &Model) -> Result<Option<AngleCoordinates>, Mech
             .then(nnz(&a.0).cmp(&nnz(&b.0)))
             .then_with(|| a.0.cmp(&b.0))
     });
+    // the arguments, most frequent first, then the coordinates themselves
+    let unit = identity(n);
     let mut s: Vec<Vec<Rational>> = Vec::new();
-    for (v, _) in args.iter().chain(
-        (0..n)
-            .map(|i| {
-                (
-                    (0..n)
-                        .map(|j| {
-                            if i == j {
-                                Rational::ONE
-                            } else {
-                                Rational::ZERO
-                            }
-                        })
-                        .collect::<Vec<_>>(),
-                    0,
-                )
-            })
-            .collect::<Vec<_>>()
-            .iter(),
-    ) {
+    for v in args.iter().map(|(v, _)| v).chain(&unit) {
         if s.len() == n {
             break;
         }

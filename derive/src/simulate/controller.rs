@@ -168,38 +168,64 @@ pub fn set_gains(
         }
         ResolvedController::Hybrid { name, modes, .. } => {
             for (g, v) in gains {
-                let mut targets = Vec::new();
-                for (i, m) in modes.iter().enumerate() {
-                    let bare = match g.split_once('.') {
-                        Some((mode, gain)) if mode == m.name => gain,
-                        Some(_) => continue,
-                        None => g.as_str(),
-                    };
-                    if gain_names(&m.controller).iter().any(|k| k == bare) {
-                        targets.push((i, bare.to_string()));
-                    }
-                }
-                if targets.len() > 1 {
-                    return Err(SimError::Setup(format!(
-                        "controller `{name}`: gain `{g}` is in several modes; write {}",
-                        targets
-                            .iter()
-                            .map(|(i, k)| format!("`{}.{k}`", modes[*i].name))
-                            .collect::<Vec<_>>()
-                            .join(" or ")
-                    )));
-                }
-                let Some((i, bare)) = targets.pop() else {
+                let target =
+                    mode_gain(name, g, modes.iter().map(|m| m.name.as_str()), |i, bare| {
+                        gain_names(&modes[i].controller).iter().any(|k| k == bare)
+                    })?;
+                let Some((i, bare)) = target else {
                     return Err(SimError::UnknownGain {
                         controller: name.clone(),
                         name: g.clone(),
                         known,
                     });
                 };
-                set_gains(&mut modes[i].controller, &[(bare, *v)])?;
+                set_gains(&mut modes[i].controller, &[(bare.to_string(), *v)])?;
             }
             Ok(())
         }
+    }
+}
+
+/// The mode of a hybrid controller that has the gain `name` (`mode.gain`,
+/// or a bare `gain` that only one mode has; `has(mode index, gain)` says
+/// whether a mode has a gain) and the gain's name in that mode; `None` if
+/// no mode has it, an error if several do.
+fn mode_gain<'n, 'm>(
+    controller: &str,
+    name: &'n str,
+    modes: impl IntoIterator<Item = &'m str>,
+    has: impl Fn(usize, &str) -> bool,
+) -> Result<Option<(usize, &'n str)>, SimError> {
+    let mut targets = Vec::new();
+    for (i, mode) in modes.into_iter().enumerate() {
+        let bare = match name.split_once('.') {
+            Some((m, gain)) if m == mode => gain,
+            Some(_) => continue,
+            None => name,
+        };
+        if has(i, bare) {
+            targets.push((i, mode, bare));
+        }
+    }
+    if targets.len() > 1 {
+        return Err(SimError::Setup(format!(
+            "controller `{controller}`: gain `{name}` is in several modes; write {}",
+            targets
+                .iter()
+                .map(|(_, mode, g)| format!("`{mode}.{g}`"))
+                .collect::<Vec<_>>()
+                .join(" or ")
+        )));
+    }
+    Ok(targets.pop().map(|(i, _, bare)| (i, bare)))
+}
+
+/// `x` into `out`, the coordinates `wrap` wrapped into [-pi, pi).
+#[inline]
+fn wrap_into(out: &mut [f64], x: &[f64], wrap: &[usize]) {
+    out.copy_from_slice(x);
+    for &i in wrap {
+        out[i] = wrap_angle(out[i]);
     }
 }
 
@@ -253,12 +279,7 @@ impl ControllerEval {
                 }
                 Kind::StateFeedback {
                     k: k.iter().flatten().copied().collect(),
-                    k_names: (0..m)
-                        .flat_map(|i| {
-                            (0..n)
-                                .map(move |j| crate::control::state_feedback_gain_name(model, i, j))
-                        })
-                        .collect(),
+                    k_names: crate::control::state_feedback_gain_names(model, m),
                     x0: x0.clone(),
                     u0: u0.clone(),
                 }
@@ -385,30 +406,14 @@ impl ControllerEval {
                 }
             }
             Kind::Hybrid { modes, .. } => {
-                let mut targets = Vec::new();
-                for (i, (c, info)) in modes.iter().zip(&self.modes).enumerate() {
-                    let bare = match name.split_once('.') {
-                        Some((mode, gain)) if mode == info.name => gain,
-                        Some(_) => continue,
-                        None => name,
-                    };
-                    if c.gains().iter().any(|(g, _)| g == bare) {
-                        targets.push((i, bare.to_string()));
-                    }
-                }
-                if targets.len() > 1 {
-                    return Err(SimError::Setup(format!(
-                        "controller `{}`: gain `{name}` is in several modes; write {}",
-                        self.name,
-                        targets
-                            .iter()
-                            .map(|(i, g)| format!("`{}.{g}`", self.modes[*i].name))
-                            .collect::<Vec<_>>()
-                            .join(" or ")
-                    )));
-                }
-                if let Some((i, bare)) = targets.pop() {
-                    return modes[i].set_gain(&bare, value);
+                let target = mode_gain(
+                    &self.name,
+                    name,
+                    self.modes.iter().map(|m| m.name.as_str()),
+                    |i, bare| modes[i].gains().iter().any(|(g, _)| g == bare),
+                )?;
+                if let Some((i, bare)) = target {
+                    return modes[i].set_gain(bare, value);
                 }
             }
             Kind::StateFeedback { k, k_names, .. } => {
@@ -485,10 +490,7 @@ impl ControllerEval {
             return None;
         };
         let n = self.n_states;
-        ws.wrapped.copy_from_slice(x);
-        for &i in wrap {
-            ws.wrapped[i] = wrap_angle(ws.wrapped[i]);
-        }
+        wrap_into(&mut ws.wrapped, x, wrap);
         ws.tape_in[..n].copy_from_slice(&ws.wrapped);
         ws.tape_in[n..].copy_from_slice(params_full);
         margins.eval(&ws.tape_in, &mut ws.margins, &mut ws.scratch);
@@ -541,10 +543,7 @@ impl ControllerEval {
                     mode,
                     ..
                 } = ws;
-                wrapped.copy_from_slice(x);
-                for &i in wrap {
-                    wrapped[i] = wrap_angle(wrapped[i]);
-                }
+                wrap_into(wrapped, x, wrap);
                 modes[*mode].eval(wrapped, params_full, u, &mut wss[*mode]);
             }
         }

@@ -62,16 +62,8 @@ impl Infer<'_> {
             .find(|(n, _)| *n == f.name)
             .map(|(_, a)| *a)?;
         if args.len() != arity {
-            self.diags.push(Diagnostic::error(
-                "plantc::wrong_arity",
-                format!(
-                    "`{}` takes {arity} argument(s), found {}",
-                    f.name,
-                    args.len()
-                ),
-                e.span,
-                "wrong number of arguments",
-            ));
+            self.diags
+                .push(super::wrong_arity(&f.name, arity, args.len(), e.span));
             return Some(None);
         }
         if f.name == "energy" {
@@ -694,7 +686,7 @@ impl Checker {
             ExprKind::Call(f, args) => {
                 if let Some((_, arity)) = CONTROLLER_FUNCTIONS.iter().find(|(b, _)| *b == f.name) {
                     if args.len() != *arity {
-                        errs.push(Diagnostic::error("plantc::wrong_arity", format!("`{}` takes {arity} argument(s), found {}", f.name, args.len()), x.span, "wrong number of arguments"));
+                        errs.push(super::wrong_arity(&f.name, arity, args.len(), x.span));
                     } else if f.name == "energy" {
                         if let Some(d) = energy_argument(&args[0], &self.syms) {
                             errs.push(d);
