@@ -231,6 +231,22 @@ mod rename {
         assert!(!parse_and_check("t", &out).has_errors());
     }
 
+    /// An `inertia` line is part of the model like a force line: a
+    /// parameter used only there is renamed there too (the visitor skipped
+    /// these lines, and the rename was refused as breaking the file).
+    #[test]
+    fn a_parameter_in_an_inertia_line_is_renamed_there_too() {
+        let src = fixture()
+            + "\nparameter Jr = 1e-4 [kg*m^2] \"rotor\"\ninertia theta = added_inertia(Jr)\n";
+        assert!(!parse_and_check("t", &src).has_errors());
+        let out = rename(&src, &model("Jr"), "J_rotor").unwrap();
+        assert!(out.contains("inertia theta = added_inertia(J_rotor)"), "{out}");
+        assert!(!out.contains("Jr"));
+        assert!(!parse_and_check("t", &out).has_errors());
+        let out = rename(&src, &model("theta"), "phi").unwrap();
+        assert!(out.contains("inertia phi = added_inertia(Jr)"), "{out}");
+    }
+
     #[test]
     fn a_coordinate_is_renamed_with_its_derivatives_forces_and_outputs() {
         let src = fixture();

@@ -91,6 +91,7 @@ pub fn root_exprs(file: &ModelFile) -> Vec<(&Expr, ExprScope)> {
         file.sensors
             .iter()
             .chain(&file.actuators)
+            .chain(&file.inertias)
             .map(|s| (&s.call, m)),
     );
     for s in &file.sets {
@@ -150,7 +151,12 @@ pub fn occurrences(file: &ModelFile) -> Vec<Occurrence> {
     for f in &file.forces {
         push(model(&f.coordinate), f.coordinate.span, refr);
     }
-    for s in file.sensors.iter().chain(&file.actuators) {
+    for s in file
+        .sensors
+        .iter()
+        .chain(&file.actuators)
+        .chain(&file.inertias)
+    {
         push(model(&s.target), s.target.span, refr);
     }
     for s in &file.sets {
