@@ -3,7 +3,8 @@
 //! microseconds for the reference models).
 
 use crate::document::Document;
-use plantc_derive::lang::ast::{CoordKind, Expr, ExprKind, ModelFile};
+use plantc_derive::lang::ast::{Expr, ExprKind, ModelFile};
+use plantc_derive::lang::check::SymbolKind;
 use plantc_derive::lang::units::Dim;
 use plantc_derive::lang::visit::{occurrences, root_exprs, Occurrence, Role, SymbolRef};
 use plantc_derive::lang::{dimension_of, parse_and_check, Checked, Span};
@@ -111,75 +112,62 @@ impl Analysis {
 
     /// The model-level names declared in the file (from the tree, so also
     /// after syntax errors), with what they are.
-    pub fn model_names(&self) -> Vec<(String, NameKind)> {
+    pub fn model_names(&self) -> Vec<(String, SymbolKind)> {
         let f = &self.file;
         let mut v = Vec::new();
         v.extend(
             f.coordinates
                 .iter()
-                .map(|c| (c.name.name.clone(), NameKind::Coordinate(c.kind))),
+                .map(|c| (c.name.name.clone(), SymbolKind::Coordinate(c.kind))),
         );
         v.extend(
             f.inputs
                 .iter()
-                .map(|i| (i.name.name.clone(), NameKind::Input)),
+                .map(|i| (i.name.name.clone(), SymbolKind::Input)),
         );
         v.extend(
             f.parameters
                 .iter()
-                .map(|p| (p.name.name.clone(), NameKind::Parameter)),
+                .map(|p| (p.name.name.clone(), SymbolKind::Parameter)),
         );
-        v.extend(f.lets.iter().map(|l| (l.name.name.clone(), NameKind::Let)));
+        v.extend(
+            f.lets
+                .iter()
+                .map(|l| (l.name.name.clone(), SymbolKind::Let)),
+        );
         v
     }
 
     /// What a model name is, if declared.
-    pub fn kind_of(&self, name: &str) -> Option<NameKind> {
+    pub fn kind_of(&self, name: &str) -> Option<SymbolKind> {
         let f = &self.file;
         if let Some(c) = f.coordinates.iter().find(|c| c.name.name == name) {
-            return Some(NameKind::Coordinate(c.kind));
+            return Some(SymbolKind::Coordinate(c.kind));
         }
         if f.inputs.iter().any(|i| i.name.name == name) {
-            return Some(NameKind::Input);
+            return Some(SymbolKind::Input);
         }
         if f.parameters.iter().any(|p| p.name.name == name) {
-            return Some(NameKind::Parameter);
+            return Some(SymbolKind::Parameter);
         }
         if f.lets.iter().any(|l| l.name.name == name) {
-            return Some(NameKind::Let);
+            return Some(SymbolKind::Let);
         }
         if f.outputs
             .iter()
             .any(|o| o.name.name == name && o.expr.is_some())
         {
-            return Some(NameKind::Output);
+            return Some(SymbolKind::Output);
         }
         if f.kinetic
             .iter()
             .chain(&f.potential)
             .any(|e| e.name.name == name)
         {
-            return Some(NameKind::Energy);
+            return Some(SymbolKind::Energy);
         }
         None
     }
-}
-
-/// What a model-level name denotes.
-#[derive(Debug, Clone, Copy, PartialEq, Eq)]
-pub enum NameKind {
-    /// A coordinate of this kind.
-    Coordinate(CoordKind),
-    /// An input.
-    Input,
-    /// A parameter.
-    Parameter,
-    /// A `let`.
-    Let,
-    /// A named output.
-    Output,
-    /// `T` or `V`.
-    Energy,
 }
 
 /// A dimension as a short unit text: `N*m`, `kg*m^2`, `1`.

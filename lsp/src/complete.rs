@@ -1,11 +1,12 @@
 //! Completion: names in scope, effects with argument snippets, units and
 //! keywords, chosen from the text before the cursor (which may not parse).
 
-use crate::analysis::{Analysis, NameKind};
+use crate::analysis::Analysis;
 use lsp_types::{
     CompletionItem, CompletionItemKind, Documentation, InsertTextFormat, MarkupContent, MarkupKind,
 };
 use plantc_derive::lang::ast::CoordKind;
+use plantc_derive::lang::check::SymbolKind;
 use plantc_derive::lang::check::BUILTINS;
 use plantc_derive::lang::effects::{self, Effect, EffectKind};
 use plantc_derive::lang::lexer::{lex, Tok};
@@ -158,23 +159,23 @@ fn effect_item(e: &Effect) -> CompletionItem {
     }
 }
 
-fn names(a: &Analysis, keep: impl Fn(NameKind) -> bool) -> Vec<CompletionItem> {
+fn names(a: &Analysis, keep: impl Fn(SymbolKind) -> bool) -> Vec<CompletionItem> {
     a.model_names()
         .into_iter()
         .filter(|(_, k)| keep(*k))
         .map(|(n, k)| {
             let (kind, detail) = match k {
-                NameKind::Coordinate(CoordKind::Angle) => {
+                SymbolKind::Coordinate(CoordKind::Angle) => {
                     (CompletionItemKind::VARIABLE, "coordinate (angle)")
                 }
-                NameKind::Coordinate(CoordKind::Length) => {
+                SymbolKind::Coordinate(CoordKind::Length) => {
                     (CompletionItemKind::VARIABLE, "coordinate (length)")
                 }
-                NameKind::Input => (CompletionItemKind::VARIABLE, "input"),
-                NameKind::Parameter => (CompletionItemKind::CONSTANT, "parameter"),
-                NameKind::Let => (CompletionItemKind::VARIABLE, "let"),
-                NameKind::Output => (CompletionItemKind::VARIABLE, "output"),
-                NameKind::Energy => (CompletionItemKind::VARIABLE, "energy"),
+                SymbolKind::Input => (CompletionItemKind::VARIABLE, "input"),
+                SymbolKind::Parameter => (CompletionItemKind::CONSTANT, "parameter"),
+                SymbolKind::Let => (CompletionItemKind::VARIABLE, "let"),
+                SymbolKind::Output => (CompletionItemKind::VARIABLE, "output"),
+                SymbolKind::Energy => (CompletionItemKind::VARIABLE, "energy"),
             };
             item(&n, kind, detail)
         })
@@ -289,7 +290,7 @@ pub fn completion(a: &Analysis, offset: usize) -> Vec<CompletionItem> {
                 .iter()
                 .map(|(k, s, d)| snippet(k, CompletionItemKind::KEYWORD, s, d))
                 .collect(),
-            Some(_) => names(a, |k| k == NameKind::Parameter)
+            Some(_) => names(a, |k| k == SymbolKind::Parameter)
                 .into_iter()
                 .map(|mut i| {
                     i.insert_text = Some(format!("{} = ${{1:value}}", i.label));
@@ -309,7 +310,7 @@ pub fn completion(a: &Analysis, offset: usize) -> Vec<CompletionItem> {
         .next()
         .unwrap_or("");
     let has_eq = head_of_line.contains('=') || !head.starts_with(before.trim_start());
-    let coordinates = |a: &Analysis| names(a, |k| matches!(k, NameKind::Coordinate(_)));
+    let coordinates = |a: &Analysis| names(a, |k| matches!(k, SymbolKind::Coordinate(_)));
     match (block.as_deref(), kw) {
         (None, "coordinate") if before.contains(':') => vec![
             item("angle", CompletionItemKind::ENUM_MEMBER, "unit rad"),
@@ -324,7 +325,7 @@ pub fn completion(a: &Analysis, offset: usize) -> Vec<CompletionItem> {
         }
         (None, "force") => coordinates(a),
         (None, "sensor" | "inertia") if !has_eq => coordinates(a),
-        (None, "actuator") if !has_eq => names(a, |k| k == NameKind::Input),
+        (None, "actuator") if !has_eq => names(a, |k| k == SymbolKind::Input),
         (None, "sensor" | "actuator" | "inertia") => {
             let kind = match kw {
                 "sensor" => EffectKind::Sensor,
@@ -332,12 +333,12 @@ pub fn completion(a: &Analysis, offset: usize) -> Vec<CompletionItem> {
                 _ => EffectKind::Actuator,
             };
             let mut v: Vec<CompletionItem> = effects::of_kind(kind).map(effect_item).collect();
-            v.extend(names(a, |k| k == NameKind::Parameter));
+            v.extend(names(a, |k| k == SymbolKind::Parameter));
             v
         }
-        (None, "output") if !has_eq => {
-            names(a, |k| matches!(k, NameKind::Coordinate(_) | NameKind::Let))
-        }
+        (None, "output") if !has_eq => names(a, |k| {
+            matches!(k, SymbolKind::Coordinate(_) | SymbolKind::Let)
+        }),
         (None, "parameter" | "input" | "model" | "coordinate") => Vec::new(),
         (Some("controller"), "linearize") => {
             let mut v: Vec<CompletionItem> = a
@@ -372,13 +373,13 @@ pub fn completion(a: &Analysis, offset: usize) -> Vec<CompletionItem> {
                 "the linearized output",
             ));
             v.extend(names(a, |k| {
-                matches!(k, NameKind::Coordinate(_) | NameKind::Parameter)
+                matches!(k, SymbolKind::Coordinate(_) | SymbolKind::Parameter)
             }));
             v.extend(builtins());
             v
         }
         (Some(_), _) => {
-            let mut v = names(a, |k| k == NameKind::Parameter);
+            let mut v = names(a, |k| k == SymbolKind::Parameter);
             v.extend(builtins());
             v
         }

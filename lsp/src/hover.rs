@@ -1,8 +1,9 @@
 //! Hover: what a name, an effect, a function or a unit is.
 
-use crate::analysis::{short_dim, Analysis, NameKind};
+use crate::analysis::{short_dim, Analysis};
 use lsp_types::{Hover, HoverContents, MarkupContent, MarkupKind};
 use plantc_derive::lang::ast::CoordKind;
+use plantc_derive::lang::check::SymbolKind;
 use plantc_derive::lang::effects::{self, EffectKind};
 use plantc_derive::lang::units::{self, parse_unit};
 use plantc_derive::lang::visit::SymbolRef;
@@ -31,7 +32,7 @@ fn symbol(a: &Analysis, s: &SymbolRef, at: Span) -> Option<String> {
     let f = &a.file;
     match s {
         SymbolRef::Model(name) => match a.kind_of(name) {
-            Some(NameKind::Coordinate(k)) => {
+            Some(SymbolKind::Coordinate(k)) => {
                 let c = f.coordinates.iter().find(|c| &c.name.name == name)?;
                 let (kind, unit) = match k {
                     CoordKind::Angle => ("angle", "rad"),
@@ -46,7 +47,7 @@ fn symbol(a: &Analysis, s: &SymbolRef, at: Span) -> Option<String> {
                 }
                 Some(t)
             }
-            Some(NameKind::Input) => {
+            Some(SymbolKind::Input) => {
                 let i = f.inputs.iter().find(|i| &i.name.name == name)?;
                 let mut t = code(a.slice(i.span));
                 t.push_str("\n\nA control input");
@@ -62,7 +63,7 @@ fn symbol(a: &Analysis, s: &SymbolRef, at: Span) -> Option<String> {
                 }
                 Some(t)
             }
-            Some(NameKind::Parameter) => {
+            Some(SymbolKind::Parameter) => {
                 let p = f.parameters.iter().find(|p| &p.name.name == name)?;
                 let unit = p.unit.as_ref().map_or("1".to_string(), |u| u.text.clone());
                 let mut t = match &p.unit {
@@ -112,7 +113,7 @@ fn symbol(a: &Analysis, s: &SymbolRef, at: Span) -> Option<String> {
                 }
                 Some(t)
             }
-            Some(NameKind::Let) => {
+            Some(SymbolKind::Let) => {
                 let l = f.lets.iter().find(|l| &l.name.name == name)?;
                 let mut t = code(&format!("let {name} = {}", a.slice(l.expr.span)));
                 if let Some(d) = a.dim_of_name(name) {
@@ -123,7 +124,7 @@ fn symbol(a: &Analysis, s: &SymbolRef, at: Span) -> Option<String> {
                 }
                 Some(t)
             }
-            Some(NameKind::Output) => {
+            Some(SymbolKind::Output) => {
                 let o = f.outputs.iter().find(|o| &o.name.name == name)?;
                 let mut t = code(a.slice(o.span));
                 if let Some(d) = o.expr.as_ref().and_then(|e| a.dim_of(e)) {
@@ -131,7 +132,7 @@ fn symbol(a: &Analysis, s: &SymbolRef, at: Span) -> Option<String> {
                 }
                 Some(t)
             }
-            Some(NameKind::Energy) => {
+            Some(SymbolKind::Energy) => {
                 let (e, what) = match f.kinetic.iter().find(|e| &e.name.name == name) {
                     Some(e) => (e, "kinetic"),
                     None => (

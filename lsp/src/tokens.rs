@@ -1,10 +1,11 @@
 //! Semantic tokens: every token of the file classified by what it denotes
 //! (a coordinate, a parameter, an effect, a unit...).
 
-use crate::analysis::{Analysis, NameKind};
+use crate::analysis::Analysis;
 use lsp_types::{
     SemanticToken, SemanticTokenModifier, SemanticTokenType, SemanticTokens, SemanticTokensLegend,
 };
+use plantc_derive::lang::check::SymbolKind;
 use plantc_derive::lang::lexer::{lex, Tok};
 use plantc_derive::lang::parser::KEYWORDS;
 use plantc_derive::lang::visit::{Role, SymbolRef};
@@ -114,9 +115,9 @@ pub fn semantic_tokens(a: &Analysis) -> SemanticTokens {
                         };
                         let (ty, m) = match &o.symbol {
                             SymbolRef::Model(n) => match a.kind_of(n) {
-                                Some(NameKind::Coordinate(_)) => (VARIABLE, 0),
-                                Some(NameKind::Input) => (PROPERTY, 0),
-                                Some(NameKind::Parameter) => (PARAMETER, READONLY),
+                                Some(SymbolKind::Coordinate(_)) => (VARIABLE, 0),
+                                Some(SymbolKind::Input) => (PROPERTY, 0),
+                                Some(SymbolKind::Parameter) => (PARAMETER, READONLY),
                                 Some(_) => (VARIABLE, READONLY),
                                 None => (VARIABLE, 0),
                             },

@@ -246,6 +246,49 @@ pub fn read_data(
     Ok(exps)
 }
 
+/// Reads the held-out files of `--validate` (none given: no experiments)
+/// with the measured data's `--map` and `--channels`.
+pub fn read_held_out(
+    model: &plantc_derive::model::Model,
+    data: &crate::cli::DataArgs,
+    validate: &[std::path::PathBuf],
+    err: &mut dyn Write,
+) -> Result<Vec<plantc_identify::Experiment>, CliError> {
+    if validate.is_empty() {
+        return Ok(Vec::new());
+    }
+    let held_out = crate::cli::DataArgs {
+        data: validate.to_vec(),
+        ..data.clone()
+    };
+    read_data(model, &held_out, err)
+}
+
+/// A validation's per-channel fit % (simulation or prediction), e.g.
+/// `theta 93.1 %, alpha -` (`-`: no fit % for the channel).
+pub fn channel_fits(scores: &[plantc_identify::ChannelScore]) -> String {
+    scores
+        .iter()
+        .map(|c| {
+            format!(
+                "{} {}",
+                c.channel,
+                c.fit_percent
+                    .map_or("-".to_string(), |f| format!("{f:.1} %"))
+            )
+        })
+        .collect::<Vec<_>>()
+        .join(", ")
+}
+
+/// The names of a comma-separated list (`a, b,,c` -> `a`, `b`, `c`).
+pub fn name_list(text: &str) -> Vec<String> {
+    text.split(',')
+        .map(|s| s.trim().to_string())
+        .filter(|s| !s.is_empty())
+        .collect()
+}
+
 /// A value in SI as a number literal in the parameter's declared unit, for
 /// the lossless editor.
 /// `text` with the given parameter values (SI) written in, each in its
@@ -400,11 +443,7 @@ pub fn fit_options(
         "auto" => Offsets::Auto,
         "none" => Offsets::None,
         list => {
-            let names: Vec<String> = list
-                .split(',')
-                .map(|s| s.trim().to_string())
-                .filter(|s| !s.is_empty())
-                .collect();
+            let names = name_list(list);
             for n in &names {
                 if !model.coordinates.iter().any(|c| &c.name == n) {
                     return Err(bad(format!("--offsets: the model has no coordinate `{n}`")));

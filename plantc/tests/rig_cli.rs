@@ -26,7 +26,7 @@ use plantc_runtime::{
 
 mod common;
 
-use common::{fake_hil_lib, model, plantc, repo, s, tmp};
+use common::{fake_hil_lib, model, number_after, plantc, repo, s, tmp};
 
 /// 1 kHz for 30 s, both ends included.
 const SAMPLES_30S: usize = 30_001;
@@ -113,15 +113,6 @@ fn close_output(trace: &Path) -> Option<f64> {
         .rev()
         .find_map(|l| l.split_whitespace().find_map(|w| w.strip_prefix("output=")))
         .and_then(|v| v.parse().ok())
-}
-
-/// The number after `key` in `text` (e.g. `estimator + controller: p50 `).
-fn number_after(text: &str, key: &str) -> Option<f64> {
-    let rest = &text[text.find(key)? + key.len()..];
-    let end = rest
-        .find(|c: char| !(c.is_ascii_digit() || "+-.e".contains(c)))
-        .unwrap_or(rest.len());
-    rest[..end].parse().ok()
 }
 
 /// The interpreted observer (designed at start, as `plantc run` does, with

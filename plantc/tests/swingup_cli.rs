@@ -13,7 +13,7 @@ use std::sync::Mutex;
 
 mod common;
 
-use common::{fake_hil_lib, model, plantc, repo, tmp};
+use common::{fake_hil_lib, model, number_after, plantc, repo, tmp};
 
 /// The fake HIL card is configured through the environment: q2usb runs in
 /// this binary take turns.
@@ -88,13 +88,20 @@ fn plantc_compiled(
     )
 }
 
-/// The number after `key` in `text`.
-fn number_after(text: &str, key: &str) -> Option<f64> {
-    let rest = &text[text.find(key)? + key.len()..];
-    let end = rest
-        .find(|c: char| !(c.is_ascii_digit() || "+-.e".contains(c)))
-        .unwrap_or(rest.len());
-    rest[..end].parse().ok()
+/// Runs `plantc <args>`: with `compiled`, through that rig crate (a
+/// process); else in this process; the fake HIL configured by `fake`, its
+/// trace in `dir`.
+fn run_case(
+    args: &[&str],
+    dir: &Path,
+    fake: Option<&str>,
+    compiled: Option<&Path>,
+) -> (i32, String, String) {
+    match (fake, compiled) {
+        (_, Some(rig)) => plantc_compiled(args, rig, fake.map(|f| (f, dir))),
+        (Some(spec), None) => with_fake_hil(spec, dir, || plantc(args)),
+        (None, None) => plantc(args),
+    }
 }
 
 /// The swing-up acceptance run; with `compiled`, the generated controller in
@@ -107,11 +114,7 @@ fn swing_up(name: &str, backend: &[&str], fake: Option<&str>, compiled: Option<&
     args.extend_from_slice(backend);
     let log_s = log.to_str().expect("utf8");
     args.extend_from_slice(&["--duration", "15", "--log", log_s]);
-    let (code, out, err) = match (fake, compiled) {
-        (_, Some(rig)) => plantc_compiled(&args, rig, fake.map(|f| (f, dir.as_path()))),
-        (Some(spec), None) => with_fake_hil(spec, &dir, || plantc(&args)),
-        (None, None) => plantc(&args),
-    };
+    let (code, out, err) = run_case(&args, &dir, fake, compiled);
     println!("{name}:\n{out}{err}");
     assert_eq!(code, 0, "{out}{err}");
     assert!(out.contains("final state engaged"), "{out}");
@@ -244,11 +247,7 @@ fn sliding_30s(name: &str, backend: &[&str], fake: Option<&str>, compiled: Optio
         "--log",
         log_s,
     ]);
-    let (code, out, err) = match (fake, compiled) {
-        (_, Some(rig)) => plantc_compiled(&args, rig, fake.map(|f| (f, dir.as_path()))),
-        (Some(spec), None) => with_fake_hil(spec, &dir, || plantc(&args)),
-        (None, None) => plantc(&args),
-    };
+    let (code, out, err) = run_case(&args, &dir, fake, compiled);
     println!("{name}:\n{out}{err}");
     assert_eq!(code, 0, "{out}{err}");
     assert!(out.contains("final state engaged"), "{out}");

@@ -37,12 +37,14 @@ impl EncoderMap {
 
     /// The state angle for `counts` (wrapped if configured).
     pub fn angle(&self, counts: i32) -> f64 {
+        self.angles(counts).0
+    }
+
+    /// The state angle and the unwrapped angle for `counts`, the counts
+    /// converted once (the loop needs both every sample).
+    pub fn angles(&self, counts: i32) -> (f64, f64) {
         let a = self.angle_unwrapped(counts);
-        if self.wrap {
-            wrap_pi(a)
-        } else {
-            a
-        }
+        (if self.wrap { wrap_pi(a) } else { a }, a)
     }
 }
 

@@ -9,7 +9,7 @@ use crate::histogram::Histogram;
 use crate::log::LogWriter;
 use crate::plant::Plant;
 use crate::reference_pendulum::RotaryPendulumReference;
-use crate::report::{ModeSwitch, Percentiles, RunReport};
+use crate::report::{ModeSwitch, RunReport};
 use crate::rt_os::try_realtime;
 use crate::supervisor::{FaultKind, Supervisor, SupervisorConfig, Transition};
 use crate::velocity_observer::ObserverSpec;
@@ -307,12 +307,6 @@ pub fn run_with_estimator(
     if let Err(e) = close_result {
         notes.push(format!("close: {e}"));
     }
-    let pct = |h: &Histogram| Percentiles {
-        p50: h.quantile(0.5),
-        p99: h.quantile(0.99),
-        max: h.max(),
-        count: h.len(),
-    };
     Ok(RunReport {
         transitions,
         final_state: sup.state(),
@@ -321,13 +315,13 @@ pub fn run_with_estimator(
         samples_logged: log.as_deref().map_or(0, |l| l.rows()),
         period_s: period,
         virtual_time,
-        jitter_ns: pct(&stats.jitter),
+        jitter_ns: stats.jitter.percentiles(),
         overruns: stats.overruns,
         missed_samples: stats.missed,
-        controller_ns: pct(&stats.ctrl),
-        estimator_ns: pct(&stats.estimator),
-        control_path_ns: pct(&stats.path),
-        cycle_work_ns: pct(&stats.work),
+        controller_ns: stats.ctrl.percentiles(),
+        estimator_ns: stats.estimator.percentiles(),
+        control_path_ns: stats.path.percentiles(),
+        cycle_work_ns: stats.work.percentiles(),
         notes,
         mode_names,
         mode_switches,
@@ -417,8 +411,7 @@ fn cycle_loop(
             }
         }
         for i in 0..nq {
-            x[i] = maps[i].angle(counts[i]);
-            q_unwrapped[i] = maps[i].angle_unwrapped(counts[i]);
+            (x[i], q_unwrapped[i]) = maps[i].angles(counts[i]);
         }
         // An observer's model holds about upright: it takes the state
         // angles; u_out still holds the voltage applied since the previous sample.

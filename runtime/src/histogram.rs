@@ -1,5 +1,7 @@
 //! A fixed-size log-linear histogram for latency statistics without allocation.
 
+use crate::report::Percentiles;
+
 const SUB_BITS: u32 = 5;
 const SUB: usize = 1 << SUB_BITS;
 const LINEAR: usize = 2 * SUB;
@@ -90,6 +92,16 @@ impl Histogram {
             }
         }
         self.max
+    }
+
+    /// Median, 99th percentile, maximum and count.
+    pub fn percentiles(&self) -> Percentiles {
+        Percentiles {
+            p50: self.quantile(0.5),
+            p99: self.quantile(0.99),
+            max: self.max(),
+            count: self.len(),
+        }
     }
 }
 

@@ -156,8 +156,7 @@ pub fn replay_log(
             let c: i32 = f[1 + n + k]
                 .parse()
                 .map_err(|_| bad(format!("`{}` is not an encoder count", f[1 + n + k])))?;
-            q[k] = maps[k].angle(c);
-            qu[k] = maps[k].angle_unwrapped(c);
+            (q[k], qu[k]) = maps[k].angles(c);
         }
         let applied = num(1 + n + nq)?;
         // the loop runs the controller when engaged or swinging up
@@ -195,12 +194,7 @@ pub fn replay_log(
         u_prev = applied;
         report.rows += 1;
     }
-    report.path_ns = Percentiles {
-        p50: hist.quantile(0.5),
-        p99: hist.quantile(0.99),
-        max: hist.max(),
-        count: hist.len(),
-    };
+    report.path_ns = hist.percentiles();
     Ok(report)
 }
 

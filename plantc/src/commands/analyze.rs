@@ -4,7 +4,7 @@
 use std::io::Write;
 use std::path::Path;
 
-use plantc_derive::analysis::{analyze_output, sliding_analysis, OutputAnalysisError};
+use plantc_derive::analysis::{analyze_output, sliding_analysis};
 use plantc_derive::control::{resolve, Derivation, ResolvedController};
 use plantc_derive::model::ControllerSpec;
 
@@ -40,10 +40,8 @@ pub fn run(
         )));
     }
     let d = Derivation::new(model).map_err(|e| CliError::failure(format!("error: {e}")))?;
-    let rep = analyze_output(model, &d, &name, &vals).map_err(|e| match e {
-        OutputAnalysisError::Lie(e) => CliError::failure(format!("error: {e}")),
-        e => CliError::failure(format!("error: {e}")),
-    })?;
+    let rep = analyze_output(model, &d, &name, &vals)
+        .map_err(|e| CliError::failure(format!("error: {e}")))?;
     let nf = &rep.normal_form;
     let zd = &rep.zero_dynamics;
     if json {

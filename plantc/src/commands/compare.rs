@@ -14,7 +14,7 @@ use plantc_identify::{
 use crate::cli::CompareArgs;
 use crate::commands::fit::with_progress;
 use crate::common::{
-    channel_spec, fit_options, load, num, read_data, values, write_json, CliError,
+    channel_fits, channel_spec, fit_options, load, num, read_data, values, write_json, CliError,
 };
 
 /// Fit % and RMSE of the model's coordinates over the experiments.
@@ -254,21 +254,7 @@ pub fn run(args: &CompareArgs, out: &mut dyn Write, err: &mut dyn Write) -> Resu
     if let Some(h) = v.horizon {
         let _ = writeln!(out, "\n{h} s-ahead prediction (from the measured state):");
         for e in &v.experiments {
-            let _ = writeln!(
-                out,
-                "  {}: {}",
-                e.name,
-                e.prediction
-                    .iter()
-                    .map(|c| format!(
-                        "{} {}",
-                        c.channel,
-                        c.fit_percent
-                            .map_or("-".to_string(), |f| format!("{f:.1} %"))
-                    ))
-                    .collect::<Vec<_>>()
-                    .join(", ")
-            );
+            let _ = writeln!(out, "  {}: {}", e.name, channel_fits(&e.prediction));
         }
     }
     let _ = writeln!(

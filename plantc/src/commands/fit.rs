@@ -14,8 +14,8 @@ use plantc_identify::{
 
 use crate::cli::FitArgs;
 use crate::common::{
-    fit_options, load, read_data, refuse_to_clobber, values, write_json, write_output,
-    write_parameter_values, CliError,
+    channel_fits, fit_options, load, name_list, read_data, read_held_out, refuse_to_clobber,
+    values, write_json, write_output, write_parameter_values, CliError,
 };
 
 /// Runs `work` while showing elapsed time and the latest status that
@@ -230,18 +230,7 @@ pub(crate) fn write_validation(out: &mut dyn Write, v: &plantc_identify::Validat
                 .clone()
                 .unwrap_or_else(|| "no simulation".to_string())
         } else {
-            e.simulation
-                .iter()
-                .map(|c| {
-                    format!(
-                        "{} {}",
-                        c.channel,
-                        c.fit_percent
-                            .map_or("-".to_string(), |f| format!("{f:.1} %"))
-                    )
-                })
-                .collect::<Vec<_>>()
-                .join(", ")
+            channel_fits(&e.simulation)
         };
         let _ = writeln!(out, "  {}: simulation fit {sim}", e.name);
         if let Some(h) = v.horizon {
@@ -249,16 +238,7 @@ pub(crate) fn write_validation(out: &mut dyn Write, v: &plantc_identify::Validat
                 out,
                 "  {}: {h} s-ahead prediction fit {}",
                 e.name,
-                e.prediction
-                    .iter()
-                    .map(|c| format!(
-                        "{} {}",
-                        c.channel,
-                        c.fit_percent
-                            .map_or("-".to_string(), |f| format!("{f:.1} %"))
-                    ))
-                    .collect::<Vec<_>>()
-                    .join(", ")
+                channel_fits(&e.prediction)
             );
         }
         for t in &e.residual_tests {
@@ -276,11 +256,7 @@ pub fn run(args: &FitArgs, out: &mut dyn Write, err: &mut dyn Write) -> Result<(
     let vals = values(&loaded, &args.params)?;
     let free = match &args.free {
         Some(list) => {
-            let names: Vec<String> = list
-                .split(',')
-                .map(|s| s.trim().to_string())
-                .filter(|s| !s.is_empty())
-                .collect();
+            let names = name_list(list);
             for n in &names {
                 if model.parameter(n).is_none() {
                     let known: Vec<&str> =
@@ -296,18 +272,7 @@ pub fn run(args: &FitArgs, out: &mut dyn Write, err: &mut dyn Write) -> Result<(
         None => None,
     };
     let measured = read_data(model, &args.data, err)?;
-    let held_out = if args.validate.is_empty() {
-        Vec::new()
-    } else {
-        read_data(
-            model,
-            &crate::cli::DataArgs {
-                data: args.validate.clone(),
-                ..args.data.clone()
-            },
-            err,
-        )?
-    };
+    let held_out = read_held_out(model, &args.data, &args.validate, err)?;
     let opts = FitOptions {
         free,
         start: Some(vals.base.clone()),

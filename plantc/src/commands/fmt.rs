@@ -72,7 +72,9 @@ pub fn run(
                 "{name}: not formatted (first difference on line {line})"
             );
         } else {
-            write_atomic(path, &formatted)
+            // crash-safe: a temporary file in the same directory, synced and
+            // renamed over the original (permissions and symbolic links kept)
+            plantc_fsio::write_atomic(path, &formatted)
                 .map_err(|e| CliError::failure(format!("error: {e} (the file is unchanged)")))?;
             let _ = writeln!(out, "formatted {name}");
         }
@@ -136,11 +138,4 @@ fn first_difference(a: &str, b: &str) -> usize {
         .position(|(x, y)| x != y)
         .unwrap_or_else(|| a.lines().count().min(b.lines().count()))
         + 1
-}
-
-/// Replaces `path` by `text` crash-safely through `plantc-fsio` (a
-/// temporary file in the same directory, synced, renamed over the original;
-/// permissions kept, a symbolic link keeps pointing at the replaced file).
-fn write_atomic(path: &Path, text: &str) -> Result<(), plantc_fsio::Error> {
-    plantc_fsio::write_atomic(path, text)
 }

@@ -19,7 +19,10 @@ use plantc_identify::{
 use crate::cli::IdentifyArgs;
 use crate::commands::compare::{write_failures, write_figures};
 use crate::commands::fit::{progress_text, with_progress};
-use crate::common::{fit_options, load, read_data, write_json, write_parameter_values, CliError};
+use crate::common::{
+    channel_fits, fit_options, load, read_data, read_held_out, write_json, write_parameter_values,
+    CliError,
+};
 
 /// One stage of the story: its label and its comparison with the data.
 struct Stage {
@@ -113,29 +116,14 @@ fn write_validation_lines(out: &mut dyn Write, v: &Validation) {
         let sim = if e.simulation.is_empty() {
             "simulation diverged".to_string()
         } else {
-            e.simulation
-                .iter()
-                .map(|c| format!("{} {}", c.channel, pct(c.fit_percent)))
-                .collect::<Vec<_>>()
-                .join(", ")
+            channel_fits(&e.simulation)
         };
         let pred = match v.horizon {
-            Some(h) => format!(
-                "; {h} s ahead {}",
-                e.prediction
-                    .iter()
-                    .map(|c| format!("{} {}", c.channel, pct(c.fit_percent)))
-                    .collect::<Vec<_>>()
-                    .join(", ")
-            ),
+            Some(h) => format!("; {h} s ahead {}", channel_fits(&e.prediction)),
             None => String::new(),
         };
         let _ = writeln!(out, "   held out {}: {sim}{pred}", e.name);
     }
-}
-
-fn pct(v: Option<f64>) -> String {
-    v.map_or("-".to_string(), |f| format!("{f:.1} %"))
 }
 
 fn story(
@@ -175,18 +163,7 @@ fn story(
         ))
     })?;
     let measured = read_data(model, &args.data, err)?;
-    let held_out = if args.validate.is_empty() {
-        Vec::new()
-    } else {
-        read_data(
-            model,
-            &crate::cli::DataArgs {
-                data: args.validate.clone(),
-                ..args.data.clone()
-            },
-            err,
-        )?
-    };
+    let held_out = read_held_out(model, &args.data, &args.validate, err)?;
     let opts = StoryOptions {
         fit: fit_options(model, &args.control, Some(&args.horizon))?,
         max_effects: args.max_effects,

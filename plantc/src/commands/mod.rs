@@ -55,14 +55,11 @@ pub fn dispatch(cli: &Cli, out: &mut dyn Write, err: &mut dyn Write) -> Result<(
         } => linearize::run(model, params, at.as_deref(), *json, out, err),
         Command::Analyze {
             model,
-            output,
             controller: Some(c),
             params,
             json,
-        } => {
-            let _ = output;
-            analyze::controller(model, c, params, *json, out, err)
-        }
+            ..
+        } => analyze::controller(model, c, params, *json, out, err),
         Command::Analyze {
             model,
             output,

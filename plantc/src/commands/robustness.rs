@@ -9,7 +9,9 @@ use plantc_derive::model::ControllerSpec;
 use plantc_derive::robustness::{study, CaseResult, Mismatch, StudyOptions};
 
 use crate::cli::RobustnessArgs;
-use crate::common::{load, parse_assignments, parse_quantity, values, write_json, CliError};
+use crate::common::{
+    load, name_list, parse_assignments, parse_quantity, values, write_json, CliError,
+};
 
 fn positive_angle(text: &str, what: &str) -> Result<f64, CliError> {
     parse_quantity(text)
@@ -85,15 +87,7 @@ pub fn run(
                 ))
             })?
     };
-    let vary: Vec<String> = args
-        .vary
-        .as_deref()
-        .unwrap_or("")
-        .split(',')
-        .map(str::trim)
-        .filter(|s| !s.is_empty())
-        .map(str::to_string)
-        .collect();
+    let vary = name_list(args.vary.as_deref().unwrap_or(""));
     let mut add = Vec::new();
     for item in &args.add {
         let (name, value) = item.split_once('=').ok_or_else(|| {

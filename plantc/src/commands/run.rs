@@ -37,52 +37,15 @@ pub fn run(args: &RunArgs, out: &mut dyn Write, err: &mut dyn Write) -> Result<(
     let mut config = RunConfig::for_plant(&plant);
     config.rate_hz = args.rate;
     config.duration_s = Some(args.duration);
-    let angle = |text: &str, what: &str| {
-        parse_quantity(text)
-            .filter(|x| x.is_finite() && *x > 0.0)
-            .ok_or_else(|| {
-                CliError::input(format!(
-                    "error: --{what} `{text}`: expected a positive angle, e.g. 180deg"
-                ))
-            })
-    };
     let swing_up = matches!(&resolved, ResolvedController::Hybrid { modes, .. }
         if modes.iter().any(|m| m.swing_up));
-    let velocity = match (args.velocity, swing_up) {
-        (Some(VelocityKind::Observer), true) => {
-            return Err(CliError::input(format!(
-                "error: `{}` has a swing-up mode; the velocity observer's model is linearized \
-                 about upright and does not hold while the pendulum swings: use --velocity derivative",
-                args.controller
-            )))
-        }
-        (Some(v), _) => v,
-        (None, true) => VelocityKind::Derivative,
-        (None, false) => VelocityKind::Observer,
-    };
-    let bandwidth = args
-        .velocity_bandwidth
-        .unwrap_or(if swing_up { 200.0 } else { 50.0 });
-    if !(bandwidth.is_finite() && bandwidth > 0.0) {
-        return Err(CliError::input(format!(
-            "error: --velocity-bandwidth {bandwidth}: expected a positive rate in rad/s"
-        )));
-    }
+    let (velocity, bandwidth) = velocity_choice(args, swing_up)?;
     config.velocity_bandwidth = bandwidth;
     if swing_up {
-        let speed = |x: f64, what: &str| {
-            if x.is_finite() && x > 0.0 {
-                Ok(x)
-            } else {
-                Err(CliError::input(format!(
-                    "error: --{what} {x}: expected a positive speed in rad/s"
-                )))
-            }
-        };
         config.supervisor.swing_up = Some(SwingUpLimits {
-            hanging_window_rad: angle(&args.hanging_window, "hanging-window")?,
-            max_arm_speed: speed(args.max_arm_speed, "max-arm-speed")?,
-            max_pendulum_speed: speed(args.max_pendulum_speed, "max-pendulum-speed")?,
+            hanging_window_rad: positive_angle(&args.hanging_window, "hanging-window")?,
+            max_arm_speed: positive_speed(args.max_arm_speed, "max-arm-speed")?,
+            max_pendulum_speed: positive_speed(args.max_pendulum_speed, "max-pendulum-speed")?,
         });
         let _ = writeln!(
             err,
@@ -101,15 +64,14 @@ pub fn run(args: &RunArgs, out: &mut dyn Write, err: &mut dyn Write) -> Result<(
         spec.accel_std = args.observer_accel;
         config.observer = Some(spec);
     }
-    config.supervisor.arm_limit_rad = angle(&args.arm_limit, "arm-limit")?;
-    config.supervisor.fall_angle_rad = angle(&args.fall_angle, "fall-angle")?;
-    config.supervisor.catch_window_rad = angle(&args.catch_window, "catch-window")?;
-    if config.supervisor.catch_window_rad >= config.supervisor.fall_angle_rad {
-        return Err(CliError::input(format!(
-            "error: --catch-window {} must be smaller than --fall-angle {}",
-            args.catch_window, args.fall_angle
-        )));
-    }
+    config.supervisor.arm_limit_rad = positive_angle(&args.arm_limit, "arm-limit")?;
+    config.supervisor.fall_angle_rad = positive_angle(&args.fall_angle, "fall-angle")?;
+    config.supervisor.catch_window_rad = positive_angle(&args.catch_window, "catch-window")?;
+    catch_window_inside_fall_angle(
+        args,
+        config.supervisor.catch_window_rad,
+        config.supervisor.fall_angle_rad,
+    )?;
     let mut backend: Box<dyn Backend> = match args.backend {
         BackendKind::Sim => {
             let x0 = match &args.x0 {
@@ -198,6 +160,73 @@ pub fn run(args: &RunArgs, out: &mut dyn Write, err: &mut dyn Write) -> Result<(
         }
     }
     Ok(())
+}
+
+/// `--WHAT TEXT`: a positive angle (`180deg`, `0.5rad` or `0.5`), in rad.
+pub(crate) fn positive_angle(text: &str, what: &str) -> Result<f64, CliError> {
+    parse_quantity(text)
+        .filter(|x| x.is_finite() && *x > 0.0)
+        .ok_or_else(|| {
+            CliError::input(format!(
+                "error: --{what} `{text}`: expected a positive angle, e.g. 180deg"
+            ))
+        })
+}
+
+/// `--WHAT X`: a positive speed in rad/s.
+pub(crate) fn positive_speed(x: f64, what: &str) -> Result<f64, CliError> {
+    if x.is_finite() && x > 0.0 {
+        Ok(x)
+    } else {
+        Err(CliError::input(format!(
+            "error: --{what} {x}: expected a positive speed in rad/s"
+        )))
+    }
+}
+
+/// Refuses a catch window (rad) that is not inside the fall angle (rad).
+pub(crate) fn catch_window_inside_fall_angle(
+    args: &RunArgs,
+    catch_window: f64,
+    fall_angle: f64,
+) -> Result<(), CliError> {
+    if catch_window >= fall_angle {
+        return Err(CliError::input(format!(
+            "error: --catch-window {} must be smaller than --fall-angle {}",
+            args.catch_window, args.fall_angle
+        )));
+    }
+    Ok(())
+}
+
+/// `--velocity` and `--velocity-bandwidth` (rad/s) for a controller with or
+/// without a swing-up mode: a swing-up mode needs the filtered derivative
+/// (the observer's model is linearized about upright), by default faster.
+pub(crate) fn velocity_choice(
+    args: &RunArgs,
+    swing_up: bool,
+) -> Result<(VelocityKind, f64), CliError> {
+    let velocity = match (args.velocity, swing_up) {
+        (Some(VelocityKind::Observer), true) => {
+            return Err(CliError::input(format!(
+                "error: `{}` has a swing-up mode; the velocity observer's model is linearized \
+                 about upright and does not hold while the pendulum swings: use --velocity derivative",
+                args.controller
+            )))
+        }
+        (Some(v), _) => v,
+        (None, true) => VelocityKind::Derivative,
+        (None, false) => VelocityKind::Observer,
+    };
+    let bandwidth = args
+        .velocity_bandwidth
+        .unwrap_or(if swing_up { 200.0 } else { 50.0 });
+    if !(bandwidth.is_finite() && bandwidth > 0.0) {
+        return Err(CliError::input(format!(
+            "error: --velocity-bandwidth {bandwidth}: expected a positive rate in rad/s"
+        )));
+    }
+    Ok((velocity, bandwidth))
 }
 
 /// `--sim-noise`, parsed as the rig binaries parse it.

@@ -25,12 +25,14 @@ use plantc_runtime::{
 };
 
 use super::gen::{codegen_error, rig_options};
-use super::run::{observer_spec, sim_noise};
+use super::run::{
+    catch_window_inside_fall_angle, observer_spec, positive_angle, positive_speed, sim_noise,
+    velocity_choice,
+};
 use super::sim::{parse_gains, refuse_overwrite};
 use crate::cli::{BackendKind, LogPrecision, RigGenArgs, RunArgs, VelocityKind};
 use crate::common::{
-    load, parse_assignments, parse_overrides, parse_quantity, values, warn_ignored_effects,
-    CliError,
+    load, parse_assignments, parse_overrides, values, warn_ignored_effects, CliError,
 };
 
 pub fn run(args: &RunArgs, out: &mut dyn Write, err: &mut dyn Write) -> Result<(), CliError> {
@@ -51,61 +53,19 @@ pub fn run(args: &RunArgs, out: &mut dyn Write, err: &mut dyn Write) -> Result<(
         Some(text) => Some(parse_assignments(text, &names, "state")?),
         None => None,
     };
-    let angle = |text: &str, what: &str| {
-        parse_quantity(text)
-            .filter(|x| x.is_finite() && *x > 0.0)
-            .ok_or_else(|| {
-                CliError::input(format!(
-                    "error: --{what} `{text}`: expected a positive angle, e.g. 180deg"
-                ))
-            })
-    };
-    let arm_limit = angle(&args.arm_limit, "arm-limit")?;
-    let fall_angle = angle(&args.fall_angle, "fall-angle")?;
+    let arm_limit = positive_angle(&args.arm_limit, "arm-limit")?;
+    let fall_angle = positive_angle(&args.fall_angle, "fall-angle")?;
     let noise = sim_noise(args)?;
-    let catch_window = angle(&args.catch_window, "catch-window")?;
-    if catch_window >= fall_angle {
-        return Err(CliError::input(format!(
-            "error: --catch-window {} must be smaller than --fall-angle {}",
-            args.catch_window, args.fall_angle
-        )));
-    }
+    let catch_window = positive_angle(&args.catch_window, "catch-window")?;
+    catch_window_inside_fall_angle(args, catch_window, fall_angle)?;
     // as in the interpreted `run`: a swing-up mode needs the derivative
     // (the observer's model is linearized about upright), faster
     let swing_up = matches!(model.controller(&args.controller),
         Some(plantc_derive::model::ControllerSpec::Hybrid { modes, .. }) if modes.iter().any(|m| m.swing_up));
-    let velocity = match (args.velocity, swing_up) {
-        (Some(VelocityKind::Observer), true) => {
-            return Err(CliError::input(format!(
-                "error: `{}` has a swing-up mode; the velocity observer's model is linearized \
-                 about upright and does not hold while the pendulum swings: use --velocity derivative",
-                args.controller
-            )))
-        }
-        (Some(v), _) => v,
-        (None, true) => VelocityKind::Derivative,
-        (None, false) => VelocityKind::Observer,
-    };
-    let bandwidth = args
-        .velocity_bandwidth
-        .unwrap_or(if swing_up { 200.0 } else { 50.0 });
-    if !(bandwidth.is_finite() && bandwidth > 0.0) {
-        return Err(CliError::input(format!(
-            "error: --velocity-bandwidth {bandwidth}: expected a positive rate in rad/s"
-        )));
-    }
-    let speed = |x: f64, what: &str| {
-        if x.is_finite() && x > 0.0 {
-            Ok(x)
-        } else {
-            Err(CliError::input(format!(
-                "error: --{what} {x}: expected a positive speed in rad/s"
-            )))
-        }
-    };
-    let hanging_window = angle(&args.hanging_window, "hanging-window")?;
-    let max_arm_speed = speed(args.max_arm_speed, "max-arm-speed")?;
-    let max_pendulum_speed = speed(args.max_pendulum_speed, "max-pendulum-speed")?;
+    let (velocity, bandwidth) = velocity_choice(args, swing_up)?;
+    let hanging_window = positive_angle(&args.hanging_window, "hanging-window")?;
+    let max_arm_speed = positive_speed(args.max_arm_speed, "max-arm-speed")?;
+    let max_pendulum_speed = positive_speed(args.max_pendulum_speed, "max-pendulum-speed")?;
     if let Some(path) = &args.log {
         refuse_overwrite(path, args.force, "log")?;
     }
@@ -330,16 +290,15 @@ fn compare(
             .collect(),
     };
     let period = 1.0 / args.rate;
+    let derivation = Derivation::new(model).map_err(|e| fail(&e))?;
     let mut estimator: Box<dyn VelocityEstimator> = match velocity {
         VelocityKind::Observer => {
-            let derivation = Derivation::new(model).map_err(|e| fail(&e))?;
             let mut spec = observer_spec(model, &derivation, vals)?;
             spec.accel_std = args.observer_accel;
             Box::new(VelocityObserver::design(&spec, &maps, period).map_err(|e| fail(&e))?)
         }
         VelocityKind::Derivative => Box::new(DerivativeEstimator::new(nq, bandwidth, period)),
     };
-    let derivation = Derivation::new(model).map_err(|e| fail(&e))?;
     let resolved = resolve(model, &derivation, &args.controller, vals).map_err(|e| fail(&e))?;
     let mut controller = ModelController::new(model, &resolved, vals).map_err(|e| fail(&e))?;
     for (name, value) in parse_gains(&args.gain)? {

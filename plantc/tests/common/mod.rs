@@ -77,6 +77,15 @@ pub fn plantc_bin<A: AsRef<OsStr>>(args: &[A]) -> (i32, String, String) {
     )
 }
 
+/// The number after `key` in `text` (e.g. `max |Vm difference| `).
+pub fn number_after(text: &str, key: &str) -> Option<f64> {
+    let rest = &text[text.find(key)? + key.len()..];
+    let end = rest
+        .find(|c: char| !(c.is_ascii_digit() || "+-.e".contains(c)))
+        .unwrap_or(rest.len());
+    rest[..end].parse().ok()
+}
+
 /// Builds (once per test binary) and locates the fake HIL cdylib
 /// (`runtime/fake-hil`), as the runtime's own tests do.
 pub fn fake_hil_lib() -> PathBuf {
