@@ -1229,7 +1229,9 @@ fn observer(
     lin: &plantc_derive::analysis::Linearization,
     o: &crate::ObserverOptions,
 ) -> Result<TokenStream, Error> {
-    use plantc_derive::linear::{design_velocity_observer, encoder_variance};
+    use plantc_derive::linear::{
+        design_velocity_observer, encoder_variance, observer_plant, ObserverPlantError,
+    };
     let nq = model.coordinates.len();
     let n = 2 * nq;
     let refuse = |why: String| {
@@ -1237,24 +1239,23 @@ fn observer(
             "the rig's velocity observer: {why}"
         )))
     };
-    if lin.b.ncols() != 1 {
-        return refuse(format!(
-            "{} inputs; the rig drives exactly one (the motor voltage)",
-            lin.b.ncols()
-        ));
-    }
-    let residual = lin.equilibrium_residual;
-    if residual.is_nan() || residual.abs() >= 1e-9 {
-        return refuse(format!(
-            "the zero state is not an equilibrium of the model (largest acceleration {residual:e}); \
-             the observer is designed about it"
-        ));
-    }
+    let (a, b) = match observer_plant(lin) {
+        Ok(ab) => ab,
+        Err(ObserverPlantError::Inputs { count }) => {
+            return refuse(format!(
+                "{count} inputs; the rig drives exactly one (the motor voltage)"
+            ))
+        }
+        Err(ObserverPlantError::NotEquilibrium { residual }) => {
+            return refuse(format!(
+                "the zero state is not an equilibrium of the model (largest acceleration {residual:e}); \
+                 the observer is designed about it"
+            ))
+        }
+    };
     if !(o.rate_hz.is_finite() && o.rate_hz > 0.0) {
         return refuse(format!("rate {} Hz", o.rate_hz));
     }
-    let a: Vec<f64> = (0..n * n).map(|k| lin.a[(k / n, k % n)]).collect();
-    let b: Vec<f64> = (0..n).map(|i| lin.b[(i, 0)]).collect();
     let period = 1.0 / o.rate_hz;
     let d = design_velocity_observer(
         &a,

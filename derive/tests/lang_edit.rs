@@ -240,7 +240,10 @@ mod rename {
             + "\nparameter Jr = 1e-4 [kg*m^2] \"rotor\"\ninertia theta = added_inertia(Jr)\n";
         assert!(!parse_and_check("t", &src).has_errors());
         let out = rename(&src, &model("Jr"), "J_rotor").unwrap();
-        assert!(out.contains("inertia theta = added_inertia(J_rotor)"), "{out}");
+        assert!(
+            out.contains("inertia theta = added_inertia(J_rotor)"),
+            "{out}"
+        );
         assert!(!out.contains("Jr"));
         assert!(!parse_and_check("t", &out).has_errors());
         let out = rename(&src, &model("theta"), "phi").unwrap();

@@ -31,7 +31,10 @@ pub use controllability::{
 pub use error::LinearError;
 pub use linear_model::{matrix_from_rows, matrix_to_rows, LinearModel};
 pub use lqr::{care_residual, lqr, Lqr};
-pub use observer::{design_velocity_observer, encoder_variance, ObserverDesign, ObserverError};
+pub use observer::{
+    design_velocity_observer, encoder_variance, observer_plant, ObserverDesign, ObserverError,
+    ObserverPlantError,
+};
 pub use place::{char_poly, check_desired_poles, place, pole_match_error, Placement};
 pub use poles::{canonicalize_poles, format_pole, parse_poles, poles, Pole};
 pub use report::{analyze, to_json, AnalysisReport, LqrReport, PlaceReport};

@@ -108,6 +108,46 @@ pub struct ObserverDesign {
     pub fastest_pole: f64,
 }
 
+/// Why a linearization cannot carry the velocity observer.
+#[derive(Debug, Clone, PartialEq)]
+pub enum ObserverPlantError {
+    /// Not exactly one input (the observer's model has one: the motor
+    /// voltage).
+    Inputs {
+        /// Inputs of the linearization.
+        count: usize,
+    },
+    /// The operating point is not an equilibrium (the observer is designed
+    /// about it).
+    NotEquilibrium {
+        /// Largest |acceleration| there.
+        residual: f64,
+    },
+}
+
+/// `(A, B)` of `lin`, row-major, for [`design_velocity_observer`]: the
+/// model `plantc run` designs its observer on at start-up and `plantc gen
+/// --rig` at generation time, so both check it here. Refused without
+/// exactly one input, then unless the operating point is an equilibrium
+/// (largest acceleration below 1e-9).
+pub fn observer_plant(
+    lin: &crate::analysis::Linearization,
+) -> Result<(Vec<f64>, Vec<f64>), ObserverPlantError> {
+    if lin.b.ncols() != 1 {
+        return Err(ObserverPlantError::Inputs {
+            count: lin.b.ncols(),
+        });
+    }
+    let residual = lin.equilibrium_residual;
+    if residual.is_nan() || residual.abs() >= 1e-9 {
+        return Err(ObserverPlantError::NotEquilibrium { residual });
+    }
+    let n = lin.a.nrows();
+    let a = (0..n * n).map(|k| lin.a[(k / n, k % n)]).collect();
+    let b = (0..n).map(|i| lin.b[(i, 0)]).collect();
+    Ok((a, b))
+}
+
 /// Variance of the quantisation error of an encoder with `counts_per_rev`
 /// counts per revolution: `(2 pi / counts_per_rev)^2 / 12` (rad^2).
 pub fn encoder_variance(counts_per_rev: f64) -> f64 {

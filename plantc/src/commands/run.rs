@@ -4,6 +4,7 @@ use std::io::Write;
 
 use plantc_derive::analysis::{linearize, OperatingPoint};
 use plantc_derive::control::{resolve, Derivation, ResolvedController};
+use plantc_derive::linear::{observer_plant, ObserverPlantError};
 use plantc_derive::mechanics::NumericDynamics;
 use plantc_derive::model::{Model, ParameterValues};
 use plantc_runtime::{
@@ -248,21 +249,16 @@ pub(crate) fn observer_spec(
     let op = OperatingPoint::zero(model);
     let lin = linearize(model, &derivation.equations, vals, &op)
         .map_err(|e| CliError::failure(format!("error: observer: {e}")))?;
-    let residual = lin.equilibrium_residual;
-    if residual.is_nan() || residual.abs() >= 1e-9 {
-        return Err(CliError::failure(format!(
-            "error: observer: the zero state is not an equilibrium of the model \
-             (largest acceleration {residual:e}); use --velocity derivative"
-        )));
-    }
-    if lin.b.ncols() != 1 {
-        return Err(CliError::failure(format!(
-            "error: observer: {} inputs, exactly one (the motor voltage) supported",
-            lin.b.ncols()
-        )));
-    }
-    let n = lin.a.nrows();
-    let a = (0..n * n).map(|k| lin.a[(k / n, k % n)]).collect();
-    let b = (0..n).map(|i| lin.b[(i, 0)]).collect();
+    let (a, b) = observer_plant(&lin).map_err(|e| {
+        CliError::failure(match e {
+            ObserverPlantError::NotEquilibrium { residual } => format!(
+                "error: observer: the zero state is not an equilibrium of the model \
+                 (largest acceleration {residual:e}); use --velocity derivative"
+            ),
+            ObserverPlantError::Inputs { count } => format!(
+                "error: observer: {count} inputs, exactly one (the motor voltage) supported"
+            ),
+        })
+    })?;
     Ok(ObserverSpec::new(a, b))
 }
