@@ -77,49 +77,29 @@ pub(crate) fn read_csv(
         .chain(spec.all().cloned())
         .collect();
     let mut plans: Vec<ColumnPlan> = Vec::new();
+    let plan = |index: usize, name: &str, kind: Kind| -> Result<ColumnPlan, DataError> {
+        let header = headers.get(index).unwrap_or_default().to_string();
+        let (factor, note) =
+            unit_factor(&file, index + 1, &header, split[index].1.as_deref(), kind)?;
+        Ok(ColumnPlan {
+            index,
+            name: name.to_string(),
+            header,
+            factor,
+            note,
+            needed: true,
+        })
+    };
     for (name, kind) in &needed {
         let Some(index) = found.iter().position(|n| n == name) else {
             return Err(DataError::MissingColumn {
-                file,
+                file: file.clone(),
                 column: name.clone(),
                 found,
                 expected: spec.expected_names(),
             });
         };
-        let header = headers.get(index).unwrap_or_default().to_string();
-        let (factor, note) = match &split[index].1 {
-            None => (1.0, None),
-            Some(u) => match lookup_unit(u) {
-                None => {
-                    return Err(DataError::UnknownUnit {
-                        file,
-                        column: index + 1,
-                        header,
-                        unit: u.clone(),
-                        kind: *kind,
-                    })
-                }
-                Some(unit) if *kind != Kind::Other && unit.kind != *kind => {
-                    return Err(DataError::IncompatibleUnit {
-                        file,
-                        column: index + 1,
-                        header,
-                        unit: u.clone(),
-                        expected: *kind,
-                        found: unit.kind,
-                    })
-                }
-                Some(unit) => (unit.factor, Some(unit_note(u, unit.kind))),
-            },
-        };
-        plans.push(ColumnPlan {
-            index,
-            name: name.clone(),
-            header,
-            factor,
-            note,
-            needed: true,
-        });
+        plans.push(plan(index, name, *kind)?);
     }
     // Optional channels when present.
     for (name, kind) in &spec.optional {
@@ -129,40 +109,7 @@ pub(crate) fn read_csv(
         if plans.iter().any(|p| p.index == index) {
             continue;
         }
-        let header = headers.get(index).unwrap_or_default().to_string();
-        let (factor, note) = match &split[index].1 {
-            None => (1.0, None),
-            Some(u) => match lookup_unit(u) {
-                None => {
-                    return Err(DataError::UnknownUnit {
-                        file,
-                        column: index + 1,
-                        header,
-                        unit: u.clone(),
-                        kind: *kind,
-                    })
-                }
-                Some(unit) if *kind != Kind::Other && unit.kind != *kind => {
-                    return Err(DataError::IncompatibleUnit {
-                        file,
-                        column: index + 1,
-                        header,
-                        unit: u.clone(),
-                        expected: *kind,
-                        found: unit.kind,
-                    })
-                }
-                Some(unit) => (unit.factor, Some(unit_note(u, unit.kind))),
-            },
-        };
-        plans.push(ColumnPlan {
-            index,
-            name: name.clone(),
-            header,
-            factor,
-            note,
-            needed: true,
-        });
+        plans.push(plan(index, name, *kind)?);
     }
     // Extra columns, in file order.
     for (index, (name, unit)) in split.iter().enumerate() {
@@ -301,6 +248,41 @@ pub(crate) fn read_csv(
         },
         warnings,
     ))
+}
+
+/// The factor to SI and the unit note of a column with unit suffix `unit`
+/// (none: factor 1, no note), checked against the channel's `kind`; errors
+/// name `column` (1-based) and its full `header`.
+pub(crate) fn unit_factor(
+    file: &Path,
+    column: usize,
+    header: &str,
+    unit: Option<&str>,
+    kind: Kind,
+) -> Result<(f64, Option<String>), DataError> {
+    let Some(u) = unit else {
+        return Ok((1.0, None));
+    };
+    match lookup_unit(u) {
+        None => Err(DataError::UnknownUnit {
+            file: file.to_path_buf(),
+            column,
+            header: header.to_string(),
+            unit: u.to_string(),
+            kind,
+        }),
+        Some(unit) if kind != Kind::Other && unit.kind != kind => {
+            Err(DataError::IncompatibleUnit {
+                file: file.to_path_buf(),
+                column,
+                header: header.to_string(),
+                unit: u.to_string(),
+                expected: kind,
+                found: unit.kind,
+            })
+        }
+        Some(unit) => Ok((unit.factor, Some(unit_note(u, unit.kind)))),
+    }
 }
 
 /// The unit note for a suffix: `rad` for SI, `deg -> rad` for a conversion.

@@ -996,6 +996,48 @@ pub struct Simulator {
     probe: StiffnessProbe,
 }
 
+/// Check the options both simulators compile with: a dry friction width
+/// must be positive.
+pub(crate) fn check_width(opts: &SimOptions) -> Result<(), SimError> {
+    match opts.dry_friction_width {
+        Some(w) if !(w > 0.0 && w.is_finite()) => Err(SimError::BadOption(format!(
+            "dry friction width must be positive, got {w}"
+        ))),
+        _ => Ok(()),
+    }
+}
+
+/// The loop state at the start of a block: the law, the replay, evaluation
+/// buffers, the replayed filter state and a buffer for the law's values.
+pub(crate) type LoopStart<'s> = (&'s LoopLaw, &'s Replay, LoopEval, Vec<f64>, Vec<f64>);
+
+/// The loop's state at the start of a block at `k0` of `sig` with `law` in
+/// the loop; None in open loop (no law).
+pub(crate) fn loop_start<'s>(
+    law: Option<&'s LoopLaw>,
+    sig: &'s Signals,
+    k0: usize,
+) -> Result<Option<LoopStart<'s>>, SimError> {
+    let Some(law) = law else {
+        return Ok(None);
+    };
+    let Some(rep) = &sig.replay else {
+        return Err(SimError::BadOption(format!(
+            "closed-loop simulation of `{}` needs its signals read for recorded controller `{}`",
+            sig.name, law.name
+        )));
+    };
+    let nf2 = rep.coeffs.len() * 2;
+    let fstate = rep.state[k0 * nf2..(k0 + 1) * nf2].to_vec();
+    Ok(Some((
+        law,
+        rep,
+        LoopEval::new(law),
+        fstate,
+        vec![0.0; law.driven().len()],
+    )))
+}
+
 /// Slow-input mask of a tape over `(state, inputs, parameters)` with
 /// `n_fast` state and input entries first: the parameters are slow.
 pub(crate) fn parameters_slow(n_fast: usize, n_params: usize) -> Vec<bool> {
@@ -1032,13 +1074,7 @@ pub(crate) fn control_at(
 impl Simulator {
     /// Derive and compile the dynamics of `model`.
     pub fn new(model: &Model, opts: SimOptions) -> Result<Simulator, SimError> {
-        if let Some(w) = opts.dry_friction_width {
-            if !(w > 0.0 && w.is_finite()) {
-                return Err(SimError::BadOption(format!(
-                    "dry friction width must be positive, got {w}"
-                )));
-            }
-        }
+        check_width(&opts)?;
         let (_, outs) = dynamics_outputs(model, opts.dry_friction_width)?;
         let tape =
             Tape::compile(&outs, &tape_inputs(model)).map_err(|e| SimError::Tape(e.to_string()))?;
@@ -1195,7 +1231,7 @@ impl Simulator {
         let mut q = vec![vec![0.0; k1 - k0]; n];
         let mut z = start.x0.clone();
         let mut y = vec![0.0; n];
-        let mut closed = self.closed(sig, k0)?;
+        let mut closed = loop_start(self.law.as_ref(), sig, k0)?;
         let (widths, levels) = (&effects.widths, &effects.levels);
         let at_sample = |k: usize, z: &[f64], u: &mut [Vec<f64>]| {
             for i in 0..n {
@@ -1220,35 +1256,6 @@ impl Simulator {
             at_sample,
         )?;
         Ok(Trajectory { q })
-    }
-
-    /// The loop's state at the start of a block at `k0`: the law, the
-    /// replay, evaluation buffers, the replayed filter state and a buffer
-    /// for the law's values. None in open loop.
-    #[allow(clippy::type_complexity)]
-    fn closed<'s>(
-        &'s self,
-        sig: &'s Signals,
-        k0: usize,
-    ) -> Result<Option<(&'s LoopLaw, &'s Replay, LoopEval, Vec<f64>, Vec<f64>)>, SimError> {
-        let Some(law) = &self.law else {
-            return Ok(None);
-        };
-        let Some(rep) = &sig.replay else {
-            return Err(SimError::BadOption(format!(
-                "closed-loop simulation of `{}` needs its signals read for recorded controller `{}`",
-                sig.name, law.name
-            )));
-        };
-        let nf2 = rep.coeffs.len() * 2;
-        let fstate = rep.state[k0 * nf2..(k0 + 1) * nf2].to_vec();
-        Ok(Some((
-            law,
-            rep,
-            LoopEval::new(law),
-            fstate,
-            vec![0.0; law.driven().len()],
-        )))
     }
 }
 

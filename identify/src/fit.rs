@@ -573,8 +573,7 @@ fn lm(
     run: &mut Run<'_>,
 ) -> Result<(f64, usize, Stop), SimError> {
     let ng = pb.n_globals();
-    let n_unknowns = frozen.iter().filter(|f| !**f).count()
-        + pb.blocks.iter().map(|b| b.free_state.len()).sum::<usize>();
+    let n_unknowns = frozen.iter().filter(|f| !**f).count() + pb.n_locals();
     let mut nu = 2.0;
     let mut last = (f64::NAN, 0usize);
     for _ in 0..max_iterations {
@@ -599,7 +598,7 @@ fn lm(
                     || (pt.g[j] >= pb.hi[j] && nrm.g_g[j] < 0.0)
             })
             .collect();
-        if held.iter().all(|h| *h) && pb.blocks.iter().all(|b| b.free_state.is_empty()) {
+        if held.iter().all(|h| *h) && pb.n_locals() == 0 {
             return Ok((nrm.ssr, nrm.count, Stop::Converged));
         }
         let mut accepted = None;
@@ -659,6 +658,56 @@ fn lm(
 /// Weighted RMS from an SSR and count.
 fn rms(ssr: f64, count: usize) -> f64 {
     (ssr / count.max(1) as f64).sqrt()
+}
+
+/// LM on the nuisance unknowns of `pb` only (the model parameters held) from
+/// `pt` over the whole record, with a fresh damping.
+fn lm_nuisance_only(
+    setup: &Setup<'_>,
+    pb: &Problem<'_>,
+    pt: &mut Point,
+    max_iterations: usize,
+    final_stage: bool,
+    run: &mut Run<'_>,
+) -> Result<(f64, usize, Stop), SimError> {
+    let p = setup.free.len();
+    let frozen: Vec<bool> = (0..pb.n_globals()).map(|j| j < p).collect();
+    let mut lambda = 1e-3;
+    lm(
+        pb,
+        pt,
+        f64::INFINITY,
+        &frozen,
+        max_iterations,
+        final_stage,
+        &mut lambda,
+        run,
+    )
+}
+
+/// Refit `q` on the whole record with the globals where `frozen` is true
+/// held (fresh damping, final tolerance); its SSR there, None when the fit
+/// or the cost could not be simulated.
+fn refit_whole(
+    pb: &Problem<'_>,
+    q: &mut Point,
+    frozen: &[bool],
+    max_iterations: usize,
+    run: &mut Run<'_>,
+) -> Option<f64> {
+    let mut lambda = 1e-3;
+    lm(
+        pb,
+        q,
+        f64::INFINITY,
+        frozen,
+        max_iterations,
+        true,
+        &mut lambda,
+        run,
+    )
+    .ok()?;
+    pb.cost(q, f64::INFINITY).ok().map(|(s, _)| s)
 }
 
 /// Everything fixed for one fit: model, data, simulators, layout choices.
@@ -924,7 +973,7 @@ pub fn fit_with_progress(
 
     // 1. horizon: whole records unless the replay diverges; then segments,
     // and back to whole records when the segments' estimates follow the data
-    let whole_follows = |g: &[f64], locals: Option<&Outcome<'_>>, run: &mut Run<'_>| -> bool {
+    let whole_follows = |g: &[f64], locals: Option<&Outcome>, run: &mut Run<'_>| -> bool {
         let pb = setup.problem(None);
         let mut pt = setup.start_point(&pb, g);
         if let Some(o) = locals {
@@ -936,7 +985,7 @@ pub fn fit_with_progress(
             Err(_) => false,
         }
     };
-    let mut out = match opts.horizon {
+    let out = match opts.horizon {
         Horizon::Whole => solve(&setup, None, &g0, None, true, &mut run, &mut notes)?,
         Horizon::Segments(h) => solve(&setup, Some(h), &g0, None, true, &mut run, &mut notes)?,
         Horizon::Auto if whole_follows(&g0, None, &mut run) => {
@@ -967,18 +1016,17 @@ pub fn fit_with_progress(
     let pb = setup.problem(segments);
     let ng = pb.n_globals();
     let p = free.len();
-    let unknowns = ng + pb.blocks.iter().map(|b| b.free_state.len()).sum::<usize>();
+    let unknowns = pb.n_unknowns();
     let (ssr0, count) = out.before;
     let before_cost = rms(ssr0, count);
-    let start_pt = out.start_pt.clone();
+    let start_pt = out.start_pt;
     let mut frozen = vec![false; ng];
-    let mut best = (out.pt.clone(), out.ssr);
-    let mut pt = out.pt.clone();
-    let mut lambda: f64;
-    out.pt = Point {
-        g: Vec::new(),
-        l: Vec::new(),
-    };
+    let mut pt = out.pt;
+    let mut best = (pt.clone(), out.ssr);
+    // a refit with some globals fixed is kept when its cost stays within
+    // the tolerance of the best and below the start's
+    let acceptable =
+        |s: f64, best: f64| s <= REDUCED_TOLERANCE * REDUCED_TOLERANCE * best && s <= ssr0;
 
     // the normal equations at the best point (reused below when the point
     // does not move)
@@ -1014,22 +1062,10 @@ pub fn fit_with_progress(
             }
         }
         if !dropped.is_empty() {
-            lambda = 1e-3;
-            let refit = lm(
-                &pb,
-                &mut q,
-                f64::INFINITY,
-                &fz,
-                opts.max_iterations,
-                true,
-                &mut lambda,
-                &mut run,
-            )
-            .ok()
-            .and_then(|_| pb.cost(&q, f64::INFINITY).ok());
+            let refit = refit_whole(&pb, &mut q, &fz, opts.max_iterations, &mut run);
             run.simulations += 1;
-            if let Some((s2, _)) = refit {
-                if s2 <= REDUCED_TOLERANCE * REDUCED_TOLERANCE * best.1 && s2 <= ssr0 {
+            if let Some(s2) = refit {
+                if acceptable(s2, best.1) {
                     best = (q, s2);
                     frozen = fz;
                     nrm = pb.normal(&best.0, f64::INFINITY)?;
@@ -1057,21 +1093,9 @@ pub fn fit_with_progress(
                     fz[j] = true;
                 }
             }
-            lambda = 1e-3;
-            let reduced = lm(
-                &pb,
-                &mut q,
-                f64::INFINITY,
-                &fz,
-                opts.max_iterations,
-                true,
-                &mut lambda,
-                &mut run,
-            )
-            .ok()
-            .and_then(|_| pb.cost(&q, f64::INFINITY).ok());
-            if let Some((s, _)) = reduced {
-                if s <= REDUCED_TOLERANCE * REDUCED_TOLERANCE * best.1 && s <= ssr0 {
+            let reduced = refit_whole(&pb, &mut q, &fz, opts.max_iterations, &mut run);
+            if let Some(s) = reduced {
+                if acceptable(s, best.1) {
                     notes.push(format!(
                         "{} fixed at start value(s) (not identifiable); cost {:.4e} against {:.4e} with all free",
                         fix.iter().map(|f| format!("`{}`", f.0)).collect::<Vec<_>>().join(", "),
@@ -1108,11 +1132,9 @@ pub fn fit_with_progress(
             }
         }
     }
-    let _ = start_pt;
 
     // final statistics at the best point
-    let (cov, _) = covariance(&nrm, &frozen, unknowns);
-    let sigma2 = nrm.ssr / nrm.count.saturating_sub(unknowns).max(1) as f64;
+    let (cov, sigma2) = covariance(&nrm, &frozen, unknowns);
     let lv = local_variances(&nrm);
     let base_after = pb.base_at(&pt.g);
     let parameters: Vec<Estimate> = (0..p)
@@ -1182,7 +1204,7 @@ pub fn fit_with_progress(
 }
 
 /// Where a fit on one layout (whole records or segments) ended.
-struct Outcome<'s> {
+struct Outcome {
     /// Segment length, None for whole records.
     segments: Option<f64>,
     /// The best point on the layout's whole objective.
@@ -1193,13 +1215,12 @@ struct Outcome<'s> {
     /// "before" (SSR infinite when the start could not be simulated).
     start_pt: Point,
     before: (f64, usize),
-    _setup: std::marker::PhantomData<&'s ()>,
 }
 
 /// Carry the nuisance of `from` (a fit on another layout) over to `pt` on
 /// `pb`: offsets as they are, initial states of blocks that start at the
 /// same sample (the first segment of an experiment gives its record's).
-fn carry_over(setup: &Setup<'_>, pb: &Problem<'_>, pt: &mut Point, from: &Outcome<'_>) {
+fn carry_over(setup: &Setup<'_>, pb: &Problem<'_>, pt: &mut Point, from: &Outcome) {
     let p = setup.free.len();
     if from.pt.g.len() == pt.g.len() {
         pt.g[p..].copy_from_slice(&from.pt.g[p..]);
@@ -1253,19 +1274,7 @@ fn choose_segments(setup: &Setup<'_>, g0: &[f64], run: &mut Run<'_>) -> f64 {
 fn whole_before(setup: &Setup<'_>, g0: &[f64], run: &mut Run<'_>) -> (Point, (f64, usize)) {
     let pb = setup.nuisance_problem(None);
     let mut pt = setup.start_point(&pb, g0);
-    let p = setup.free.len();
-    let frozen: Vec<bool> = (0..pb.n_globals()).map(|j| j < p).collect();
-    let mut lambda = 1e-3;
-    let _ = lm(
-        &pb,
-        &mut pt,
-        f64::INFINITY,
-        &frozen,
-        10,
-        false,
-        &mut lambda,
-        run,
-    );
+    let _ = lm_nuisance_only(setup, &pb, &mut pt, 10, false, run);
     run.simulations += 1;
     let count = pb.count_all();
     let c = pb
@@ -1277,21 +1286,21 @@ fn whole_before(setup: &Setup<'_>, g0: &[f64], run: &mut Run<'_>) -> (Point, (f6
 /// One fit on one layout: scan (optional), nuisance at the start, growing
 /// horizons (whole records) or one stage (segments), multi-start when
 /// stalled; the best point on the layout's whole objective.
-fn solve<'s>(
-    setup: &'s Setup<'_>,
+fn solve(
+    setup: &Setup<'_>,
     segments: Option<f64>,
     g_start: &[f64],
-    seed: Option<&Outcome<'_>>,
+    seed: Option<&Outcome>,
     do_scan: bool,
     run: &mut Run<'_>,
     notes: &mut Vec<String>,
-) -> Result<Outcome<'s>, FitError> {
+) -> Result<Outcome, FitError> {
     let opts = setup.opts;
     let pb = setup.problem(segments);
     let ng = pb.n_globals();
     let p = setup.free.len();
     let count_all = pb.count_all();
-    let unknowns = ng + pb.blocks.iter().map(|b| b.free_state.len()).sum::<usize>();
+    let unknowns = pb.n_unknowns();
     if count_all < unknowns {
         return Err(FitError::NotEnoughData {
             residuals: count_all,
@@ -1321,21 +1330,10 @@ fn solve<'s>(
         scan(setup, &pb, &mut pt, run, notes);
     }
     // nuisance at the start parameters: the honest "before"
-    let nuisance_frozen: Vec<bool> = (0..ng).map(|j| j < p).collect();
-    let mut lambda = 1e-3;
-    let has_nuisance = ng > p || pb.blocks.iter().any(|b| !b.free_state.is_empty());
+    let has_nuisance = ng > p || pb.n_locals() > 0;
     if has_nuisance {
         let pbn = setup.nuisance_problem(segments);
-        let _ = lm(
-            &pbn,
-            &mut pt,
-            f64::INFINITY,
-            &nuisance_frozen,
-            10,
-            false,
-            &mut lambda,
-            run,
-        );
+        let _ = lm_nuisance_only(setup, &pbn, &mut pt, 10, false, run);
     }
     run.simulations += 1;
     let before = pb
@@ -1344,7 +1342,7 @@ fn solve<'s>(
     let start_pt = pt.clone();
     let mut best = (pt.clone(), before.0);
     // growing horizons, the best point on the whole objective kept
-    lambda = 1e-3;
+    let mut lambda: f64 = 1e-3;
     // SSR and count of the last stage
     let mut stage: Option<(f64, usize)> = None;
     let mut last_stop = Stop::Converged;
@@ -1422,16 +1420,12 @@ fn solve<'s>(
         ssr: best.1,
         start_pt,
         before,
-        _setup: std::marker::PhantomData,
     })
 }
 
 /// Fit only the nuisance unknowns of `pb` (model parameters held) from
 /// `pt`; true when the result can be simulated.
 pub(crate) fn lm_nuisance(setup: &Setup<'_>, pb: &Problem<'_>, pt: &mut Point) -> bool {
-    let p = setup.free.len();
-    let frozen: Vec<bool> = (0..pb.n_globals()).map(|j| j < p).collect();
-    let mut lambda = 1e-3;
     let mut sink = |_: &FitProgress| {};
     let mut run = Run {
         iterations: 0,
@@ -1440,16 +1434,7 @@ pub(crate) fn lm_nuisance(setup: &Setup<'_>, pb: &Problem<'_>, pt: &mut Point) -
         stages: 1,
         progress: &mut sink,
     };
-    let _ = lm(
-        pb,
-        pt,
-        f64::INFINITY,
-        &frozen,
-        15,
-        true,
-        &mut lambda,
-        &mut run,
-    );
+    let _ = lm_nuisance_only(setup, pb, pt, 15, true, &mut run);
     pb.cost(pt, f64::INFINITY).is_ok()
 }
 
@@ -1462,7 +1447,7 @@ pub(crate) fn nuisance_estimates(
 ) -> Vec<ExperimentEstimate> {
     let ng = pb.n_globals();
     let frozen = vec![false; ng];
-    let unknowns = ng + pb.blocks.iter().map(|b| b.free_state.len()).sum::<usize>();
+    let unknowns = pb.n_unknowns();
     let (cov, sigma2, lv) = match pb.normal(pt, f64::INFINITY) {
         Ok(nrm) => {
             let (cov, s2) = covariance(&nrm, &frozen, unknowns);
@@ -1588,14 +1573,12 @@ fn identifiability(
             std_error: cov[j * ng + j].sqrt(),
         })
         .collect();
-    let nl = live.len();
     let sub = |m: &[f64]| -> Vec<f64> {
         live.iter()
             .flat_map(|&i| live.iter().map(move |&j| (i, j)))
             .map(|(i, j)| m[i * ng + j])
             .collect()
     };
-    let _ = nl;
     analyse(
         &params,
         &sub(&info),

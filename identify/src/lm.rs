@@ -108,29 +108,51 @@ pub(crate) fn cholesky_solve(l: &[f64], n: usize, x: &mut [f64]) {
     }
 }
 
-/// Solve the SPD `a x = b` with Jacobi scaling (`a` scaled to a unit
+/// The Jacobi-scaled Cholesky factor of an SPD matrix (`a` scaled to a unit
 /// diagonal first, which keeps the factorisation of badly scaled problems
-/// accurate); None if not positive definite.
-pub(crate) fn solve_spd(a: &[f64], n: usize, b: &[f64]) -> Option<Vec<f64>> {
-    let s: Vec<f64> = (0..n).map(|i| a[i * n + i].max(0.0).sqrt()).collect();
-    if s.iter().any(|v| v.is_nan() || *v <= 0.0) {
-        return None;
+/// accurate), factored once for any number of right-hand sides.
+pub(crate) struct Spd {
+    n: usize,
+    /// The scaling, `sqrt(a_ii)`.
+    s: Vec<f64>,
+    /// Cholesky factor of the scaled matrix.
+    l: Vec<f64>,
+}
+
+impl Spd {
+    /// Factor the `n x n` matrix `a`; None if not positive definite.
+    pub fn new(a: &[f64], n: usize) -> Option<Spd> {
+        let s: Vec<f64> = (0..n).map(|i| a[i * n + i].max(0.0).sqrt()).collect();
+        if s.iter().any(|v| v.is_nan() || *v <= 0.0) {
+            return None;
+        }
+        let scaled: Vec<f64> = (0..n * n).map(|k| a[k] / (s[k / n] * s[k % n])).collect();
+        let l = cholesky(&scaled, n)?;
+        Some(Spd { n, s, l })
     }
-    let scaled: Vec<f64> = (0..n * n).map(|k| a[k] / (s[k / n] * s[k % n])).collect();
-    let l = cholesky(&scaled, n)?;
-    let mut x: Vec<f64> = (0..n).map(|i| b[i] / s[i]).collect();
-    cholesky_solve(&l, n, &mut x);
-    Some(x.iter().zip(&s).map(|(x, s)| x / s).collect())
+
+    /// `a^-1 b`.
+    pub fn solve(&self, b: &[f64]) -> Vec<f64> {
+        let mut x: Vec<f64> = (0..self.n).map(|i| b[i] / self.s[i]).collect();
+        cholesky_solve(&self.l, self.n, &mut x);
+        x.iter().zip(&self.s).map(|(x, s)| x / s).collect()
+    }
+}
+
+/// Solve the SPD `a x = b` ([`Spd`]); None if not positive definite.
+pub(crate) fn solve_spd(a: &[f64], n: usize, b: &[f64]) -> Option<Vec<f64>> {
+    Some(Spd::new(a, n)?.solve(b))
 }
 
 /// Inverse of the SPD `a` (Jacobi-scaled Cholesky); None if not positive
 /// definite.
 pub(crate) fn inverse_spd(a: &[f64], n: usize) -> Option<Vec<f64>> {
+    let f = Spd::new(a, n)?;
     let mut inv = vec![0.0; n * n];
     for j in 0..n {
         let mut e = vec![0.0; n];
         e[j] = 1.0;
-        let col = solve_spd(a, n, &e)?;
+        let col = f.solve(&e);
         for i in 0..n {
             inv[i * n + j] = col[i];
         }
@@ -188,16 +210,17 @@ impl Damped {
             for i in 0..l {
                 bb[i * l + i] += damp(b.a_ll[i * l + i], lambda, lfloor);
             }
-            // B^-1 A_bg column by column, B^-1 g_b
+            // B^-1 A_bg column by column, B^-1 g_b (B factored once)
+            let bf = Spd::new(&bb, l)?;
             let mut x = vec![0.0; l * ng];
             for gcol in 0..ng {
                 let rhs: Vec<f64> = (0..l).map(|i| b.a_gl[gcol * l + i]).collect();
-                let sol = solve_spd(&bb, l, &rhs)?;
+                let sol = bf.solve(&rhs);
                 for i in 0..l {
                     x[i * ng + gcol] = sol[i];
                 }
             }
-            let y = solve_spd(&bb, l, &b.g_l)?;
+            let y = bf.solve(&b.g_l);
             // S -= A_gb X ; r += A_gb y
             for gi in 0..ng {
                 for gj in 0..ng {
@@ -298,11 +321,12 @@ pub(crate) fn global_information(nrm: &Normal) -> Vec<f64> {
         for i in 0..l {
             bb[i * l + i] += ridge;
         }
+        let Some(bf) = Spd::new(&bb, l) else {
+            continue;
+        };
         for gj in 0..ng {
             let rhs: Vec<f64> = (0..l).map(|i| b.a_gl[gj * l + i]).collect();
-            let Some(x) = solve_spd(&bb, l, &rhs) else {
-                continue;
-            };
+            let x = bf.solve(&rhs);
             for gi in 0..ng {
                 let v: f64 = (0..l).map(|i| b.a_gl[gi * l + i] * x[i]).sum();
                 s[gi * ng + gj] -= v;

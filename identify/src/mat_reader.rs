@@ -8,13 +8,13 @@
 
 use std::path::Path;
 
-use crate::csv_reader::unit_note;
+use crate::csv_reader::unit_factor;
 use crate::data::{
     experiment_name, first_non_increasing, sampling_warning, Channel, ChannelSpec, Experiment,
     ReadOptions, MIN_SAMPLES,
 };
 use crate::error::{DataError, DataWarning};
-use crate::units::{lookup_unit, split_header, Kind};
+use crate::units::{split_header, Kind};
 
 /// Reads a MAT experiment. See [`crate::read_experiment_with`].
 pub(crate) fn read_mat(
@@ -196,31 +196,7 @@ pub(crate) fn read_mat(
     let mut channels = Vec::new();
     for (k, kind) in order {
         let (name, unit) = &split[k];
-        let (factor, note) = match unit {
-            None => (1.0, None),
-            Some(u) => match lookup_unit(u) {
-                None => {
-                    return Err(DataError::UnknownUnit {
-                        file,
-                        column: k + 2,
-                        header: names[k].clone(),
-                        unit: u.clone(),
-                        kind,
-                    })
-                }
-                Some(unit) if kind != Kind::Other && unit.kind != kind => {
-                    return Err(DataError::IncompatibleUnit {
-                        file,
-                        column: k + 2,
-                        header: names[k].clone(),
-                        unit: u.clone(),
-                        expected: kind,
-                        found: unit.kind,
-                    })
-                }
-                Some(unit) => (unit.factor, Some(unit_note(u, unit.kind))),
-            },
-        };
+        let (factor, note) = unit_factor(&file, k + 2, &names[k], unit.as_deref(), kind)?;
         channels.push(Channel {
             name: name.clone(),
             unit_note: note,

@@ -130,6 +130,17 @@ impl Problem<'_> {
         self.free.len() + self.offsets.len()
     }
 
+    /// Number of locals: the estimated initial-state components of every
+    /// block.
+    pub fn n_locals(&self) -> usize {
+        self.blocks.iter().map(|b| b.free_state.len()).sum()
+    }
+
+    /// Number of unknowns: the globals and every block's locals.
+    pub fn n_unknowns(&self) -> usize {
+        self.n_globals() + self.n_locals()
+    }
+
     /// Base parameter vector at globals `g`.
     pub fn base_at(&self, g: &[f64]) -> Vec<f64> {
         let mut b = self.base.clone();

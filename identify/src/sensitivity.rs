@@ -58,9 +58,9 @@ use plantc_derive::sym::{diff, Expr, SplitTape, Tape};
 
 use crate::closed_loop::{LoopEval, LoopLaw, LoopSens, Replay};
 use crate::experiment_sim::{
-    check_start, dynamics_outputs, integrate, lu_factor, lu_solve, parameters_slow, prepare_run,
-    received, received_derivatives, tape_inputs, BlockStart, OnSwitch, Segment, SignalEffects,
-    Signals, SimError, SimOptions, StiffnessProbe, REFINE,
+    check_start, check_width, dynamics_outputs, integrate, loop_start, lu_factor, lu_solve,
+    parameters_slow, prepare_run, received, received_derivatives, tape_inputs, BlockStart,
+    OnSwitch, Segment, SignalEffects, Signals, SimError, SimOptions, StiffnessProbe, REFINE,
 };
 
 /// `y = a x` for the row-major `n x n` matrix `a`.
@@ -72,6 +72,28 @@ fn mat_vec(a: &[f64], n: usize, x: &[f64], y: &mut [f64]) {
             .zip(x)
             .map(|(p, q)| p * q)
             .sum();
+    }
+}
+
+/// Add `M^-1 B du` (from `minv`, the row-major `n x n` inverse, and `b`,
+/// `n x m`) to the velocity rows of column `j` of `ds` (`nc` columns);
+/// `n` and `m` are the lengths of the buffers `tmp, w` and of `du`.
+#[inline]
+fn add_input_forcing(
+    minv: &[f64],
+    b: &[f64],
+    du: &[f64],
+    (tmp, w): (&mut [f64], &mut [f64]),
+    ds: &mut [f64],
+    (nc, j): (usize, usize),
+) {
+    let (n, m) = (tmp.len(), du.len());
+    for i in 0..n {
+        tmp[i] = (0..m).map(|l| b[i * m + l] * du[l]).sum::<f64>();
+    }
+    mat_vec(minv, n, tmp, w);
+    for i in 0..n {
+        ds[(n + i) * nc + j] += w[i];
     }
 }
 
@@ -144,13 +166,7 @@ impl SensitivitySimulator {
         free: &[String],
         opts: SimOptions,
     ) -> Result<SensitivitySimulator, SimError> {
-        if let Some(w) = opts.dry_friction_width {
-            if !(w > 0.0 && w.is_finite()) {
-                return Err(SimError::BadOption(format!(
-                    "dry friction width must be positive, got {w}"
-                )));
-            }
-        }
+        check_width(&opts)?;
         let mut idx = Vec::with_capacity(free.len());
         for name in free {
             let Some(i) = model.parameters.iter().position(|p| &p.name == name) else {
@@ -346,6 +362,8 @@ impl SensitivitySimulator {
         let mut jd = vec![0.0; (nx + p) * n];
         let mut minv = vec![0.0; n * n];
         let mut du = vec![0.0; m];
+        // d held / d(width, level) of each input at the held value
+        let mut dheld = vec![(0.0, 0.0); m];
         // closed loop: du_hist[(k - k0) * nd * nc + d * nc + c], the
         // sensitivity of driven input d held from sample k
         let du_hist = std::cell::RefCell::new(vec![0.0; (k1 - k0) * nd * nc]);
@@ -417,10 +435,13 @@ impl SensitivitySimulator {
             // deadzone widths and saturation levels of inputs from the data:
             // M^-1 B d held/dtheta, with d held/d(w, L) from the held value
             if deadzone_forcing {
+                for l in 0..m {
+                    dheld[l] = received_derivatives(u[l], levels[l]);
+                }
                 for j in 0..p {
                     let mut any = false;
                     for l in 0..m {
-                        let (gw, gl) = received_derivatives(u[l], levels[l]);
+                        let (gw, gl) = dheld[l];
                         let g = gw * d_width[j * m + l] + gl * d_level[j * m + l];
                         du[l] = if g != 0.0 && !driven.contains(&l) {
                             any = true;
@@ -432,13 +453,7 @@ impl SensitivitySimulator {
                     if !any {
                         continue;
                     }
-                    for i in 0..n {
-                        tmp[i] = (0..m).map(|l| b[i * m + l] * du[l]).sum::<f64>();
-                    }
-                    mat_vec(&minv, n, &tmp, &mut w);
-                    for i in 0..n {
-                        ds[(n + i) * nc + j] += w[i];
-                    }
+                    add_input_forcing(&minv, b, &du, (&mut tmp, &mut w), ds, (nc, j));
                 }
             }
             // inputs computed in the loop: M^-1 B du/dcolumn of the held sample
@@ -462,13 +477,7 @@ impl SensitivitySimulator {
                     if !any {
                         continue;
                     }
-                    for i in 0..n {
-                        tmp[i] = (0..m).map(|l| b[i * m + l] * du[l]).sum::<f64>();
-                    }
-                    mat_vec(&minv, n, &tmp, &mut w);
-                    for i in 0..n {
-                        ds[(n + i) * nc + j] += w[i];
-                    }
+                    add_input_forcing(&minv, b, &du, (&mut tmp, &mut w), ds, (nc, j));
                 }
             }
             // moving segment boundaries (delayed switches): f (b' - a') / L
@@ -584,8 +593,8 @@ impl SensitivitySimulator {
         Ok(SensitivityTrajectory { q, dq })
     }
 
-    /// Loop state at a block starting at `k0` with `nc` sensitivity
-    /// columns; None in open loop.
+    /// Loop state at a block starting at `k0` ([`loop_start`]) and the
+    /// law's sensitivities to `nc` columns; None in open loop.
     #[allow(clippy::type_complexity)]
     fn closed<'s>(
         &'s self,
@@ -603,24 +612,11 @@ impl SensitivitySimulator {
         )>,
         SimError,
     > {
-        let Some(law) = &self.law else {
-            return Ok(None);
-        };
-        let Some(rep) = &sig.replay else {
-            return Err(SimError::BadOption(format!(
-                "closed-loop simulation of `{}` needs its signals read for recorded controller `{}`",
-                sig.name, law.name
-            )));
-        };
-        let nf2 = rep.coeffs.len() * 2;
-        Ok(Some((
-            law,
-            rep,
-            LoopEval::new(law),
-            rep.state[k0 * nf2..(k0 + 1) * nf2].to_vec(),
-            vec![0.0; law.driven().len()],
-            LoopSens::new(law, nc),
-        )))
+        Ok(
+            loop_start(self.law.as_ref(), sig, k0)?.map(|(law, rep, ev, fstate, u_law)| {
+                (law, rep, ev, fstate, u_law, LoopSens::new(law, nc))
+            }),
+        )
     }
 }
 

@@ -6,29 +6,23 @@
 use std::path::{Path, PathBuf};
 
 use plantc_derive::model::load_model;
-use plantc_identify::{fit, read_experiments, ChannelSpec, FitOptions, Kind, ReadOptions};
+use plantc_identify::{
+    fit, read_experiments, ChannelSpec, Experiment, FitOptions, Kind, ReadOptions,
+};
 
 fn repo() -> PathBuf {
     Path::new(env!("CARGO_MANIFEST_DIR")).join("..")
 }
 
-/// Fit % >= 92 on both joints (issue acceptance) with the measured torques
-/// as input; the fitted friction is printed next to the lab's identified
-/// values (`model_parameters_design_A.0_model_2.0.yml`: viscous 0.001 N m s,
-/// Coulomb 0.093 / 0.078 N m in `cf atan(100 q')`, i.e. 0.146 / 0.123 N m
-/// at speed; the lab's 2022-08-19 controller files list 0.0928 / 0.0771 N m
-/// and 0.0111 / 0.0044 N m s).
-#[test]
-fn measured_torques_fit_both_joints() {
+/// The recording (`trajectory_00.csv`) with the measured torques as the
+/// inputs; None (and a note) when the shared data are absent.
+fn read_trajectory() -> Option<Vec<Experiment>> {
     let file =
         repo().join("../shared/data/real/dfki_double_pendulum_sysid/converted/trajectory_00.csv");
     if !file.is_file() {
         eprintln!("skipping: {} not present", file.display());
-        return;
+        return None;
     }
-    let model = load_model(&repo().join("models/double_pendulum.plant"))
-        .expect("model loads")
-        .model;
     let spec = ChannelSpec::new()
         .angle("q1")
         .angle("q2")
@@ -42,6 +36,23 @@ fn measured_torques_fit_both_joints() {
         ..ReadOptions::default()
     };
     let (exps, _) = read_experiments(&[file], &spec, &opts).expect("reads");
+    Some(exps)
+}
+
+/// Fit % >= 92 on both joints (issue acceptance) with the measured torques
+/// as input; the fitted friction is printed next to the lab's identified
+/// values (`model_parameters_design_A.0_model_2.0.yml`: viscous 0.001 N m s,
+/// Coulomb 0.093 / 0.078 N m in `cf atan(100 q')`, i.e. 0.146 / 0.123 N m
+/// at speed; the lab's 2022-08-19 controller files list 0.0928 / 0.0771 N m
+/// and 0.0111 / 0.0044 N m s).
+#[test]
+fn measured_torques_fit_both_joints() {
+    let Some(exps) = read_trajectory() else {
+        return;
+    };
+    let model = load_model(&repo().join("models/double_pendulum.plant"))
+        .expect("model loads")
+        .model;
     let t = std::time::Instant::now();
     let r = fit(&model, &exps, &FitOptions::default()).expect("fits");
     eprintln!(
@@ -92,12 +103,9 @@ fn measured_torques_fit_both_joints() {
 /// the output).
 #[test]
 fn viscous_only_model_first_finds_coulomb_friction() {
-    let file =
-        repo().join("../shared/data/real/dfki_double_pendulum_sysid/converted/trajectory_00.csv");
-    if !file.is_file() {
-        eprintln!("skipping: {} not present", file.display());
+    let Some(exps) = read_trajectory() else {
         return;
-    }
+    };
     let full =
         std::fs::read_to_string(repo().join("models/double_pendulum.plant")).expect("model text");
     let text: String = full
@@ -110,19 +118,6 @@ fn viscous_only_model_first_finds_coulomb_friction() {
         .collect::<Vec<_>>()
         .join("\n");
     assert!(!text.contains("coulomb"), "{text}");
-    let spec = ChannelSpec::new()
-        .angle("q1")
-        .angle("q2")
-        .input("tau1", Kind::Torque)
-        .input("tau2", Kind::Torque);
-    let opts = ReadOptions {
-        rename: vec![
-            ("tau1".into(), "tau1_meas".into()),
-            ("tau2".into(), "tau2_meas".into()),
-        ],
-        ..ReadOptions::default()
-    };
-    let (exps, _) = read_experiments(&[file], &spec, &opts).expect("reads");
     let t = std::time::Instant::now();
     let d = plantc_identify::diagnose(&text, &exps, &FitOptions::default()).expect("diagnoses");
     eprintln!(

@@ -8,15 +8,15 @@
 
 mod common;
 
-use common::simulated::{check_sensitivities, model, pendulum_text};
+use common::simulated::{check_sensitivities, model, pendulum_text, simulate};
 
-use plantc_derive::model::{Model, ParameterValues};
+use plantc_derive::model::Model;
 use plantc_identify::diagnose::{candidates, model_from_text, regressor_for, DiagnoseOptions};
 use plantc_identify::effect_edit::label_of;
 use plantc_identify::synth::{parse_effect_spec, parse_experiment_spec};
 use plantc_identify::{
     read_experiment, synthesize, EffectInstance, EffectKind, EquationError, EquationErrorOptions,
-    Experiment, Signals, SimOptions, Simulator, SynthOptions, SynthSpec,
+    Experiment, Signals, SynthOptions, SynthSpec,
 };
 
 /// The pendulum with extra declarations and extra terms on the arm's force.
@@ -62,13 +62,9 @@ fn sensitivities_of_the_new_effects_match_finite_differences() {
         " + cogging(A, N, ph) + speed_limit(vmax, cv)",
         "inertia alpha = added_inertia(Ja)",
     );
-    let sim = Simulator::new(&m, SimOptions::default()).expect("compiles");
-    let base: Vec<f64> = m.parameters.iter().map(|p| p.value).collect();
-    let tr = sim
-        .simulate(&sig, &ParameterValues::from_base(&m, base).full, sig.len())
-        .expect("simulates");
-    let span = tr.q[0].iter().fold(0.0f64, |a, v| a.max(v.abs()));
-    let speed = tr.q[0]
+    let q = simulate(&m, &sig);
+    let span = q[0].iter().fold(0.0f64, |a, v| a.max(v.abs()));
+    let speed = q[0]
         .windows(2)
         .map(|w| (w[1] - w[0]).abs() / 0.002)
         .fold(0.0f64, f64::max);

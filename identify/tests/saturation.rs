@@ -7,15 +7,16 @@
 mod common;
 
 use common::simulated::{
-    driven_signals, max_diff, model, nominal, pendulum_text, pendulum_with, simulate,
+    check_sensitivities, check_sensitivities_in_loop, driven_signals, max_diff, model, nominal,
+    pendulum_text, pendulum_with, simulate,
 };
 use std::path::PathBuf;
 
-use plantc_derive::model::{load_model_text, Model, ParameterValues};
+use plantc_derive::model::{load_model_text, ParameterValues};
 use plantc_identify::experiment_sim::{deadzone, saturation};
 use plantc_identify::{
-    Channel, EffectInstance, EffectKind, Experiment, LoopLaw, SensitivitySimulator, Signals,
-    SimError, SimOptions, Simulator,
+    Channel, EffectInstance, EffectKind, Experiment, LoopLaw, Signals, SimError, SimOptions,
+    Simulator,
 };
 
 /// `min(max(u, -L), L)` written out (the reference for [`saturation`]).
@@ -115,55 +116,6 @@ fn nonpositive_level_in_the_parameter_vector_is_an_error() {
     }
 }
 
-/// Sensitivities against central differences of the plain simulation; the
-/// tolerance is relative to the largest |S| of each coordinate.
-fn check_sensitivities(
-    m: &Model,
-    sig: &Signals,
-    free: &[&str],
-    steps: &[f64],
-    tol: f64,
-    law: Option<&LoopLaw>,
-) {
-    let free: Vec<String> = free.iter().map(|s| s.to_string()).collect();
-    let mut sens = SensitivitySimulator::new(m, &free, SimOptions::default()).expect("compiles");
-    let mut sim = Simulator::new(m, SimOptions::default()).expect("compiles");
-    if let Some(l) = law {
-        sens = sens.with_loop(l.clone());
-        sim = sim.with_loop(l.clone());
-    }
-    let base: Vec<f64> = m.parameters.iter().map(|p| p.value).collect();
-    let full = ParameterValues::from_base(m, base.clone()).full;
-    let st = sens.simulate(sig, &full, sig.len()).expect("simulates");
-    let plain = sim.simulate(sig, &full, sig.len()).expect("simulates");
-    assert!(max_diff(&st.q, &plain.q) < 1e-12);
-    for (j, &pi) in sens.free_indices().iter().enumerate() {
-        let h = steps[j];
-        let run = |delta: f64| {
-            let mut b = base.clone();
-            b[pi] += delta;
-            sim.simulate(sig, &ParameterValues::from_base(m, b).full, sig.len())
-                .expect("simulates")
-        };
-        let (yp, ym) = (run(h), run(-h));
-        for i in 0..m.coordinates.len() {
-            let scale = st.dq[i][j].iter().fold(1e-12_f64, |a, v| a.max(v.abs()));
-            let mut worst = 0.0_f64;
-            for k in 0..sig.len() {
-                let fd = (yp.q[i][k] - ym.q[i][k]) / (2.0 * h);
-                worst = worst.max((fd - st.dq[i][j][k]).abs());
-            }
-            eprintln!(
-                "{} coord {i}: max |S| {scale:.3e}, max error {worst:.3e} ({:.1e} relative)",
-                free[j],
-                worst / scale
-            );
-            assert!(scale > 1e-6, "{} coord {i}: no sensitivity", free[j]);
-            assert!(worst <= tol * scale, "{} coord {i}", free[j]);
-        }
-    }
-}
-
 /// The sensitivity to `L` is exact for the discrete simulation (the held
 /// `sat(u[k])` is `+-L` or `u[k]`, linear in `L`, on each sample with
 /// `|u[k]| != L`): they agree with central differences to 1e-6 relative
@@ -181,7 +133,7 @@ fn sensitivity_to_level_matches_finite_differences() {
     }
     let m =
         pendulum_with("parameter L = 1.2 [V] estimate [0.1, 10]\nactuator Vm = saturation(L)\n");
-    check_sensitivities(&m, &sig, &["L", "J1"], &[1e-6, 1e-8], 1e-6, None);
+    check_sensitivities(&m, &sig, &["L", "J1"], &[1e-6, 1e-8], 1e-6);
     // with a deadzone, a delay and an offset on the same input, all estimated
     let m = pendulum_with(
         "parameter L = 1.1 [V] estimate [0.1, 10]\nparameter w = 0.3 [V] estimate [0, 2]\n\
@@ -195,7 +147,6 @@ fn sensitivity_to_level_matches_finite_differences() {
         &["L", "w", "Td", "V0"],
         &[1e-6, 1e-6, 1e-7, 1e-6],
         1e-6,
-        None,
     );
 }
 
@@ -246,7 +197,7 @@ fn closed_loop_sensitivity_with_saturation_matches_finite_differences() {
         tr.q[0].iter().any(|v| (v - 0.0).abs() > 0.05),
         "the arm moves"
     );
-    check_sensitivities(
+    check_sensitivities_in_loop(
         &m,
         &sig,
         &["L", "J1", "b1"],

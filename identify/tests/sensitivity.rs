@@ -3,6 +3,8 @@
 
 mod common;
 
+use common::simulated::driven_signals;
+
 use std::path::{Path, PathBuf};
 
 use plantc_derive::model::{load_model, Model, ParameterValues};
@@ -19,23 +21,6 @@ fn pendulum() -> Model {
     load_model(&repo().join("models/rotary_pendulum.plant"))
         .expect("pendulum model loads")
         .model
-}
-
-/// A synthetic driven experiment (no data files needed): pendulum hanging,
-/// a multisine voltage, 1 s at 500 Hz.
-fn driven_signals() -> Signals {
-    let t: Vec<f64> = (0..500).map(|k| k as f64 * 0.002).collect();
-    let u = t
-        .iter()
-        .map(|t| 1.5 * (2.0 * std::f64::consts::PI * 1.3 * t).sin() + 0.8 * (17.0 * t).cos())
-        .collect();
-    Signals {
-        name: "synthetic".into(),
-        t,
-        q: vec![vec![0.0; 500], vec![std::f64::consts::PI - 0.3; 500]],
-        u: vec![u],
-        replay: None,
-    }
 }
 
 #[test]

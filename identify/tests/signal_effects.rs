@@ -6,7 +6,7 @@
 
 mod common;
 
-use std::path::{Path, PathBuf};
+use common::simulated::{driven_signals, max_diff, model, pendulum_text, pendulum_with, simulate};
 
 use plantc_derive::model::{load_model_text, Model, ParameterValues};
 use plantc_identify::effect_edit::all_candidates;
@@ -14,62 +14,6 @@ use plantc_identify::{
     EffectEditError, EffectInstance, EffectKind, SensitivitySimulator, Signals, SimError,
     SimOptions, Simulator,
 };
-
-fn repo() -> PathBuf {
-    Path::new(env!("CARGO_MANIFEST_DIR")).join("..")
-}
-
-fn pendulum_text() -> String {
-    std::fs::read_to_string(repo().join("models/rotary_pendulum.plant")).expect("model text")
-}
-
-fn model(text: &str) -> Model {
-    match load_model_text("test.plant", text) {
-        Ok(m) => m.model,
-        Err(e) => panic!("{}", e.render()),
-    }
-}
-
-/// The pendulum with extra lines appended.
-fn pendulum_with(extra: &str) -> Model {
-    model(&(pendulum_text() + "\n" + extra))
-}
-
-fn nominal(m: &Model) -> Vec<f64> {
-    ParameterValues::from_base(m, m.parameters.iter().map(|p| p.value).collect()).full
-}
-
-/// A synthetic driven experiment: pendulum hanging, a multisine voltage,
-/// 1 s at 500 Hz.
-fn driven_signals() -> Signals {
-    let t: Vec<f64> = (0..500).map(|k| k as f64 * 0.002).collect();
-    let u = t
-        .iter()
-        .map(|t| 1.5 * (2.0 * std::f64::consts::PI * 1.3 * t).sin() + 0.8 * (17.0 * t).cos())
-        .collect();
-    Signals {
-        name: "synthetic".into(),
-        t,
-        q: vec![vec![0.0; 500], vec![std::f64::consts::PI - 0.3; 500]],
-        u: vec![u],
-        replay: None,
-    }
-}
-
-fn max_diff(a: &[Vec<f64>], b: &[Vec<f64>]) -> f64 {
-    a.iter()
-        .zip(b)
-        .flat_map(|(x, y)| x.iter().zip(y).map(|(p, q)| (p - q).abs()))
-        .fold(0.0, f64::max)
-}
-
-fn simulate(m: &Model, sig: &Signals) -> Vec<Vec<f64>> {
-    Simulator::new(m, SimOptions::default())
-        .expect("compiles")
-        .simulate(sig, &nominal(m), sig.len())
-        .expect("simulates")
-        .q
-}
 
 #[test]
 fn input_offset_equals_offset_input() {

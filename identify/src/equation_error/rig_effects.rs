@@ -46,7 +46,7 @@ use plantc_derive::model::Model;
 
 use super::{
     dot, least_squares, residual, EquationError, EquationErrorError, LinearEstimate, Regressor,
-    Score,
+    Score, Smoothed,
 };
 use crate::effect_edit::label_of;
 
@@ -133,6 +133,24 @@ fn quantiles(v: &[f64], ps: &[f64]) -> Vec<f64> {
     ps.iter()
         .map(|p| s[((p * (s.len() - 1) as f64).round() as usize).min(s.len() - 1)])
         .collect()
+}
+
+/// The levels scanned for magnitudes `mags`: their [`LEVEL_QUANTILES`],
+/// distinct and positive.
+fn level_grid(mags: &[f64]) -> Vec<f64> {
+    let mut levels = quantiles(mags, &LEVEL_QUANTILES);
+    levels.dedup();
+    levels.retain(|l| *l > 0.0);
+    levels
+}
+
+/// The largest step between neighbours of the sorted `levels` (the scan's
+/// resolution).
+fn widest_step(levels: &[f64]) -> f64 {
+    levels
+        .windows(2)
+        .map(|w| w[1] - w[0])
+        .fold(0.0f64, f64::max)
 }
 
 /// The vertex of the parabola through `(x[i], y[i])`, `i = k-1, k, k+1`,
@@ -285,6 +303,16 @@ impl EquationError {
         step
     }
 
+    /// `of(experiment)[k]` on each row `(experiment, k, _)` of `idx`.
+    fn on_rows(&self, idx: &[usize], of: impl Fn(&Smoothed) -> &Vec<f64>) -> Vec<f64> {
+        idx.iter()
+            .map(|&r| {
+                let (e, k, _) = self.rows[r];
+                of(&self.exps[e])[k]
+            })
+            .collect()
+    }
+
     /// `f(raw_q[i])` smoothed like the states, on the rows `idx` of
     /// equation `i`, weighted.
     fn smoothed_of_q(&self, i: usize, idx: &[usize], f: impl Fn(f64) -> f64) -> Vec<f64> {
@@ -318,13 +346,7 @@ impl EquationError {
         let step = self.position_step(i);
         let n_max = ((2.0 * std::f64::consts::PI / (COUNTS_PER_PERIOD * step)).floor() as usize)
             .min(MAX_PERIODS);
-        let q: Vec<f64> = idx
-            .iter()
-            .map(|&r| {
-                let (e, k, _) = self.rows[r];
-                self.exps[e].q[i][k]
-            })
-            .collect();
+        let q = self.on_rows(&idx, |e| &e.q[i]);
         let range = q.iter().fold(f64::NEG_INFINITY, |a, &v| a.max(v))
             - q.iter().fold(f64::INFINITY, |a, &v| a.min(v));
         let n_min = if range > 0.0 {
@@ -422,9 +444,7 @@ impl EquationError {
             .flat_map(|e| e.raw_u[j].iter().map(|u| u.abs()))
             .filter(|u| *u > 0.0)
             .collect();
-        let mut levels = quantiles(&mags, &LEVEL_QUANTILES);
-        levels.dedup();
-        levels.retain(|l| *l > 0.0);
+        let levels = level_grid(&mags);
         if levels.is_empty() {
             return Ok(self.empty_score(std::slice::from_ref(&name.to_string())));
         }
@@ -465,10 +485,7 @@ impl EquationError {
         if score.bic_gain <= 0.0 {
             score.columns = 0;
         }
-        let spacing = levels
-            .windows(2)
-            .map(|w| w[1] - w[0])
-            .fold(0.0f64, f64::max);
+        let spacing = widest_step(&levels);
         score.estimates = vec![LinearEstimate {
             name: name.to_string(),
             value: level,
@@ -488,17 +505,9 @@ impl EquationError {
         let (b, r0, _) = self.projected();
         let idx = self.rows_of(i);
         let w = self.weight[i];
-        let v: Vec<f64> = idx
-            .iter()
-            .map(|&r| {
-                let (e, k, _) = self.rows[r];
-                self.exps[e].qd[i][k]
-            })
-            .collect();
+        let v = self.on_rows(&idx, |e| &e.qd[i]);
         let mags: Vec<f64> = v.iter().map(|x| x.abs()).collect();
-        let mut levels = quantiles(&mags, &LEVEL_QUANTILES);
-        levels.dedup();
-        levels.retain(|l| *l > 0.0);
+        let levels = level_grid(&mags);
         let col = |vmax: f64| -> Vec<f64> {
             v.iter()
                 .map(|&x| rounded_dead_band(x, vmax) * w)
@@ -527,10 +536,7 @@ impl EquationError {
         }
         let full = vec![self.column(&idx, &col(vmax))];
         let (mut score, coef, var) = self.finish(&self.r, &full, 1);
-        let spacing = levels
-            .windows(2)
-            .map(|w| w[1] - w[0])
-            .fold(0.0f64, f64::max);
+        let spacing = widest_step(&levels);
         score.estimates = vec![
             LinearEstimate {
                 name: names[0].clone(),

@@ -5,7 +5,7 @@
 use std::path::Path;
 
 use plantc_derive::model::{load_model_text, Model, ParameterValues};
-use plantc_identify::{SensitivitySimulator, Signals, SimOptions, Simulator};
+use plantc_identify::{LoopLaw, SensitivitySimulator, Signals, SimOptions, Simulator};
 
 pub fn pendulum_text() -> String {
     let path = Path::new(env!("CARGO_MANIFEST_DIR")).join("../models/rotary_pendulum.plant");
@@ -63,9 +63,26 @@ pub fn simulate(m: &Model, sig: &Signals) -> Vec<Vec<f64>> {
 /// Sensitivities against central differences of the plain simulation; the
 /// tolerance is relative to the largest |S| of each coordinate.
 pub fn check_sensitivities(m: &Model, sig: &Signals, free: &[&str], steps: &[f64], tol: f64) {
+    check_sensitivities_in_loop(m, sig, free, steps, tol, None);
+}
+
+/// [`check_sensitivities`] with a recorded controller `law` in the loop of
+/// both simulators, if given.
+pub fn check_sensitivities_in_loop(
+    m: &Model,
+    sig: &Signals,
+    free: &[&str],
+    steps: &[f64],
+    tol: f64,
+    law: Option<&LoopLaw>,
+) {
     let free: Vec<String> = free.iter().map(|s| s.to_string()).collect();
-    let sens = SensitivitySimulator::new(m, &free, SimOptions::default()).expect("compiles");
-    let sim = Simulator::new(m, SimOptions::default()).expect("compiles");
+    let mut sens = SensitivitySimulator::new(m, &free, SimOptions::default()).expect("compiles");
+    let mut sim = Simulator::new(m, SimOptions::default()).expect("compiles");
+    if let Some(l) = law {
+        sens = sens.with_loop(l.clone());
+        sim = sim.with_loop(l.clone());
+    }
     let base: Vec<f64> = m.parameters.iter().map(|p| p.value).collect();
     let full = ParameterValues::from_base(m, base.clone()).full;
     let st = sens.simulate(sig, &full, sig.len()).expect("simulates");
