@@ -482,7 +482,7 @@ pub fn diagnose_with(
         });
         edited.push((m, standing));
     }
-    let floor = crate::fit::noise_cost(&baseline.weights);
+    let floor = crate::weights::noise_cost(&baseline.weights);
     let above_floor = floor > 0.0 && baseline.after_cost >= FLOOR_BASELINE * floor;
     if blind && above_floor {
         notes.push(

@@ -1071,11 +1071,36 @@ impl EquationError {
             }
             None => cand,
         };
+        let (mut score, coef, var) = self.finish(&target, &cand, 0);
+        score.estimates = names
+            .iter()
+            .enumerate()
+            .map(|(j, name)| LinearEstimate {
+                name: name.clone(),
+                value: p0[j] + sign * coef[j],
+                std_error: var[j].sqrt(),
+            })
+            .collect();
+        Ok(score)
+    }
+
+    /// Score with candidate columns `cand` on top of the nuisance, `extra`
+    /// scanned parameters counted in the penalty; returns the score (with
+    /// empty estimates), the coefficients of `cand` and their variances.
+    fn finish(
+        &self,
+        target: &[f64],
+        cand: &[Vec<f64>],
+        extra: usize,
+    ) -> (Score, Vec<f64>, Vec<f64>) {
         let mut cols: Vec<&[f64]> = self.nuisance.iter().map(Vec::as_slice).collect();
         let nn = cols.len();
         cols.extend(cand.iter().map(Vec::as_slice));
-        let fit = least_squares(&cols, &target);
-        let k = fit.independent[nn..].iter().filter(|b| **b).count();
+        let fit = least_squares(&cols, target);
+        let independent = fit.independent[nn..].iter().filter(|b| **b).count();
+        // a column-free candidate (saturation) counts when its target moved
+        let moved = cand.is_empty() && target != self.r.as_slice();
+        let k = independent + if independent > 0 || moved { extra } else { 0 };
         let nrows = self.rows.len() as f64;
         let rss1 = fit.rss.min(self.rss0);
         let bic_gain = if k == 0 || rss1 <= 0.0 {
@@ -1085,25 +1110,23 @@ impl EquationError {
         };
         let dof = (nrows - (nn + k) as f64).max(1.0);
         let sigma2 = fit.rss / dof;
-        let estimates = names
-            .iter()
-            .enumerate()
-            .map(|(j, name)| LinearEstimate {
-                name: name.clone(),
-                value: p0[j] + sign * fit.coef[nn + j],
-                std_error: (sigma2 * fit.inv_diag[nn + j]).sqrt(),
-            })
+        let var: Vec<f64> = (0..cand.len())
+            .map(|j| sigma2 * fit.inv_diag[nn + j])
             .collect();
-        let r1 = residual(&target, &cols, &fit.coef);
+        let r1 = residual(target, &cols, &fit.coef);
         let (by_experiment, by_speed) = self.shares(&r1);
-        Ok(Score {
-            bic_gain,
-            residual_share: ((self.rss0 - rss1) / self.rss0).max(0.0),
-            columns: k,
-            estimates,
-            by_experiment,
-            by_speed,
-        })
+        (
+            Score {
+                bic_gain,
+                residual_share: ((self.rss0 - rss1) / self.rss0).max(0.0),
+                columns: k,
+                estimates: Vec::new(),
+                by_experiment,
+                by_speed,
+            },
+            fit.coef[nn..].to_vec(),
+            var,
+        )
     }
 
     /// Where the reduction of the squared residual from the nuisance-only

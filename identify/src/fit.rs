@@ -1393,7 +1393,7 @@ fn solve(
         }
     }
     // multi-start when stalled far above the floor at a bound
-    let floor = noise_cost(&setup.weights);
+    let floor = crate::weights::noise_cost(&setup.weights);
     let at_bound = |g: &[f64]| {
         (0..p).any(|j| (g[j] - pb.lo[j]).min(pb.hi[j] - g[j]) < 1e-3 * (pb.hi[j] - pb.lo[j]))
     };
@@ -1470,17 +1470,6 @@ pub(crate) fn nuisance_estimates(
             .collect()
     });
     experiment_estimates(setup, pb, pt, &cov, &lv, sigma2, &sim, None)
-}
-
-/// The weighted RMS that measurement noise alone would leave.
-pub(crate) fn noise_cost(weights: &[ChannelWeight]) -> f64 {
-    let n = weights.len().max(1) as f64;
-    (weights
-        .iter()
-        .map(|w| (w.weight * w.noise).powi(2))
-        .sum::<f64>()
-        / n)
-        .sqrt()
 }
 
 /// Unweighted RMSE of simulated against measured over all coordinates and

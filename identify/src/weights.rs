@@ -160,6 +160,18 @@ pub fn channel_weights(
         .collect()
 }
 
+/// The weighted RMS that measurement noise alone would leave: the noise
+/// floor of a fit's cost (`FitResult::after_cost`) with these weights.
+pub fn noise_cost(weights: &[ChannelWeight]) -> f64 {
+    let n = weights.len().max(1) as f64;
+    (weights
+        .iter()
+        .map(|w| (w.weight * w.noise).powi(2))
+        .sum::<f64>()
+        / n)
+        .sqrt()
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;

@@ -313,10 +313,7 @@ fn two_effects_are_named_in_turn_and_the_residual_ends_near_the_floor() {
         .iter()
         .filter_map(|r| r.effect.as_ref().map(|e| e.label()))
         .collect();
-    let w = &story.fit.weights;
-    let floor = (w.iter().map(|c| (c.weight * c.noise).powi(2)).sum::<f64>()
-        / w.len().max(1) as f64)
-        .sqrt();
+    let floor = plantc_identify::weights::noise_cost(&story.fit.weights);
     for (k, r) in story.rounds.iter().enumerate() {
         eprintln!(
             "round {}: {:?}, cost {:.3e} -> {:?} (floor {floor:.3e})",

@@ -44,10 +44,7 @@
 
 use plantc_derive::model::Model;
 
-use super::{
-    dot, least_squares, residual, EquationError, EquationErrorError, LinearEstimate, Regressor,
-    Score, Smoothed,
-};
+use super::{dot, EquationError, EquationErrorError, LinearEstimate, Regressor, Score, Smoothed};
 use crate::effect_edit::label_of;
 
 /// Smallest cogging period count scanned.
@@ -241,51 +238,6 @@ impl EquationError {
             c[r] = *v;
         }
         c
-    }
-
-    /// Score with candidate columns `cand` on top of the nuisance, `extra`
-    /// scanned parameters counted in the penalty; returns the score (with
-    /// empty estimates), the coefficients of `cand` and their variances.
-    fn finish(
-        &self,
-        target: &[f64],
-        cand: &[Vec<f64>],
-        extra: usize,
-    ) -> (Score, Vec<f64>, Vec<f64>) {
-        let mut cols: Vec<&[f64]> = self.nuisance.iter().map(Vec::as_slice).collect();
-        let nn = cols.len();
-        cols.extend(cand.iter().map(Vec::as_slice));
-        let fit = least_squares(&cols, target);
-        let independent = fit.independent[nn..].iter().filter(|b| **b).count();
-        // a column-free candidate (saturation) counts when its target moved
-        let moved = cand.is_empty() && target != self.r.as_slice();
-        let k = independent + if independent > 0 || moved { extra } else { 0 };
-        let nrows = self.rows.len() as f64;
-        let rss1 = fit.rss.min(self.rss0);
-        let bic_gain = if k == 0 || rss1 <= 0.0 {
-            0.0
-        } else {
-            nrows * (self.rss0 / rss1).ln() - k as f64 * nrows.ln()
-        };
-        let dof = (nrows - (nn + k) as f64).max(1.0);
-        let sigma2 = fit.rss / dof;
-        let var: Vec<f64> = (0..cand.len())
-            .map(|j| sigma2 * fit.inv_diag[nn + j])
-            .collect();
-        let r1 = residual(target, &cols, &fit.coef);
-        let (by_experiment, by_speed) = self.shares(&r1);
-        (
-            Score {
-                bic_gain,
-                residual_share: ((self.rss0 - rss1) / self.rss0).max(0.0),
-                columns: k,
-                estimates: Vec::new(),
-                by_experiment,
-                by_speed,
-            },
-            fit.coef[nn..].to_vec(),
-            var,
-        )
     }
 
     /// The smallest positive step of coordinate `i` between samples (an
