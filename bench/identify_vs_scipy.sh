@@ -26,7 +26,8 @@
 # verdicts, and plantc's CPU against the 3 s goal. A numpy+scipy venv is
 # made on first use at PLANTC_BENCH_SCIPY_VENV (default
 # ~/.cache/plantc-bench/venv-scipy); PLANTC=path/to/plantc skips the cargo
-# build. Takes about 10 minutes, nearly all of it scipy.
+# build. Takes about 8 minutes (480 s measured, 2 cores, load 4.5), nearly
+# all of it the scipy pipeline's simulation-error fits.
 set -euo pipefail
 cd "$(dirname "$0")/.."
 VENV="${PLANTC_BENCH_SCIPY_VENV:-${XDG_CACHE_HOME:-$HOME/.cache}/plantc-bench/venv-scipy}"
@@ -93,6 +94,7 @@ print(f"effect value (truth 6e-4 N m): scipy {s['effect_value'] if s['effect_val
       f"plantc Fc_alpha {fc if fc is not None else float('nan'):.4e}")
 phases = ", ".join(f"{ph['name']} {ph['cpu']:.1f}" for ph in s["phases"] if ph["cpu"] >= 0.05)
 print(f"scipy CPU by phase (s): {phases}")
+print("(plantc also estimates sensor offsets, screens a second round and writes figures; the scipy peer does one round)")
 print("reference, identification notes (their pipeline, other cases, same data size): 11-154 s per case,")
 print("  nominal fit 9-63 s, equation-error ranking 0.25 s")
 print(f"goal (issue 11): plantc identify <= 3 s CPU per case: {'met' if pc <= 3.0 else 'NOT met'} ({pc:.1f} s)")
