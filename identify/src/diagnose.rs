@@ -415,6 +415,19 @@ pub fn diagnose_with(
 ) -> Result<Diagnosis, DiagnoseError> {
     let model = model_from_text("baseline", text)?;
     let baseline = fit(&model, experiments, &opts.fit).map_err(DiagnoseError::Fit)?;
+    diagnose_from(text, experiments, baseline, opts)
+}
+
+/// [`diagnose_with`] against a baseline fitted already: `baseline` must be
+/// the fit of the model in `text` to `experiments` under `opts.fit` (as
+/// the last round of the identify story leaves it).
+pub fn diagnose_from(
+    text: &str,
+    experiments: &[Experiment],
+    baseline: FitResult,
+    opts: &DiagnoseOptions,
+) -> Result<Diagnosis, DiagnoseError> {
+    let model = model_from_text("baseline", text)?;
     let nuisance = opts
         .fit
         .free
@@ -493,6 +506,8 @@ pub fn diagnose_with(
     // columns the model's own parameters already span, e.g. viscous
     // friction where a damping is estimated, adds nothing); all candidates
     // are eligible when the ranking is blind.
+    // each refit starts warm from the baseline; a second start from the
+    // nominal values follows while nothing has settled the diagnosis
     let refit_at = |ranking: &mut [Ranked], idx: usize| {
         refit(
             &mut ranking[idx],
@@ -503,12 +518,26 @@ pub fn diagnose_with(
             opts,
         );
     };
+    let second_at = |ranking: &mut [Ranked], idx: usize| {
+        if !settled(ranking, floor) {
+            second_start(
+                &mut ranking[idx],
+                &edited[idx].0,
+                &baseline,
+                experiments,
+                opts,
+            );
+        }
+    };
     let leaders: Vec<usize> = (0..ranking.len())
         .filter(|&i| blind || edited[i].1 .0)
         .take(opts.refit)
         .collect();
     for &idx in &leaders {
         refit_at(&mut ranking, idx);
+    }
+    for &idx in &leaders {
+        second_at(&mut ranking, idx);
     }
     // When none of them explains the residual and the residual sits well
     // above the noise floor, the equation-error ranking has missed (its
@@ -536,6 +565,7 @@ pub fn diagnose_with(
                 ));
             }
             refit_at(&mut ranking, idx);
+            second_at(&mut ranking, idx);
         }
     }
     // a candidate that explains the residual competes with the simpler
@@ -555,6 +585,7 @@ pub fn diagnose_with(
                 r.candidate.effect == *inner && r.candidate.target == c.target && r.fit.is_none()
             }) {
                 refit_at(&mut ranking, j);
+                second_at(&mut ranking, j);
             }
         }
     }
@@ -658,7 +689,9 @@ fn decide(
             })
             .collect();
         let horizon = baseline.segments.map_or(Horizon::Whole, Horizon::Segments);
-        let Ok(again) = fit(model, experiments, &screening(opts, start, horizon)) else {
+        let mut again_opts = screening(opts, start, horizon);
+        again_opts.warm = Some(f.warm.clone());
+        let Ok(again) = fit(model, experiments, &again_opts) else {
             return Some(top.candidate.clone());
         };
         if again.after_cost >= 0.999 * base_cost {
@@ -781,7 +814,15 @@ fn sensor_offsets_from_nuisance(
                 for e in r.parameters.iter_mut().take(1) {
                     e.value = mean;
                 }
-                match refit_from(r, &m, horizon, Some((model, baseline)), experiments, opts) {
+                match refit_from(
+                    r,
+                    &m,
+                    horizon,
+                    Some((model, baseline)),
+                    true,
+                    experiments,
+                    opts,
+                ) {
                     Ok(f) => f,
                     Err(_) => continue,
                 }
@@ -847,13 +888,19 @@ fn prefer_nested(ranking: &mut [Ranked], base_cost: f64, floor: f64, min_gain: f
     }
 }
 
+/// A screening refit stops when a step lowers the SSR by less than this
+/// fraction: it is compared with others by ratios of costs (a 1.5x gain at
+/// the least), to which a 0.1 % change of the SSR is noise.
+pub const SCREENING_TOLERANCE: f64 = 1e-3;
+
 /// A refit gain above which a second start is not tried.
 const DECISIVE_GAIN: f64 = 30.0;
 
-/// Refit one candidate's model from the baseline estimates and the
-/// equation-error estimates of its own parameters; if that fails (a baseline
-/// distorted by the missing effect can make the edited model diverge), from
-/// the model's nominal values instead.
+/// Refit one candidate's model from the baseline (its estimates, its
+/// nuisance as a warm start) and the equation-error estimates of the
+/// candidate's own parameters; if that fails (a baseline distorted by the
+/// missing effect can make the edited model diverge), from the model's
+/// nominal values instead.
 fn refit(
     r: &mut Ranked,
     m: &Model,
@@ -864,38 +911,82 @@ fn refit(
 ) {
     // the candidate is judged on the baseline's terms: the same horizon
     let horizon = baseline.segments.map_or(Horizon::Whole, Horizon::Segments);
-    let mut outcome = refit_from(r, m, horizon, Some((model, baseline)), experiments, opts);
-    // A baseline distorted by the missing effect can also trap the refit in
-    // a local minimum (shared spring_arm case: 5.2x from the baseline, 438x
-    // from the nominal values). Unless the first start already gave a
-    // decisive gain, also start from the nominal values and keep the better:
-    // for the equation-error leader always, for the others when the first
-    // start failed or already shows some gain (a candidate that does nothing
-    // from the first start is not worth a second fit; this keeps clean data
-    // cheap).
-    let gain = outcome.as_ref().map_or(0.0, |f| {
-        baseline.after_cost / f.after_cost.max(f64::MIN_POSITIVE)
-    });
-    let worth_it = outcome.is_err() || r.evidence.equation_error_rank == 1 || gain >= 1.2;
-    if worth_it && gain < DECISIVE_GAIN {
-        let second = refit_from(r, m, horizon, None, experiments, opts);
-        outcome = match (outcome, second) {
+    let base = Some((model, baseline));
+    let mut outcome = refit_from(r, m, horizon, base, true, experiments, opts);
+    // The candidate's model contains the baseline's (the effect at zero),
+    // so a refit that ends above the baseline's cost is trapped where the
+    // warm start put it (the vocabulary's deadzone: 0.80x): again from the
+    // same values with the growing horizons, and the better kept.
+    let trapped = outcome
+        .as_ref()
+        .map_or(true, |f| f.after_cost > baseline.after_cost);
+    if trapped {
+        let cold = refit_from(r, m, horizon, base, false, experiments, opts);
+        outcome = match (outcome, cold) {
             (Ok(a), Ok(b)) => Ok(if b.after_cost < a.after_cost { b } else { a }),
             (Ok(a), Err(_)) => Ok(a),
-            (Err(_), second) => second,
+            (Err(_), cold) => cold,
         };
     }
+    let outcome = outcome.or_else(|_| refit_from(r, m, horizon, None, false, experiments, opts));
     match outcome {
         Ok(f) => credit(r, f, baseline.after_cost),
         Err(e) => r.error = Some(e.to_string()),
     }
 }
 
+/// A baseline distorted by the missing effect can trap the refit from it in
+/// a local minimum (shared spring_arm case: 5.2x from the baseline, 438x
+/// from the nominal values): refit candidate `r` again from the model's
+/// nominal values, with the growing horizons, and keep the better. Worth it
+/// for the equation-error leader and for a candidate that already shows
+/// some gain; one that does nothing from the baseline is not worth a second
+/// fit (this keeps clean data cheap), nor one that already gained
+/// decisively.
+fn second_start(
+    r: &mut Ranked,
+    m: &Model,
+    baseline: &FitResult,
+    experiments: &[Experiment],
+    opts: &DiagnoseOptions,
+) {
+    let Some(first) = &r.fit else {
+        return;
+    };
+    let gain = baseline.after_cost / first.after_cost.max(f64::MIN_POSITIVE);
+    let worth_it = r.evidence.equation_error_rank == 1 || gain >= 1.2;
+    if !worth_it || gain >= DECISIVE_GAIN {
+        return;
+    }
+    let horizon = baseline.segments.map_or(Horizon::Whole, Horizon::Segments);
+    if let Ok(f) = refit_from(r, m, horizon, None, false, experiments, opts) {
+        if f.after_cost < first.after_cost {
+            credit(r, f, baseline.after_cost);
+        }
+    }
+}
+
+/// Is the diagnosis settled by the refits so far: a candidate that gained
+/// decisively ([`DECISIVE_GAIN`]) or explains the residual down to the
+/// noise floor? Then second starts cannot change the verdict.
+fn settled(ranking: &[Ranked], floor: f64) -> bool {
+    ranking.iter().any(|r| {
+        r.fit.as_ref().is_some_and(|f| {
+            r.gain >= DECISIVE_GAIN || (floor > 0.0 && f.after_cost <= FLOOR_REACHED * floor)
+        })
+    })
+}
+
+/// Refit candidate `r`'s model `m` from the baseline's values (`from`) or
+/// the nominal ones, with the candidate's equation-error estimates; `warm`
+/// starts the nuisance where the baseline's ended and goes straight to the
+/// whole records (see [`FitOptions::warm`]).
 fn refit_from(
     r: &Ranked,
     m: &Model,
     horizon: Horizon,
     from: Option<(&Model, &FitResult)>,
+    warm: bool,
     experiments: &[Experiment],
     opts: &DiagnoseOptions,
 ) -> Result<FitResult, FitError> {
@@ -917,7 +1008,9 @@ fn refit_from(
             }
         }
     }
-    fit(m, experiments, &screening(opts, start, horizon))
+    let mut fo = screening(opts, start, horizon);
+    fo.warm = from.filter(|_| warm).map(|(_, b)| b.warm.clone());
+    fit(m, experiments, &fo)
 }
 
 /// The fit options of a screening refit: every `estimate` parameter free
@@ -930,6 +1023,8 @@ fn screening(opts: &DiagnoseOptions, start: Vec<f64>, horizon: Horizon) -> FitOp
         horizon,
         multistart: 0,
         act_on_identifiability: false,
+        tolerance: SCREENING_TOLERANCE,
+        warm: None,
         ..opts.fit.clone()
     }
 }

@@ -126,13 +126,27 @@ pub(crate) struct ParamInfo<'a> {
     pub std_error: f64,
 }
 
+/// Whether `v` sits at a bound of `[lo, hi]`: within a thousandth of the
+/// smaller of the box's width and the value's own magnitude (itself at
+/// least a thousandth of the box). A box is often far wider than the value
+/// (dry friction of 6e-4 N m in `[0, 10]` is not at its bound; 1e-9 is).
+pub(crate) fn at_bound(v: f64, lo: f64, hi: f64) -> bool {
+    let w = hi - lo;
+    if !(w.is_finite() && w > 0.0) {
+        return v <= lo || v >= hi;
+    }
+    let scale = w.min(v.abs().max(1e-3 * w));
+    (v - lo).min(hi - v) <= 1e-3 * scale
+}
+
 /// Analyse the information `info` (`np x np`, row-major, the parameters'
 /// block with nuisance marginalised) and covariance `cov` of the
-/// parameters.
+/// parameters, at a point where the (weighted) SSR is `ssr`.
 pub(crate) fn analyse(
     params: &[ParamInfo<'_>],
     info: &[f64],
     cov: &[f64],
+    ssr: f64,
     corr_threshold: f64,
 ) -> Identifiability {
     let np = params.len();
@@ -148,7 +162,10 @@ pub(crate) fn analyse(
             p.value.abs().max(1e-12)
         }
     };
-    // sensitivity of the cost to moving each parameter across its box
+    // change of the SSR when each parameter moves across its box: dead
+    // when below a millionth of the SSR itself (judged against the cost,
+    // not against the other parameters: a wide box, e.g. dry friction up to
+    // 10 N m, would make every other parameter look dead)
     let sens: Vec<f64> = params
         .iter()
         .enumerate()
@@ -157,7 +174,7 @@ pub(crate) fn analyse(
     let top = sens.iter().copied().fold(0.0f64, f64::max);
     let dead: Vec<bool> = sens
         .iter()
-        .map(|&s| s.is_nan() || s <= 1e-6 * top || top == 0.0)
+        .map(|&s| s.is_nan() || s <= 1e-6 * ssr.max(0.0) || top == 0.0)
         .collect();
     for (j, p) in params.iter().enumerate() {
         if dead[j] {
@@ -206,7 +223,7 @@ pub(crate) fn analyse(
         if !dead[j] && w.is_finite() && p.std_error.is_finite() && p.std_error > w {
             out.wide.push(p.name.to_string());
         }
-        if w.is_finite() && (p.value - p.lo).min(p.hi - p.value) < 1e-3 * w {
+        if w.is_finite() && at_bound(p.value, p.lo, p.hi) {
             out.at_bound.push(p.name.to_string());
         }
     }
@@ -292,7 +309,7 @@ mod tests {
         }
         let cov = vec![f64::NAN; np * np];
         let params = [p("a"), p("b"), p("c"), p("d")];
-        let id = analyse(&params, &info, &cov, 0.95);
+        let id = analyse(&params, &info, &cov, 1.0, 0.95);
         assert_eq!(id.dead, vec!["d".to_string()]);
         assert_eq!(id.flat.len(), 1, "{id:?}");
         let names: Vec<&str> = id.flat[0].parameters.iter().map(|x| x.0.as_str()).collect();
@@ -302,5 +319,27 @@ mod tests {
         assert!(fix.iter().any(|f| f.0 == "d"));
         assert!(fix.iter().any(|f| f.0 == "a" || f.0 == "c"));
         assert!(!id.is_identifiable());
+    }
+
+    /// A parameter in a box far wider than its value (dry friction of
+    /// 6e-4 N m in [0, 10]) neither makes the others look dead nor sits
+    /// at its bound (identify's report said "J1, b1, l2: the data do not
+    /// depend on it" with such a box).
+    #[test]
+    fn a_wide_box_does_not_kill_the_others() {
+        // the cost is very sensitive to Fc per unit (the old rule, relative
+        // to the most sensitive parameter across its box, called J1 dead)
+        let info = [1.0, 0.0, 0.0, 1e6];
+        let cov = [1.0, 0.0, 0.0, 1e-6];
+        let mut wide = p("Fc");
+        wide.value = 6e-4;
+        wide.hi = 10.0;
+        let params = [p("J1"), wide];
+        let id = analyse(&params, &info, &cov, 1e-2, 0.95);
+        assert!(id.dead.is_empty(), "{id:?}");
+        assert!(id.at_bound.is_empty(), "{id:?}");
+        assert!(at_bound(1e-9, 0.0, 10.0));
+        assert!(at_bound(10.0, 0.0, 10.0));
+        assert!(!at_bound(0.5, 0.0, 1.0));
     }
 }

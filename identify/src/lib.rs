@@ -65,8 +65,8 @@ pub mod where_it_fails;
 
 pub use closed_loop::LoopLaw;
 pub use diagnose::{
-    candidates, diagnose, diagnose_with, Candidate, DiagnoseError, DiagnoseOptions, Diagnosis,
-    Evidence, Ranked,
+    candidates, diagnose, diagnose_from, diagnose_with, Candidate, DiagnoseError, DiagnoseOptions,
+    Diagnosis, Evidence, Ranked,
 };
 pub use effect_edit::{EffectEditError, EffectInstance, EffectKind};
 pub use equation_error::{
@@ -78,7 +78,7 @@ pub use experiment_sim::{
 pub use fit::{
     fit, fit_with_progress, resolve_closed_loop, signals_for, ClosedLoop, Estimate,
     ExperimentEstimate, FitError, FitOptions, FitProgress, FitResult, Horizon, NuisanceValue,
-    Offsets,
+    Offsets, WarmStart,
 };
 pub use identifiability::Identifiability;
 pub use metrics::{compare, fit_percent, rmse, ChannelFit, ExperimentFit, FitReport, MetricsError};

@@ -53,14 +53,15 @@
 //! every state component and free parameter) goes into one compiled tape,
 //! split so that its parameter-only part runs once per simulation.
 
+use plantc_derive::mechanics::small_lu::invert;
 use plantc_derive::model::Model;
 use plantc_derive::sym::{diff, Expr, SplitTape, Tape};
 
 use crate::closed_loop::{LoopEval, LoopLaw, LoopSens, Replay};
 use crate::experiment_sim::{
-    check_start, check_width, dynamics_outputs, integrate, loop_start, lu_factor, lu_solve,
-    parameters_slow, prepare_run, received, received_derivatives, tape_inputs, BlockStart,
-    OnSwitch, Segment, SignalEffects, Signals, SimError, SimOptions, StiffnessProbe, REFINE,
+    check_start, check_width, dynamics_outputs, integrate, loop_start, parameters_slow,
+    prepare_run, received, received_derivatives, tape_inputs, BlockStart, OnSwitch, Segment,
+    SignalEffects, Signals, SimError, SimOptions, StiffnessProbe, REFINE,
 };
 
 /// `y = a x` for the row-major `n x n` matrix `a`.
@@ -376,20 +377,17 @@ impl SensitivitySimulator {
             } else {
                 self.split.eval_fast(&tin, &mut out, &mut scratch);
             }
-            lu.copy_from_slice(&out[..n * n]);
             let r0 = &out[n * n..n * n + n];
             let b = &out[n * n + n..bs];
-            if !lu_factor(&mut lu, n, &mut piv) {
-                return false;
-            }
             // M^-1 once; every right-hand side is then a product
-            for c in 0..n {
-                w.iter_mut().for_each(|v| *v = 0.0);
-                w[c] = 1.0;
-                lu_solve(&lu, n, &piv, &mut w, &mut tmp);
-                for i in 0..n {
-                    minv[i * n + c] = w[i];
-                }
+            if !invert(
+                &out[..n * n],
+                n,
+                &mut minv,
+                (&mut lu, &mut piv, &mut tmp, &mut w),
+                f64::MIN_POSITIVE,
+            ) {
+                return false;
             }
             for i in 0..n {
                 tmp[i] = r0[i] + (0..m).map(|j| b[i * m + j] * u[j]).sum::<f64>();

@@ -11,7 +11,9 @@ use std::fmt;
 use plantc_derive::model::{Model, ParameterValues};
 
 use crate::data::Experiment;
-use crate::diagnose::{diagnose_with, model_from_text, DiagnoseError, DiagnoseOptions, Ranked};
+use crate::diagnose::{
+    diagnose_from, diagnose_with, model_from_text, DiagnoseError, DiagnoseOptions, Ranked,
+};
 use crate::effect_edit::EffectInstance;
 use crate::fit::{fit_with_progress, FitError, FitOptions, FitProgress, FitResult, Horizon};
 use crate::metrics::{compare, FitReport};
@@ -236,17 +238,16 @@ pub fn identify(
         let round = rounds.len() + 1;
         progress(&StoryProgress::Step(format!("diagnosing (round {round})")));
         let dopts = DiagnoseOptions {
-            fit: match &current_fit {
-                // later rounds start from the last fit's values
-                Some(f) => FitOptions {
-                    start: Some(f.base.clone()),
-                    ..opts.fit.clone()
-                },
-                None => opts.fit.clone(),
-            },
+            fit: opts.fit.clone(),
             ..opts.diagnose.clone()
         };
-        let d = diagnose_with(&current_text, experiments, &dopts).map_err(StoryError::Diagnose)?;
+        // later rounds diagnose against the last round's fit (the model as
+        // it now stands, fitted under the same options)
+        let d = match current_fit.clone() {
+            Some(f) => diagnose_from(&current_text, experiments, f, &dopts),
+            None => diagnose_with(&current_text, experiments, &dopts),
+        }
+        .map_err(StoryError::Diagnose)?;
         let current_model = model_from_text("model", &current_text).map_err(StoryError::Model)?;
         if rounds.is_empty() {
             stages.push(stage(
@@ -313,6 +314,8 @@ pub fn identify(
             experiments,
             &FitOptions {
                 start: Some(start),
+                // from where the candidate's refit left the nuisance
+                warm: top.fit.as_ref().map(|f| f.warm.clone()),
                 ..opts.fit.clone()
             },
             &mut |p| progress(&StoryProgress::Fit(p.clone())),
