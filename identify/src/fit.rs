@@ -1455,46 +1455,6 @@ fn solve(
     let first = (pt.clone(), before.0);
     let (mut best, last_stop) = staged(&pb, pt, first, &frozen, &horizons, opts, run);
     let floor = crate::weights::noise_cost(&setup.weights);
-    // Per-experiment offsets can trap the solver: on a swing, an offset
-    // trades against the parameters that set its phase (a free swing from
-    // nominal values stalled at cost 0.14 with an alpha offset of 0.039
-    // rad; fitted without offsets it reached 0.031, the clean data's own
-    // level; the solver had not even stopped for want of descent). When
-    // the fit ends far above the noise floor and extra starts are allowed,
-    // the staged fit is run again from the start with the offsets held at
-    // zero, then everything is freed on the whole records, and the better
-    // end is kept.
-    if opts.multistart > 0
-        && !pb.offsets.is_empty()
-        && best.1.is_finite()
-        && rms(best.1, count_all) > 3.0 * floor
-    {
-        let mut q = setup.start_point(&pb, g_start);
-        if let Some(o) = seed {
-            carry_over(setup, &pb, &mut q, o);
-        }
-        q.g[p..].iter_mut().for_each(|o| *o = 0.0);
-        let held: Vec<bool> = (0..ng).map(|j| j >= p).collect();
-        let pbn = setup.nuisance_problem(segments);
-        let _ = lm_nuisance_only(setup, &pbn, &mut q, 10, false, run);
-        run.simulations += 1;
-        let c0 = pb.cost(&q, f64::INFINITY).map_or(f64::INFINITY, |x| x.0);
-        let (mut again, _) = staged(&pb, q.clone(), (q, c0), &held, &horizons, opts, run);
-        if again.1.is_finite() {
-            if let Some(s) = refit_whole(&pb, &mut again.0, &frozen, opts.max_iterations, run) {
-                run.simulations += 1;
-                again.1 = again.1.min(s);
-            }
-        }
-        if again.1 < best.1 {
-            notes.push(format!(
-                "the fit stalled at {:.3e} with per-experiment offsets that trade against the parameters; fitted again with the offsets held at zero, then freed, it reached {:.3e}",
-                rms(best.1, count_all),
-                rms(again.1, count_all)
-            ));
-            best = again;
-        }
-    }
     // multi-start when stalled far above the floor at a bound
     let at_bound =
         |g: &[f64]| (0..p).any(|j| crate::identifiability::at_bound(g[j], pb.lo[j], pb.hi[j]));
@@ -1546,6 +1506,17 @@ fn staged(
     opts: &FitOptions,
     run: &mut Run<'_>,
 ) -> ((Point, f64), Stop) {
+    // per-experiment offsets are held on the short horizons: there an
+    // offset trades against the parameters that set a swing's phase (a
+    // free swing from nominal values fitted with them free stalled at cost
+    // 0.144 with an alpha offset of 0.039 rad; held, 0.037, the clean
+    // data's level); they move on the whole records only
+    let n_free = pb.n_globals() - pb.offsets.len();
+    let short: Vec<bool> = frozen
+        .iter()
+        .enumerate()
+        .map(|(j, f)| *f || j >= n_free)
+        .collect();
     let mut lambda: f64 = 1e-3;
     // SSR and count of the last stage
     let mut stage: Option<(f64, usize)> = None;
@@ -1566,7 +1537,7 @@ fn staged(
             pb,
             &mut pt,
             h,
-            frozen,
+            if h.is_finite() { &short } else { frozen },
             opts.max_iterations,
             last,
             &mut lambda,
