@@ -239,6 +239,17 @@ pub enum Regressor {
         /// Names given to the estimates of `vmax` and `c`.
         names: [String; 2],
     },
+    /// Stribeck friction `-(Fc + (Fs - Fc) exp(-(q'/vs)^2)) sign(q')` on
+    /// coordinate `coordinate`: for each `vs` of a logarithmic scan, the
+    /// columns `sign(q')` and `exp(-(q'/vs)^2) sign(q')` in the
+    /// coordinate's equation, with coefficients `-Fc` and `-(Fs - Fc)`
+    /// (only `Fs > Fc` counts); the best `vs` wins.
+    Stribeck {
+        /// Coordinate index.
+        coordinate: usize,
+        /// Names given to the estimates of `Fc`, `Fs` and `vs`.
+        names: [String; 3],
+    },
 }
 
 /// A parameter estimate of the equation-error regression (a linearised
@@ -1050,6 +1061,9 @@ impl EquationError {
             }
             Regressor::SpeedLimit { coordinate, names } => {
                 return self.score_speed_limit(*coordinate, names);
+            }
+            Regressor::Stribeck { coordinate, names } => {
+                return self.score_stribeck(*coordinate, names);
             }
         };
         // with the scale held fixed, a candidate column the model's own

@@ -163,8 +163,12 @@ pub struct FitOptions {
 /// offsets by coordinate. See [`FitOptions::warm`].
 #[derive(Clone, Debug, Default, PartialEq)]
 pub struct WarmStart {
-    experiments: Vec<(Vec<f64>, Vec<(usize, f64)>)>,
+    experiments: Vec<WarmExperiment>,
 }
+
+/// One experiment's part of a [`WarmStart`]: the initial state of its
+/// first block, its offsets as `(coordinate, value)`.
+type WarmExperiment = (Vec<f64>, Vec<(usize, f64)>);
 
 impl Default for FitOptions {
     fn default() -> Self {

@@ -20,7 +20,11 @@
 //! effects of issue 11 (cogging, saturation, speed limit, added inertia) and
 //! the lead's sensor offset from per-file offsets: 15 of 16, each new effect
 //! first with its main parameter within 0.1 % (the miss is still Stribeck on
-//! the arm).
+//! the arm). With Stribeck friction scanned over `vs` in the equation-error
+//! ranking and the simpler forces on a target refitted against a
+//! multi-parameter winner (issue 11, stop 20): 16 of 16, Stribeck on the arm
+//! found with `Fs` -6.7 % (its Coulomb part is shared with the gearbox's
+//! `Fg1`).
 
 use std::path::Path;
 use std::sync::Mutex;
