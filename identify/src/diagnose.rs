@@ -597,12 +597,21 @@ pub fn diagnose_from(
     // order among them is noise (vocabulary drag on the arm: speed limit
     // 3.12x and Stribeck 2.91x refitted, the drag itself fourth and never
     // refitted); refitted, the per-parameter penalty decides
+    // (not when a one-parameter force on that target passes already)
+    let passing_force = |r: &Ranked| {
+        r.candidate.kind == EffectKind::Force
+            && passes(r, baseline.after_cost, floor, opts.min_gain)
+    };
     let winners: Vec<(String, usize)> = ranking
         .iter()
         .filter(|r| {
-            r.candidate.kind == EffectKind::Force
+            passing_force(r)
                 && r.candidate.parameters.len() > 1
-                && passes(r, baseline.after_cost, floor, opts.min_gain)
+                && !ranking.iter().any(|o| {
+                    o.candidate.target == r.candidate.target
+                        && o.candidate.parameters.len() == 1
+                        && passing_force(o)
+                })
         })
         .map(|r| (r.candidate.target.clone(), r.candidate.parameters.len()))
         .collect();
@@ -920,10 +929,18 @@ fn prefer_nested(ranking: &mut [Ranked], base_cost: f64, floor: f64, min_gain: f
     }
 }
 
+/// A warm refit whose cost ends above the baseline's by more than this
+/// factor is trapped (the candidate contains the baseline, so it can do at
+/// least as well); one that ends level with it just found nothing.
+pub const TRAPPED: f64 = 1.01;
+
 /// A screening refit stops when a step lowers the SSR by less than this
-/// fraction: it is compared with others by ratios of costs (a 1.5x gain at
-/// the least), to which a 0.1 % change of the SSR is noise.
-pub const SCREENING_TOLERANCE: f64 = 1e-3;
+/// fraction: it is compared with others by ratios of costs (1.25x at the
+/// least), to which a change of 0.02 % is noise. Not looser: a slow descent
+/// can still be going somewhere (the vocabulary's Stribeck friction on the
+/// arm, refitted from nominal values, stopped at 2.05x with 1e-3 and went
+/// on to 53x with 2e-4).
+pub const SCREENING_TOLERANCE: f64 = 2e-4;
 
 /// A refit gain above which a second start is not tried.
 const DECISIVE_GAIN: f64 = 30.0;
@@ -946,12 +963,12 @@ fn refit(
     let base = Some((model, baseline));
     let mut outcome = refit_from(r, m, horizon, base, true, experiments, opts);
     // The candidate's model contains the baseline's (the effect at zero),
-    // so a refit that ends above the baseline's cost is trapped where the
+    // so a refit that ends above the baseline's cost ([`TRAPPED`]) is trapped where the
     // warm start put it (the vocabulary's deadzone: 0.80x): again from the
     // same values with the growing horizons, and the better kept.
     let trapped = outcome
         .as_ref()
-        .map_or(true, |f| f.after_cost > baseline.after_cost);
+        .map_or(true, |f| f.after_cost > TRAPPED * baseline.after_cost);
     if trapped {
         let cold = refit_from(r, m, horizon, base, false, experiments, opts);
         outcome = match (outcome, cold) {

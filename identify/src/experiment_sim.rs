@@ -48,6 +48,7 @@
 
 use std::fmt;
 
+use plantc_derive::mechanics::small_lu::invert;
 use plantc_derive::mechanics::{derive_equations, flat_outputs, small_lu, smooth_signs, Equations};
 use plantc_derive::model::Model;
 use plantc_derive::sym::{diff, Expr, SplitTape, Symbol, Tape};
@@ -1197,6 +1198,9 @@ impl Simulator {
         let mut piv = vec![0; n];
         let mut acc = vec![0.0; n];
         let mut tmp = vec![0.0; n];
+        let mut col = vec![0.0; n];
+        let mut lu = vec![0.0; n * n];
+        let mut minv = vec![0.0; n * n];
         let rhs = |x: &[f64], u: &[f64], _: &[usize], _: &Segment, dx: &mut [f64]| {
             tin[..2 * n].copy_from_slice(x);
             tin[2 * n..2 * n + m].copy_from_slice(u);
@@ -1214,12 +1218,21 @@ impl Simulator {
                 }
                 acc[i] = s;
             }
-            if !lu_factor(mm, n, &mut piv) {
+            // M^-1 as the sensitivity simulator forms it (cofactors for
+            // n <= 3), so both simulators give the same trajectory
+            if !invert(
+                mm,
+                n,
+                &mut minv,
+                (&mut lu, &mut piv, &mut tmp, &mut col),
+                f64::MIN_POSITIVE,
+            ) {
                 return false;
             }
-            lu_solve(mm, n, &piv, &mut acc, &mut tmp);
             dx[..n].copy_from_slice(&x[n..2 * n]);
-            dx[n..2 * n].copy_from_slice(&acc);
+            for i in 0..n {
+                dx[n + i] = (0..n).map(|j| minv[i * n + j] * acc[j]).sum();
+            }
             true
         };
         let meas_off: Vec<f64> = effects
