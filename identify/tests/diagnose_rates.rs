@@ -15,8 +15,6 @@ mod common;
 use common::simulated::pendulum_text;
 
 use plantc_identify::diagnose::{diagnose_with, DiagnoseOptions};
-use plantc_identify::synth::{parse_effect_spec, parse_experiment_spec};
-use plantc_identify::{read_experiment, synthesize, Experiment, SynthOptions, SynthSpec};
 
 fn cases() -> usize {
     std::env::var("PLANTC_RATE_CASES")
@@ -46,41 +44,13 @@ fn variation(k: usize) -> (f64, Vec<(String, f64)>, u64, [u32; 2]) {
 fn diagnose_case(test: &str, k: usize, effect: &str) -> String {
     let text = pendulum_text();
     let (_, base, seed, [large, small]) = variation(k);
-    let spec = SynthSpec {
-        case: format!("{test}_{k}"),
-        model_name: "rotary_pendulum.plant".into(),
-        effects: if effect.is_empty() {
-            Vec::new()
-        } else {
-            vec![parse_effect_spec(effect).expect("effect")]
-        },
-        parameter_set: None,
-        values: base,
-        experiments: [
-            format!("free_swing:alpha0={large}deg,duration=10,name=large"),
-            format!("free_swing:alpha0={small}deg,duration=10,name=small"),
-            format!("driven:alpha0=180deg,duration=10,seed={seed},rms=1.2,name=driven"),
-        ]
-        .iter()
-        .map(|e| parse_experiment_spec(e).expect("experiment"))
-        .collect(),
-        options: SynthOptions {
-            seed,
-            ..SynthOptions::default()
-        },
-    };
-    let out = synthesize(&text, &spec).expect("synthesizes");
     let dir = format!("{test}_{k}");
-    let exps: Vec<Experiment> = out
-        .files
-        .iter()
-        .map(|f| {
-            let p = common::write(&dir, &f.file_name, &f.text);
-            read_experiment(&p, &common::pendulum_spec())
-                .expect("reads")
-                .0
-        })
-        .collect();
+    let experiments = [
+        format!("free_swing:alpha0={large}deg,duration=10,name=large"),
+        format!("free_swing:alpha0={small}deg,duration=10,name=small"),
+        format!("driven:alpha0=180deg,duration=10,seed={seed},rms=1.2,name=driven"),
+    ];
+    let exps = common::synth_pendulum(&dir, &text, effect, base, &experiments, seed);
     let _ = std::fs::remove_dir_all(common::scratch(&dir));
     let d = diagnose_with(&text, &exps, &DiagnoseOptions::default()).expect("diagnoses");
     match &d.verdict {

@@ -13,10 +13,8 @@ use common::simulated::{check_sensitivities, model, pendulum_text, simulate};
 use plantc_derive::model::Model;
 use plantc_identify::diagnose::{candidates, model_from_text, regressor_for, DiagnoseOptions};
 use plantc_identify::effect_edit::label_of;
-use plantc_identify::synth::{parse_effect_spec, parse_experiment_spec};
 use plantc_identify::{
-    read_experiment, synthesize, EffectInstance, EffectKind, EquationError, EquationErrorOptions,
-    Experiment, Signals, SynthOptions, SynthSpec,
+    EffectInstance, EffectKind, EquationError, EquationErrorOptions, Experiment, Signals,
 };
 
 /// The pendulum with extra declarations and extra terms on the arm's force.
@@ -157,40 +155,14 @@ const RIG: [(&str, f64); 5] = [
 /// hidden effect.
 fn synth_case(test: &str, effect: &str) -> (String, Vec<Experiment>) {
     let text = pendulum_text();
-    let spec = SynthSpec {
-        case: test.into(),
-        model_name: "rotary_pendulum.plant".into(),
-        effects: if effect.is_empty() {
-            Vec::new()
-        } else {
-            vec![parse_effect_spec(effect).expect("effect")]
-        },
-        parameter_set: None,
-        values: RIG.iter().map(|(n, v)| (n.to_string(), *v)).collect(),
-        experiments: [
-            "free_swing:alpha0=120deg,duration=10,name=large",
-            "free_swing:alpha0=160deg,duration=10,name=small",
-            "driven:alpha0=180deg,duration=10,seed=7,rms=1.2,name=driven",
-        ]
-        .iter()
-        .map(|e| parse_experiment_spec(e).expect("experiment"))
-        .collect(),
-        options: SynthOptions {
-            seed: 5,
-            ..SynthOptions::default()
-        },
-    };
-    let out = synthesize(&text, &spec).expect("synthesizes");
-    let exps = out
-        .files
-        .iter()
-        .map(|f| {
-            let p = common::write(test, &f.file_name, &f.text);
-            read_experiment(&p, &common::pendulum_spec())
-                .expect("reads")
-                .0
-        })
-        .collect();
+    let experiments = [
+        "free_swing:alpha0=120deg,duration=10,name=large",
+        "free_swing:alpha0=160deg,duration=10,name=small",
+        "driven:alpha0=180deg,duration=10,seed=7,rms=1.2,name=driven",
+    ]
+    .map(String::from);
+    let values = RIG.iter().map(|(n, v)| (n.to_string(), *v)).collect();
+    let exps = common::synth_pendulum(test, &text, effect, values, &experiments, 5);
     (text, exps)
 }
 

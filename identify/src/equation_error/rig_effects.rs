@@ -467,18 +467,29 @@ impl EquationError {
         Ok(score)
     }
 
-    pub(super) fn score_speed_limit(
+    /// What a velocity-dependent force on coordinate `i` is scanned on:
+    /// the nuisance basis and the residual after it, the rows of equation
+    /// `i`, its weight and the smoothed velocity on those rows.
+    #[allow(clippy::type_complexity)]
+    fn velocity_rows(
         &self,
         i: usize,
-        names: &[String; 2],
-    ) -> Result<Score, EquationErrorError> {
+    ) -> Result<(Vec<Vec<f64>>, Vec<f64>, Vec<usize>, f64, Vec<f64>), EquationErrorError> {
         if i >= self.n {
             return Err(EquationErrorError::BadIndex(i));
         }
         let (b, r0, _) = self.projected();
         let idx = self.rows_of(i);
-        let w = self.weight[i];
         let v = self.on_rows(&idx, |e| &e.qd[i]);
+        Ok((b, r0, idx, self.weight[i], v))
+    }
+
+    pub(super) fn score_speed_limit(
+        &self,
+        i: usize,
+        names: &[String; 2],
+    ) -> Result<Score, EquationErrorError> {
+        let (b, r0, idx, w, v) = self.velocity_rows(i)?;
         let mags: Vec<f64> = v.iter().map(|x| x.abs()).collect();
         let levels = level_grid(&mags);
         let col = |vmax: f64| -> Vec<f64> {
@@ -530,13 +541,7 @@ impl EquationError {
         i: usize,
         names: &[String; 3],
     ) -> Result<Score, EquationErrorError> {
-        if i >= self.n {
-            return Err(EquationErrorError::BadIndex(i));
-        }
-        let (b, r0, _) = self.projected();
-        let idx = self.rows_of(i);
-        let w = self.weight[i];
-        let v = self.on_rows(&idx, |e| &e.qd[i]);
+        let (b, r0, idx, w, v) = self.velocity_rows(i)?;
         let top = v.iter().fold(0.0f64, |a, x| a.max(x.abs()));
         let sgn: Vec<f64> = v.iter().map(|&x| (x / self.width).tanh() * w).collect();
         // is the Coulomb column the model's own already (projected away)?

@@ -5,7 +5,10 @@ pub mod simulated;
 
 use std::path::PathBuf;
 
-use plantc_identify::{ChannelSpec, Kind};
+use plantc_identify::synth::{parse_effect_spec, parse_experiment_spec};
+use plantc_identify::{
+    read_experiment, synthesize, ChannelSpec, Experiment, Kind, SynthOptions, SynthSpec,
+};
 
 /// The rotary pendulum's channels.
 pub fn pendulum_spec() -> ChannelSpec {
@@ -62,4 +65,44 @@ pub fn shared_data() -> Option<PathBuf> {
     let p = PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../../shared/data");
     let p2 = PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../shared/data");
     [p, p2].into_iter().find(|p| p.join("clean").is_dir())
+}
+
+/// Data of the rotary pendulum model `text` made by `synth` in scratch
+/// directory `test`: `effect` hidden (empty: none), true `values`, the
+/// `experiments` specs, 500 Hz and 4096 counts with noise seed `seed`.
+pub fn synth_pendulum(
+    test: &str,
+    text: &str,
+    effect: &str,
+    values: Vec<(String, f64)>,
+    experiments: &[String],
+    seed: u64,
+) -> Vec<Experiment> {
+    let spec = SynthSpec {
+        case: test.into(),
+        model_name: "rotary_pendulum.plant".into(),
+        effects: if effect.is_empty() {
+            Vec::new()
+        } else {
+            vec![parse_effect_spec(effect).expect("effect")]
+        },
+        parameter_set: None,
+        values,
+        experiments: experiments
+            .iter()
+            .map(|e| parse_experiment_spec(e).expect("experiment"))
+            .collect(),
+        options: SynthOptions {
+            seed,
+            ..SynthOptions::default()
+        },
+    };
+    let out = synthesize(text, &spec).expect("synthesizes");
+    out.files
+        .iter()
+        .map(|f| {
+            let p = write(test, &f.file_name, &f.text);
+            read_experiment(&p, &pendulum_spec()).expect("reads").0
+        })
+        .collect()
 }
