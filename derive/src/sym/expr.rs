@@ -82,8 +82,8 @@ impl Func {
     /// Evaluate on `f64`.
     pub fn eval(self, x: f64) -> f64 {
         match self {
-            Func::Sin => x.sin(),
-            Func::Cos => x.cos(),
+            Func::Sin => super::trig::sin(x),
+            Func::Cos => super::trig::cos(x),
             Func::Tan => x.tan(),
             Func::Exp => x.exp(),
             Func::Ln => x.ln(),

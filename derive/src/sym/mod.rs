@@ -14,6 +14,7 @@ pub mod print;
 pub mod rational;
 pub mod subst;
 pub mod tape;
+pub mod trig;
 
 pub use canonical::{
     canonical, equivalent, is_zero, simplify, try_canonical, try_is_zero, try_is_zero_within,

@@ -710,7 +710,7 @@ fn run(instrs: &[Instr], inputs: &[f64], s: &mut [f64]) {
                 cos_dst,
                 a,
             } => {
-                let (sv, cv) = s[a as usize].sin_cos();
+                let (sv, cv) = super::trig::sin_cos(s[a as usize]);
                 s[sin_dst as usize] = sv;
                 s[cos_dst as usize] = cv;
             }
