@@ -1,7 +1,9 @@
 //! Acceptance (issue 11): each effect real rigs need -- cogging on the arm,
 //! the actuator's saturation, the drive's speed limit, an added inertia on
 //! the pendulum -- is named first by the full diagnosis in at least 90 % of
-//! synthetic rigs, and clean rigs get no finding. Each case varies what a
+//! synthetic rigs, and clean rigs get no finding; so is the rest of the
+//! vocabulary (one known weak spot, see
+//! `stribeck_friction_on_the_arm_is_mostly_named_first`). Each case varies what a
 //! held-out rig would: the effect's size (0.7x to 1.4x the vocabulary's),
 //! the true base parameters (J1, l2, b2 within 10 %), the multisine's
 //! phases and the release angles. The truth is the synth spec of each case.
@@ -60,9 +62,14 @@ fn diagnose_case(test: &str, k: usize, effect: &str) -> String {
     }
 }
 
-/// Run the cases of one effect (`{f}` in `spec` is replaced by the size
-/// factor applied to `size`) and require `want` first in >= 90 %.
+/// Run the cases of one effect (`{v}` in `spec` is replaced by `size` times
+/// the case's size factor) and require `want` first in >= 90 %.
 fn rate(test: &str, spec: &str, size: f64, want: &str) {
+    rate_at_least(test, spec, size, want, 0.9);
+}
+
+/// [`rate`] with another required share.
+fn rate_at_least(test: &str, spec: &str, size: f64, want: &str, share: f64) {
     let n = cases();
     let mut right = 0;
     for k in 0..n {
@@ -78,7 +85,7 @@ fn rate(test: &str, spec: &str, size: f64, want: &str) {
     }
     eprintln!("{test}: {want} first in {right} of {n}");
     assert!(
-        right as f64 >= 0.9 * n as f64,
+        right as f64 >= share * n as f64,
         "{test}: {want} first in only {right} of {n}"
     );
 }
@@ -129,4 +136,125 @@ fn added_inertia_is_named_first() {
         3e-4,
         "added_inertia@alpha",
     );
+}
+
+// The rest of the vocabulary, varied the same way (the sizes are the
+// vocabulary test's). Measured when added (stop 21, release, 5 cases each):
+// before that stop's changes the Stribeck friction on the pendulum was
+// first in 3 of 5 (Coulomb friction credited: the Stribeck refit stalled in
+// the Coulomb-like minimum), the deadzone 4 of 5 (a 0.56 V deadzone trapped
+// its refit from the distorted baseline), the spring on the pendulum 4 of 5
+// (a sensor offset credited against its own baseline while its refit sat
+// 10x above the spring's), the drag on the arm 4 of 5 (baseline 1.8x the
+// floor, the drag down to it by 1.92x, called adequate); after, 5 of 5 each,
+// clean 5 of 5.
+
+#[test]
+fn coulomb_friction_on_the_pendulum_is_named_first() {
+    rate(
+        "rate_coulomb_alpha",
+        "coulomb_friction:alpha={v}",
+        5e-4,
+        "coulomb_friction@alpha",
+    );
+}
+
+#[test]
+fn stribeck_friction_on_the_pendulum_is_named_first() {
+    rate(
+        "rate_stribeck_alpha",
+        "stribeck_friction:alpha:Fc={v},Fs=1.2e-3,vs=0.1",
+        4e-4,
+        "stribeck_friction@alpha",
+    );
+}
+
+/// The known weak spot: stiction on the arm 9-19x its Coulomb level on
+/// top of the model's gearbox friction sticks the arm, the equation error
+/// cannot see it (the stuck arm's torque is a constraint force) and the
+/// refits stall (Fs = 0.056 N m: a spring on the arm credited at 1.50x).
+/// Measured 3 of 5 (stop 21: cases 2 and 3 missed; case 3 is borderline,
+/// found by `plantc diagnose` on the same spec synthesized from the CLI,
+/// whose base values differ in the last digits); required 3 of 5 so a
+/// regression shows. 278 s for this file's 16 tests x 5 cases (release,
+/// two threads).
+#[test]
+fn stribeck_friction_on_the_arm_is_mostly_named_first() {
+    rate_at_least(
+        "rate_stribeck_theta",
+        "stribeck_friction:theta:Fc=3e-3,Fs={v},vs=0.3",
+        4e-2,
+        "stribeck_friction@theta",
+        0.6,
+    );
+}
+
+#[test]
+fn quadratic_drag_on_the_pendulum_is_named_first() {
+    rate(
+        "rate_drag_alpha",
+        "quadratic_drag:alpha={v}",
+        1.5e-4,
+        "quadratic_drag@alpha",
+    );
+}
+
+#[test]
+fn quadratic_drag_on_the_arm_is_named_first() {
+    rate(
+        "rate_drag_theta",
+        "quadratic_drag:theta={v}",
+        1e-3,
+        "quadratic_drag@theta",
+    );
+}
+
+#[test]
+fn spring_on_the_arm_is_named_first() {
+    rate(
+        "rate_spring_theta",
+        "spring:theta={v}",
+        0.05,
+        "spring@theta",
+    );
+}
+
+#[test]
+fn spring_on_the_pendulum_is_named_first() {
+    rate(
+        "rate_spring_alpha",
+        "spring:alpha={v}",
+        0.005,
+        "spring@alpha",
+    );
+}
+
+#[test]
+fn sensor_offset_is_named_first() {
+    rate(
+        "rate_offset",
+        "sensor_offset:alpha={v}",
+        0.03,
+        "sensor_offset@alpha",
+    );
+}
+
+#[test]
+fn input_offset_is_named_first() {
+    rate(
+        "rate_input_offset",
+        "input_offset:Vm={v}",
+        0.3,
+        "input_offset@Vm",
+    );
+}
+
+#[test]
+fn input_delay_is_named_first() {
+    rate("rate_delay", "input_delay:Vm={v}", 4e-3, "input_delay@Vm");
+}
+
+#[test]
+fn deadzone_is_named_first() {
+    rate("rate_deadzone", "deadzone:Vm={v}", 0.4, "deadzone@Vm");
 }
