@@ -10,39 +10,40 @@
 //! fdlibm/musl minimax polynomials on `[-pi/4, pi/4]`, whose error is below
 //! one unit in the last place.
 //!
-//! The kernels and the reduction constants are those of fdlibm
+//! The kernels and the reduction constants (as bit patterns, exact) are
+//! those of fdlibm
 //! (`k_sin.c`, `k_cos.c`, `e_rem_pio2.c`):
 //! Copyright (C) 1993 by Sun Microsystems, Inc. All rights reserved.
 //! Developed at SunPro, a Sun Microsystems, Inc. business.
 //! Permission to use, copy, modify, and distribute this software is freely
 //! granted, provided that this notice is preserved.
 
-const S1: f64 = -1.666_666_666_666_663_243_48e-1;
-const S2: f64 = 8.333_333_333_322_489_461_24e-3;
-const S3: f64 = -1.984_126_982_985_794_931_34e-4;
-const S4: f64 = 2.755_731_370_707_006_767_89e-6;
-const S5: f64 = -2.505_076_025_340_686_341_95e-8;
-const S6: f64 = 1.589_690_995_211_550_102_21e-10;
+const S1: f64 = f64::from_bits(0xbfc5_5555_5555_5549);
+const S2: f64 = f64::from_bits(0x3f81_1111_1110_f8a6);
+const S3: f64 = f64::from_bits(0xbf2a_01a0_19c1_61d5);
+const S4: f64 = f64::from_bits(0x3ec7_1de3_57b1_fe7d);
+const S5: f64 = f64::from_bits(0xbe5a_e5e6_8a2b_9ceb);
+const S6: f64 = f64::from_bits(0x3de5_d93a_5acf_d57c);
 
-const C1: f64 = 4.166_666_666_666_660_190_37e-2;
-const C2: f64 = -1.388_888_888_887_410_957_49e-3;
-const C3: f64 = 2.480_158_728_947_672_941_78e-5;
-const C4: f64 = -2.755_731_435_139_066_330_35e-7;
-const C5: f64 = 2.087_572_321_298_174_827_90e-9;
-const C6: f64 = -1.135_964_755_778_819_482_65e-11;
+const C1: f64 = f64::from_bits(0x3fa5_5555_5555_554c);
+const C2: f64 = f64::from_bits(0xbf56_c16c_16c1_5177);
+const C3: f64 = f64::from_bits(0x3efa_01a0_19cb_1590);
+const C4: f64 = f64::from_bits(0xbe92_7e4f_809c_52ad);
+const C5: f64 = f64::from_bits(0x3e21_ee9e_bdb4_b1c4);
+const C6: f64 = f64::from_bits(0xbda8_fae9_be88_38d4);
 
 /// `2/pi`.
-const INV_PIO2: f64 = 6.366_197_723_675_813_824_33e-1;
+const INV_PIO2: f64 = f64::from_bits(0x3fe4_5f30_6dc9_c883);
 /// First 33 bits of `pi/2`.
-const PIO2_1: f64 = 1.570_796_326_734_125_614_17e0;
+const PIO2_1: f64 = f64::from_bits(0x3ff9_21fb_5440_0000);
 /// Second 33 bits of `pi/2`.
-const PIO2_2: f64 = 6.077_100_506_303_965_976_60e-11;
+const PIO2_2: f64 = f64::from_bits(0x3dd0_b461_1a60_0000);
 /// `pi/2 - (PIO2_1 + PIO2_2)`.
-const PIO2_2T: f64 = 2.022_266_248_795_950_631_54e-21;
+const PIO2_2T: f64 = f64::from_bits(0x3ba3_198a_2e03_7073);
 /// Third 33 bits of `pi/2`.
-const PIO2_3: f64 = 2.022_266_248_711_166_455_80e-21;
+const PIO2_3: f64 = f64::from_bits(0x3ba3_198a_2e00_0000);
 /// `pi/2 - (PIO2_1 + PIO2_2 + PIO2_3)`.
-const PIO2_3T: f64 = 8.478_427_660_368_899_569_97e-32;
+const PIO2_3T: f64 = f64::from_bits(0x397b_839a_2520_49c1);
 /// Adding and subtracting this rounds to an integer (`1.5 * 2^52`).
 const TO_INT: f64 = 1.5 / f64::EPSILON;
 /// `pi/4`, below which no reduction is needed.
@@ -78,8 +79,8 @@ pub fn sin_cos(x: f64) -> (f64, f64) {
     if ax <= PIO4 {
         return (k_sin(x, 0.0), k_cos(x, 0.0));
     }
-    // NaN compares false: non-finite and huge arguments go to the platform
-    if !(ax < MEDIUM) {
+    // non-finite and huge arguments go to the platform
+    if ax.is_nan() || ax >= MEDIUM {
         return x.sin_cos();
     }
     let f = x * INV_PIO2 + TO_INT - TO_INT;
@@ -184,17 +185,14 @@ mod tests {
                 check(v);
             }
         }
-        // the double closest to a multiple of pi/2 below 2^20 pi/2
-        // (fdlibm's worst case for the medium reduction is near 6381956970095103 * 2^797,
-        // far above; these are the ones the third round exists for here)
-        for x in [
-            1.570_796_326_794_896_6,
-            3.141_592_653_589_793,
-            4.712_388_980_384_69,
-            6.283_185_307_179_586,
-            5.497_787_143_782_138e5,
-        ] {
-            check(x);
+        // and large multiples, up to the medium range's end
+        for k in [65_537i64, 300_001, 667_000, 1_000_003, 1_048_575] {
+            let x = k as f64 * std::f64::consts::FRAC_PI_2;
+            let mut v = f64::from_bits(x.to_bits() - 3);
+            for _ in 0..7 {
+                check(v);
+                v = f64::from_bits(v.to_bits() + 1);
+            }
         }
     }
 
