@@ -291,7 +291,8 @@ fn a_4_ms_input_delay_is_found_within_10_percent() {
 /// (3.04e-3 against 3.18e-3); with 1e-4, Stribeck friction plus the
 /// re-estimated damping ends below the floor too (2.94e-3 against 3.21e-3).
 /// On these runs the data cannot tell those apart, so one effect is the
-/// right answer there.
+/// right answer there; at 5e-4 N m and 1.5e-4 N m s^2 see
+/// `coulomb_friction_and_drag_end_named_as_such`.
 #[test]
 fn two_effects_are_named_in_turn_and_the_residual_ends_near_the_floor() {
     let text = pendulum_text();
@@ -329,6 +330,123 @@ fn two_effects_are_named_in_turn_and_the_residual_ends_near_the_floor() {
             && named[..2].contains(&"coulomb_friction@alpha".to_string())
             && named[..2].contains(&"input_delay@Vm".to_string()),
         "{named:?}"
+    );
+    assert!(
+        story.fit.after_cost <= 1.3 * floor,
+        "final cost {:.3e} vs floor {floor:.3e}",
+        story.fit.after_cost
+    );
+}
+
+/// The two-effect example, Coulomb friction and quadratic drag on
+/// the pendulum (5e-4 N m and 1.5e-4 N m s^2, the rate survey's rig):
+/// round 1 takes a Stribeck friction over the Coulomb friction (4.21x
+/// against 2.96x: its hump stands in for part of the drag), round 2 the
+/// drag; with the drag in, the Stribeck friction does no better than the
+/// Coulomb friction (1.01x) and the story replaces it, so both effects are
+/// named as they are and estimated (Fc 5.01e-4, cd 1.53e-4 when written).
+#[test]
+fn coulomb_friction_and_drag_end_named_as_such() {
+    let text = pendulum_text();
+    let exps = synth(
+        "coulomb_drag",
+        &text,
+        &["coulomb_friction:alpha=5e-4", "quadratic_drag:alpha=1.5e-4"],
+        &[
+            ("J1", 1.3e-3),
+            ("l2", 0.16),
+            ("b1", 3.2e-3),
+            ("b2", 1.1e-3),
+            ("Fg1", 0.012),
+        ],
+        &[
+            "free_swing:alpha0=115deg,duration=10,name=large",
+            "free_swing:alpha0=155deg,duration=10,name=small",
+            "driven:alpha0=180deg,duration=10,seed=5,rms=1.2,name=driven",
+        ],
+        500.0,
+    );
+    let opts = plantc_identify::StoryOptions::default();
+    let story = plantc_identify::identify(&text, &exps, &opts, &mut |_| {}).expect("identifies");
+    for (k, r) in story.rounds.iter().enumerate() {
+        eprintln!(
+            "round {}: {:?}, cost {:.3e} -> {:?}",
+            k + 1,
+            r.effect.as_ref().map(|e| e.label()),
+            r.cost_before,
+            r.cost_after
+        );
+    }
+    for s in &story.simplifications {
+        eprintln!(
+            "round {}: {} -> {} ({:.3e} -> {:.3e})",
+            s.round,
+            s.from.label(),
+            s.to.label(),
+            s.cost_with,
+            s.cost_simpler
+        );
+    }
+    let model = plantc_identify::diagnose::model_from_text("final", &story.text).expect("checks");
+    let value = |name: &str| {
+        model
+            .parameters
+            .iter()
+            .position(|p| p.name == name)
+            .map(|i| story.fit.base[i])
+    };
+    assert!(model.parameter("Fs_alpha").is_none(), "{}", story.text);
+    let (fc, cd) = (value("Fc_alpha"), value("cd_alpha"));
+    eprintln!("Fc {fc:?} (truth 5e-4), cd {cd:?} (truth 1.5e-4)");
+    let fc = fc.expect("Coulomb friction on alpha");
+    let cd = cd.expect("quadratic drag on alpha");
+    assert!((fc / 5e-4 - 1.0).abs() < 0.05, "Fc = {fc}");
+    assert!((cd / 1.5e-4 - 1.0).abs() < 0.1, "cd = {cd}");
+    let floor = plantc_identify::weights::noise_cost(&story.fit.weights);
+    assert!(story.fit.after_cost <= 1.3 * floor);
+}
+
+/// The same two effects on the survey's second rig (J1 +8 %, l2 -4 %, b2
+/// +8 %, other release angles): round 2's diagnosis finds the round-1 model
+/// (a Stribeck friction) a minimum 2x lower from the drag candidate's
+/// values, credits the drag nothing against it, and the story keeps that
+/// better fit: the residual ends at the floor (before, the story kept the
+/// round-1 fit at 2.2x the floor's RMSE). Still weak: that minimum is a
+/// Stribeck friction with `vs` at its bound and `Fc > Fs`, whose expansion
+/// is the Coulomb friction plus a quadratic drag.
+#[test]
+fn a_better_minimum_found_by_the_diagnosis_is_kept() {
+    let text = pendulum_text();
+    let exps = synth(
+        "coulomb_drag_2",
+        &text,
+        &["coulomb_friction:alpha=5e-4", "quadratic_drag:alpha=1.5e-4"],
+        &[
+            ("J1", 1.3e-3 * 1.08),
+            ("l2", 0.16 * 0.96),
+            ("b1", 3.2e-3),
+            ("b2", 1.1e-3 * 1.08),
+            ("Fg1", 0.012),
+        ],
+        &[
+            "free_swing:alpha0=120deg,duration=10,name=large",
+            "free_swing:alpha0=160deg,duration=10,name=small",
+            "driven:alpha0=180deg,duration=10,seed=6,rms=1.2,name=driven",
+        ],
+        500.0,
+    );
+    let story = plantc_identify::identify(
+        &text,
+        &exps,
+        &plantc_identify::StoryOptions::default(),
+        &mut |_| {},
+    )
+    .expect("identifies");
+    let floor = plantc_identify::weights::noise_cost(&story.fit.weights);
+    let labels: Vec<&str> = story.stages.iter().map(|s| s.label.as_str()).collect();
+    eprintln!(
+        "{labels:?}; final cost {:.3e}, floor {floor:.3e}; {}",
+        story.fit.after_cost, story.stop
     );
     assert!(
         story.fit.after_cost <= 1.3 * floor,

@@ -307,7 +307,66 @@ fn story(
             }
             _ => {
                 let _ = writeln!(out, "   verdict: {}", s.stop);
+                if let Some(stage) = s
+                    .stages
+                    .iter()
+                    .find(|st| st.label == "refitted from a better start")
+                {
+                    let _ = writeln!(
+                        out,
+                        "   the model as it stands, refitted from a candidate's values, reached a lower cost ({:.3e}): that fit is the result",
+                        stage.cost.unwrap_or(f64::NAN)
+                    );
+                }
             }
+        }
+    }
+    // earlier effects replaced by their simpler form
+    let mut summary_simplified = Vec::new();
+    for (i, simple) in s.simplifications.iter().enumerate() {
+        let n = 3 + s.rounds.len() + i;
+        let _ = writeln!(
+            out,
+            "\n{n}. simplification: with the later effects in, `{}` (round {}) does no better than `{}` (cost {:.3e} with it, {:.3e} with the simpler one: {:.2}x); replaced:\n{}",
+            simple.from.label(),
+            simple.round,
+            simple.to.label(),
+            simple.cost_with,
+            simple.cost_simpler,
+            simple.cost_simpler / simple.cost_with.max(f64::MIN_POSITIVE),
+            indent(&simple.to.snippet())
+        );
+        let label = format!("{} for {}, fitted", simple.to.label(), simple.from.label());
+        if let Some(stage) = s.stages.iter().find(|st| st.label == label) {
+            let m2 = model_from_text("stage", &stage.text).map_err(fail)?;
+            write_stage_figures(
+                (&staging, dir),
+                &format!("{n}-simplified"),
+                &m2,
+                &measured,
+                stage,
+                err,
+            )?;
+            if let Some(v) = &stage.validation {
+                write_validation_lines(out, v);
+            }
+        }
+        summary_simplified.push(serde_json::json!({
+            "round": simple.round,
+            "from": simple.from.label(),
+            "to": simple.to.label(),
+            "snippet": simple.to.snippet(),
+            "cost_with": simple.cost_with,
+            "cost_simpler": simple.cost_simpler,
+        }));
+    }
+    if !s.simplifications.is_empty() {
+        for e in &s.fit.parameters {
+            let _ = writeln!(
+                out,
+                "   {:<10} = {:.5e}  (std error {:.1e})",
+                e.name, e.value, e.std_error
+            );
         }
     }
     // the result
@@ -342,6 +401,7 @@ fn story(
         "verdict": if s.rounds.iter().any(|r| r.effect.is_some()) { "missing_effect" } else { "adequate" },
         "stop": s.stop,
         "rounds": summary_rounds,
+        "simplified": summary_simplified,
         "fit": crate::commands::fit::fit_json(&s.fit),
         "seconds": elapsed,
         "files": files,
