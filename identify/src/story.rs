@@ -114,10 +114,28 @@ pub struct Simplification {
     pub from: EffectInstance,
     /// The simpler effect now in its place.
     pub to: EffectInstance,
+    /// The effect a diagnosis of the model with `to` named then (when
+    /// `from` was fitted to no shape of its own, see [`identify`]).
+    pub then: Option<EffectInstance>,
     /// Cost of the final model with `from`...
     pub cost_with: f64,
-    /// ...and with `to`, refitted.
+    /// ...and with `to` (and `then`), refitted.
     pub cost_simpler: f64,
+}
+
+impl Simplification {
+    /// The label of its stage in [`Story::stages`].
+    pub fn stage_label(&self) -> String {
+        match &self.then {
+            Some(t) => format!(
+                "{} for {}, + {}, fitted",
+                self.to.label(),
+                self.from.label(),
+                t.label()
+            ),
+            None => format!("{} for {}, fitted", self.to.label(), self.from.label()),
+        }
+    }
 }
 
 /// (effect, the simpler effect it contains on the same target): the
@@ -427,8 +445,16 @@ pub fn identify(
                 continue;
             }
             let m2 = model_from_text("simplified", &text2).map_err(StoryError::Model)?;
+            let simple = Simplification {
+                round: k + 1,
+                from,
+                to: to.clone(),
+                then: None,
+                cost_with: fit.after_cost,
+                cost_simpler: f2.after_cost,
+            };
             stages.push(stage(
-                &format!("{} for {}, fitted", to.label(), from.label()),
+                &simple.stage_label(),
                 &text2,
                 &m2,
                 &f2.base,
@@ -436,17 +462,106 @@ pub fn identify(
                 experiments,
                 opts,
             )?);
-            simplifications.push(Simplification {
-                round: k + 1,
-                from,
-                to: to.clone(),
-                cost_with: fit.after_cost,
-                cost_simpler: f2.after_cost,
-            });
+            simplifications.push(simple);
             applied[k] = Some(to);
             current_text = text2;
             fit = f2;
         }
+    }
+    // A Stribeck friction fitted to no Stribeck shape (no hump, Fs <= Fc,
+    // or vs at a bound of its box) imitates something else (Coulomb
+    // friction and drag on the rate survey's second rig: vs at its 10 rad/s
+    // bound and Fc > Fs, whose expansion Fs + (Fc - Fs) v^2/vs^2 is a
+    // Coulomb friction plus a quadratic drag): its simpler form is put in
+    // its place and diagnosed once more, and that is kept when the
+    // diagnosis names an effect and the model with both ends no more than
+    // NESTED_GAIN above.
+    let dopts = DiagnoseOptions {
+        fit: opts.fit.clone(),
+        ..opts.diagnose.clone()
+    };
+    for k in 0..applied.len() {
+        let Some(from) = applied[k].clone() else {
+            continue;
+        };
+        let Some((_, simpler)) = SIMPLER.iter().find(|(outer, _)| *outer == from.effect) else {
+            continue;
+        };
+        if !no_shape_of_its_own(&current_text, &fit, &from) {
+            continue;
+        }
+        progress(&StoryProgress::Step(format!(
+            "trying {simpler}@{} for {}",
+            from.target,
+            from.label()
+        )));
+        let last = (current_text.as_str(), &fit);
+        let Some((text2, f2, to)) =
+            simpler_story(text, &applied, k, last, simpler, experiments, opts)
+        else {
+            continue;
+        };
+        let Ok(d) = diagnose_from(&text2, experiments, f2, &dopts) else {
+            continue;
+        };
+        let Some(top) = d.verdict.as_ref().and_then(|_| d.ranking.first()) else {
+            continue;
+        };
+        let then = fitted_instance(top);
+        let Ok(text3) = then.apply(&text2) else {
+            continue;
+        };
+        let m3 = model_from_text("then", &text3).map_err(StoryError::Model)?;
+        // from the candidate's refit in that diagnosis (its model is `text3`)
+        let start: Vec<f64> = m3
+            .parameters
+            .iter()
+            .map(|p| {
+                top.fit
+                    .as_ref()
+                    .and_then(|f| f.parameters.iter().find(|e| e.name == p.name))
+                    .map_or(p.value, |e| e.value)
+            })
+            .collect();
+        let Ok(f3) = crate::fit::fit(
+            &m3,
+            experiments,
+            &FitOptions {
+                start: Some(start),
+                warm: top.fit.as_ref().map(|f| f.warm.clone()),
+                ..opts.fit.clone()
+            },
+        ) else {
+            continue;
+        };
+        if f3.after_cost > NESTED_GAIN * fit.after_cost {
+            continue;
+        }
+        let (mut to, mut then) = (to, then);
+        write_fitted(&mut to, &f3);
+        write_fitted(&mut then, &f3);
+        let simple = Simplification {
+            round: k + 1,
+            from,
+            to: to.clone(),
+            then: Some(then.clone()),
+            cost_with: fit.after_cost,
+            cost_simpler: f3.after_cost,
+        };
+        stages.push(stage(
+            &simple.stage_label(),
+            &text3,
+            &m3,
+            &f3.base,
+            Some(&f3),
+            experiments,
+            opts,
+        )?);
+        simplifications.push(simple);
+        applied[k] = Some(to);
+        applied.push(Some(then));
+        current_text = text3;
+        fit = f3;
     }
     Ok(Story {
         stages,
@@ -513,11 +628,37 @@ fn simpler_story(
     )
     .ok()?;
     let mut put = put?;
-    for p in &mut put.parameters {
+    write_fitted(&mut put, &f);
+    Some((current, f, put))
+}
+
+/// Write the values of `f` into the parameters of `inst` (six significant
+/// digits, as the rounds' snippets).
+fn write_fitted(inst: &mut EffectInstance, f: &FitResult) {
+    for p in &mut inst.parameters {
         if let Some(e) = f.parameters.iter().find(|e| e.name == p.name) {
-            // six significant digits, as the rounds' snippets
             p.value = format!("{:.5e}", e.value).parse().unwrap_or(e.value);
         }
     }
-    Some((current, f, put))
+}
+
+/// Is effect `inst` (a Stribeck friction) fitted in `fit` of the model
+/// `text` to no shape of its own: no hump (`Fs <= Fc`), or its velocity at
+/// a bound of its box?
+fn no_shape_of_its_own(text: &str, fit: &FitResult, inst: &EffectInstance) -> bool {
+    let Ok(model) = model_from_text("final", text) else {
+        return false;
+    };
+    let value = |base: &str| {
+        let name = format!("{base}_{}", inst.target);
+        let i = model.parameters.iter().position(|p| p.name == name)?;
+        Some((fit.base[i], model.parameters[i].estimate))
+    };
+    let (Some((fc, _)), Some((fs, _)), Some((vs, bounds))) =
+        (value("Fc"), value("Fs"), value("vs"))
+    else {
+        return false;
+    };
+    let at_bound = bounds.is_some_and(|(lo, hi)| vs <= lo * 1.001 || vs >= hi * 0.999);
+    fs <= fc || at_bound
 }

@@ -325,18 +325,36 @@ fn story(
     let mut summary_simplified = Vec::new();
     for (i, simple) in s.simplifications.iter().enumerate() {
         let n = 3 + s.rounds.len() + i;
-        let _ = writeln!(
-            out,
-            "\n{n}. simplification: with the later effects in, `{}` (round {}) does no better than `{}` (cost {:.3e} with it, {:.3e} with the simpler one: {:.2}x); replaced:\n{}",
-            simple.from.label(),
-            simple.round,
-            simple.to.label(),
-            simple.cost_with,
-            simple.cost_simpler,
-            simple.cost_simpler / simple.cost_with.max(f64::MIN_POSITIVE),
-            indent(&simple.to.snippet())
-        );
-        let label = format!("{} for {}, fitted", simple.to.label(), simple.from.label());
+        let ratio = simple.cost_simpler / simple.cost_with.max(f64::MIN_POSITIVE);
+        match &simple.then {
+            None => {
+                let _ = writeln!(
+                    out,
+                    "\n{n}. simplification: with the later effects in, `{}` (round {}) does no better than `{}` (cost {:.3e} with it, {:.3e} with the simpler one: {ratio:.2}x); replaced:\n{}",
+                    simple.from.label(),
+                    simple.round,
+                    simple.to.label(),
+                    simple.cost_with,
+                    simple.cost_simpler,
+                    indent(&simple.to.snippet())
+                );
+            }
+            Some(then) => {
+                let _ = writeln!(
+                    out,
+                    "\n{n}. simplification: `{}` (round {}) was fitted to no shape of its own (no hump, or its velocity at a bound of its box); with `{}` in its place the diagnosis names `{}`, and the model with both reaches cost {:.3e} against {:.3e} ({ratio:.2}x); replaced and added:\n{}\n{}",
+                    simple.from.label(),
+                    simple.round,
+                    simple.to.label(),
+                    then.label(),
+                    simple.cost_simpler,
+                    simple.cost_with,
+                    indent(&simple.to.snippet()),
+                    indent(&then.snippet())
+                );
+            }
+        }
+        let label = simple.stage_label();
         if let Some(stage) = s.stages.iter().find(|st| st.label == label) {
             let m2 = model_from_text("stage", &stage.text).map_err(fail)?;
             write_stage_figures(
@@ -356,6 +374,7 @@ fn story(
             "from": simple.from.label(),
             "to": simple.to.label(),
             "snippet": simple.to.snippet(),
+            "then": simple.then.as_ref().map(|t| t.label()),
             "cost_with": simple.cost_with,
             "cost_simpler": simple.cost_simpler,
         }));
@@ -391,7 +410,8 @@ fn story(
         "RMSE {first:.3e} -> {last:.3e}: {:.1}x lower; {} ({} effect(s) added); model -> {}, figures -> {}/ ({elapsed:.1} s)",
         first / last.max(f64::MIN_POSITIVE),
         s.stop,
-        s.rounds.iter().filter(|r| r.effect.is_some()).count(),
+        s.rounds.iter().filter(|r| r.effect.is_some()).count()
+            + s.simplifications.iter().filter(|x| x.then.is_some()).count(),
         dir.join("fitted.plant").display(),
         dir.display(),
     );
