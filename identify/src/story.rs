@@ -424,20 +424,12 @@ pub fn identify(
         .collect();
     if found.len() >= 2 {
         for &k in &found[..found.len() - 1] {
-            let Some(from) = rounds[k].effect.clone() else {
+            let Some(from) = applied[k].clone() else {
                 continue;
             };
-            let Some((_, simpler)) = SIMPLER.iter().find(|(outer, _)| *outer == from.effect) else {
-                continue;
-            };
-            progress(&StoryProgress::Step(format!(
-                "trying {simpler}@{} for {}",
-                from.target,
-                from.label()
-            )));
             let last = (current_text.as_str(), &fit);
             let Some((text2, f2, to)) =
-                simpler_story(text, &applied, k, last, simpler, experiments, opts)
+                simpler_story(text, &applied, k, last, experiments, opts, progress)
             else {
                 continue;
             };
@@ -484,20 +476,12 @@ pub fn identify(
         let Some(from) = applied[k].clone() else {
             continue;
         };
-        let Some((_, simpler)) = SIMPLER.iter().find(|(outer, _)| *outer == from.effect) else {
-            continue;
-        };
         if !no_shape_of_its_own(&current_text, &fit, &from) {
             continue;
         }
-        progress(&StoryProgress::Step(format!(
-            "trying {simpler}@{} for {}",
-            from.target,
-            from.label()
-        )));
         let last = (current_text.as_str(), &fit);
         let Some((text2, f2, to)) =
-            simpler_story(text, &applied, k, last, simpler, experiments, opts)
+            simpler_story(text, &applied, k, last, experiments, opts, progress)
         else {
             continue;
         };
@@ -574,8 +558,8 @@ pub fn identify(
 }
 
 /// The story's final model rebuilt from `text` with round `k`'s effect
-/// replaced by `simpler` on its target (the other rounds' effects as
-/// `applied` has them), fitted from the values of `last` (the final model's text and
+/// replaced by its simpler form ([`SIMPLER`]; None when it has none) on
+/// its target (the other rounds' effects as `applied` has them), fitted from the values of `last` (the final model's text and
 /// fit; the simpler effect's parameter of the same name, e.g. `Fc_alpha`,
 /// takes the level the bigger one fitted): its text, fit and the effect
 /// put in; None when it cannot be built or fitted.
@@ -584,10 +568,17 @@ fn simpler_story(
     applied: &[Option<EffectInstance>],
     k: usize,
     (last_text, last): (&str, &FitResult),
-    simpler: &str,
     experiments: &[Experiment],
     opts: &StoryOptions,
+    progress: &mut dyn FnMut(&StoryProgress),
 ) -> Option<(String, FitResult, EffectInstance)> {
+    let from = applied.get(k)?.as_ref()?;
+    let (_, simpler) = SIMPLER.iter().find(|(outer, _)| *outer == from.effect)?;
+    progress(&StoryProgress::Step(format!(
+        "trying {simpler}@{} for {}",
+        from.target,
+        from.label()
+    )));
     let mut current = text.to_string();
     let mut put = None;
     for (j, inst) in applied.iter().enumerate() {

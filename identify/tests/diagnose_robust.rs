@@ -387,6 +387,19 @@ fn coulomb_friction_and_drag_end_named_as_such() {
             s.cost_simpler
         );
     }
+    assert_coulomb_and_drag(&story);
+}
+
+/// `story` ends with Coulomb friction and quadratic drag on the pendulum,
+/// no Stribeck friction, within 5 % and 10 % of the synth truth (5e-4 N m,
+/// 1.5e-4 N m s^2), at the noise floor.
+fn assert_coulomb_and_drag(story: &plantc_identify::Story) {
+    let floor = plantc_identify::weights::noise_cost(&story.fit.weights);
+    assert!(
+        story.fit.after_cost <= 1.3 * floor,
+        "final cost {:.3e} vs floor {floor:.3e}",
+        story.fit.after_cost
+    );
     let model = plantc_identify::diagnose::model_from_text("final", &story.text).expect("checks");
     let value = |name: &str| {
         model
@@ -396,14 +409,11 @@ fn coulomb_friction_and_drag_end_named_as_such() {
             .map(|i| story.fit.base[i])
     };
     assert!(model.parameter("Fs_alpha").is_none(), "{}", story.text);
-    let (fc, cd) = (value("Fc_alpha"), value("cd_alpha"));
-    eprintln!("Fc {fc:?} (truth 5e-4), cd {cd:?} (truth 1.5e-4)");
-    let fc = fc.expect("Coulomb friction on alpha");
-    let cd = cd.expect("quadratic drag on alpha");
+    let fc = value("Fc_alpha").expect("Coulomb friction on alpha");
+    let cd = value("cd_alpha").expect("quadratic drag on alpha");
+    eprintln!("Fc {fc:.4e} (truth 5e-4), cd {cd:.4e} (truth 1.5e-4)");
     assert!((fc / 5e-4 - 1.0).abs() < 0.05, "Fc = {fc}");
     assert!((cd / 1.5e-4 - 1.0).abs() < 0.1, "cd = {cd}");
-    let floor = plantc_identify::weights::noise_cost(&story.fit.weights);
-    assert!(story.fit.after_cost <= 1.3 * floor);
 }
 
 /// The same two effects on the survey's second rig (J1 +8 %, l2 -4 %, b2
@@ -444,29 +454,7 @@ fn coulomb_friction_and_drag_on_another_rig_end_named_as_such() {
         &mut |_| {},
     )
     .expect("identifies");
-    let floor = plantc_identify::weights::noise_cost(&story.fit.weights);
     let labels: Vec<&str> = story.stages.iter().map(|s| s.label.as_str()).collect();
-    eprintln!(
-        "{labels:?}; final cost {:.3e}, floor {floor:.3e}; {}",
-        story.fit.after_cost, story.stop
-    );
-    assert!(
-        story.fit.after_cost <= 1.3 * floor,
-        "final cost {:.3e} vs floor {floor:.3e}",
-        story.fit.after_cost
-    );
-    let model = plantc_identify::diagnose::model_from_text("final", &story.text).expect("checks");
-    let value = |name: &str| {
-        model
-            .parameters
-            .iter()
-            .position(|p| p.name == name)
-            .map(|i| story.fit.base[i])
-    };
-    assert!(model.parameter("Fs_alpha").is_none(), "{}", story.text);
-    let fc = value("Fc_alpha").expect("Coulomb friction on alpha");
-    let cd = value("cd_alpha").expect("quadratic drag on alpha");
-    eprintln!("Fc {fc:.4e} (truth 5e-4), cd {cd:.4e} (truth 1.5e-4)");
-    assert!((fc / 5e-4 - 1.0).abs() < 0.05, "Fc = {fc}");
-    assert!((cd / 1.5e-4 - 1.0).abs() < 0.1, "cd = {cd}");
+    eprintln!("{labels:?}; {}", story.stop);
+    assert_coulomb_and_drag(&story);
 }

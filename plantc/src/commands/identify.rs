@@ -284,17 +284,14 @@ fn story(
                 for m in f.identifiability.messages() {
                     let _ = writeln!(out, "   warning: {m}");
                 }
-                write_stage_figures(
+                show_stage(
+                    (out, err),
                     (&staging, dir),
                     &format!("{}-fitted", 3 + k),
                     &m2,
                     &measured,
                     stage,
-                    err,
                 )?;
-                if let Some(v) = &stage.validation {
-                    write_validation_lines(out, v);
-                }
                 summary_rounds.push(serde_json::json!({
                     "effect": inst.effect,
                     "target": inst.target,
@@ -357,17 +354,14 @@ fn story(
         let label = simple.stage_label();
         if let Some(stage) = s.stages.iter().find(|st| st.label == label) {
             let m2 = model_from_text("stage", &stage.text).map_err(fail)?;
-            write_stage_figures(
+            show_stage(
+                (out, err),
                 (&staging, dir),
                 &format!("{n}-simplified"),
                 &m2,
                 &measured,
                 stage,
-                err,
             )?;
-            if let Some(v) = &stage.validation {
-                write_validation_lines(out, v);
-            }
         }
         summary_simplified.push(serde_json::json!({
             "round": simple.round,
@@ -474,6 +468,22 @@ fn write_stage_figures(
         &stage.simulated,
         err,
     )
+}
+
+/// A stage's figures ([`write_stage_figures`]) and its validation lines.
+fn show_stage(
+    (out, err): (&mut dyn Write, &mut dyn Write),
+    dirs: (&Path, &Path),
+    sub: &str,
+    model: &Model,
+    measured: &[Experiment],
+    stage: &plantc_identify::Stage,
+) -> Result<(), CliError> {
+    write_stage_figures(dirs, sub, model, measured, stage, err)?;
+    if let Some(v) = &stage.validation {
+        write_validation_lines(out, v);
+    }
+    Ok(())
 }
 
 /// Whether a top-level entry of the output directory is one identify writes
