@@ -476,7 +476,9 @@ pub fn identify(
         let Some(from) = applied[k].clone() else {
             continue;
         };
-        if !no_shape_of_its_own(&current_text, &fit, &from) {
+        // (the diagnosis may add an effect: not past --max-effects)
+        let in_model = applied.iter().flatten().count();
+        if in_model >= opts.max_effects || !no_shape_of_its_own(&current_text, &fit, &from) {
             continue;
         }
         let last = (current_text.as_str(), &fit);
