@@ -62,7 +62,9 @@ use crate::effect_edit::{all_candidates, EffectEditError, EffectInstance, Effect
 use crate::equation_error::{
     EquationError, EquationErrorError, EquationErrorOptions, Regressor, Score, Share,
 };
-use crate::fit::{fit, Estimate, FitError, FitOptions, FitResult, Horizon, Offsets};
+use crate::fit::{
+    fit, values_from, with_estimates, Estimate, FitError, FitOptions, FitResult, Horizon, Offsets,
+};
 use crate::sensitivity::estimated_parameters;
 
 /// Smallest RMSE ratio (baseline / candidate) that counts as a found effect.
@@ -779,17 +781,7 @@ fn decide(
         checked.push(label.clone());
         // the model without the effect, from the candidate's values
         let f = top.fit.as_ref().expect("passes implies refitted");
-        let start: Vec<f64> = model
-            .parameters
-            .iter()
-            .zip(&baseline.base)
-            .map(|(p, b)| {
-                f.parameters
-                    .iter()
-                    .find(|e| e.name == p.name)
-                    .map_or(*b, |e| e.value)
-            })
-            .collect();
+        let start = with_estimates(model, baseline.base.clone(), &f.parameters);
         let horizon = baseline.segments.map_or(Horizon::Whole, Horizon::Segments);
         let mut again_opts = screening(opts, start, horizon);
         again_opts.warm = Some(f.warm.clone());
@@ -991,11 +983,12 @@ fn stribeck_from_coulomb(
     else {
         return;
     };
-    let fc_name = format!("Fc_{target}");
-    let Some(fc) = coulomb_model
-        .parameters
-        .iter()
-        .position(|p| p.name == fc_name)
+    let index = |m: &Model, base: &str| {
+        let name = r.candidate.parameter_name(base)?;
+        m.parameters.iter().position(|p| p.name == name)
+    };
+    // the Coulomb friction's level (its `Fc` is named as the Stribeck's)
+    let Some(fc) = index(coulomb_model, "Fc")
         .map(|k| coulomb.base[k])
         .filter(|v| *v > 0.0)
     else {
@@ -1015,18 +1008,9 @@ fn stribeck_from_coulomb(
     if top <= 0.0 {
         return;
     }
-    let mut start: Vec<f64> = m.parameters.iter().map(|p| p.value).collect();
-    for (k, p) in coulomb_model.parameters.iter().enumerate() {
-        if let Some(j) = m.parameters.iter().position(|q| q.name == p.name) {
-            start[j] = coulomb.base[k];
-        }
-    }
-    let index = |name: String| m.parameters.iter().position(|p| p.name == name);
-    let (Some(i_fc), Some(i_fs), Some(i_vs)) = (
-        index(fc_name),
-        index(format!("Fs_{target}")),
-        index(format!("vs_{target}")),
-    ) else {
+    let start = values_from(m, (coulomb_model, &coulomb.base));
+    let (Some(i_fc), Some(i_fs), Some(i_vs)) = (index(m, "Fc"), index(m, "Fs"), index(m, "vs"))
+    else {
         return;
     };
     let horizon = coulomb.segments.map_or(Horizon::Whole, Horizon::Segments);
@@ -1064,7 +1048,7 @@ fn stribeck_from_coulomb(
 }
 
 /// (effect, the simpler effect it contains on the same target).
-const NESTED: &[(&str, &str)] = &[("stribeck_friction", "coulomb_friction")];
+pub(crate) const NESTED: &[(&str, &str)] = &[("stribeck_friction", "coulomb_friction")];
 
 /// How much lower the cost of an effect has to be than that of the simpler
 /// effect it contains ([`NESTED`]) for the bigger one to be preferred.
@@ -1213,14 +1197,10 @@ fn refit_from(
     experiments: &[Experiment],
     opts: &DiagnoseOptions,
 ) -> Result<FitResult, FitError> {
-    let mut start: Vec<f64> = m.parameters.iter().map(|p| p.value).collect();
-    if let Some((model, baseline)) = from {
-        for (i, p) in model.parameters.iter().enumerate() {
-            if let Some(j) = m.parameters.iter().position(|q| q.name == p.name) {
-                start[j] = baseline.base[i];
-            }
-        }
-    }
+    let mut start = match from {
+        Some((model, baseline)) => values_from(m, (model, &baseline.base)),
+        None => m.parameters.iter().map(|p| p.value).collect(),
+    };
     for e in &r.parameters {
         if let Some(j) = m.parameters.iter().position(|q| q.name == e.name) {
             if let Some((lo, hi)) = m.parameters[j].estimate {

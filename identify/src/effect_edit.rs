@@ -432,6 +432,14 @@ impl EffectInstance {
         })
     }
 
+    /// The model name of the effect's parameter `base` (`Fc` -> `Fc_alpha`).
+    pub fn parameter_name(&self, base: &str) -> Option<&str> {
+        self.parameters
+            .iter()
+            .find(|p| p.base == base)
+            .map(|p| p.name.as_str())
+    }
+
     /// `effect@target`.
     pub fn label(&self) -> String {
         format!("{}@{}", self.effect, self.target)

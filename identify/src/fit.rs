@@ -1977,6 +1977,37 @@ fn multistart(
     Some((q, s))
 }
 
+/// The values of `m`'s base parameters, each taken instead from the
+/// parameter of the same name in `from` (a model and its base values) when
+/// it has one: the start of a refit of an edited model from a fit of
+/// another.
+pub(crate) fn values_from(m: &Model, (from, base): (&Model, &[f64])) -> Vec<f64> {
+    m.parameters
+        .iter()
+        .map(|p| {
+            from.parameters
+                .iter()
+                .position(|q| q.name == p.name)
+                .map_or(p.value, |i| base[i])
+        })
+        .collect()
+}
+
+/// `start` (values of `m`'s base parameters) with each parameter that
+/// `estimates` holds at its estimate.
+pub(crate) fn with_estimates(m: &Model, start: Vec<f64>, estimates: &[Estimate]) -> Vec<f64> {
+    m.parameters
+        .iter()
+        .zip(start)
+        .map(|(p, v)| {
+            estimates
+                .iter()
+                .find(|e| e.name == p.name)
+                .map_or(v, |e| e.value)
+        })
+        .collect()
+}
+
 /// Base parameter values as a full vector (base then derived).
 pub fn full_parameters(model: &Model, base: Vec<f64>) -> Vec<f64> {
     ParameterValues::from_base(model, base).full

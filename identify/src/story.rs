@@ -12,11 +12,14 @@ use plantc_derive::model::{Model, ParameterValues};
 
 use crate::data::Experiment;
 use crate::diagnose::{
-    diagnose_from, diagnose_with, model_from_text, DiagnoseError, DiagnoseOptions, Ranked,
+    diagnose_from, diagnose_with, model_from_text, DiagnoseError, DiagnoseOptions, Ranked, NESTED,
     NESTED_GAIN,
 };
 use crate::effect_edit::EffectInstance;
-use crate::fit::{fit_with_progress, FitError, FitOptions, FitProgress, FitResult, Horizon};
+use crate::fit::{
+    fit, fit_with_progress, values_from, with_estimates, FitError, FitOptions, FitProgress,
+    FitResult, Horizon,
+};
 use crate::metrics::{compare, FitReport};
 use crate::validate::{as_experiments, validate, ValidateOptions, Validation};
 
@@ -101,6 +104,21 @@ pub struct Story {
     /// Effects of earlier rounds replaced by their simpler form once the
     /// later ones were in (the final `text` and `fit` have them replaced).
     pub simplifications: Vec<Simplification>,
+    /// The stage of the model as it stood refitted to a better minimum
+    /// found by the last diagnosis (then the story's fit), if any.
+    pub better_start: Option<usize>,
+}
+
+impl Story {
+    /// How many effects the final model has gained.
+    pub fn effects_added(&self) -> usize {
+        self.rounds.iter().filter(|r| r.effect.is_some()).count()
+            + self
+                .simplifications
+                .iter()
+                .filter(|x| x.then.is_some())
+                .count()
+    }
 }
 
 /// An effect found in an early round that, with the later rounds' effects
@@ -121,11 +139,13 @@ pub struct Simplification {
     pub cost_with: f64,
     /// ...and with `to` (and `then`), refitted.
     pub cost_simpler: f64,
+    /// Its stage in [`Story::stages`].
+    pub stage: usize,
 }
 
 impl Simplification {
-    /// The label of its stage in [`Story::stages`].
-    pub fn stage_label(&self) -> String {
+    /// The label of its stage.
+    fn stage_label(&self) -> String {
         match &self.then {
             Some(t) => format!(
                 "{} for {}, + {}, fitted",
@@ -137,10 +157,6 @@ impl Simplification {
         }
     }
 }
-
-/// (effect, the simpler effect it contains on the same target): the
-/// diagnosis' nested pairs, checked again at the end of the story.
-const SIMPLER: &[(&str, &str)] = &[("stribeck_friction", "coulomb_friction")];
 
 /// Why the story could not be told.
 #[derive(Clone, Debug, PartialEq)]
@@ -242,15 +258,19 @@ fn stage(
 pub fn fitted_instance(r: &Ranked) -> EffectInstance {
     let mut inst = r.candidate.clone();
     if let Some(f) = &r.fit {
-        for p in &mut inst.parameters {
-            if let Some(e) = f.parameters.iter().find(|e| e.name == p.name) {
-                // six significant digits: readable in the snippet, and the
-                // next fit refines it anyway
-                p.value = format!("{:.5e}", e.value).parse().unwrap_or(e.value);
-            }
-        }
+        write_fitted(&mut inst, f);
     }
     inst
+}
+
+/// Write the values of `f` into the parameters of `inst` (six significant
+/// digits: readable in the snippet, and the next fit refines them anyway).
+fn write_fitted(inst: &mut EffectInstance, f: &FitResult) {
+    for p in &mut inst.parameters {
+        if let Some(e) = f.parameters.iter().find(|e| e.name == p.name) {
+            p.value = format!("{:.5e}", e.value).parse().unwrap_or(e.value);
+        }
+    }
 }
 
 /// Tell the story for `text` (a model file's content) on `experiments`.
@@ -276,6 +296,7 @@ pub fn identify(
     let mut rounds: Vec<Round> = Vec::new();
     let mut current_text = text.to_string();
     let mut current_fit: Option<FitResult> = None;
+    let mut better_start = None;
     let stop;
     loop {
         let round = rounds.len() + 1;
@@ -322,6 +343,7 @@ pub fn identify(
                 .as_ref()
                 .is_some_and(|f| d.baseline.after_cost < 0.999 * f.after_cost);
             if improved && round > 1 {
+                better_start = Some(stages.len());
                 stages.push(stage(
                     "refitted from a better start",
                     &current_text,
@@ -353,19 +375,10 @@ pub fn identify(
         // start from the refit's values (the effect's and the model's)
         let mut start: Vec<f64> = m2.parameters.iter().map(|p| p.value).collect();
         if let Some(f) = &top.fit {
-            for (i, p) in m2.parameters.iter().enumerate() {
-                if let Some(e) = f.parameters.iter().find(|e| e.name == p.name) {
-                    start[i] = e.value;
-                } else if let Some(j) = current_model
-                    .parameters
-                    .iter()
-                    .position(|q| q.name == p.name)
-                {
-                    if let Some(cf) = &current_fit {
-                        start[i] = cf.base[j];
-                    }
-                }
+            if let Some(cf) = &current_fit {
+                start = values_from(&m2, (&current_model, &cf.base));
             }
+            start = with_estimates(&m2, start, &f.parameters);
         }
         progress(&StoryProgress::Step(format!(
             "fitting with {}",
@@ -407,251 +420,236 @@ pub fn identify(
             break;
         }
     }
-    let mut fit = current_fit.expect("the first round fits the nominal model");
-    // An effect taken in an early round over its simpler form may owe its
-    // extra parameters to an effect found later (Coulomb friction and a
-    // quadratic drag on the pendulum: round 1 took a Stribeck friction,
-    // 4.21x against the Coulomb friction's 2.96x, its hump standing in for
-    // part of the drag; with the drag in, the hump had shrunk to
-    // vs = 1.2e-3 rad/s): each such effect is tried in its simpler form in
-    // the final model and replaced unless it beats it by NESTED_GAIN.
-    let mut simplifications = Vec::new();
-    // the effects in the model, round by round (the rounds keep what they found)
-    let mut applied: Vec<Option<EffectInstance>> =
-        rounds.iter().map(|r| r.effect.clone()).collect();
-    let found: Vec<usize> = (0..rounds.len())
-        .filter(|&k| rounds[k].effect.is_some())
-        .collect();
-    if found.len() >= 2 {
-        for &k in &found[..found.len() - 1] {
-            let Some(from) = applied[k].clone() else {
-                continue;
-            };
-            let last = (current_text.as_str(), &fit);
-            let Some((text2, f2, to)) =
-                simpler_story(text, &applied, k, last, experiments, opts, progress)
-            else {
-                continue;
-            };
-            if NESTED_GAIN * fit.after_cost <= f2.after_cost {
-                continue;
-            }
-            let m2 = model_from_text("simplified", &text2).map_err(StoryError::Model)?;
-            let simple = Simplification {
-                round: k + 1,
-                from,
-                to: to.clone(),
-                then: None,
-                cost_with: fit.after_cost,
-                cost_simpler: f2.after_cost,
-            };
-            stages.push(stage(
-                &simple.stage_label(),
-                &text2,
-                &m2,
-                &f2.base,
-                Some(&f2),
-                experiments,
-                opts,
-            )?);
-            simplifications.push(simple);
-            applied[k] = Some(to);
-            current_text = text2;
-            fit = f2;
-        }
-    }
-    // A Stribeck friction fitted to no Stribeck shape (no hump, Fs <= Fc,
-    // or vs at a bound of its box) imitates something else (Coulomb
-    // friction and drag on the rate survey's second rig: vs at its 10 rad/s
-    // bound and Fc > Fs, whose expansion Fs + (Fc - Fs) v^2/vs^2 is a
-    // Coulomb friction plus a quadratic drag): its simpler form is put in
-    // its place and diagnosed once more, and that is kept when the
-    // diagnosis names an effect and the model with both ends no more than
-    // NESTED_GAIN above.
-    let dopts = DiagnoseOptions {
-        fit: opts.fit.clone(),
-        ..opts.diagnose.clone()
-    };
-    for k in 0..applied.len() {
-        let Some(from) = applied[k].clone() else {
-            continue;
-        };
-        // (the diagnosis may add an effect: not past --max-effects)
-        let in_model = applied.iter().flatten().count();
-        if in_model >= opts.max_effects || !no_shape_of_its_own(&current_text, &fit, &from) {
-            continue;
-        }
-        let last = (current_text.as_str(), &fit);
-        let Some((text2, f2, to)) =
-            simpler_story(text, &applied, k, last, experiments, opts, progress)
-        else {
-            continue;
-        };
-        let Ok(d) = diagnose_from(&text2, experiments, f2, &dopts) else {
-            continue;
-        };
-        let Some(top) = d.verdict.as_ref().and_then(|_| d.ranking.first()) else {
-            continue;
-        };
-        let then = fitted_instance(top);
-        let Ok(text3) = then.apply(&text2) else {
-            continue;
-        };
-        let m3 = model_from_text("then", &text3).map_err(StoryError::Model)?;
-        // from the candidate's refit in that diagnosis (its model is `text3`)
-        let start: Vec<f64> = m3
-            .parameters
-            .iter()
-            .map(|p| {
-                top.fit
-                    .as_ref()
-                    .and_then(|f| f.parameters.iter().find(|e| e.name == p.name))
-                    .map_or(p.value, |e| e.value)
-            })
-            .collect();
-        let Ok(f3) = crate::fit::fit(
-            &m3,
-            experiments,
-            &FitOptions {
-                start: Some(start),
-                warm: top.fit.as_ref().map(|f| f.warm.clone()),
-                ..opts.fit.clone()
-            },
-        ) else {
-            continue;
-        };
-        if f3.after_cost > NESTED_GAIN * fit.after_cost {
-            continue;
-        }
-        let (mut to, mut then) = (to, then);
-        write_fitted(&mut to, &f3);
-        write_fitted(&mut then, &f3);
-        let simple = Simplification {
-            round: k + 1,
-            from,
-            to: to.clone(),
-            then: Some(then.clone()),
-            cost_with: fit.after_cost,
-            cost_simpler: f3.after_cost,
-        };
-        stages.push(stage(
-            &simple.stage_label(),
-            &text3,
-            &m3,
-            &f3.base,
-            Some(&f3),
-            experiments,
-            opts,
-        )?);
-        simplifications.push(simple);
-        applied[k] = Some(to);
-        applied.push(Some(then));
-        current_text = text3;
-        fit = f3;
-    }
-    Ok(Story {
-        stages,
-        rounds,
-        fit,
+    let fit = current_fit.expect("the first round fits the nominal model");
+    let mut end = EndSteps {
+        applied: rounds.iter().map(|r| r.effect.clone()).collect(),
         text: current_text,
+        fit,
+        simplifications: Vec::new(),
+        stages,
+    };
+    end.run(text, &rounds, experiments, opts, progress)?;
+    Ok(Story {
+        stages: end.stages,
+        rounds,
+        fit: end.fit,
+        text: end.text,
         stop,
-        simplifications,
+        simplifications: end.simplifications,
+        better_start,
     })
 }
 
-/// The story's final model rebuilt from `text` with round `k`'s effect
-/// replaced by its simpler form ([`SIMPLER`]; None when it has none) on
-/// its target (the other rounds' effects as `applied` has them), fitted from the values of `last` (the final model's text and
-/// fit; the simpler effect's parameter of the same name, e.g. `Fc_alpha`,
-/// takes the level the bigger one fitted): its text, fit and the effect
-/// put in; None when it cannot be built or fitted.
-fn simpler_story(
-    text: &str,
-    applied: &[Option<EffectInstance>],
-    k: usize,
-    (last_text, last): (&str, &FitResult),
-    experiments: &[Experiment],
-    opts: &StoryOptions,
-    progress: &mut dyn FnMut(&StoryProgress),
-) -> Option<(String, FitResult, EffectInstance)> {
-    let from = applied.get(k)?.as_ref()?;
-    let (_, simpler) = SIMPLER.iter().find(|(outer, _)| *outer == from.effect)?;
-    progress(&StoryProgress::Step(format!(
-        "trying {simpler}@{} for {}",
-        from.target,
-        from.label()
-    )));
-    let mut current = text.to_string();
-    let mut put = None;
-    for (j, inst) in applied.iter().enumerate() {
-        let Some(inst) = inst else {
-            continue;
-        };
-        let inst = if j == k {
-            let m = model_from_text("simpler", &current).ok()?;
-            let to = EffectInstance::candidate(&m, simpler, &inst.target).ok()?;
-            put = Some(to.clone());
-            to
-        } else {
-            inst.clone()
-        };
-        current = inst.apply(&current).ok()?;
-    }
-    let last_model = model_from_text("last", last_text).ok()?;
-    let m2 = model_from_text("simpler", &current).ok()?;
-    let start: Vec<f64> = m2
-        .parameters
-        .iter()
-        .map(|p| {
-            last_model
-                .parameters
-                .iter()
-                .position(|q| q.name == p.name)
-                .map_or(p.value, |i| last.base[i])
-        })
-        .collect();
-    let f = crate::fit::fit(
-        &m2,
-        experiments,
-        &FitOptions {
-            start: Some(start),
-            warm: Some(last.warm.clone()),
-            ..opts.fit.clone()
-        },
-    )
-    .ok()?;
-    let mut put = put?;
-    write_fitted(&mut put, &f);
-    Some((current, f, put))
+/// The story's end steps, on the model its rounds built.
+struct EndSteps {
+    /// The effects in the model, round by round (the rounds keep what they
+    /// found), then any a step added.
+    applied: Vec<Option<EffectInstance>>,
+    /// The model's text and fit as they now stand.
+    text: String,
+    fit: FitResult,
+    simplifications: Vec<Simplification>,
+    stages: Vec<Stage>,
 }
 
-/// Write the values of `f` into the parameters of `inst` (six significant
-/// digits, as the rounds' snippets).
-fn write_fitted(inst: &mut EffectInstance, f: &FitResult) {
-    for p in &mut inst.parameters {
-        if let Some(e) = f.parameters.iter().find(|e| e.name == p.name) {
-            p.value = format!("{:.5e}", e.value).parse().unwrap_or(e.value);
+impl EndSteps {
+    /// 1. An effect taken in an early round over its simpler form may owe
+    ///    its extra parameters to an effect found later (Coulomb friction
+    ///    and a quadratic drag on the pendulum: round 1 took a Stribeck
+    ///    friction, 4.21x against the Coulomb friction's 2.96x, its hump
+    ///    standing in for part of the drag; with the drag in, the hump had
+    ///    shrunk to vs = 1.2e-3 rad/s): each such effect is tried in its
+    ///    simpler form in the final model and replaced unless it beats it
+    ///    by NESTED_GAIN.
+    /// 2. A Stribeck friction fitted to no Stribeck shape (no hump, Fs <=
+    ///    Fc, or vs at a bound of its box) imitates something else (Coulomb
+    ///    friction and drag on the rate survey's second rig: vs at its
+    ///    10 rad/s bound and Fc > Fs, whose expansion Fs + (Fc - Fs)
+    ///    v^2/vs^2 is a Coulomb friction plus a quadratic drag): its
+    ///    simpler form is put in its place and diagnosed once more, and that
+    ///    is kept when the diagnosis names an effect (not past
+    ///    `max_effects`) and the model with both ends no more than
+    ///    NESTED_GAIN above.
+    fn run(
+        &mut self,
+        text: &str,
+        rounds: &[Round],
+        experiments: &[Experiment],
+        opts: &StoryOptions,
+        progress: &mut dyn FnMut(&StoryProgress),
+    ) -> Result<(), StoryError> {
+        let found: Vec<usize> = (0..rounds.len())
+            .filter(|&k| rounds[k].effect.is_some())
+            .collect();
+        for &k in found.iter().take(found.len().saturating_sub(1)) {
+            let Some((text2, f2, to)) = self.simpler(text, k, experiments, opts, progress) else {
+                continue;
+            };
+            if f2.after_cost < NESTED_GAIN * self.fit.after_cost {
+                self.adopt(k, (to, None), (text2, f2), experiments, opts)?;
+            }
         }
+        let dopts = DiagnoseOptions {
+            fit: opts.fit.clone(),
+            ..opts.diagnose.clone()
+        };
+        for k in 0..self.applied.len() {
+            let in_model = self.applied.iter().flatten().count();
+            if in_model >= opts.max_effects || !self.no_shape_of_its_own(k) {
+                continue;
+            }
+            let Some((text2, f2, mut to)) = self.simpler(text, k, experiments, opts, progress)
+            else {
+                continue;
+            };
+            let Ok(d) = diagnose_from(&text2, experiments, f2, &dopts) else {
+                continue;
+            };
+            let Some(top) = d.verdict.as_ref().and_then(|_| d.ranking.first()) else {
+                continue;
+            };
+            let mut then = fitted_instance(top);
+            let Ok(text3) = then.apply(&text2) else {
+                continue;
+            };
+            let m3 = model_from_text("then", &text3).map_err(StoryError::Model)?;
+            // from the candidate's refit in that diagnosis (its model is `text3`)
+            let nominal: Vec<f64> = m3.parameters.iter().map(|p| p.value).collect();
+            let start = match &top.fit {
+                Some(f) => with_estimates(&m3, nominal, &f.parameters),
+                None => nominal,
+            };
+            let fo = FitOptions {
+                start: Some(start),
+                warm: top.fit.as_ref().map(|f| f.warm.clone()),
+                ..opts.fit.clone()
+            };
+            let Ok(f3) = fit(&m3, experiments, &fo) else {
+                continue;
+            };
+            if f3.after_cost <= NESTED_GAIN * self.fit.after_cost {
+                write_fitted(&mut to, &f3);
+                write_fitted(&mut then, &f3);
+                self.adopt(k, (to, Some(then)), (text3, f3), experiments, opts)?;
+            }
+        }
+        Ok(())
     }
-}
 
-/// Is effect `inst` (a Stribeck friction) fitted in `fit` of the model
-/// `text` to no shape of its own: no hump (`Fs <= Fc`), or its velocity at
-/// a bound of its box?
-fn no_shape_of_its_own(text: &str, fit: &FitResult, inst: &EffectInstance) -> bool {
-    let Ok(model) = model_from_text("final", text) else {
-        return false;
-    };
-    let value = |base: &str| {
-        let name = format!("{base}_{}", inst.target);
-        let i = model.parameters.iter().position(|p| p.name == name)?;
-        Some((fit.base[i], model.parameters[i].estimate))
-    };
-    let (Some((fc, _)), Some((fs, _)), Some((vs, bounds))) =
-        (value("Fc"), value("Fs"), value("vs"))
-    else {
-        return false;
-    };
-    let at_bound = bounds.is_some_and(|(lo, hi)| vs <= lo * 1.001 || vs >= hi * 0.999);
-    fs <= fc || at_bound
+    /// Put `to` in the place of round `k`'s effect (and add `then`): the
+    /// model becomes `text` fitted by `f`, with its stage and record.
+    fn adopt(
+        &mut self,
+        k: usize,
+        (to, then): (EffectInstance, Option<EffectInstance>),
+        (text, f): (String, FitResult),
+        experiments: &[Experiment],
+        opts: &StoryOptions,
+    ) -> Result<(), StoryError> {
+        let Some(from) = self.applied[k].replace(to.clone()) else {
+            return Ok(());
+        };
+        let m = model_from_text("simplified", &text).map_err(StoryError::Model)?;
+        let simple = Simplification {
+            round: k + 1,
+            from,
+            to,
+            then: then.clone(),
+            cost_with: self.fit.after_cost,
+            cost_simpler: f.after_cost,
+            stage: self.stages.len(),
+        };
+        let label = simple.stage_label();
+        self.stages.push(stage(
+            &label,
+            &text,
+            &m,
+            &f.base,
+            Some(&f),
+            experiments,
+            opts,
+        )?);
+        self.simplifications.push(simple);
+        if then.is_some() {
+            self.applied.push(then);
+        }
+        self.text = text;
+        self.fit = f;
+        Ok(())
+    }
+
+    /// The model rebuilt from `text` with round `k`'s effect replaced by
+    /// its simpler form ([`NESTED`]; None when it has none) on its target
+    /// (the other effects as `applied` has them), fitted from the values of
+    /// the model as it stands (the simpler effect's parameter of the same
+    /// name, e.g. `Fc_alpha`, takes the level the bigger one fitted): its
+    /// text, fit and the effect put in; None when it cannot be built or
+    /// fitted.
+    fn simpler(
+        &self,
+        text: &str,
+        k: usize,
+        experiments: &[Experiment],
+        opts: &StoryOptions,
+        progress: &mut dyn FnMut(&StoryProgress),
+    ) -> Option<(String, FitResult, EffectInstance)> {
+        let from = self.applied.get(k)?.as_ref()?;
+        let (_, simpler) = NESTED.iter().find(|(outer, _)| *outer == from.effect)?;
+        progress(&StoryProgress::Step(format!(
+            "trying {simpler}@{} for {}",
+            from.target,
+            from.label()
+        )));
+        let mut current = text.to_string();
+        let mut put = None;
+        for (j, inst) in self.applied.iter().enumerate() {
+            let Some(inst) = inst else {
+                continue;
+            };
+            let inst = if j == k {
+                let m = model_from_text("simpler", &current).ok()?;
+                let to = EffectInstance::candidate(&m, simpler, &inst.target).ok()?;
+                put = Some(to.clone());
+                to
+            } else {
+                inst.clone()
+            };
+            current = inst.apply(&current).ok()?;
+        }
+        let last_model = model_from_text("last", &self.text).ok()?;
+        let m2 = model_from_text("simpler", &current).ok()?;
+        let fo = FitOptions {
+            start: Some(values_from(&m2, (&last_model, &self.fit.base))),
+            warm: Some(self.fit.warm.clone()),
+            ..opts.fit.clone()
+        };
+        let f = fit(&m2, experiments, &fo).ok()?;
+        let mut put = put?;
+        write_fitted(&mut put, &f);
+        Some((current, f, put))
+    }
+
+    /// Is round `k`'s effect, a Stribeck friction, fitted in the model as it
+    /// stands to no shape of its own: no hump (`Fs <= Fc`), or its velocity
+    /// at a bound of its box?
+    fn no_shape_of_its_own(&self, k: usize) -> bool {
+        let Some(Some(inst)) = self.applied.get(k) else {
+            return false;
+        };
+        let Ok(model) = model_from_text("final", &self.text) else {
+            return false;
+        };
+        let value = |base: &str| {
+            let name = inst.parameter_name(base)?;
+            let i = model.parameters.iter().position(|p| p.name == name)?;
+            Some((self.fit.base[i], model.parameters[i].estimate))
+        };
+        let (Some((fc, _)), Some((fs, _)), Some((vs, bounds))) =
+            (value("Fc"), value("Fs"), value("vs"))
+        else {
+            return false;
+        };
+        let at_bound = bounds.is_some_and(|(lo, hi)| vs <= lo * 1.001 || vs >= hi * 0.999);
+        fs <= fc || at_bound
+    }
 }

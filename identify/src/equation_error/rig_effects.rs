@@ -55,7 +55,9 @@
 
 use plantc_derive::model::Model;
 
-use super::{dot, EquationError, EquationErrorError, LinearEstimate, Regressor, Score, Smoothed};
+use super::{
+    dot, spans, EquationError, EquationErrorError, LinearEstimate, Regressor, Score, Smoothed,
+};
 use crate::effect_edit::label_of;
 
 /// Smallest cogging period count scanned.
@@ -545,12 +547,11 @@ impl EquationError {
         let top = v.iter().fold(0.0f64, |a, x| a.max(x.abs()));
         let sgn: Vec<f64> = v.iter().map(|&x| (x / self.width).tanh() * w).collect();
         // is the Coulomb column the model's own already (projected away)?
-        let norm = dot(&sgn, &sgn);
-        let own = norm <= 0.0 || {
-            let full = self.column(&idx, &sgn);
-            let pn: f64 = norm - b.iter().map(|u| dot(u, &full).powi(2)).sum::<f64>();
-            pn <= 1e-6 * norm
-        };
+        let coulomb = self.column(&idx, &sgn);
+        let norm = dot(&coulomb, &coulomb);
+        // what the orthonormal nuisance basis leaves of it
+        let left = norm - b.iter().map(|u| dot(u, &coulomb).powi(2)).sum::<f64>();
+        let own = norm <= 0.0 || spans(left, &coulomb);
         let hump = |vs: f64| -> Vec<f64> {
             v.iter()
                 .zip(&sgn)
@@ -584,7 +585,7 @@ impl EquationError {
         };
         let mut full = Vec::new();
         if !own {
-            full.push(self.column(&idx, &sgn));
+            full.push(coulomb);
         }
         full.push(self.column(&idx, &hump(vs)));
         let (mut score, coef, var) = self.finish(&self.r, &full, 1);

@@ -265,22 +265,7 @@ fn story(
                     "model with the effect -> {}",
                     dir.join(&file).display()
                 );
-                for e in &f.parameters {
-                    let _ = writeln!(
-                        out,
-                        "   {:<10} = {:.5e}  (std error {:.1e}){}",
-                        e.name,
-                        e.value,
-                        e.std_error,
-                        if e.fixed {
-                            "  fixed (not identifiable)"
-                        } else if e.at_bound {
-                            "  at its bound"
-                        } else {
-                            ""
-                        }
-                    );
-                }
+                write_estimates(out, &f.parameters);
                 for m in f.identifiability.messages() {
                     let _ = writeln!(out, "   warning: {m}");
                 }
@@ -304,11 +289,7 @@ fn story(
             }
             _ => {
                 let _ = writeln!(out, "   verdict: {}", s.stop);
-                if let Some(stage) = s
-                    .stages
-                    .iter()
-                    .find(|st| st.label == "refitted from a better start")
-                {
+                if let Some(stage) = s.better_start.and_then(|i| s.stages.get(i)) {
                     let _ = writeln!(
                         out,
                         "   the model as it stands, refitted from a candidate's values, reached a lower cost ({:.3e}): that fit is the result",
@@ -351,8 +332,7 @@ fn story(
                 );
             }
         }
-        let label = simple.stage_label();
-        if let Some(stage) = s.stages.iter().find(|st| st.label == label) {
+        if let Some(stage) = s.stages.get(simple.stage) {
             let m2 = model_from_text("stage", &stage.text).map_err(fail)?;
             show_stage(
                 (out, err),
@@ -374,13 +354,7 @@ fn story(
         }));
     }
     if !s.simplifications.is_empty() {
-        for e in &s.fit.parameters {
-            let _ = writeln!(
-                out,
-                "   {:<10} = {:.5e}  (std error {:.1e})",
-                e.name, e.value, e.std_error
-            );
-        }
+        write_estimates(out, &s.fit.parameters);
     }
     // the result
     let final_model = model_from_text("final", &s.text).map_err(fail)?;
@@ -404,8 +378,7 @@ fn story(
         "RMSE {first:.3e} -> {last:.3e}: {:.1}x lower; {} ({} effect(s) added); model -> {}, figures -> {}/ ({elapsed:.1} s)",
         first / last.max(f64::MIN_POSITIVE),
         s.stop,
-        s.rounds.iter().filter(|r| r.effect.is_some()).count()
-            + s.simplifications.iter().filter(|x| x.then.is_some()).count(),
+        s.effects_added(),
         dir.join("fitted.plant").display(),
         dir.display(),
     );
@@ -468,6 +441,27 @@ fn write_stage_figures(
         &stage.simulated,
         err,
     )
+}
+
+/// A fit's estimates, one line each, with their standard errors and
+/// whether fixed or at a bound.
+fn write_estimates(out: &mut dyn Write, estimates: &[plantc_identify::Estimate]) {
+    for e in estimates {
+        let _ = writeln!(
+            out,
+            "   {:<10} = {:.5e}  (std error {:.1e}){}",
+            e.name,
+            e.value,
+            e.std_error,
+            if e.fixed {
+                "  fixed (not identifiable)"
+            } else if e.at_bound {
+                "  at its bound"
+            } else {
+                ""
+            }
+        );
+    }
 }
 
 /// A stage's figures ([`write_stage_figures`]) and its validation lines.
