@@ -156,6 +156,12 @@ pub struct FitOptions {
     /// growing horizons: for a refit near a fitted point (a candidate
     /// effect added to a fitted baseline).
     pub warm: Option<WarmStart>,
+    /// Another start (base values, model order) for a warm fit: the fit
+    /// starts from whichever of `start` and this one the whole records,
+    /// from the warm nuisance, fit better (two more simulations). A lower
+    /// cost is no proof of a better basin: the caller offers this only
+    /// where any start will do (see the diagnosis' refits).
+    pub alternative_start: Option<Vec<f64>>,
 }
 
 /// Where a fit's nuisance ended, per experiment: the initial state of its
@@ -190,6 +196,7 @@ impl Default for FitOptions {
             act_on_identifiability: true,
             tolerance: FINAL_TOLERANCE,
             warm: None,
+            alternative_start: None,
         }
     }
 }
@@ -1041,8 +1048,15 @@ pub fn fit_with_progress(
     let setup = Setup::new(model, experiments, opts, &free_names)?;
     let law = setup.sim.law().cloned();
     let free = setup.free.clone();
-    let base = setup.base.clone();
-    let g0: Vec<f64> = free.iter().map(|&i| base[i]).collect();
+    let mut run = Run {
+        tolerance: opts.tolerance,
+        iterations: 0,
+        simulations: 0,
+        stage: 0,
+        stages: 1,
+        progress,
+    };
+    let g0 = better_start(&setup, &mut run);
     let mut notes = Vec::new();
     if let Some(l) = &law {
         notes.push(format!(
@@ -1055,14 +1069,6 @@ pub fn fit_with_progress(
             }
         ));
     }
-    let mut run = Run {
-        tolerance: opts.tolerance,
-        iterations: 0,
-        simulations: 0,
-        stage: 0,
-        stages: 1,
-        progress,
-    };
 
     // 1. horizon: whole records unless the replay diverges; then segments,
     // and back to whole records when the segments' estimates follow the data
@@ -1298,6 +1304,36 @@ pub fn fit_with_progress(
         simulated,
         warm,
     })
+}
+
+/// The free values of the start of a fit: those of [`FitOptions::start`],
+/// or of [`FitOptions::alternative_start`] when the fit is warm and the
+/// whole records, with the warm nuisance, fit better from there (two
+/// simulations).
+fn better_start(setup: &Setup<'_>, run: &mut Run<'_>) -> Vec<f64> {
+    let free_of = |base: &[f64]| -> Vec<f64> { setup.free.iter().map(|&i| base[i]).collect() };
+    let g0 = free_of(&setup.base);
+    let alt = match &setup.opts.alternative_start {
+        Some(a) if setup.opts.warm.is_some() && a.len() == setup.base.len() => free_of(a),
+        _ => return g0,
+    };
+    if alt == g0 || alt.iter().any(|v| !v.is_finite()) {
+        return g0;
+    }
+    let pb = setup.problem(None);
+    let mut cost_at = |g: &[f64]| {
+        let mut pt = setup.start_point(&pb, g);
+        setup.apply_warm(&pb, &mut pt);
+        run.simulations += 1;
+        pb.cost(&pt, f64::INFINITY)
+            .map_or(f64::INFINITY, |(s, _)| s)
+    };
+    let (own, other) = (cost_at(&g0), cost_at(&alt));
+    if other < own {
+        alt
+    } else {
+        g0
+    }
 }
 
 /// Where a fit on one layout (whole records or segments) ended.
