@@ -328,12 +328,16 @@ pub fn identify(
         let cost_before = d.baseline.after_cost;
         let top = d.verdict.as_ref().and_then(|_| d.ranking.first()).cloned();
         let Some(top) = top else {
+            let caveat = d
+                .segments_caveat()
+                .map(|c| format!(" ({c})"))
+                .unwrap_or_default();
             stop = if d.unexplained() {
                 d.verdict_line()
             } else if round == 1 {
-                "adequate: no candidate effect lowers the cost clearly".to_string()
+                format!("adequate: no candidate effect lowers the cost clearly{caveat}")
             } else {
-                "no further effect lowers the cost clearly".to_string()
+                format!("no further effect lowers the cost clearly{caveat}")
             };
             // the diagnosis may have found the model as it stands a better
             // minimum (its baseline refitted from a candidate's values: rate

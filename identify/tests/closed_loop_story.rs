@@ -1,0 +1,225 @@
+//! The story on closed-loop recordings: the pendulum balanced upright by a
+//! state-feedback law, an excitation voltage added to the law's output, a
+//! hidden effect. Replayed open loop the upright pendulum falls within a
+//! second, so the fit has to go to segments or simulate the law in the
+//! loop.
+//!
+//! The data are made here: the true model (the pendulum with the effect)
+//! simulated with the law in the loop ([`Simulator::with_loop`]), the law's
+//! output at every sample recomputed from the same trajectory (the applied
+//! voltage a rig logs), then the angles rounded to a 4096-count encoder.
+//! The law reads the unrounded angles (a rig's reads the rounded ones); the
+//! logged voltage is still exactly the applied one. Gains: `plantc lqr
+//! models/rotary_pendulum.plant --q 5,1,0.1,0.1 --r 1`.
+
+mod common;
+
+use common::simulated::{model, pendulum_text};
+use std::fmt::Write as _;
+
+use plantc_derive::model::ParameterValues;
+use plantc_identify::{
+    read_experiment, Channel, EffectInstance, Experiment, LoopLaw, Signals, SimOptions, Simulator,
+    StoryOptions,
+};
+
+const LAW: &str = "
+recorded controller balance \"LQR about upright, Q = [5, 1, 0.1, 0.1], R = 1\" {
+    signal ff [V] \"injected excitation\"
+    gain k1 = -2.236068 [V/rad]
+    gain k2 = 20.162622 [V/rad]
+    gain k3 = -2.012116 [V*s/rad]
+    gain k4 = 2.652266 [V*s/rad]
+    Vm = -k1*theta - k2*alpha - k3*derivative(theta, 100 [rad/s]) - k4*derivative(alpha, 100 [rad/s]) + ff
+}
+";
+
+/// A sum of sines between 0.3 and 5 Hz with `rms` volts, phases from a
+/// small generator seeded by `seed`.
+fn excitation(t: &[f64], rms: f64, seed: u64) -> Vec<f64> {
+    let mut s = seed.wrapping_mul(0x9E37_79B9_7F4A_7C15) | 1;
+    let mut next = move || {
+        s ^= s << 13;
+        s ^= s >> 7;
+        s ^= s << 17;
+        (s >> 11) as f64 / (1u64 << 53) as f64
+    };
+    let freqs: Vec<f64> = (0..12).map(|k| 0.3 + k as f64 * 0.4).collect();
+    let phases: Vec<f64> = freqs
+        .iter()
+        .map(|_| 2.0 * std::f64::consts::PI * next())
+        .collect();
+    let amp = rms * (2.0 / freqs.len() as f64).sqrt();
+    t.iter()
+        .map(|&tk| {
+            freqs
+                .iter()
+                .zip(&phases)
+                .map(|(f, p)| amp * (2.0 * std::f64::consts::PI * f * tk + p).sin())
+                .sum()
+        })
+        .collect()
+}
+
+fn ch(name: &str, values: Vec<f64>) -> Channel {
+    Channel {
+        name: name.into(),
+        unit_note: None,
+        values,
+    }
+}
+
+/// Closed-loop runs of the pendulum with `effect` (`(effect, target,
+/// values)`) hidden, written as CSV (`t, theta, alpha, Vm, ff`) and read
+/// back as the CLI would.
+fn closed_loop_runs(test: &str, effect: (&str, &str, &[(&str, f64)])) -> Vec<Experiment> {
+    let text = pendulum_text();
+    let m0 = model(&text);
+    let values: Vec<(String, f64)> = effect.2.iter().map(|(n, v)| (n.to_string(), *v)).collect();
+    let inst = EffectInstance::with_values(&m0, effect.0, effect.1, &values).expect("effect");
+    let truth_text = format!("{}{LAW}", inst.apply(&text).expect("applies"));
+    let truth = model(&truth_text);
+    let law = LoopLaw::new(&truth, "balance").expect("law");
+    let full = ParameterValues::new(&truth, None, &[])
+        .expect("values")
+        .full;
+    let sim = Simulator::new(&truth, SimOptions::default())
+        .expect("compiles")
+        .with_loop(law.clone());
+    let (rate, duration) = (500.0, 20.0);
+    let n = (rate * duration) as usize;
+    let t: Vec<f64> = (0..n).map(|k| k as f64 / rate).collect();
+    let q_step = 2.0 * std::f64::consts::PI / 4096.0;
+    let mut out = Vec::new();
+    for (run, alpha0) in [(1u64, 0.04), (2, -0.03), (3, 0.02)] {
+        let ff = excitation(&t, 0.6, run);
+        let start = Experiment {
+            name: format!("balance{run}"),
+            file: format!("balance{run}.csv").into(),
+            t: t.clone(),
+            channels: vec![
+                ch("theta", vec![0.0; n]),
+                ch("alpha", vec![alpha0; n]),
+                ch("ff", ff.clone()),
+            ],
+        };
+        let sig = Signals::from_experiment_closed(&truth, &start, &law).expect("signals");
+        let q = sim.simulate(&sig, &full, n).expect("simulates").q;
+        assert!(
+            q[1].iter().all(|a| a.abs() < 0.5),
+            "the law keeps the pendulum up"
+        );
+        let vm = law.replay(&start, &q).expect("replays").u[0].clone();
+        let mut csv = String::from("t,theta,alpha,Vm,ff\n");
+        for k in 0..n {
+            let round = |v: f64| q_step * (v / q_step).round();
+            writeln!(
+                csv,
+                "{:.4},{:.9},{:.9},{:.6},{:.6}",
+                t[k],
+                round(q[0][k]),
+                round(q[1][k]),
+                vm[k],
+                ff[k]
+            )
+            .expect("formats");
+        }
+        let p = common::write(test, &format!("balance{run}.csv"), &csv);
+        out.push(
+            read_experiment(&p, &common::pendulum_spec())
+                .expect("reads")
+                .0,
+        );
+    }
+    out
+}
+
+fn story(text: &str, exps: &[Experiment]) -> plantc_identify::Story {
+    let opts = StoryOptions {
+        max_effects: 2,
+        ..Default::default()
+    };
+    let s = plantc_identify::identify(text, exps, &opts, &mut |_| {}).expect("identifies");
+    for (k, r) in s.rounds.iter().enumerate() {
+        eprintln!(
+            "round {}: {:?}, cost {:.3e} -> {:?}",
+            k + 1,
+            r.effect.as_ref().map(|e| e.label()),
+            r.cost_before,
+            r.cost_after
+        );
+        for c in r.ranking.iter().take(4) {
+            eprintln!(
+                "    {:28} gain {:.2} ee rank {}",
+                c.candidate.label(),
+                c.gain,
+                c.evidence.equation_error_rank
+            );
+        }
+    }
+    eprintln!(
+        "stop: {}; floor {:.3e}, segments {:?}, final cost {:.3e}",
+        s.stop,
+        plantc_identify::weights::noise_cost(&s.fit.weights),
+        s.fit.segments,
+        s.fit.after_cost
+    );
+    for n in &s.fit.notes {
+        eprintln!("  note: {n}");
+    }
+    s
+}
+
+fn first_named(s: &plantc_identify::Story) -> Option<String> {
+    s.rounds
+        .first()
+        .and_then(|r| r.effect.as_ref())
+        .map(|e| e.label())
+}
+
+/// Coulomb friction of 6e-4 N m on the balanced pendulum, the law in the
+/// model: simulated in the loop, fed by the recorded excitation, over the
+/// whole records. The friction is named (4.1x when written) and the story
+/// ends at the noise floor.
+#[test]
+fn coulomb_friction_in_closed_loop_with_the_law() {
+    let exps = closed_loop_runs("cl_law", ("coulomb_friction", "alpha", &[("Fc", 6e-4)]));
+    let text = format!("{}{LAW}", pendulum_text());
+    let s = story(&text, &exps);
+    assert_eq!(s.fit.closed_loop.as_deref(), Some("balance"));
+    assert_eq!(s.fit.segments, None, "whole records in the loop");
+    assert_eq!(first_named(&s).as_deref(), Some("coulomb_friction@alpha"));
+    let fc = s
+        .fit
+        .parameters
+        .iter()
+        .find(|p| p.name == "Fc_alpha")
+        .expect("Fc");
+    assert!((fc.value / 6e-4 - 1.0).abs() < 0.1, "Fc {:.3e}", fc.value);
+    let floor = plantc_identify::weights::noise_cost(&s.fit.weights);
+    assert!(s.fit.after_cost <= 1.25 * floor);
+}
+
+/// The same recordings with the plain model (no law): the logged voltage
+/// replayed open loop lets the upright pendulum fall within a second, so
+/// the fit is on short segments, where the friction's trace stays under the
+/// encoder's noise (1.12x when written). No physics is invented, and the
+/// verdict says what it could not see and how to let it see: the law.
+#[test]
+fn closed_loop_without_the_law_invents_nothing_and_says_why() {
+    let exps = closed_loop_runs("cl_open", ("coulomb_friction", "alpha", &[("Fc", 6e-4)]));
+    let s = story(&pendulum_text(), &exps);
+    assert!(s.fit.segments.is_some(), "replayed open loop it falls");
+    let named = first_named(&s);
+    assert!(
+        named.is_none() || named.as_deref() == Some("coulomb_friction@alpha"),
+        "{named:?}"
+    );
+    if named.is_none() {
+        assert!(
+            s.stop.contains("segments") && s.stop.contains("recorded controller"),
+            "{}",
+            s.stop
+        );
+    }
+}
