@@ -164,17 +164,17 @@ pub struct FitOptions {
     pub alternative_start: Option<Vec<f64>>,
 }
 
-/// Where a fit's nuisance ended, per experiment: the initial state of its
-/// first block (positions then velocities) and its per-experiment sensor
-/// offsets by coordinate. See [`FitOptions::warm`].
+/// Where a fit's nuisance ended: per experiment its sensor offsets by
+/// coordinate, and the initial state (positions then velocities) of every
+/// block it was fitted in (one per experiment on whole records, one per
+/// segment on segments). See [`FitOptions::warm`].
 #[derive(Clone, Debug, Default, PartialEq)]
 pub struct WarmStart {
-    experiments: Vec<WarmExperiment>,
+    /// Per experiment: its offsets as `(coordinate, value)`.
+    offsets: Vec<Vec<(usize, f64)>>,
+    /// Per block: experiment, first sample, initial state.
+    blocks: Vec<(usize, usize, Vec<f64>)>,
 }
-
-/// One experiment's part of a [`WarmStart`]: the initial state of its
-/// first block, its offsets as `(coordinate, value)`.
-type WarmExperiment = (Vec<f64>, Vec<(usize, f64)>);
 
 impl Default for FitOptions {
     fn default() -> Self {
@@ -965,58 +965,63 @@ impl<'a> Setup<'a> {
             .model_offsets(&full)
             .unwrap_or_else(|_| vec![0.0; n]);
         let p = self.free.len();
-        let experiments = (0..self.sigs.len())
+        let offsets = (0..self.sigs.len())
             .map(|e| {
-                let x0 = pb
-                    .blocks
-                    .iter()
-                    .position(|b| b.exp == e)
-                    .map_or_else(Vec::new, |b| {
-                        pb.block_start(b, pt, &model_off, pb.blocks[b].range.clone())
-                            .x0
-                    });
-                let offsets = pb
-                    .offsets
+                pb.offsets
                     .iter()
                     .enumerate()
                     .filter(|(_, o)| o.0 == e)
                     .map(|(k, o)| (o.1, pt.g[p + k]))
-                    .collect();
-                (x0, offsets)
+                    .collect()
             })
             .collect();
-        WarmStart { experiments }
+        let blocks = pb
+            .blocks
+            .iter()
+            .enumerate()
+            .map(|(b, blk)| {
+                let x0 = pb.block_start(b, pt, &model_off, blk.range.clone()).x0;
+                (blk.exp, blk.range.start, x0)
+            })
+            .collect();
+        WarmStart { offsets, blocks }
     }
 
     /// `pt` with the nuisance of [`FitOptions::warm`] where it applies: the
-    /// initial state of each block that starts its record, the offsets.
-    /// False when there is no warm start for these experiments.
+    /// offsets, the initial state of each block that starts where a block
+    /// of the warm start did. False when there is no warm start for these
+    /// experiments, or on segments when a block has none (a fit on other
+    /// segments).
     fn apply_warm(&self, pb: &Problem<'_>, pt: &mut Point) -> bool {
         let Some(w) = &self.opts.warm else {
             return false;
         };
-        if w.experiments.len() != self.sigs.len() {
+        if w.offsets.len() != self.sigs.len() {
             return false;
         }
         let p = self.free.len();
         for (k, &(e, c)) in pb.offsets.iter().enumerate() {
-            if let Some(&(_, v)) = w.experiments[e].1.iter().find(|o| o.0 == c) {
+            if let Some(&(_, v)) = w.offsets[e].iter().find(|o| o.0 == c) {
                 pt.g[p + k] = v;
             }
         }
+        let mut all = true;
         for (b, blk) in pb.blocks.iter().enumerate() {
-            let x0 = &w.experiments[blk.exp].0;
-            let first = pb.blocks.iter().position(|x| x.exp == blk.exp) == Some(b);
-            if !first || x0.is_empty() {
+            let Some((_, _, x0)) = w
+                .blocks
+                .iter()
+                .find(|(e, k0, _)| *e == blk.exp && *k0 == blk.range.start)
+            else {
+                all = false;
                 continue;
-            }
+            };
             for (j, &c) in blk.free_state.iter().enumerate() {
                 if let Some(v) = x0.get(c) {
                     pt.l[b][j] = *v;
                 }
             }
         }
-        true
+        all || pb.blocks.len() == self.sigs.len()
     }
 }
 
@@ -1313,8 +1318,10 @@ pub fn fit_with_progress(
 fn better_start(setup: &Setup<'_>, run: &mut Run<'_>) -> Vec<f64> {
     let free_of = |base: &[f64]| -> Vec<f64> { setup.free.iter().map(|&i| base[i]).collect() };
     let g0 = free_of(&setup.base);
+    // (the alternative is weighed on whole records)
+    let warm = setup.opts.warm.is_some() && !matches!(setup.opts.horizon, Horizon::Segments(_));
     let alt = match &setup.opts.alternative_start {
-        Some(a) if setup.opts.warm.is_some() && a.len() == setup.base.len() => free_of(a),
+        Some(a) if warm && a.len() == setup.base.len() => free_of(a),
         _ => return g0,
     };
     if alt == g0 || alt.iter().any(|v| !v.is_finite()) {
@@ -1444,9 +1451,9 @@ fn solve(
     if let Some(o) = seed {
         carry_over(setup, &pb, &mut pt, o);
     }
-    // a warm start that the whole records follow goes straight to them
-    let warm = segments.is_none()
-        && seed.is_none()
+    // a warm start that the whole records (or the segments) follow goes
+    // straight to them
+    let warm = seed.is_none()
         && setup.apply_warm(&pb, &mut pt)
         && {
             run.simulations += 1;
