@@ -455,6 +455,54 @@ pub(crate) struct Segment {
     pub(crate) end: Option<usize>,
 }
 
+/// The RK4 substep of a simulation: `h`, or a longer one over the sample
+/// intervals where it is safe.
+#[derive(Clone, Debug, PartialEq)]
+pub(crate) struct Substep {
+    /// The substep where nothing else is known.
+    pub(crate) h: f64,
+    /// `(longer substep, stiff velocity components, dry-friction width)`:
+    /// the stiffness that sets `h` comes from the dry friction on those
+    /// velocities (the steepest slope of `tanh(v/w)` at zero speed); over a
+    /// sample interval where each of them starts at least `5 w` plus twice
+    /// the distance its acceleration covers in the interval from zero speed
+    /// the slope is below `2e-4` of that, and the longer substep is taken.
+    pub(crate) relaxed: Option<(f64, Vec<usize>, f64)>,
+}
+
+impl Substep {
+    /// `h` everywhere.
+    pub(crate) fn fixed(h: f64) -> Substep {
+        Substep { h, relaxed: None }
+    }
+
+    /// Substeps `refine` times shorter, never relaxed (a retry after a
+    /// divergence).
+    pub(crate) fn refined(&self, refine: f64) -> Substep {
+        if refine == 1.0 {
+            self.clone()
+        } else {
+            Substep::fixed(self.h / refine)
+        }
+    }
+
+    /// The number of substeps over a segment of length `len` starting at
+    /// state `z` with derivative `dz` there.
+    fn count(&self, len: f64, z: &[f64], dz: &[f64]) -> usize {
+        let h = match &self.relaxed {
+            Some((long, stiff, w))
+                if stiff
+                    .iter()
+                    .all(|&i| z[i].abs() > 5.0 * w + 2.0 * dz[i].abs() * len) =>
+            {
+                *long
+            }
+            _ => self.h,
+        };
+        ((len / h) - 1e-9).ceil().max(1.0) as usize
+    }
+}
+
 /// RK4 over the sample intervals `range` (block `[k0, k1)`) with
 /// zero-order-hold input, each input `j` delayed by `delays[j] >= 0` s (see
 /// the module docs).
@@ -480,7 +528,7 @@ pub(crate) fn integrate(
     t: &[f64],
     u: &mut [Vec<f64>],
     range: std::ops::Range<usize>,
-    substep: f64,
+    substep: &Substep,
     z: &mut [f64],
     delays: &[f64],
     mut rhs: impl FnMut(&[f64], &[f64], &[usize], &Segment, &mut [f64]) -> bool,
@@ -576,10 +624,14 @@ pub(crate) fn integrate(
                 }
             }
             seg.len = b - a;
-            let steps = ((seg.len / substep) - 1e-9).ceil().max(1.0) as usize;
+            // the first stage's derivative, which also decides the count
+            if !rhs(z, &uh, &idx, &seg, &mut k1v) {
+                return Err(diverged());
+            }
+            let steps = substep.count(seg.len, z, &k1v);
             let h = seg.len / steps as f64;
-            for _ in 0..steps {
-                if !rhs(z, &uh, &idx, &seg, &mut k1v) {
+            for s in 0..steps {
+                if s > 0 && !rhs(z, &uh, &idx, &seg, &mut k1v) {
                     return Err(diverged());
                 }
                 for i in 0..dim {
@@ -865,6 +917,50 @@ impl StiffnessProbe {
 
     /// The substep limit at positions `q`, zero velocities, input `u`.
     pub(crate) fn limit(&self, q: &[f64], u: &[f64], params: &[f64]) -> f64 {
+        let n = self.n;
+        let Some(rows) = self.rates(q, u, params) else {
+            return f64::INFINITY;
+        };
+        let rate = (0..n)
+            .map(|i| (0..n).map(|j| rows[i * n + j].abs()).sum::<f64>())
+            .fold(0.0f64, f64::max);
+        if rate > 0.0 && rate.is_finite() {
+            2.5 / rate
+        } else {
+            f64::INFINITY
+        }
+    }
+
+    /// The velocities (state indices `n + j`) whose dry friction alone
+    /// keeps the substep below `long`: without their columns the limit
+    /// reaches `long`. None when there are none, or when the others keep it
+    /// below `long` too.
+    pub(crate) fn stiff_velocities(
+        &self,
+        q: &[f64],
+        u: &[f64],
+        params: &[f64],
+        long: f64,
+    ) -> Option<Vec<usize>> {
+        let n = self.n;
+        let rows = self.rates(q, u, params)?;
+        let allowed = 2.5 / long;
+        let column = |j: usize| (0..n).map(|i| rows[i * n + j].abs()).sum::<f64>();
+        let stiff: Vec<usize> = (0..n).filter(|&j| column(j) > 0.5 * allowed).collect();
+        let rest = (0..n)
+            .map(|i| {
+                (0..n)
+                    .filter(|j| !stiff.contains(j))
+                    .map(|j| rows[i * n + j].abs())
+                    .sum::<f64>()
+            })
+            .fold(0.0f64, f64::max);
+        (!stiff.is_empty() && rest <= allowed).then(|| stiff.iter().map(|j| n + j).collect())
+    }
+
+    /// `M^-1 d r0/d v` (row-major) at positions `q`, zero velocities, input
+    /// `u`; None when `M` is singular there.
+    fn rates(&self, q: &[f64], u: &[f64], params: &[f64]) -> Option<Vec<f64>> {
         let (n, m) = (self.n, self.m);
         let mut tin = vec![0.0; 2 * n + m + params.len()];
         tin[..n].copy_from_slice(&q[..n]);
@@ -874,10 +970,9 @@ impl StiffnessProbe {
         let mut mm = out[..n * n].to_vec();
         let mut piv = vec![0; n];
         if !lu_factor(&mut mm, n, &mut piv) {
-            return f64::INFINITY;
+            return None;
         }
         let mut tmp = vec![0.0; n];
-        let mut rate = 0.0f64;
         let mut rows = vec![0.0; n * n];
         for j in 0..n {
             let mut col: Vec<f64> = (0..n).map(|i| out[n * n + i * n + j]).collect();
@@ -886,14 +981,7 @@ impl StiffnessProbe {
                 rows[i * n + j] = col[i];
             }
         }
-        for i in 0..n {
-            rate = rate.max((0..n).map(|j| rows[i * n + j].abs()).sum());
-        }
-        if rate > 0.0 && rate.is_finite() {
-            2.5 / rate
-        } else {
-            f64::INFINITY
-        }
+        Some(rows)
     }
 }
 
@@ -909,7 +997,7 @@ pub(crate) fn prepare_run(
     signals: &SignalEffects,
     probe: &StiffnessProbe,
     x0: &[f64],
-) -> Result<(f64, SignalValues, Vec<Vec<f64>>), SimError> {
+) -> Result<(Substep, SignalValues, Vec<Vec<f64>>), SimError> {
     if params.len() != n_params {
         return Err(SimError::ParameterCount {
             expected: n_params,
@@ -922,17 +1010,27 @@ pub(crate) fn prepare_run(
             sig.name
         )));
     }
-    let mut h = substep_for(sig, opts)?;
+    let h = substep_for(sig, opts)?;
     let effects = signals.eval(params)?;
     let u = held_inputs(sig, &effects.widths, &effects.levels);
+    let mut step = Substep::fixed(h);
     if opts.substep.is_none() && x0.len() >= n {
         let u0: Vec<f64> = u
             .iter()
             .map(|v| v.first().copied().unwrap_or(0.0))
             .collect();
-        h = h.min(probe.limit(x0, &u0, params));
+        step.h = h.min(probe.limit(x0, &u0, params));
+        // away from zero speed the dry friction is not stiff: one substep
+        // per sample up to 2 ms (RK4's error at the pendulum's 10 rad/s is
+        // then ~3e-11 per step)
+        let long = sig.sample_time().min(2e-3);
+        if let (Some(w), true) = (opts.dry_friction_width, long > step.h) {
+            if let Some(stiff) = probe.stiff_velocities(x0, &u0, params, long) {
+                step.relaxed = Some((long, stiff, w));
+            }
+        }
     }
-    Ok((h, effects, u))
+    Ok((step, effects, u))
 }
 
 /// The substep for an experiment under `opts`.
@@ -1184,7 +1282,7 @@ impl Simulator {
             &self.probe,
             &start.x0,
         )?;
-        let h = h / refine;
+        let h = h.refined(refine);
         let (n, m) = (self.n, self.m);
         check_start(sig, start, n)?;
         let (k0, k1) = (start.range.start, start.range.end);
@@ -1261,7 +1359,7 @@ impl Simulator {
             &sig.t,
             &mut u,
             k0..k1,
-            h,
+            &h,
             &mut z,
             &effects.delays,
             rhs,

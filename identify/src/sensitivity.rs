@@ -325,7 +325,7 @@ impl SensitivitySimulator {
             &self.probe,
             &start.x0,
         )?;
-        let h = h / refine;
+        let h = h.refined(refine);
         let (n, m, p) = (self.n, self.m, self.free.len());
         check_start(sig, start, n)?;
         let nx = 2 * n;
@@ -581,7 +581,7 @@ impl SensitivitySimulator {
             &sig.t,
             &mut u,
             k0..k1,
-            h,
+            &h,
             &mut z,
             &effects.delays,
             rhs,
