@@ -106,6 +106,12 @@ pub struct DiagnoseOptions {
     /// Fractional RMSE reduction each effect parameter has to buy when
     /// refitted candidates are compared (0.02: 2 % per parameter).
     pub per_parameter_gain: f64,
+    /// Credit [`PARTIAL_GAIN`] far above the floor ([`PARTIAL_BASELINE`]):
+    /// on by default; off where the residual far above the floor is the
+    /// response to something no effect stands for (a stabilised replay of
+    /// records under an unlogged disturbance, where a spring fitted the
+    /// feedback's answer to it for 1.42x).
+    pub partial_credit: bool,
 }
 
 impl Default for DiagnoseOptions {
@@ -116,6 +122,7 @@ impl Default for DiagnoseOptions {
             refit: 3,
             min_gain: MIN_GAIN,
             per_parameter_gain: 0.02,
+            partial_credit: true,
         }
     }
 }
@@ -260,6 +267,9 @@ pub struct Diagnosis {
     /// equation-error ranking, screening extended beyond the leaders, a
     /// baseline improved by a restart), in words.
     pub notes: Vec<String>,
+    /// Whether [`PARTIAL_GAIN`] far above the floor was credited
+    /// ([`DiagnoseOptions::partial_credit`]).
+    pub partial_credit: bool,
 }
 
 impl Diagnosis {
@@ -289,7 +299,7 @@ impl Diagnosis {
     pub fn segments_caveat(&self) -> Option<String> {
         let h = self.baseline.segments?;
         let mut s = format!(
-            "judged on {h} s segments, each from its own estimated state, as the whole records could not be replayed: an effect whose trace within {h} s stays under the noise cannot show"
+            "judged on {h} s segments, each from its own estimated state: an effect whose trace within {h} s stays under the noise cannot show"
         );
         if self.baseline.closed_loop.is_none() {
             s.push_str(
@@ -325,8 +335,13 @@ impl Diagnosis {
                 .max_by(|a, b| a.gain.total_cmp(&b.gain))
                 .map(|r| format!("; the best, {}, gains {:.2}x", r.candidate.label(), r.gain))
                 .unwrap_or_default();
+            let far = if self.partial_credit {
+                format!(", or {PARTIAL_GAIN}x far above it")
+            } else {
+                String::new()
+            };
             format!(
-                "unexplained residual: {:.1}x the noise floor, and none of the {} candidates refitted lowers it clearly ({MIN_GAIN}x, to the floor, or {PARTIAL_GAIN}x far above it){best}: an effect outside the vocabulary, or a nominal model too far off{caveat}",
+                "unexplained residual: {:.1}x the noise floor, and none of the {} candidates refitted lowers it clearly ({MIN_GAIN}x, or to the floor{far}){best}: an effect outside the vocabulary, or a nominal model too far off{caveat}",
                 self.above_floor(),
                 refitted.len()
             )
@@ -555,7 +570,7 @@ pub fn diagnose_from(
                 && baseline.after_cost >= PARTIAL_BASELINE * floor
                 && !ranking
                     .iter()
-                    .any(|r| passes(r, baseline.after_cost, floor, opts.min_gain));
+                    .any(|r| passes(r, baseline.after_cost, floor, opts));
             second_start(
                 &mut ranking[idx],
                 &edited[idx].0,
@@ -592,7 +607,7 @@ pub fn diagnose_from(
         for (k, idx) in rest.into_iter().enumerate() {
             if ranking
                 .iter()
-                .any(|r| passes(r, baseline.after_cost, floor, opts.min_gain))
+                .any(|r| passes(r, baseline.after_cost, floor, opts))
             {
                 break;
             }
@@ -612,7 +627,7 @@ pub fn diagnose_from(
     // friction): that one is refitted too, so the per-parameter penalty can
     // prefer it
     for idx in 0..ranking.len() {
-        if !passes(&ranking[idx], baseline.after_cost, floor, opts.min_gain) {
+        if !passes(&ranking[idx], baseline.after_cost, floor, opts) {
             continue;
         }
         let c = ranking[idx].candidate.clone();
@@ -638,7 +653,7 @@ pub fn diagnose_from(
             continue;
         };
         if inner.candidate.effect != "coulomb_friction"
-            || !passes(inner, baseline.after_cost, floor, opts.min_gain)
+            || !passes(inner, baseline.after_cost, floor, opts)
             || (floor > 0.0 && inner_fit.after_cost <= FLOOR_REACHED * floor)
         {
             continue;
@@ -668,8 +683,7 @@ pub fn diagnose_from(
     // refitted); refitted, the per-parameter penalty decides
     // (not when a one-parameter force on that target passes already)
     let passing_force = |r: &Ranked| {
-        r.candidate.kind == EffectKind::Force
-            && passes(r, baseline.after_cost, floor, opts.min_gain)
+        r.candidate.kind == EffectKind::Force && passes(r, baseline.after_cost, floor, opts)
     };
     let winners: Vec<(String, usize)> = ranking
         .iter()
@@ -718,6 +732,7 @@ pub fn diagnose_from(
         verdict,
         floor,
         notes,
+        partial_credit: opts.partial_credit,
     })
 }
 
@@ -730,12 +745,15 @@ pub fn diagnose_from(
 /// [`PARTIAL_GAIN`] is no noise (rate survey, quadratic drag of 7e-4 on the
 /// arm: baseline 1.80x the floor, the drag 1.92x down to 0.94x; on clean
 /// data no candidate gained more than 1.1x).
-fn passes(r: &Ranked, base_cost: f64, floor: f64, min_gain: f64) -> bool {
+fn passes(r: &Ranked, base_cost: f64, floor: f64, opts: &DiagnoseOptions) -> bool {
     r.fit.as_ref().is_some_and(|f| {
         let to_floor = floor > 0.0 && f.after_cost <= FLOOR_REACHED * floor;
-        r.gain >= min_gain
+        r.gain >= opts.min_gain
             || (to_floor && base_cost >= FLOOR_BASELINE * floor)
-            || (floor > 0.0 && base_cost >= PARTIAL_BASELINE * floor && r.gain >= PARTIAL_GAIN)
+            || (opts.partial_credit
+                && floor > 0.0
+                && base_cost >= PARTIAL_BASELINE * floor
+                && r.gain >= PARTIAL_GAIN)
             || (to_floor && r.gain >= PARTIAL_GAIN)
     })
 }
@@ -783,7 +801,7 @@ fn decide(
         };
         // the candidates that pass first: a sensor offset ranked by its own
         // cost can sort below one that explains nothing
-        let fails = |r: &Ranked| !passes(r, base_cost, floor, opts.min_gain);
+        let fails = |r: &Ranked| !passes(r, base_cost, floor, opts);
         ranking.sort_by(|a, b| {
             fails(a)
                 .cmp(&fails(b))
@@ -794,9 +812,9 @@ fn decide(
                         .cmp(&b.evidence.equation_error_rank),
                 )
         });
-        prefer_nested(ranking, base_cost, floor, opts.min_gain);
+        prefer_nested(ranking, base_cost, floor, opts);
         let top = ranking.first()?;
-        if !passes(top, base_cost, floor, opts.min_gain) {
+        if !passes(top, base_cost, floor, opts) {
             return None;
         }
         let label = top.candidate.label();
@@ -1085,7 +1103,7 @@ pub const NESTED_GAIN: f64 = 1.25;
 
 /// Move the simpler effect to the top when the top one contains it and
 /// does not beat it by [`NESTED_GAIN`].
-fn prefer_nested(ranking: &mut [Ranked], base_cost: f64, floor: f64, min_gain: f64) {
+fn prefer_nested(ranking: &mut [Ranked], base_cost: f64, floor: f64, opts: &DiagnoseOptions) {
     let Some(top) = ranking.first() else {
         return;
     };
@@ -1096,7 +1114,7 @@ fn prefer_nested(ranking: &mut [Ranked], base_cost: f64, floor: f64, min_gain: f
         let Some(j) = ranking.iter().position(|r| {
             r.candidate.effect == *inner
                 && r.candidate.target == top.candidate.target
-                && passes(r, base_cost, floor, min_gain)
+                && passes(r, base_cost, floor, opts)
         }) else {
             continue;
         };

@@ -1311,6 +1311,27 @@ pub fn fit_with_progress(
     })
 }
 
+/// Do the whole records, replayed from the start values with the nuisance
+/// at its data estimates, follow the data (the weighted RMS within
+/// [`DIVERGED_COST`])? What [`Horizon::Auto`] asks before choosing segments.
+pub fn replay_follows(
+    model: &Model,
+    experiments: &[Experiment],
+    opts: &FitOptions,
+) -> Result<bool, FitError> {
+    let free_names = opts
+        .free
+        .clone()
+        .unwrap_or_else(|| estimated_parameters(model));
+    let setup = Setup::new(model, experiments, opts, &free_names)?;
+    let pb = setup.problem(None);
+    let g0: Vec<f64> = setup.free.iter().map(|&i| setup.base[i]).collect();
+    let pt = setup.start_point(&pb, &g0);
+    Ok(pb
+        .cost(&pt, f64::INFINITY)
+        .is_ok_and(|(s, c)| rms(s, c) <= DIVERGED_COST))
+}
+
 /// The free values of the start of a fit: those of [`FitOptions::start`],
 /// or of [`FitOptions::alternative_start`] when the fit is warm and the
 /// whole records, with the warm nuisance, fit better from there (two

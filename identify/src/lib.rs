@@ -58,6 +58,7 @@ pub mod plot;
 pub mod residual_tests;
 pub mod savitzky_golay;
 pub mod sensitivity;
+pub mod stabilised_replay;
 pub mod story;
 pub mod synth;
 pub mod validate;

@@ -17,10 +17,11 @@ use crate::diagnose::{
 };
 use crate::effect_edit::EffectInstance;
 use crate::fit::{
-    fit, fit_with_progress, values_from, with_estimates, FitError, FitOptions, FitProgress,
-    FitResult, Horizon,
+    fit, fit_with_progress, replay_follows, values_from, with_estimates, ClosedLoop, FitError,
+    FitOptions, FitProgress, FitResult, Horizon,
 };
 use crate::metrics::{compare, FitReport};
+use crate::stabilised_replay::StabilisedReplay;
 use crate::validate::{as_experiments, validate, ValidateOptions, Validation};
 
 /// Options of [`identify`].
@@ -107,6 +108,10 @@ pub struct Story {
     /// The stage of the model as it stood refitted to a better minimum
     /// found by the last diagnosis (then the story's fit), if any.
     pub better_start: Option<usize>,
+    /// How the records were replayed when their open-loop replay falls and
+    /// the model holds no law ([`crate::stabilised_replay`]); the texts
+    /// above are without its block.
+    pub stabilised: Option<String>,
 }
 
 impl Story {
@@ -281,6 +286,73 @@ pub fn identify(
     progress: &mut dyn FnMut(&StoryProgress),
 ) -> Result<Story, StoryError> {
     let model = model_from_text("model", text).map_err(StoryError::Model)?;
+    // records an unstable plant's open-loop replay cannot follow, and no
+    // law in the model: the story runs on the stabilised replay
+    let Some(stab) = stabilised_replay(&model, text, experiments, opts)? else {
+        return story(text, experiments, opts, progress);
+    };
+    let (text2, experiments2, opts2) = stab;
+    let mut s = story(&text2.0, &experiments2, &opts2, progress)?;
+    let replay = text2.1;
+    for st in &mut s.stages {
+        st.text = replay.strip(&st.text);
+    }
+    s.text = replay.strip(&s.text);
+    s.stabilised = Some(replay.note());
+    Ok(s)
+}
+
+/// The model text with a [`StabilisedReplay`] block, the records and the
+/// options' held-out records with its columns, when the story needs one:
+/// the model holds no recorded controller, the closed loop is automatic,
+/// the horizon not fixed to segments, the model has one input, and the
+/// whole records replayed open loop from the start values leave the data.
+/// None when not needed or when no feedback could be designed (the fit
+/// then goes to segments as before).
+#[allow(clippy::type_complexity)]
+fn stabilised_replay(
+    model: &Model,
+    text: &str,
+    experiments: &[Experiment],
+    opts: &StoryOptions,
+) -> Result<Option<((String, StabilisedReplay), Vec<Experiment>, StoryOptions)>, StoryError> {
+    if !model.recorded.is_empty()
+        || model.inputs.len() != 1
+        || !matches!(opts.fit.closed_loop, ClosedLoop::Auto)
+        || matches!(opts.fit.horizon, Horizon::Segments(_))
+        || replay_follows(model, experiments, &opts.fit).map_err(StoryError::Fit)?
+    {
+        return Ok(None);
+    }
+    let Ok(replay) = StabilisedReplay::design(model, experiments) else {
+        return Ok(None);
+    };
+    let (Ok(exps), Ok(validate)) = (
+        replay.augment(model, experiments),
+        replay.augment(model, &opts.validate),
+    ) else {
+        return Ok(None);
+    };
+    let text = format!("{text}{}", replay.block);
+    let opts = StoryOptions {
+        validate,
+        diagnose: DiagnoseOptions {
+            partial_credit: false,
+            ..opts.diagnose.clone()
+        },
+        ..opts.clone()
+    };
+    Ok(Some(((text, replay), exps, opts)))
+}
+
+/// The story proper (see [`identify`]).
+fn story(
+    text: &str,
+    experiments: &[Experiment],
+    opts: &StoryOptions,
+    progress: &mut dyn FnMut(&StoryProgress),
+) -> Result<Story, StoryError> {
+    let model = model_from_text("model", text).map_err(StoryError::Model)?;
     let nominal =
         ParameterValues::new(&model, None, &[]).map_err(|e| StoryError::Compare(e.to_string()))?;
     progress(&StoryProgress::Step("comparing the nominal model".into()));
@@ -441,6 +513,7 @@ pub fn identify(
         stop,
         simplifications: end.simplifications,
         better_start,
+        stabilised: None,
     })
 }
 

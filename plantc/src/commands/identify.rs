@@ -192,6 +192,9 @@ fn story(
         args.model.display(),
         measured.len()
     );
+    if let Some(note) = &s.stabilised {
+        let _ = writeln!(out, "   note: {note}");
+    }
     write_stage_figures((&staging, dir), "1-nominal", model, &measured, nominal, err)?;
     let _ = writeln!(out, "   RMSE {:.3e}; where it fails:", nominal.report.rmse);
     if write_failures(out, model, &measured, &nominal.simulated)? == 0 {
@@ -387,6 +390,7 @@ fn story(
         "model": args.model.display().to_string(),
         "verdict": if s.rounds.iter().any(|r| r.effect.is_some()) { "missing_effect" } else { "adequate" },
         "stop": s.stop,
+        "stabilised_replay": s.stabilised,
         "rounds": summary_rounds,
         "simplified": summary_simplified,
         "fit": crate::commands::fit::fit_json(&s.fit),
