@@ -349,7 +349,9 @@ pub struct FitControlArgs {
     #[arg(long, value_name = "auto|none|COORD,...", default_value = "auto")]
     pub offsets: String,
     /// Recorded controller simulated in the loop: `auto` (the model's, when
-    /// the data hold its columns), `off`, or its name.
+    /// the data hold its columns; `identify` with none in the model and
+    /// records whose open-loop replay falls: the logged input with a
+    /// stabilising feedback of its own), `off`, or its name.
     #[arg(
         long = "closed-loop",
         value_name = "auto|off|NAME",
