@@ -73,14 +73,19 @@ fn ch(name: &str, values: Vec<f64>) -> Channel {
 }
 
 /// Closed-loop runs of the pendulum with `effect` (`(effect, target,
-/// values)`) hidden, written as CSV (`t, theta, alpha, Vm, ff`) and read
+/// values)`; an empty effect name: none) hidden, written as CSV (`t, theta, alpha, Vm, ff`) and read
 /// back as the CLI would.
 fn closed_loop_runs(test: &str, effect: (&str, &str, &[(&str, f64)])) -> Vec<Experiment> {
     let text = pendulum_text();
     let m0 = model(&text);
     let values: Vec<(String, f64)> = effect.2.iter().map(|(n, v)| (n.to_string(), *v)).collect();
-    let inst = EffectInstance::with_values(&m0, effect.0, effect.1, &values).expect("effect");
-    let truth_text = format!("{}{LAW}", inst.apply(&text).expect("applies"));
+    let with_effect = if effect.0.is_empty() {
+        text.clone()
+    } else {
+        let inst = EffectInstance::with_values(&m0, effect.0, effect.1, &values).expect("effect");
+        inst.apply(&text).expect("applies")
+    };
+    let truth_text = format!("{with_effect}{LAW}");
     let truth = model(&truth_text);
     let law = LoopLaw::new(&truth, "balance").expect("law");
     let full = ParameterValues::new(&truth, None, &[])
@@ -266,5 +271,36 @@ fn on_segments_the_verdict_says_what_it_cannot_see() {
             "{}",
             s.stop
         );
+    }
+}
+
+/// Clean closed-loop records on the plain model: the stabilised replay
+/// invents nothing.
+#[test]
+fn clean_closed_loop_records_get_no_finding() {
+    let exps = closed_loop_runs("cl_clean", ("", "", &[]));
+    let s = story(&pendulum_text(), &exps);
+    assert!(s.stabilised.is_some());
+    assert_eq!(first_named(&s), None, "{}", s.stop);
+}
+
+/// A 4 ms input delay in the loop, the plain model: no other effect is
+/// named in its place. A weak spot, measured: the delay refits to 1.78x
+/// from 2.4x the noise floor and is not credited (not 3x, and the
+/// stabilised replay's own floor, 1.25x the encoder's on clean records, is
+/// above the 1.25x "to the floor" mark); the verdict is an unexplained
+/// residual naming the delay as the best candidate.
+#[test]
+fn input_delay_in_closed_loop_without_the_law_is_not_mistaken() {
+    let exps = closed_loop_runs("cl_delay", ("input_delay", "Vm", &[("Td", 4e-3)]));
+    let s = story(&pendulum_text(), &exps);
+    assert!(s.stabilised.is_some());
+    let named = first_named(&s);
+    assert!(
+        named.is_none() || named.as_deref() == Some("input_delay@Vm"),
+        "{named:?}"
+    );
+    if named.is_none() {
+        assert!(s.stop.contains("the best, input_delay@Vm"), "{}", s.stop);
     }
 }
