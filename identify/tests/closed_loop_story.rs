@@ -148,14 +148,8 @@ fn story(text: &str, exps: &[Experiment]) -> plantc_identify::Story {
         ..Default::default()
     };
     let s = plantc_identify::identify(text, exps, &opts, &mut |_| {}).expect("identifies");
-    for (k, r) in s.rounds.iter().enumerate() {
-        eprintln!(
-            "round {}: {:?}, cost {:.3e} -> {:?}",
-            k + 1,
-            r.effect.as_ref().map(|e| e.label()),
-            r.cost_before,
-            r.cost_after
-        );
+    common::show_rounds(&s);
+    for r in &s.rounds {
         for c in r.ranking.iter().take(4) {
             eprintln!(
                 "    {:28} gain {:.2} ee rank {}",
@@ -178,6 +172,22 @@ fn story(text: &str, exps: &[Experiment]) -> plantc_identify::Story {
     s
 }
 
+/// The story's estimate of `name` is within `tol` (relative) of `truth`.
+fn assert_estimate(s: &plantc_identify::Story, name: &str, truth: f64, tol: f64) {
+    let p = s
+        .fit
+        .parameters
+        .iter()
+        .find(|p| p.name == name)
+        .unwrap_or_else(|| panic!("no estimate of {name}"));
+    eprintln!("{name} {:.4e} (true {truth:.1e})", p.value);
+    assert!(
+        (p.value / truth - 1.0).abs() < tol,
+        "{name} {:.3e}",
+        p.value
+    );
+}
+
 fn first_named(s: &plantc_identify::Story) -> Option<String> {
     s.rounds
         .first()
@@ -197,13 +207,7 @@ fn coulomb_friction_in_closed_loop_with_the_law() {
     assert_eq!(s.fit.closed_loop.as_deref(), Some("balance"));
     assert_eq!(s.fit.segments, None, "whole records in the loop");
     assert_eq!(first_named(&s).as_deref(), Some("coulomb_friction@alpha"));
-    let fc = s
-        .fit
-        .parameters
-        .iter()
-        .find(|p| p.name == "Fc_alpha")
-        .expect("Fc");
-    assert!((fc.value / 6e-4 - 1.0).abs() < 0.1, "Fc {:.3e}", fc.value);
+    assert_estimate(&s, "Fc_alpha", 6e-4, 0.1);
     let floor = plantc_identify::weights::noise_cost(&s.fit.weights);
     assert!(s.fit.after_cost <= 1.25 * floor);
 }
@@ -224,14 +228,7 @@ fn closed_loop_without_the_law_is_replayed_stabilised() {
     assert!(note.contains("stabilising feedback"), "{note:?}");
     assert_eq!(s.fit.segments, None, "whole records");
     assert_eq!(first_named(&s).as_deref(), Some("coulomb_friction@alpha"));
-    let fc = s
-        .fit
-        .parameters
-        .iter()
-        .find(|p| p.name == "Fc_alpha")
-        .expect("Fc");
-    eprintln!("Fc_alpha {:.4e} (true 6e-4)", fc.value);
-    assert!((fc.value / 6e-4 - 1.0).abs() < 0.1, "Fc {:.3e}", fc.value);
+    assert_estimate(&s, "Fc_alpha", 6e-4, 0.1);
     let floor = plantc_identify::weights::noise_cost(&s.fit.weights);
     assert!(
         s.fit.after_cost <= 1.5 * floor,

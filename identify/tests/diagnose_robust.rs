@@ -368,15 +368,7 @@ fn coulomb_friction_and_drag_end_named_as_such() {
     );
     let opts = plantc_identify::StoryOptions::default();
     let story = plantc_identify::identify(&text, &exps, &opts, &mut |_| {}).expect("identifies");
-    for (k, r) in story.rounds.iter().enumerate() {
-        eprintln!(
-            "round {}: {:?}, cost {:.3e} -> {:?}",
-            k + 1,
-            r.effect.as_ref().map(|e| e.label()),
-            r.cost_before,
-            r.cost_after
-        );
-    }
+    common::show_rounds(&story);
     for s in &story.simplifications {
         eprintln!(
             "round {}: {} -> {} ({:.3e} -> {:.3e})",

@@ -106,3 +106,16 @@ pub fn synth_pendulum(
         })
         .collect()
 }
+
+/// Print each round of a story (effect, cost before and after) to stderr.
+pub fn show_rounds(story: &plantc_identify::Story) {
+    for (k, r) in story.rounds.iter().enumerate() {
+        eprintln!(
+            "round {}: {:?}, cost {:.3e} -> {:?}",
+            k + 1,
+            r.effect.as_ref().map(|e| e.label()),
+            r.cost_before,
+            r.cost_after
+        );
+    }
+}
