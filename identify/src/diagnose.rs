@@ -1234,8 +1234,8 @@ fn settled(ranking: &[Ranked], floor: f64) -> bool {
 
 /// Refit candidate `r`'s model `m` from the baseline's values (`from`) or
 /// the nominal ones, with the candidate's equation-error estimates; `warm`
-/// starts the nuisance where the baseline's ended and goes straight to the
-/// whole records (see [`FitOptions::warm`]).
+/// starts the nuisance where the baseline's ended and goes straight to its
+/// horizon (see [`FitOptions::warm`]).
 fn refit_from(
     r: &Ranked,
     m: &Model,

@@ -918,7 +918,7 @@ impl StiffnessProbe {
     /// The substep limit at positions `q`, zero velocities, input `u`.
     pub(crate) fn limit(&self, q: &[f64], u: &[f64], params: &[f64]) -> f64 {
         let n = self.n;
-        let Some(rows) = self.rates(q, u, params) else {
+        let Some(rows) = self.rates(q, &vec![0.0; n], u, params) else {
             return f64::INFINITY;
         };
         let rate = (0..n)
@@ -932,38 +932,43 @@ impl StiffnessProbe {
     }
 
     /// The velocities (state indices `n + j`) whose dry friction alone
-    /// keeps the substep below `long`: without their columns the limit
-    /// reaches `long`. None when there are none, or when the others keep it
-    /// below `long` too.
+    /// keeps the substep below `long` (width `w`): at zero speed their
+    /// columns are what makes it short, and at `5 w` on them the whole
+    /// matrix allows `long` (a stiffness that does not fade with speed, a
+    /// stiff viscous or back-EMF term, does not qualify). None when there
+    /// are none.
     pub(crate) fn stiff_velocities(
         &self,
         q: &[f64],
         u: &[f64],
         params: &[f64],
-        long: f64,
+        (long, w): (f64, f64),
     ) -> Option<Vec<usize>> {
         let n = self.n;
-        let rows = self.rates(q, u, params)?;
         let allowed = 2.5 / long;
+        let rows = self.rates(q, &vec![0.0; n], u, params)?;
         let column = |j: usize| (0..n).map(|i| rows[i * n + j].abs()).sum::<f64>();
         let stiff: Vec<usize> = (0..n).filter(|&j| column(j) > 0.5 * allowed).collect();
-        let rest = (0..n)
-            .map(|i| {
-                (0..n)
-                    .filter(|j| !stiff.contains(j))
-                    .map(|j| rows[i * n + j].abs())
-                    .sum::<f64>()
-            })
+        if stiff.is_empty() {
+            return None;
+        }
+        let v: Vec<f64> = (0..n)
+            .map(|j| if stiff.contains(&j) { 5.0 * w } else { 0.0 })
+            .collect();
+        let moving = self.rates(q, &v, u, params)?;
+        let rate = (0..n)
+            .map(|i| (0..n).map(|j| moving[i * n + j].abs()).sum::<f64>())
             .fold(0.0f64, f64::max);
-        (!stiff.is_empty() && rest <= allowed).then(|| stiff.iter().map(|j| n + j).collect())
+        (rate <= allowed).then(|| stiff.iter().map(|j| n + j).collect())
     }
 
-    /// `M^-1 d r0/d v` (row-major) at positions `q`, zero velocities, input
+    /// `M^-1 d r0/d v` (row-major) at positions `q`, velocities `v`, input
     /// `u`; None when `M` is singular there.
-    fn rates(&self, q: &[f64], u: &[f64], params: &[f64]) -> Option<Vec<f64>> {
+    fn rates(&self, q: &[f64], v: &[f64], u: &[f64], params: &[f64]) -> Option<Vec<f64>> {
         let (n, m) = (self.n, self.m);
         let mut tin = vec![0.0; 2 * n + m + params.len()];
         tin[..n].copy_from_slice(&q[..n]);
+        tin[n..2 * n].copy_from_slice(&v[..n]);
         tin[2 * n..2 * n + m].copy_from_slice(&u[..m]);
         tin[2 * n + m..].copy_from_slice(params);
         let out = self.tape.eval_vec(&tin);
@@ -1025,7 +1030,7 @@ pub(crate) fn prepare_run(
         // then ~3e-11 per step)
         let long = sig.sample_time().min(2e-3);
         if let (Some(w), true) = (opts.dry_friction_width, long > step.h) {
-            if let Some(stiff) = probe.stiff_velocities(x0, &u0, params, long) {
+            if let Some(stiff) = probe.stiff_velocities(x0, &u0, params, (long, w)) {
                 step.relaxed = Some((long, stiff, w));
             }
         }

@@ -150,11 +150,12 @@ pub struct FitOptions {
     /// by less than this fraction ([`FINAL_TOLERANCE`]; a screening fit,
     /// which only compares costs, can stop earlier).
     pub tolerance: f64,
-    /// Start the nuisance (initial states, per-experiment offsets) where
-    /// an earlier fit of the same experiments ended ([`FitResult::warm`]),
-    /// and, when the whole records follow the data from there, skip the
-    /// growing horizons: for a refit near a fitted point (a candidate
-    /// effect added to a fitted baseline).
+    /// Start the nuisance (initial states of every block, per-experiment
+    /// offsets) where an earlier fit of the same experiments ended
+    /// ([`FitResult::warm`]), and, when the whole records (or, on segments,
+    /// the same segments) follow the data from there, skip the growing
+    /// horizons and the nuisance-only start: for a refit near a fitted
+    /// point (a candidate effect added to a fitted baseline).
     pub warm: Option<WarmStart>,
     /// Another start (base values, model order) for a warm fit: the fit
     /// starts from whichever of `start` and this one the whole records,
@@ -955,8 +956,8 @@ impl<'a> Setup<'a> {
         Point { g, l }
     }
 
-    /// Where the nuisance of `pt` on `pb` is, per experiment (see
-    /// [`WarmStart`]).
+    /// Where the nuisance of `pt` on `pb` is: offsets per experiment,
+    /// initial state per block (see [`WarmStart`]).
     fn warm_at(&self, pb: &Problem<'_>, pt: &Point) -> WarmStart {
         let n = self.model.coordinates.len();
         let full = pb.full_at(&pt.g);

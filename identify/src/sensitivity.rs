@@ -389,8 +389,14 @@ impl SensitivitySimulator {
             ) {
                 return false;
             }
+            // summed as the plain simulator does, so both give the same
+            // trajectory to the bit (and take the same substeps)
             for i in 0..n {
-                tmp[i] = r0[i] + (0..m).map(|j| b[i * m + j] * u[j]).sum::<f64>();
+                let mut s = r0[i];
+                for j in 0..m {
+                    s += b[i * m + j] * u[j];
+                }
+                tmp[i] = s;
             }
             mat_vec(&minv, n, &tmp, &mut acc);
             for d in 0..nx + p {

@@ -32,7 +32,9 @@ use std::fmt::Write as _;
 
 use nalgebra::DMatrix;
 use plantc_derive::analysis::{linearize, OperatingPoint};
+use plantc_derive::lang::units::parse_unit;
 use plantc_derive::linear::lqr;
+use plantc_derive::linear::poles;
 use plantc_derive::mechanics::derive_equations;
 use plantc_derive::model::{CoordinateKind, Model, ParameterValues};
 
@@ -71,6 +73,9 @@ pub enum StabiliseError {
     Design(String),
     /// A record lacks a coordinate or an input.
     MissingChannel(String),
+    /// The model linearised at the data's mean position is stable: its
+    /// replay leaving the data is no loop's doing.
+    Stable,
 }
 
 impl std::fmt::Display for StabiliseError {
@@ -79,6 +84,7 @@ impl std::fmt::Display for StabiliseError {
             StabiliseError::Model(e) => write!(f, "the model: {e}"),
             StabiliseError::Design(e) => write!(f, "the LQR design: {e}"),
             StabiliseError::MissingChannel(c) => write!(f, "a record has no column `{c}`"),
+            StabiliseError::Stable => write!(f, "the linearised plant is stable"),
         }
     }
 }
@@ -103,9 +109,7 @@ const SMOOTHING: (f64, usize) = (0.05, 5);
 /// ([`SMOOTHING`]; the median period), the first and last half windows
 /// left as measured.
 fn smoothed(t: &[f64], y: &[f64]) -> Vec<f64> {
-    let mut d: Vec<f64> = t.windows(2).map(|w| w[1] - w[0]).collect();
-    d.sort_by(f64::total_cmp);
-    let dt = d.get(d.len() / 2).copied().unwrap_or(0.0);
+    let dt = crate::data::median_dt(t).unwrap_or(0.0);
     let h = if dt > 0.0 {
         (SMOOTHING.0 / dt).round().max(3.0) as usize
     } else {
@@ -145,7 +149,7 @@ impl StabilisedReplay {
         let mut q_all: Vec<Vec<f64>> = vec![Vec::new(); n];
         let mut v_all: Vec<Vec<f64>> = vec![Vec::new(); n];
         let mut u_all: Vec<Vec<f64>> = vec![Vec::new(); m];
-        for e in experiments {
+        for e in experiments.iter().filter(|e| !e.t.is_empty()) {
             for (i, c) in model.coordinates.iter().enumerate() {
                 let q = column(e, &c.name)?;
                 // velocities over 20 ms, quantisation averaged out
@@ -173,6 +177,12 @@ impl StabilisedReplay {
         let eqs = derive_equations(model).map_err(|e| StabiliseError::Model(e.to_string()))?;
         let lin = linearize(model, &eqs, &values, &OperatingPoint { x: x0, u: u0 })
             .map_err(|e| StabiliseError::Model(e.to_string()))?;
+        // only an unstable plant: a stable one whose replay leaves the data
+        // is far from its values, and a feedback would hide what is wrong
+        let open = poles(&lin.a).map_err(|e| StabiliseError::Model(e.to_string()))?;
+        if !open.iter().any(|p| p.re > 0.0) {
+            return Err(StabiliseError::Stable);
+        }
         // Bryson's rule: each state and input weighted by the inverse square
         // of its spread in the data (a floor keeps a still channel finite)
         let floor = |s: f64, f: f64| if s.is_finite() && s > f { s } else { f };
@@ -235,6 +245,8 @@ impl StabilisedReplay {
                 u.to_string()
             }
         };
+        // K is in SI; a gain written in the input's unit is scaled by it
+        let input_scale = |j: usize| parse_unit(&input_unit(j)).map_or(1.0, |u| u.scale.to_f64());
         let mut block = String::new();
         let _ = writeln!(
             block,
@@ -276,6 +288,7 @@ impl StabilisedReplay {
             for (i, c) in model.coordinates.iter().enumerate() {
                 let (kp, kd) = (k[(j, i)], k[(j, n + i)]);
                 row.push(kp);
+                let (kp, kd) = (kp / input_scale(j), kd / input_scale(j));
                 let gp = format!("kp_{}_{}", inp.name, c.name);
                 let gd = format!("kd_{}_{}", inp.name, c.name);
                 let (uu, cu) = (input_unit(j), unit_of(i));

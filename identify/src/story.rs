@@ -108,10 +108,11 @@ pub struct Story {
     /// The stage of the model as it stood refitted to a better minimum
     /// found by the last diagnosis (then the story's fit), if any.
     pub better_start: Option<usize>,
-    /// How the records were replayed when their open-loop replay falls and
-    /// the model holds no law ([`crate::stabilised_replay`]); the texts
-    /// above are without its block.
-    pub stabilised: Option<String>,
+    /// The feedback the records were replayed with when their open-loop
+    /// replay falls and the model holds no law
+    /// ([`crate::stabilised_replay`]); the texts above are without its
+    /// block, the fits (`closed_loop`, notes) name it.
+    pub stabilised: Option<StabilisedReplay>,
 }
 
 impl Story {
@@ -298,7 +299,7 @@ pub fn identify(
         st.text = replay.strip(&st.text);
     }
     s.text = replay.strip(&s.text);
-    s.stabilised = Some(replay.note());
+    s.stabilised = Some(replay);
     Ok(s)
 }
 
@@ -334,6 +335,11 @@ fn stabilised_replay(
         return Ok(None);
     };
     let text = format!("{text}{}", replay.block);
+    // a block the model check refuses (a name it shadows...) is no reason
+    // to fail: the story goes on without it
+    if model_from_text("model", &text).is_err() {
+        return Ok(None);
+    }
     let opts = StoryOptions {
         validate,
         diagnose: DiagnoseOptions {

@@ -223,7 +223,7 @@ fn coulomb_friction_in_closed_loop_with_the_law() {
 fn closed_loop_without_the_law_is_replayed_stabilised() {
     let exps = closed_loop_runs("cl_open", ("coulomb_friction", "alpha", &[("Fc", 6e-4)]));
     let s = story(&pendulum_text(), &exps);
-    let note = s.stabilised.as_deref().unwrap_or("");
+    let note = s.stabilised.as_ref().map(|r| r.note()).unwrap_or_default();
     eprintln!("stabilised: {note}");
     assert!(note.contains("stabilising feedback"), "{note:?}");
     assert_eq!(s.fit.segments, None, "whole records");

@@ -192,8 +192,8 @@ fn story(
         args.model.display(),
         measured.len()
     );
-    if let Some(note) = &s.stabilised {
-        let _ = writeln!(out, "   note: {note}");
+    if let Some(replay) = &s.stabilised {
+        let _ = writeln!(out, "   note: {}", replay.note());
     }
     write_stage_figures((&staging, dir), "1-nominal", model, &measured, nominal, err)?;
     let _ = writeln!(out, "   RMSE {:.3e}; where it fails:", nominal.report.rmse);
@@ -390,7 +390,13 @@ fn story(
         "model": args.model.display().to_string(),
         "verdict": if s.rounds.iter().any(|r| r.effect.is_some()) { "missing_effect" } else { "adequate" },
         "stop": s.stop,
-        "stabilised_replay": s.stabilised,
+        "stabilised_replay": s.stabilised.as_ref().map(|r| serde_json::json!({
+            "note": r.note(),
+            "controller": r.name,
+            "gains": r.gains,
+            "poles": [r.poles.0, r.poles.1],
+            "block": r.block,
+        })),
         "rounds": summary_rounds,
         "simplified": summary_simplified,
         "fit": crate::commands::fit::fit_json(&s.fit),
