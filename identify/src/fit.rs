@@ -1087,10 +1087,7 @@ pub fn fit_with_progress(
             setup.apply_warm(&pb, &mut pt);
         }
         run.simulations += 1;
-        match pb.cost(&pt, f64::INFINITY) {
-            Ok((s, c)) => rms(s, c) <= DIVERGED_COST,
-            Err(_) => false,
-        }
+        follows(&pb, &pt)
     };
     let out = match opts.horizon {
         Horizon::Whole => solve(&setup, None, &g0, None, true, &mut run, &mut notes)?,
@@ -1328,9 +1325,14 @@ pub fn replay_follows(
     let pb = setup.problem(None);
     let g0: Vec<f64> = setup.free.iter().map(|&i| setup.base[i]).collect();
     let pt = setup.start_point(&pb, &g0);
-    Ok(pb
-        .cost(&pt, f64::INFINITY)
-        .is_ok_and(|(s, c)| rms(s, c) <= DIVERGED_COST))
+    Ok(follows(&pb, &pt))
+}
+
+/// Does the simulation of `pb` at `pt` over everything follow the data
+/// (simulates, weighted RMS within [`DIVERGED_COST`])?
+fn follows(pb: &Problem<'_>, pt: &Point) -> bool {
+    pb.cost(pt, f64::INFINITY)
+        .is_ok_and(|(s, c)| rms(s, c) <= DIVERGED_COST)
 }
 
 /// The free values of the start of a fit: those of [`FitOptions::start`],
@@ -1481,9 +1483,7 @@ fn solve(
             run.simulations += 1;
             true
         }
-        && pb
-            .cost(&pt, f64::INFINITY)
-            .is_ok_and(|(s, c)| rms(s, c) <= DIVERGED_COST);
+        && follows(&pb, &pt);
     if !warm {
         pt = setup.start_point(&pb, g_start);
         if let Some(o) = seed {
