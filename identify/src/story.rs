@@ -113,6 +113,9 @@ pub struct Story {
     /// ([`crate::stabilised_replay`]); the texts above are without its
     /// block, the fits (`closed_loop`, notes) name it.
     pub stabilised: Option<StabilisedReplay>,
+    /// The last diagnosis found the residual well above the noise floor
+    /// with no candidate explaining it ([`crate::Diagnosis::unexplained`]).
+    pub unexplained: bool,
 }
 
 impl Story {
@@ -375,6 +378,7 @@ fn story(
     let mut current_text = text.to_string();
     let mut current_fit: Option<FitResult> = None;
     let mut better_start = None;
+    let mut unexplained = false;
     let stop;
     loop {
         let round = rounds.len() + 1;
@@ -410,7 +414,8 @@ fn story(
                 .segments_caveat()
                 .map(|c| format!(" ({c})"))
                 .unwrap_or_default();
-            stop = if d.unexplained() {
+            unexplained = d.unexplained();
+            stop = if unexplained {
                 d.verdict_line()
             } else if round == 1 {
                 format!("adequate: no candidate effect lowers the cost clearly{caveat}")
@@ -520,6 +525,7 @@ fn story(
         simplifications: end.simplifications,
         better_start,
         stabilised: None,
+        unexplained,
     })
 }
 

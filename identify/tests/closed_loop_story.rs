@@ -279,6 +279,7 @@ fn clean_closed_loop_records_get_no_finding() {
     let s = story(&pendulum_text(), &exps);
     assert!(s.stabilised.is_some());
     assert_eq!(first_named(&s), None, "{}", s.stop);
+    assert!(!s.unexplained, "{}", s.stop);
 }
 
 /// A 4 ms input delay in the loop, the plain model: no other effect is
@@ -298,6 +299,7 @@ fn input_delay_in_closed_loop_without_the_law_is_not_mistaken() {
         "{named:?}"
     );
     if named.is_none() {
+        assert!(s.unexplained, "{}", s.stop);
         assert!(s.stop.contains("the best, input_delay@Vm"), "{}", s.stop);
     }
 }

@@ -388,7 +388,13 @@ fn story(
     let _ = writeln!(err, "done in {elapsed:.1} s");
     let mut summary = serde_json::json!({
         "model": args.model.display().to_string(),
-        "verdict": if s.rounds.iter().any(|r| r.effect.is_some()) { "missing_effect" } else { "adequate" },
+        "verdict": if s.rounds.iter().any(|r| r.effect.is_some()) {
+            "missing_effect"
+        } else if s.unexplained {
+            "unexplained_residual"
+        } else {
+            "adequate"
+        },
         "stop": s.stop,
         "stabilised_replay": s.stabilised.as_ref().map(|r| serde_json::json!({
             "note": r.note(),
