@@ -455,6 +455,21 @@ pub(crate) struct Segment {
     pub(crate) end: Option<usize>,
 }
 
+/// `r0 + B u` into `out` (`b` row-major, `r0.len() x u.len()`), summed in
+/// one order: both simulators call it, so their trajectories agree to the
+/// bit (and take the same substeps, see [`Substep`]).
+#[inline]
+pub(crate) fn forces(r0: &[f64], b: &[f64], u: &[f64], out: &mut [f64]) {
+    let m = u.len();
+    for (i, o) in out.iter_mut().enumerate().take(r0.len()) {
+        let mut s = r0[i];
+        for j in 0..m {
+            s += b[i * m + j] * u[j];
+        }
+        *o = s;
+    }
+}
+
 /// The RK4 substep of a simulation: `h`, or a longer one over the sample
 /// intervals where it is safe.
 #[derive(Clone, Debug, PartialEq)]
@@ -921,9 +936,7 @@ impl StiffnessProbe {
         let Some(rows) = self.rates(q, &vec![0.0; n], u, params) else {
             return f64::INFINITY;
         };
-        let rate = (0..n)
-            .map(|i| (0..n).map(|j| rows[i * n + j].abs()).sum::<f64>())
-            .fold(0.0f64, f64::max);
+        let rate = largest_row_sum(&rows, n);
         if rate > 0.0 && rate.is_finite() {
             2.5 / rate
         } else {
@@ -956,10 +969,7 @@ impl StiffnessProbe {
             .map(|j| if stiff.contains(&j) { 5.0 * w } else { 0.0 })
             .collect();
         let moving = self.rates(q, &v, u, params)?;
-        let rate = (0..n)
-            .map(|i| (0..n).map(|j| moving[i * n + j].abs()).sum::<f64>())
-            .fold(0.0f64, f64::max);
-        (rate <= allowed).then(|| stiff.iter().map(|j| n + j).collect())
+        (largest_row_sum(&moving, n) <= allowed).then(|| stiff.iter().map(|j| n + j).collect())
     }
 
     /// `M^-1 d r0/d v` (row-major) at positions `q`, velocities `v`, input
@@ -988,6 +998,14 @@ impl StiffnessProbe {
         }
         Some(rows)
     }
+}
+
+/// The infinity norm of the row-major `n x n` matrix `a` (a bound on its
+/// eigenvalues' magnitudes).
+fn largest_row_sum(a: &[f64], n: usize) -> f64 {
+    (0..n)
+        .map(|i| a[i * n..(i + 1) * n].iter().map(|v| v.abs()).sum::<f64>())
+        .fold(0.0f64, f64::max)
 }
 
 /// What both simulators do before integrating: check the parameter vector
@@ -1314,13 +1332,7 @@ impl Simulator {
             }
             let (mm, rest) = out.split_at_mut(n * n);
             let (r0, b) = rest.split_at(n);
-            for i in 0..n {
-                let mut s = r0[i];
-                for j in 0..m {
-                    s += b[i * m + j] * u[j];
-                }
-                acc[i] = s;
-            }
+            forces(r0, b, u, &mut acc);
             // M^-1 as the sensitivity simulator forms it (cofactors for
             // n <= 3), so both simulators give the same trajectory
             if !invert(

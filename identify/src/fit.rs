@@ -956,6 +956,11 @@ impl<'a> Setup<'a> {
         Point { g, l }
     }
 
+    /// The free parameters' values in `base` (model order).
+    fn free_values(&self, base: &[f64]) -> Vec<f64> {
+        self.free.iter().map(|&i| base[i]).collect()
+    }
+
     /// Where the nuisance of `pt` on `pb` is: offsets per experiment,
     /// initial state per block (see [`WarmStart`]).
     fn warm_at(&self, pb: &Problem<'_>, pt: &Point) -> WarmStart {
@@ -1323,8 +1328,7 @@ pub fn replay_follows(
         .unwrap_or_else(|| estimated_parameters(model));
     let setup = Setup::new(model, experiments, opts, &free_names)?;
     let pb = setup.problem(None);
-    let g0: Vec<f64> = setup.free.iter().map(|&i| setup.base[i]).collect();
-    let pt = setup.start_point(&pb, &g0);
+    let pt = setup.start_point(&pb, &setup.free_values(&setup.base));
     Ok(follows(&pb, &pt))
 }
 
@@ -1340,12 +1344,11 @@ fn follows(pb: &Problem<'_>, pt: &Point) -> bool {
 /// whole records, with the warm nuisance, fit better from there (two
 /// simulations).
 fn better_start(setup: &Setup<'_>, run: &mut Run<'_>) -> Vec<f64> {
-    let free_of = |base: &[f64]| -> Vec<f64> { setup.free.iter().map(|&i| base[i]).collect() };
-    let g0 = free_of(&setup.base);
+    let g0 = setup.free_values(&setup.base);
     // (the alternative is weighed on whole records)
     let warm = setup.opts.warm.is_some() && !matches!(setup.opts.horizon, Horizon::Segments(_));
     let alt = match &setup.opts.alternative_start {
-        Some(a) if warm && a.len() == setup.base.len() => free_of(a),
+        Some(a) if warm && a.len() == setup.base.len() => setup.free_values(a),
         _ => return g0,
     };
     if alt == g0 || alt.iter().any(|v| !v.is_finite()) {

@@ -59,7 +59,7 @@ use plantc_derive::sym::{diff, Expr, SplitTape, Tape};
 
 use crate::closed_loop::{LoopEval, LoopLaw, LoopSens, Replay};
 use crate::experiment_sim::{
-    check_start, check_width, dynamics_outputs, integrate, loop_start, parameters_slow,
+    check_start, check_width, dynamics_outputs, forces, integrate, loop_start, parameters_slow,
     prepare_run, received, received_derivatives, tape_inputs, BlockStart, OnSwitch, Segment,
     SignalEffects, Signals, SimError, SimOptions, StiffnessProbe, REFINE,
 };
@@ -389,15 +389,7 @@ impl SensitivitySimulator {
             ) {
                 return false;
             }
-            // summed as the plain simulator does, so both give the same
-            // trajectory to the bit (and take the same substeps)
-            for i in 0..n {
-                let mut s = r0[i];
-                for j in 0..m {
-                    s += b[i * m + j] * u[j];
-                }
-                tmp[i] = s;
-            }
+            forces(r0, b, u, &mut tmp);
             mat_vec(&minv, n, &tmp, &mut acc);
             for d in 0..nx + p {
                 let blk = &out[bs * (d + 1)..bs * (d + 2)];

@@ -92,13 +92,13 @@ impl std::fmt::Display for StabiliseError {
 impl std::error::Error for StabiliseError {}
 
 /// Standard deviation of `v` (0 for fewer than two values).
-fn spread(v: impl Iterator<Item = f64> + Clone) -> f64 {
-    let n = v.clone().count();
+fn spread(v: &[f64]) -> f64 {
+    let n = v.len();
     if n < 2 {
         return 0.0;
     }
-    let mean = v.clone().sum::<f64>() / n as f64;
-    (v.map(|x| (x - mean).powi(2)).sum::<f64>() / (n - 1) as f64).sqrt()
+    let mean = v.iter().sum::<f64>() / n as f64;
+    (v.iter().map(|x| (x - mean).powi(2)).sum::<f64>() / (n - 1) as f64).sqrt()
 }
 
 /// Half window (s) and degree of the Savitzky-Golay smoothing of the
@@ -188,15 +188,15 @@ impl StabilisedReplay {
         let floor = |s: f64, f: f64| if s.is_finite() && s > f { s } else { f };
         let mut q_w = DMatrix::zeros(2 * n, 2 * n);
         for i in 0..n {
-            q_w[(i, i)] = 1.0 / floor(spread(q_all[i].iter().copied()), 1e-3).powi(2);
-            q_w[(n + i, n + i)] = 1.0 / floor(spread(v_all[i].iter().copied()), 1e-2).powi(2);
+            q_w[(i, i)] = 1.0 / floor(spread(&q_all[i]), 1e-3).powi(2);
+            q_w[(n + i, n + i)] = 1.0 / floor(spread(&v_all[i]), 1e-2).powi(2);
         }
         let mut r_scale = 1.0;
-        let mut design = None;
-        for _ in 0..12 {
+        let mut tries = 0;
+        let (k, poles) = loop {
             let mut r_w = DMatrix::zeros(m, m);
             for j in 0..m {
-                r_w[(j, j)] = r_scale / floor(spread(u_all[j].iter().copied()), 1e-3).powi(2);
+                r_w[(j, j)] = r_scale / floor(spread(&u_all[j]), 1e-3).powi(2);
             }
             let d = lqr(&lin.a, &lin.b, &q_w, &r_w)
                 .map_err(|e| StabiliseError::Design(e.to_string()))?;
@@ -207,15 +207,15 @@ impl StabilisedReplay {
                 .collect();
             let fastest = mags.iter().copied().fold(0.0, f64::max);
             let slowest = mags.iter().copied().fold(f64::INFINITY, f64::min);
-            design = Some((d.k, (slowest, fastest)));
-            if fastest <= POLE_SHARE * CUTOFF {
-                break;
+            tries += 1;
+            if fastest <= POLE_SHARE * CUTOFF || tries == 12 {
+                break (d.k, (slowest, fastest));
             }
             r_scale *= 4.0;
-        }
-        let Some((k, poles)) = design else {
-            return Err(StabiliseError::Design("no design".into()));
         };
+        let gains: Vec<Vec<f64>> = (0..m)
+            .map(|j| (0..2 * n).map(|c| k[(j, c)]).collect())
+            .collect();
         let taken: Vec<String> = experiments
             .iter()
             .flat_map(|e| e.channels.iter().map(|c| c.name.clone()))
@@ -281,14 +281,10 @@ impl StabilisedReplay {
                 c.name, c.name, measured[i]
             );
         }
-        let mut gains = Vec::new();
         for (j, inp) in model.inputs.iter().enumerate() {
-            let mut row = Vec::new();
             let mut law = format!("    {} = {}", inp.name, logged[j]);
             for (i, c) in model.coordinates.iter().enumerate() {
-                let (kp, kd) = (k[(j, i)], k[(j, n + i)]);
-                row.push(kp);
-                let (kp, kd) = (kp / input_scale(j), kd / input_scale(j));
+                let (kp, kd) = (k[(j, i)] / input_scale(j), k[(j, n + i)] / input_scale(j));
                 let gp = format!("kp_{}_{}", inp.name, c.name);
                 let gd = format!("kd_{}_{}", inp.name, c.name);
                 let (uu, cu) = (input_unit(j), unit_of(i));
@@ -300,10 +296,6 @@ impl StabilisedReplay {
                     " - {gp}*{err} - {gd}*derivative({err}, {CUTOFF} [rad/s])"
                 );
             }
-            for i in 0..n {
-                row.push(k[(j, n + i)]);
-            }
-            gains.push(row);
             let _ = writeln!(block, "{law}");
         }
         block.push_str("}\n");

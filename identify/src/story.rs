@@ -39,6 +39,17 @@ pub struct StoryOptions {
     pub predict: Option<f64>,
 }
 
+impl StoryOptions {
+    /// The options of a round's diagnosis: `diagnose` with the story's fit
+    /// options.
+    fn diagnose_options(&self) -> DiagnoseOptions {
+        DiagnoseOptions {
+            fit: self.fit.clone(),
+            ..self.diagnose.clone()
+        }
+    }
+}
+
 impl Default for StoryOptions {
     fn default() -> Self {
         StoryOptions {
@@ -201,17 +212,27 @@ pub enum StoryProgress {
     Fit(FitProgress),
 }
 
-/// A stage from a model, its parameters and (if a fit made it) the fit's
-/// simulation; otherwise the nuisance is estimated by [`validate`].
+/// A stage from a model at the values and with the simulation of the fit
+/// that made it, or (None) at its nominal values, the nuisance estimated
+/// by [`validate`].
 fn stage(
     label: &str,
     text: &str,
     model: &Model,
-    base: &[f64],
     fitted: Option<&FitResult>,
     experiments: &[Experiment],
     opts: &StoryOptions,
 ) -> Result<Stage, StoryError> {
+    let nominal;
+    let base: &[f64] = match fitted {
+        Some(f) => &f.base,
+        None => {
+            nominal = ParameterValues::new(model, None, &[])
+                .map_err(|e| StoryError::Compare(e.to_string()))?
+                .base;
+            &nominal
+        }
+    };
     let names: Vec<&str> = model.coordinates.iter().map(|c| c.name.as_str()).collect();
     let vopts = ValidateOptions {
         fit: FitOptions {
@@ -292,18 +313,28 @@ pub fn identify(
     let model = model_from_text("model", text).map_err(StoryError::Model)?;
     // records an unstable plant's open-loop replay cannot follow, and no
     // law in the model: the story runs on the stabilised replay
-    let Some(stab) = stabilised_replay(&model, text, experiments, opts)? else {
+    let Some(on) = stabilised_replay(&model, text, experiments, opts)? else {
         return story(text, experiments, opts, progress);
     };
-    let (text2, experiments2, opts2) = stab;
-    let mut s = story(&text2.0, &experiments2, &opts2, progress)?;
-    let replay = text2.1;
+    let mut s = story(&on.text, &on.experiments, &on.opts, progress)?;
+    let replay = on.replay;
     for st in &mut s.stages {
         st.text = replay.strip(&st.text);
     }
     s.text = replay.strip(&s.text);
     s.stabilised = Some(replay);
     Ok(s)
+}
+
+/// What the story runs on with a [`StabilisedReplay`].
+struct Stabilised {
+    replay: StabilisedReplay,
+    /// The model text with the replay's block.
+    text: String,
+    /// The records with its columns.
+    experiments: Vec<Experiment>,
+    /// The options, held-out records with its columns.
+    opts: StoryOptions,
 }
 
 /// The model text with a [`StabilisedReplay`] block, the records and the
@@ -313,13 +344,12 @@ pub fn identify(
 /// whole records replayed open loop from the start values leave the data.
 /// None when not needed or when no feedback could be designed (the fit
 /// then goes to segments as before).
-#[allow(clippy::type_complexity)]
 fn stabilised_replay(
     model: &Model,
     text: &str,
     experiments: &[Experiment],
     opts: &StoryOptions,
-) -> Result<Option<((String, StabilisedReplay), Vec<Experiment>, StoryOptions)>, StoryError> {
+) -> Result<Option<Stabilised>, StoryError> {
     if !model.recorded.is_empty()
         || model.inputs.len() != 1
         || !matches!(opts.fit.closed_loop, ClosedLoop::Auto)
@@ -351,7 +381,12 @@ fn stabilised_replay(
         },
         ..opts.clone()
     };
-    Ok(Some(((text, replay), exps, opts)))
+    Ok(Some(Stabilised {
+        replay,
+        text,
+        experiments: exps,
+        opts,
+    }))
 }
 
 /// The story proper (see [`identify`]).
@@ -362,18 +397,8 @@ fn story(
     progress: &mut dyn FnMut(&StoryProgress),
 ) -> Result<Story, StoryError> {
     let model = model_from_text("model", text).map_err(StoryError::Model)?;
-    let nominal =
-        ParameterValues::new(&model, None, &[]).map_err(|e| StoryError::Compare(e.to_string()))?;
     progress(&StoryProgress::Step("comparing the nominal model".into()));
-    let mut stages = vec![stage(
-        "nominal",
-        text,
-        &model,
-        &nominal.base,
-        None,
-        experiments,
-        opts,
-    )?];
+    let mut stages = vec![stage("nominal", text, &model, None, experiments, opts)?];
     let mut rounds: Vec<Round> = Vec::new();
     let mut current_text = text.to_string();
     let mut current_fit: Option<FitResult> = None;
@@ -383,10 +408,7 @@ fn story(
     loop {
         let round = rounds.len() + 1;
         progress(&StoryProgress::Step(format!("diagnosing (round {round})")));
-        let dopts = DiagnoseOptions {
-            fit: opts.fit.clone(),
-            ..opts.diagnose.clone()
-        };
+        let dopts = opts.diagnose_options();
         // later rounds diagnose against the last round's fit (the model as
         // it now stands, fitted under the same options)
         let d = match current_fit.clone() {
@@ -400,7 +422,6 @@ fn story(
                 "nominal, refitted",
                 &current_text,
                 &current_model,
-                &d.baseline.base,
                 Some(&d.baseline),
                 experiments,
                 opts,
@@ -435,7 +456,6 @@ fn story(
                     "refitted from a better start",
                     &current_text,
                     &current_model,
-                    &d.baseline.base,
                     Some(&d.baseline),
                     experiments,
                     opts,
@@ -484,15 +504,7 @@ fn story(
         )
         .map_err(StoryError::Fit)?;
         let label = format!("+ {}, fitted", inst.label());
-        stages.push(stage(
-            &label,
-            &edited,
-            &m2,
-            &f.base,
-            Some(&f),
-            experiments,
-            opts,
-        )?);
+        stages.push(stage(&label, &edited, &m2, Some(&f), experiments, opts)?);
         rounds.push(Round {
             ranking: d.ranking,
             effect: Some(inst),
@@ -578,10 +590,7 @@ impl EndSteps {
                 self.adopt(k, (to, None), (text2, f2), experiments, opts)?;
             }
         }
-        let dopts = DiagnoseOptions {
-            fit: opts.fit.clone(),
-            ..opts.diagnose.clone()
-        };
+        let dopts = opts.diagnose_options();
         for k in 0..self.applied.len() {
             let in_model = self.applied.iter().flatten().count();
             if in_model >= opts.max_effects || !self.no_shape_of_its_own(k) {
@@ -649,15 +658,8 @@ impl EndSteps {
             stage: self.stages.len(),
         };
         let label = simple.stage_label();
-        self.stages.push(stage(
-            &label,
-            &text,
-            &m,
-            &f.base,
-            Some(&f),
-            experiments,
-            opts,
-        )?);
+        self.stages
+            .push(stage(&label, &text, &m, Some(&f), experiments, opts)?);
         self.simplifications.push(simple);
         if then.is_some() {
             self.applied.push(then);

@@ -172,6 +172,16 @@ fn story(text: &str, exps: &[Experiment]) -> plantc_identify::Story {
     s
 }
 
+/// `label` is the first effect named, or none is: true for the latter.
+fn nothing_else_named(s: &plantc_identify::Story, label: &str) -> bool {
+    let named = first_named(s);
+    assert!(
+        named.is_none() || named.as_deref() == Some(label),
+        "{named:?}"
+    );
+    named.is_none()
+}
+
 /// The story's estimate of `name` is within `tol` (relative) of `truth`.
 fn assert_estimate(s: &plantc_identify::Story, name: &str, truth: f64, tol: f64) {
     let p = s
@@ -257,12 +267,7 @@ fn on_segments_the_verdict_says_what_it_cannot_see() {
         plantc_identify::identify(&pendulum_text(), &exps, &opts, &mut |_| {}).expect("identifies");
     eprintln!("stop: {}", s.stop);
     assert!(s.stabilised.is_none());
-    let named = first_named(&s);
-    assert!(
-        named.is_none() || named.as_deref() == Some("coulomb_friction@alpha"),
-        "{named:?}"
-    );
-    if named.is_none() {
+    if nothing_else_named(&s, "coulomb_friction@alpha") {
         assert!(
             s.stop.contains("segments") && s.stop.contains("recorded controller"),
             "{}",
@@ -293,12 +298,7 @@ fn input_delay_in_closed_loop_without_the_law_is_not_mistaken() {
     let exps = closed_loop_runs("cl_delay", ("input_delay", "Vm", &[("Td", 4e-3)]));
     let s = story(&pendulum_text(), &exps);
     assert!(s.stabilised.is_some());
-    let named = first_named(&s);
-    assert!(
-        named.is_none() || named.as_deref() == Some("input_delay@Vm"),
-        "{named:?}"
-    );
-    if named.is_none() {
+    if nothing_else_named(&s, "input_delay@Vm") {
         assert!(s.unexplained, "{}", s.stop);
         assert!(s.stop.contains("the best, input_delay@Vm"), "{}", s.stop);
     }

@@ -315,15 +315,8 @@ fn two_effects_are_named_in_turn_and_the_residual_ends_near_the_floor() {
         .filter_map(|r| r.effect.as_ref().map(|e| e.label()))
         .collect();
     let floor = plantc_identify::weights::noise_cost(&story.fit.weights);
-    for (k, r) in story.rounds.iter().enumerate() {
-        eprintln!(
-            "round {}: {:?}, cost {:.3e} -> {:?} (floor {floor:.3e})",
-            k + 1,
-            r.effect.as_ref().map(|e| e.label()),
-            r.cost_before,
-            r.cost_after
-        );
-    }
+    common::show_rounds(&story);
+    eprintln!("floor {floor:.3e}");
     eprintln!("stop: {}", story.stop);
     assert!(
         named.len() >= 2
