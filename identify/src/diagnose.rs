@@ -282,6 +282,12 @@ impl Diagnosis {
         }
     }
 
+    /// Is the baseline at the noise floor ([`FLOOR_REACHED`] times it or
+    /// less)? Then no candidate is refitted: nothing is left to explain.
+    pub fn at_floor(&self) -> bool {
+        self.floor > 0.0 && self.baseline.after_cost <= FLOOR_REACHED * self.floor
+    }
+
     /// No verdict while the baseline sits well above the noise floor
     /// ([`FLOOR_BASELINE`] times or more): the model is not adequate, the
     /// residual is unexplained by every candidate tried.
@@ -344,6 +350,11 @@ impl Diagnosis {
                 "unexplained residual: {:.1}x the noise floor, and none of the {} candidates refitted lowers it clearly ({MIN_GAIN}x, or to the floor{far}){best}: an effect outside the vocabulary, or a nominal model too far off{caveat}",
                 self.above_floor(),
                 refitted.len()
+            )
+        } else if self.at_floor() && self.verdict.is_none() {
+            format!(
+                "adequate: the residual is at the noise floor ({:.2}x), nothing is left for an effect to explain{caveat}",
+                self.above_floor()
             )
         } else {
             format!(
@@ -540,6 +551,20 @@ pub fn diagnose_from(
     }
     let floor = crate::weights::noise_cost(&baseline.weights);
     let above_floor = floor > 0.0 && baseline.after_cost >= FLOOR_BASELINE * floor;
+    // At the noise floor what is left is noise: an effect could only take
+    // the residual below it, its contribution to the prediction smaller
+    // than the noise, which is never credited. No candidate is refitted
+    // (a sensor offset hidden in the per-experiment offsets is still
+    // looked for below: that is not residual). In the round after an
+    // effect that reached the floor this was a third of a whole case's
+    // time (demo_coulomb: three refits, 1.2 s of 5.9 s).
+    let at_floor = floor > 0.0 && baseline.after_cost <= FLOOR_REACHED * floor;
+    if at_floor {
+        notes.push(format!(
+            "the baseline is at the noise floor ({:.2}x): no candidate refitted, an effect could only fit the noise",
+            baseline.after_cost / floor
+        ));
+    }
     if blind && above_floor {
         notes.push(
             "the equation-error ranking cannot discriminate (no candidate explains any of the torque residual): every candidate is screened by simulation error instead".to_string(),
@@ -582,7 +607,7 @@ pub fn diagnose_from(
         }
     };
     let leaders: Vec<usize> = (0..ranking.len())
-        .filter(|&i| blind || edited[i].1 .0)
+        .filter(|&i| !at_floor && (blind || edited[i].1 .0))
         .take(opts.refit)
         .collect();
     for &idx in &leaders {

@@ -438,6 +438,11 @@ fn story(
             unexplained = d.unexplained();
             stop = if unexplained {
                 d.verdict_line()
+            } else if d.at_floor() && d.verdict.is_none() {
+                format!(
+                    "the residual is at the noise floor ({:.2}x): nothing left to explain{caveat}",
+                    d.above_floor()
+                )
             } else if round == 1 {
                 format!("adequate: no candidate effect lowers the cost clearly{caveat}")
             } else {
