@@ -322,9 +322,7 @@ impl Signals {
 
     /// Median sample interval.
     pub(crate) fn sample_time(&self) -> f64 {
-        let mut d: Vec<f64> = self.t.windows(2).map(|w| w[1] - w[0]).collect();
-        d.sort_by(f64::total_cmp);
-        d.get(d.len() / 2).copied().unwrap_or(1e-3)
+        crate::data::median_dt(&self.t).unwrap_or(1e-3)
     }
 }
 
@@ -1314,7 +1312,7 @@ impl Simulator {
         let mut out = vec![0.0; self.tape.n_outputs()];
         let mut scratch = vec![0.0; self.tape.scratch_len().max(self.split.scratch_len())];
         if !unsplit {
-            self.split.eval_slow(&tin, &mut scratch);
+            self.split.eval_slow_outputs(&tin, &mut out, &mut scratch);
         }
         let mut piv = vec![0; n];
         let mut acc = vec![0.0; n];
@@ -1328,9 +1326,9 @@ impl Simulator {
             if unsplit {
                 self.tape.eval(&tin, &mut out, &mut scratch);
             } else {
-                self.split.eval_fast(&tin, &mut out, &mut scratch);
+                self.split.eval_fast_changed(&tin, &mut out, &mut scratch);
             }
-            let (mm, rest) = out.split_at_mut(n * n);
+            let (mm, rest) = out.split_at(n * n);
             let (r0, b) = rest.split_at(n);
             forces(r0, b, u, &mut acc);
             // M^-1 as the sensitivity simulator forms it (cofactors for

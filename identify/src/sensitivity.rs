@@ -76,6 +76,104 @@ fn mat_vec(a: &[f64], n: usize, x: &[f64], y: &mut [f64]) {
     }
 }
 
+/// The number of coordinates `n` of the per-stage kernels below: a constant
+/// for the common small models ([`Fixed`]) so that their loops over two or
+/// three rows unroll and lose their bounds checks (those loops cost more in
+/// index arithmetic than in products: a third of a fit's instructions on
+/// the pendulum), or the model's own ([`Any`]). The same operations in the
+/// same order either way, so both give the same bits.
+trait Dim: Copy {
+    fn n(self) -> usize;
+}
+
+/// `n` known when compiling.
+#[derive(Copy, Clone)]
+struct Fixed<const N: usize>;
+
+impl<const N: usize> Dim for Fixed<N> {
+    #[inline(always)]
+    fn n(self) -> usize {
+        N
+    }
+}
+
+/// `n` known when running.
+#[derive(Copy, Clone)]
+struct Any(usize);
+
+impl Dim for Any {
+    #[inline(always)]
+    fn n(self) -> usize {
+        self.0
+    }
+}
+
+/// `jd[d * n + i] = d a_i / d z_d` for every `d` (the state, then the free
+/// parameters), `a = M^-1 (r0 + B u)` the acceleration: from the tape's
+/// derivative blocks (each `bs = n n + n + n m` long: `dM`, `dr0`, `dB`
+/// row-major), `M^-1 (dr0 + dB u - dM a)`. `w` is a buffer of `n`.
+#[allow(clippy::too_many_arguments)]
+#[inline(always)]
+fn acceleration_jacobian<D: Dim>(
+    dim: D,
+    blocks: &[f64],
+    (m, bs): (usize, usize),
+    u: &[f64],
+    acc: &[f64],
+    minv: &[f64],
+    w: &mut [f64],
+    jd: &mut [f64],
+) {
+    let n = dim.n();
+    let (acc, minv, w) = (&acc[..n], &minv[..n * n], &mut w[..n]);
+    for (blk, jd_d) in blocks.chunks_exact(bs).zip(jd.chunks_exact_mut(n)) {
+        let (dm, rest) = blk.split_at(n * n);
+        let (dr, db) = rest.split_at(n);
+        for i in 0..n {
+            let mut s = dr[i];
+            for j in 0..m {
+                s += db[i * m + j] * u[j];
+            }
+            let row = &dm[i * n..(i + 1) * n];
+            for (k, a) in row.iter().zip(acc.iter()) {
+                s -= k * a;
+            }
+            w[i] = s;
+        }
+        mat_vec(minv, n, w, jd_d);
+    }
+}
+
+/// The sensitivity rows' rates: `d/dt S_q = S_v`, `d/dt S_v = (da/dx) S +
+/// da/dtheta` (`nc` columns, the first `p` the free parameters'), from
+/// [`acceleration_jacobian`]'s `jd`.
+#[inline(always)]
+fn sensitivity_rates<D: Dim>(
+    dim: D,
+    jd: &[f64],
+    s: &[f64],
+    ds: &mut [f64],
+    (p, nc): (usize, usize),
+) {
+    let n = dim.n();
+    let nx = 2 * n;
+    ds[..n * nc].copy_from_slice(&s[n * nc..nx * nc]);
+    for i in 0..n {
+        let row = &mut ds[(n + i) * nc..(n + i + 1) * nc];
+        for (j, r) in row.iter_mut().enumerate() {
+            *r = if j < p { jd[(nx + j) * n + i] } else { 0.0 };
+        }
+        for k in 0..nx {
+            let a = jd[k * n + i];
+            if a != 0.0 {
+                for (r, sv) in row.iter_mut().zip(&s[k * nc..(k + 1) * nc]) {
+                    *r += a * sv;
+                }
+            }
+        }
+    }
+}
+
 /// Add `M^-1 B du` (from `minv`, the row-major `n x n` inverse, and `b`,
 /// `n x m`) to the velocity rows of column `j` of `ds` (`nc` columns);
 /// `n` and `m` are the lengths of the buffers `tmp, w` and of `du`.
@@ -352,7 +450,7 @@ impl SensitivitySimulator {
         let mut out = vec![0.0; self.tape.n_outputs()];
         let mut scratch = vec![0.0; self.tape.scratch_len().max(self.split.scratch_len())];
         if !unsplit {
-            self.split.eval_slow(&tin, &mut scratch);
+            self.split.eval_slow_outputs(&tin, &mut out, &mut scratch);
         }
         let mut lu = vec![0.0; n * n];
         let mut piv = vec![0; n];
@@ -375,7 +473,7 @@ impl SensitivitySimulator {
             if unsplit {
                 self.tape.eval(&tin, &mut out, &mut scratch);
             } else {
-                self.split.eval_fast(&tin, &mut out, &mut scratch);
+                self.split.eval_fast_changed(&tin, &mut out, &mut scratch);
             }
             let r0 = &out[n * n..n * n + n];
             let b = &out[n * n + n..bs];
@@ -391,42 +489,22 @@ impl SensitivitySimulator {
             }
             forces(r0, b, u, &mut tmp);
             mat_vec(&minv, n, &tmp, &mut acc);
-            for d in 0..nx + p {
-                let blk = &out[bs * (d + 1)..bs * (d + 2)];
-                let (dm, rest) = blk.split_at(n * n);
-                let (dr, db) = rest.split_at(n);
-                for i in 0..n {
-                    let mut s = dr[i];
-                    for j in 0..m {
-                        s += db[i * m + j] * u[j];
-                    }
-                    let row = &dm[i * n..(i + 1) * n];
-                    for (k, a) in row.iter().zip(acc.iter()) {
-                        s -= k * a;
-                    }
-                    w[i] = s;
-                }
-                mat_vec(&minv, n, &w, &mut jd[d * n..d * n + n]);
-            }
             dz[..n].copy_from_slice(&z[n..nx]);
             dz[n..nx].copy_from_slice(&acc);
             let s = &z[nx..];
             let ds = &mut dz[nx..];
-            // rows of S: d/dt S_q = S_v; d/dt S_v = (da/dx) S + da/dtheta
-            ds[..n * nc].copy_from_slice(&s[n * nc..nx * nc]);
-            for i in 0..n {
-                let row = &mut ds[(n + i) * nc..(n + i + 1) * nc];
-                for (j, r) in row.iter_mut().enumerate() {
-                    *r = if j < p { jd[(nx + j) * n + i] } else { 0.0 };
-                }
-                for k in 0..nx {
-                    let a = jd[k * n + i];
-                    if a != 0.0 {
-                        for (r, sv) in row.iter_mut().zip(&s[k * nc..(k + 1) * nc]) {
-                            *r += a * sv;
-                        }
-                    }
-                }
+            let blocks = &out[bs..bs * (nx + p + 1)];
+            macro_rules! kernels {
+                ($dim:expr) => {{
+                    acceleration_jacobian($dim, blocks, (m, bs), u, &acc, &minv, &mut w, &mut jd);
+                    sensitivity_rates($dim, &jd, s, ds, (p, nc));
+                }};
+            }
+            match n {
+                1 => kernels!(Fixed::<1>),
+                2 => kernels!(Fixed::<2>),
+                3 => kernels!(Fixed::<3>),
+                _ => kernels!(Any(n)),
             }
             // deadzone widths and saturation levels of inputs from the data:
             // M^-1 B d held/dtheta, with d held/d(w, L) from the held value

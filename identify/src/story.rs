@@ -503,6 +503,10 @@ fn story(
                 start: Some(start),
                 // from where the candidate's refit left the nuisance
                 warm: top.fit.as_ref().map(|f| f.warm.clone()),
+                // the candidate's refit scanned its delays and offsets: from
+                // its values a scan finds the same start (main job, input
+                // delay: 40 simulations that moved nothing)
+                scan: opts.fit.scan && top.fit.is_none(),
                 ..opts.fit.clone()
             },
             &mut |p| progress(&StoryProgress::Fit(p.clone())),

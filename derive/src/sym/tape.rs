@@ -571,7 +571,8 @@ impl Tape {
         assert_eq!(inputs.len(), self.inputs.len(), "tape input length");
         assert!(out.len() >= self.outputs.len(), "tape output length");
         assert!(scratch.len() >= self.n_slots, "tape scratch length");
-        run(&self.instrs, inputs, scratch);
+        // SAFETY: in_bounds at construction; lengths asserted above
+        unsafe { run(&self.instrs, inputs, scratch) };
         for (o, slot) in out.iter_mut().zip(&self.outputs) {
             *o = scratch[*slot as usize];
         }
@@ -589,6 +590,10 @@ impl Tape {
 /// Map SSA values to slots, reusing a slot once its value is dead.
 fn allocate(instrs: Vec<Instr>, n_values: usize, outs: &[u32], inputs: Vec<Symbol>) -> Tape {
     let (instrs, slot_of, n_slots) = assign_slots(&instrs, n_values, outs);
+    assert!(
+        in_bounds(&instrs, n_slots, inputs.len()),
+        "tape slots out of range"
+    );
     Tape {
         inputs,
         outputs: outs.iter().map(|o| slot_of[*o as usize]).collect(),
@@ -690,31 +695,72 @@ fn value_key(ins: &Instr) -> (u8, u64, u32, u32) {
     }
 }
 
-/// Execute `instrs` on the slots `s` (no bounds beyond slice indexing).
+/// Do all of `instrs`' slots lie below `n_slots` and their input indices
+/// below `n_inputs`? Checked once when a tape is built (it is never changed
+/// after), which is what makes [`run`]'s unchecked accesses sound.
+fn in_bounds(instrs: &[Instr], n_slots: usize, n_inputs: usize) -> bool {
+    instrs.iter().all(|ins| {
+        let input_ok = match *ins {
+            Instr::Input { index, .. } => (index as usize) < n_inputs,
+            _ => true,
+        };
+        input_ok
+            && ins
+                .operands()
+                .into_iter()
+                .chain(ins.dsts())
+                .flatten()
+                .all(|a| (a as usize) < n_slots)
+    })
+}
+
+/// Execute `instrs` on the slots `s`.
+///
+/// Without bounds checks on the slots: in a simulation these tapes run at
+/// every integrator stage, and three checks per instruction were a fifth of
+/// their time.
+///
+/// # Safety
+/// Every slot of `instrs` is below `s.len()` and every input index below
+/// `inputs.len()`: the tape's constructors assert [`in_bounds`] for their
+/// `n_slots` and input count, and every caller asserts `s.len() >= n_slots`
+/// and `inputs.len() ==` the input count before calling.
 #[inline(always)]
-fn run(instrs: &[Instr], inputs: &[f64], s: &mut [f64]) {
+unsafe fn run(instrs: &[Instr], inputs: &[f64], s: &mut [f64]) {
+    // SAFETY (all accesses below): in bounds by the contract above.
+    macro_rules! r {
+        ($i:expr) => {
+            *s.get_unchecked($i as usize)
+        };
+    }
+    macro_rules! w {
+        ($i:expr, $v:expr) => {{
+            let v = $v;
+            *s.get_unchecked_mut($i as usize) = v;
+        }};
+    }
     for ins in instrs {
         match *ins {
-            Instr::Const { dst, value } => s[dst as usize] = value,
-            Instr::Input { dst, index } => s[dst as usize] = inputs[index as usize],
-            Instr::Add { dst, a, b } => s[dst as usize] = s[a as usize] + s[b as usize],
-            Instr::Sub { dst, a, b } => s[dst as usize] = s[a as usize] - s[b as usize],
-            Instr::Mul { dst, a, b } => s[dst as usize] = s[a as usize] * s[b as usize],
-            Instr::Div { dst, a, b } => s[dst as usize] = s[a as usize] / s[b as usize],
-            Instr::Neg { dst, a } => s[dst as usize] = -s[a as usize],
-            Instr::Sqrt { dst, a } => s[dst as usize] = s[a as usize].sqrt(),
-            Instr::Pow { dst, a, b } => s[dst as usize] = s[a as usize].powf(s[b as usize]),
-            Instr::Func { dst, f, a } => s[dst as usize] = f.eval(s[a as usize]),
+            Instr::Const { dst, value } => w!(dst, value),
+            Instr::Input { dst, index } => w!(dst, *inputs.get_unchecked(index as usize)),
+            Instr::Add { dst, a, b } => w!(dst, r!(a) + r!(b)),
+            Instr::Sub { dst, a, b } => w!(dst, r!(a) - r!(b)),
+            Instr::Mul { dst, a, b } => w!(dst, r!(a) * r!(b)),
+            Instr::Div { dst, a, b } => w!(dst, r!(a) / r!(b)),
+            Instr::Neg { dst, a } => w!(dst, -r!(a)),
+            Instr::Sqrt { dst, a } => w!(dst, r!(a).sqrt()),
+            Instr::Pow { dst, a, b } => w!(dst, r!(a).powf(r!(b))),
+            Instr::Func { dst, f, a } => w!(dst, f.eval(r!(a))),
             Instr::SinCos {
                 sin_dst,
                 cos_dst,
                 a,
             } => {
-                let (sv, cv) = super::trig::sin_cos(s[a as usize]);
-                s[sin_dst as usize] = sv;
-                s[cos_dst as usize] = cv;
+                let (sv, cv) = super::trig::sin_cos(r!(a));
+                w!(sin_dst, sv);
+                w!(cos_dst, cv);
             }
-            Instr::Atan2 { dst, y, x } => s[dst as usize] = s[y as usize].atan2(s[x as usize]),
+            Instr::Atan2 { dst, y, x } => w!(dst, r!(y).atan2(r!(x))),
         }
     }
 }
@@ -739,6 +785,8 @@ pub struct SplitTape {
     slow_instrs: Vec<Instr>,
     fast_instrs: Vec<Instr>,
     outputs: Vec<u32>,
+    /// `(output, slot)` of the outputs that depend on a fast input.
+    fast_outputs: Vec<(u32, u32)>,
     n_slots: usize,
 }
 
@@ -841,12 +889,23 @@ impl Tape {
         let mut ordered = slow_ssa;
         ordered.extend(fast_ssa);
         let (mut instrs, slot_of, n_slots) = assign_slots(&ordered, n_values as usize, &keep);
+        assert!(
+            in_bounds(&instrs, n_slots, slow.len()),
+            "tape slots out of range"
+        );
         let fast_instrs = instrs.split_off(n_slow);
+        let outputs: Vec<u32> = out_vals.iter().map(|v| slot_of[*v as usize]).collect();
+        let fast_outputs = (0u32..)
+            .zip(&out_vals)
+            .filter(|(_, v)| !is_slow[**v as usize])
+            .map(|(i, _)| (i, outputs[i as usize]))
+            .collect();
         SplitTape {
             slow: slow.to_vec(),
             slow_instrs: instrs,
             fast_instrs,
-            outputs: out_vals.iter().map(|v| slot_of[*v as usize]).collect(),
+            outputs,
+            fast_outputs,
             n_slots,
         }
     }
@@ -887,7 +946,38 @@ impl SplitTape {
     pub fn eval_slow(&self, inputs: &[f64], scratch: &mut [f64]) {
         assert_eq!(inputs.len(), self.slow.len(), "tape input length");
         assert!(scratch.len() >= self.n_slots, "tape scratch length");
-        run(&self.slow_instrs, inputs, scratch);
+        // SAFETY: in_bounds at construction; lengths asserted above
+        unsafe { run(&self.slow_instrs, inputs, scratch) };
+    }
+
+    /// [`SplitTape::eval_slow`], then write the outputs that depend on slow
+    /// inputs only into `out`, for [`SplitTape::eval_fast_changed`] to
+    /// leave them there. Panics as `eval_slow` does, or if `out` is shorter
+    /// than the number of outputs.
+    pub fn eval_slow_outputs(&self, inputs: &[f64], out: &mut [f64], scratch: &mut [f64]) {
+        self.eval_slow(inputs, scratch);
+        assert!(out.len() >= self.outputs.len(), "tape output length");
+        for (o, slot) in out.iter_mut().zip(&self.outputs) {
+            *o = scratch[*slot as usize];
+        }
+    }
+
+    /// [`SplitTape::eval_fast`] writing only the outputs that depend on a
+    /// fast input: the others keep the values the last
+    /// [`SplitTape::eval_slow_outputs`] wrote into `out` (a simulation's
+    /// derivative blocks are mostly such constants, zeros among them, and
+    /// copying them at every stage was a fifth of the tape's time). Same
+    /// requirements and panics as `eval_fast`, and `out` untouched by
+    /// anything else since that `eval_slow_outputs`.
+    pub fn eval_fast_changed(&self, inputs: &[f64], out: &mut [f64], scratch: &mut [f64]) {
+        assert_eq!(inputs.len(), self.slow.len(), "tape input length");
+        assert!(out.len() >= self.outputs.len(), "tape output length");
+        assert!(scratch.len() >= self.n_slots, "tape scratch length");
+        // SAFETY: in_bounds at construction; lengths asserted above
+        unsafe { run(&self.fast_instrs, inputs, scratch) };
+        for &(o, slot) in &self.fast_outputs {
+            out[o as usize] = scratch[slot as usize];
+        }
     }
 
     /// Evaluate the fast part and write every output (slow-only outputs are
@@ -903,7 +993,8 @@ impl SplitTape {
         assert_eq!(inputs.len(), self.slow.len(), "tape input length");
         assert!(out.len() >= self.outputs.len(), "tape output length");
         assert!(scratch.len() >= self.n_slots, "tape scratch length");
-        run(&self.fast_instrs, inputs, scratch);
+        // SAFETY: in_bounds at construction; lengths asserted above
+        unsafe { run(&self.fast_instrs, inputs, scratch) };
         for (o, slot) in out.iter_mut().zip(&self.outputs) {
             *o = scratch[*slot as usize];
         }
