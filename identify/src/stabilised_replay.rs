@@ -247,6 +247,41 @@ impl StabilisedReplay {
         };
         // K is in SI; a gain written in the input's unit is scaled by it
         let input_scale = |j: usize| parse_unit(&input_unit(j)).map_or(1.0, |u| u.scale.to_f64());
+        // the block's own names (errors and gains), clear of every name
+        // the model or the block already uses
+        let mut used: Vec<String> = names;
+        used.extend(model.coordinates.iter().map(|c| c.name.clone()));
+        used.extend(model.inputs.iter().map(|i| i.name.clone()));
+        used.extend(model.outputs.iter().map(|o| o.name.clone()));
+        used.extend(model.derived.iter().map(|d| d.name.clone()));
+        used.extend(logged.iter().chain(&measured).cloned());
+        used.push(name.clone());
+        let mut local = |base: String| {
+            let fresh = unique(base, &used);
+            used.push(fresh.clone());
+            fresh
+        };
+        let errs: Vec<String> = model
+            .coordinates
+            .iter()
+            .map(|c| local(format!("err_{}", c.name)))
+            .collect();
+        let gain_names: Vec<Vec<(String, String)>> = model
+            .inputs
+            .iter()
+            .map(|inp| {
+                model
+                    .coordinates
+                    .iter()
+                    .map(|c| {
+                        (
+                            local(format!("kp_{}_{}", inp.name, c.name)),
+                            local(format!("kd_{}_{}", inp.name, c.name)),
+                        )
+                    })
+                    .collect()
+            })
+            .collect();
         let mut block = String::new();
         let _ = writeln!(
             block,
@@ -275,22 +310,17 @@ impl StabilisedReplay {
             );
         }
         for (i, c) in model.coordinates.iter().enumerate() {
-            let _ = writeln!(
-                block,
-                "    let err_{} = {} - {}",
-                c.name, c.name, measured[i]
-            );
+            let _ = writeln!(block, "    let {} = {} - {}", errs[i], c.name, measured[i]);
         }
         for (j, inp) in model.inputs.iter().enumerate() {
             let mut law = format!("    {} = {}", inp.name, logged[j]);
-            for (i, c) in model.coordinates.iter().enumerate() {
+            for i in 0..n {
                 let (kp, kd) = (k[(j, i)] / input_scale(j), k[(j, n + i)] / input_scale(j));
-                let gp = format!("kp_{}_{}", inp.name, c.name);
-                let gd = format!("kd_{}_{}", inp.name, c.name);
+                let (gp, gd) = &gain_names[j][i];
                 let (uu, cu) = (input_unit(j), unit_of(i));
                 let _ = writeln!(block, "    gain {gp} = {kp:e} [{uu}/{cu}]");
                 let _ = writeln!(block, "    gain {gd} = {kd:e} [{uu}*s/{cu}]");
-                let err = format!("err_{}", c.name);
+                let err = &errs[i];
                 let _ = write!(
                     law,
                     " - {gp}*{err} - {gd}*derivative({err}, {CUTOFF} [rad/s])"
