@@ -1,7 +1,8 @@
 //! The whole identification story as one call: the nominal model against
 //! the data, then rounds of diagnose -> add the missing effect -> refit,
-//! until the model is adequate, nothing helps, or the round limit; with the
-//! model judged on held-out experiments at every stage when given.
+//! until the residual reaches the noise floor, nothing helps, or the round
+//! limit; with the model judged on held-out experiments at every stage when
+//! given.
 //!
 //! The story only computes; writing files and printing is the caller's
 //! (`plantc identify` formats it, tests and the language server read it).

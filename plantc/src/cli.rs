@@ -238,7 +238,9 @@ pub struct IdentifyArgs {
     /// segment starts from its own estimated state).
     #[arg(long, value_name = "auto|whole|SECONDS", default_value = "auto")]
     pub horizon: String,
-    /// Most effects added in turn (diagnose -> add -> refit rounds).
+    /// Most effects added in turn (diagnose -> add -> refit rounds; the
+    /// rounds stop earlier when the residual reaches the noise floor or no
+    /// candidate helps).
     #[arg(long = "max-effects", value_name = "N", default_value_t = 3)]
     pub max_effects: usize,
     /// Held-out experiments the model is judged on at each stage.
