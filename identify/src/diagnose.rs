@@ -79,6 +79,12 @@ pub const FLOOR_REACHED: f64 = 1.25;
 /// pendulum in one driven run, baseline 3.2x the floor, refit 1.01x).
 pub const FLOOR_BASELINE: f64 = 2.0;
 
+/// Is a weighted cost at the noise floor `floor` ([`FLOOR_REACHED`] times it
+/// or less; never without a floor)?
+fn reaches_floor(cost: f64, floor: f64) -> bool {
+    floor > 0.0 && cost <= FLOOR_REACHED * floor
+}
+
 /// Far above the noise floor (at least [`PARTIAL_BASELINE`] times), a
 /// candidate that removes a third of the residual ([`PARTIAL_GAIN`]) is
 /// credited below the 3x rule: with two effects in the data neither alone
@@ -285,7 +291,7 @@ impl Diagnosis {
     /// Is the baseline at the noise floor ([`FLOOR_REACHED`] times it or
     /// less)? Then no candidate is refitted: nothing is left to explain.
     pub fn at_floor(&self) -> bool {
-        self.floor > 0.0 && self.baseline.after_cost <= FLOOR_REACHED * self.floor
+        reaches_floor(self.baseline.after_cost, self.floor)
     }
 
     /// No verdict while the baseline sits well above the noise floor
@@ -558,7 +564,7 @@ pub fn diagnose_from(
     // looked for below: that is not residual). In the round after an
     // effect that reached the floor this was a third of a whole case's
     // time (demo_coulomb: three refits, 1.2 s of 5.9 s).
-    let at_floor = floor > 0.0 && baseline.after_cost <= FLOOR_REACHED * floor;
+    let at_floor = reaches_floor(baseline.after_cost, floor);
     if at_floor {
         notes.push(format!(
             "the baseline is at the noise floor ({:.2}x): no candidate refitted, an effect could only fit the noise",
@@ -679,7 +685,7 @@ pub fn diagnose_from(
         };
         if inner.candidate.effect != "coulomb_friction"
             || !passes(inner, baseline.after_cost, floor, opts)
-            || (floor > 0.0 && inner_fit.after_cost <= FLOOR_REACHED * floor)
+            || reaches_floor(inner_fit.after_cost, floor)
         {
             continue;
         }
@@ -772,7 +778,7 @@ pub fn diagnose_from(
 /// data no candidate gained more than 1.1x).
 fn passes(r: &Ranked, base_cost: f64, floor: f64, opts: &DiagnoseOptions) -> bool {
     r.fit.as_ref().is_some_and(|f| {
-        let to_floor = floor > 0.0 && f.after_cost <= FLOOR_REACHED * floor;
+        let to_floor = reaches_floor(f.after_cost, floor);
         r.gain >= opts.min_gain
             || (to_floor && base_cost >= FLOOR_BASELINE * floor)
             || (opts.partial_credit
@@ -1251,9 +1257,9 @@ fn second_start(
 /// noise floor? Then second starts cannot change the verdict.
 fn settled(ranking: &[Ranked], floor: f64) -> bool {
     ranking.iter().any(|r| {
-        r.fit.as_ref().is_some_and(|f| {
-            r.gain >= DECISIVE_GAIN || (floor > 0.0 && f.after_cost <= FLOOR_REACHED * floor)
-        })
+        r.fit
+            .as_ref()
+            .is_some_and(|f| r.gain >= DECISIVE_GAIN || reaches_floor(f.after_cost, floor))
     })
 }
 
@@ -1282,9 +1288,8 @@ fn refit_from(
     // that fits better. Not above the floor: there a start worse than the
     // baseline still leads to the effect where the baseline's own minimum
     // traps it (rate survey: saturation 2/5, cogging 3/5 when allowed).
-    let at_floor = from.is_some_and(|(_, b)| {
-        b.after_cost <= FLOOR_REACHED * crate::weights::noise_cost(&b.weights)
-    });
+    let at_floor = from
+        .is_some_and(|(_, b)| reaches_floor(b.after_cost, crate::weights::noise_cost(&b.weights)));
     let alternative = at_floor.then(|| start.clone());
     for e in &r.parameters {
         if let Some(j) = m.parameters.iter().position(|q| q.name == e.name) {
