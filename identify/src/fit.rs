@@ -672,8 +672,10 @@ fn lm(
                     .collect(),
             };
             run.simulations += 1;
+            // (not when the sensitivity simulation had to refine its
+            // substep: the plain one may not have, and its cost decides)
             let with_normal = if eager && first_trial {
-                pb.normal(&trial, horizon).ok()
+                pb.normal(&trial, horizon).ok().filter(|n| !n.refined)
             } else {
                 None
             };

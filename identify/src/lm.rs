@@ -33,6 +33,9 @@ pub(crate) struct Normal {
     pub ssr: f64,
     /// Number of residuals.
     pub count: usize,
+    /// Whether a block's sensitivity simulation had to refine its substep
+    /// ([`crate::sensitivity::SensitivityTrajectory::refined`]).
+    pub refined: bool,
 }
 
 /// A block's part of [`Normal`].
@@ -65,6 +68,7 @@ impl Normal {
                 .collect(),
             ssr: 0.0,
             count: 0,
+            refined: false,
         }
     }
 }

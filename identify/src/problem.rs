@@ -356,13 +356,14 @@ impl Problem<'_> {
                     jtj[c * nc + d] = jtj[d * nc + c];
                 }
             }
-            Ok((map, jtj, jtr, ssr, count))
+            Ok((map, jtj, jtr, ssr, count, tr.refined))
         });
         let mut nrm = Normal::new(ng, self.blocks.iter().map(|b| b.free_state.len()));
         for (b, part) in parts.into_iter().enumerate() {
-            let (map, jtj, jtr, ssr, count) = part?;
+            let (map, jtj, jtr, ssr, count, refined) = part?;
             nrm.ssr += ssr;
             nrm.count += count;
+            nrm.refined |= refined;
             let nc = map.len();
             let bn: &mut BlockNormal = &mut nrm.blocks[b];
             for c in 0..nc {

@@ -125,6 +125,9 @@ fn acceleration_jacobian<D: Dim>(
     jd: &mut [f64],
 ) {
     let n = dim.n();
+    if n == 0 {
+        return;
+    }
     let (acc, minv, w) = (&acc[..n], &minv[..n * n], &mut w[..n]);
     for (blk, jd_d) in blocks.chunks_exact(bs).zip(jd.chunks_exact_mut(n)) {
         let (dm, rest) = blk.split_at(n * n);
@@ -226,6 +229,11 @@ pub struct SensitivityTrajectory {
     /// `dq[i][j][k]`: derivative of coordinate `i` at sample `k` with respect
     /// to column `j` (the free parameters, then any extra columns).
     pub dq: Vec<Vec<Vec<f64>>>,
+    /// Whether the simulation was run again at a [`REFINE`] times finer
+    /// substep after diverging at the normal one (its sensitivities may
+    /// overflow where the plain simulation's states stay finite: then the
+    /// two simulators' trajectories differ).
+    pub refined: bool,
 }
 
 /// A compiled simulator with forward sensitivities.
@@ -394,9 +402,9 @@ impl SensitivitySimulator {
         unsplit: bool,
     ) -> Result<SensitivityTrajectory, SimError> {
         match self.run_refined(sig, params, start, tied, extra, unsplit, 1.0) {
-            Err(SimError::Diverged { .. }) if self.opts.substep.is_none() => {
-                self.run_refined(sig, params, start, tied, extra, unsplit, REFINE)
-            }
+            Err(SimError::Diverged { .. }) if self.opts.substep.is_none() => self
+                .run_refined(sig, params, start, tied, extra, unsplit, REFINE)
+                .map(|t| SensitivityTrajectory { refined: true, ..t }),
             r => r,
         }
     }
@@ -664,7 +672,11 @@ impl SensitivitySimulator {
             on_switch,
             at_sample,
         )?;
-        Ok(SensitivityTrajectory { q, dq })
+        Ok(SensitivityTrajectory {
+            q,
+            dq,
+            refined: false,
+        })
     }
 
     /// Loop state at a block starting at `k0` ([`loop_start`]) and the

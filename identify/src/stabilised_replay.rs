@@ -135,6 +135,18 @@ fn unique(base: String, taken: &[String]) -> String {
     name
 }
 
+/// Every name a model declares: recorded controllers, parameters,
+/// coordinates, inputs, outputs, derived quantities.
+fn model_names(model: &Model) -> Vec<String> {
+    let mut names: Vec<String> = model.recorded.iter().map(|r| r.name.clone()).collect();
+    names.extend(model.parameters.iter().map(|p| p.name.clone()));
+    names.extend(model.coordinates.iter().map(|c| c.name.clone()));
+    names.extend(model.inputs.iter().map(|i| i.name.clone()));
+    names.extend(model.outputs.iter().map(|o| o.name.clone()));
+    names.extend(model.derived.iter().map(|d| d.name.clone()));
+    names
+}
+
 impl StabilisedReplay {
     /// Design the feedback for `model` (nominal values) on `experiments`.
     pub fn design(model: &Model, experiments: &[Experiment]) -> Result<Self, StabiliseError> {
@@ -216,10 +228,13 @@ impl StabilisedReplay {
         let gains: Vec<Vec<f64>> = (0..m)
             .map(|j| (0..2 * n).map(|c| k[(j, c)]).collect())
             .collect();
-        let taken: Vec<String> = experiments
+        // the signal columns the block adds: clear of the files' columns
+        // and of every name of the model
+        let mut taken: Vec<String> = experiments
             .iter()
             .flat_map(|e| e.channels.iter().map(|c| c.name.clone()))
             .collect();
+        taken.extend(model_names(model));
         let logged: Vec<String> = model
             .inputs
             .iter()
@@ -230,9 +245,7 @@ impl StabilisedReplay {
             .iter()
             .map(|c| unique(format!("measured_{}", c.name), &taken))
             .collect();
-        let mut names: Vec<String> = model.recorded.iter().map(|r| r.name.clone()).collect();
-        names.extend(model.parameters.iter().map(|p| p.name.clone()));
-        let name = unique("stabilised_replay".to_string(), &names);
+        let name = unique("stabilised_replay".to_string(), &model_names(model));
         let unit_of = |i: usize| match model.coordinates[i].kind {
             CoordinateKind::Angle => "rad",
             _ => "m",
@@ -249,11 +262,7 @@ impl StabilisedReplay {
         let input_scale = |j: usize| parse_unit(&input_unit(j)).map_or(1.0, |u| u.scale.to_f64());
         // the block's own names (errors and gains), clear of every name
         // the model or the block already uses
-        let mut used: Vec<String> = names;
-        used.extend(model.coordinates.iter().map(|c| c.name.clone()));
-        used.extend(model.inputs.iter().map(|i| i.name.clone()));
-        used.extend(model.outputs.iter().map(|o| o.name.clone()));
-        used.extend(model.derived.iter().map(|d| d.name.clone()));
+        let mut used: Vec<String> = model_names(model);
         used.extend(logged.iter().chain(&measured).cloned());
         used.push(name.clone());
         let mut local = |base: String| {

@@ -439,7 +439,7 @@ fn story(
             unexplained = d.unexplained();
             stop = if unexplained {
                 d.verdict_line()
-            } else if d.at_floor() && d.verdict.is_none() {
+            } else if d.nothing_left {
                 format!(
                     "the residual is at the noise floor ({:.2}x): nothing left to explain{caveat}",
                     d.above_floor()
@@ -504,10 +504,11 @@ fn story(
                 start: Some(start),
                 // from where the candidate's refit left the nuisance
                 warm: top.fit.as_ref().map(|f| f.warm.clone()),
-                // the candidate's refit scanned its delays and offsets: from
-                // its values a scan finds the same start (main job, input
-                // delay: 40 simulations that moved nothing)
-                scan: opts.fit.scan && top.fit.is_none(),
+                // the candidate's refit (a verdict is always refitted)
+                // scanned its delays and offsets: from its values a scan
+                // finds the same start (main job, input delay: 40
+                // simulations that moved nothing)
+                scan: false,
                 ..opts.fit.clone()
             },
             &mut |p| progress(&StoryProgress::Fit(p.clone())),

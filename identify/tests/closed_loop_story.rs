@@ -304,28 +304,26 @@ fn input_delay_in_closed_loop_without_the_law_is_not_mistaken() {
     }
 }
 
-/// The block's own names (errors, gains) keep clear of the model's: with a
-/// parameter called `err_alpha` and one called `kp_Vm_theta` the block is
-/// still a valid part of the model (it fell back to segments before).
+/// The block's own names (signals, errors, gains) keep clear of the
+/// model's: with parameters called `err_alpha`, `kp_Vm_theta` and
+/// `measured_alpha` the block is still a valid part of the model (it fell
+/// back to segments before).
 #[test]
 fn the_replay_block_names_keep_clear_of_the_models() {
     let exps = closed_loop_runs("cl_names", ("", "", &[]));
     let text = pendulum_text()
-        + "\nparameter err_alpha = 1 [1] \"a user's name\"\nparameter kp_Vm_theta = 2 [1] \"another\"\n";
+        + "\nparameter err_alpha = 1 [1] \"a user's name\"\nparameter kp_Vm_theta = 2 [1] \"another\"\nparameter measured_alpha = 3 [1] \"and one more\"\n";
     let m = model(&text);
     let replay =
         plantc_identify::stabilised_replay::StabilisedReplay::design(&m, &exps).expect("designs");
     let with_block = format!("{text}{}", replay.block);
     let checked = plantc_identify::diagnose::model_from_text("with block", &with_block);
     assert!(checked.is_ok(), "{:?}\n{}", checked.err(), replay.block);
-    assert!(
-        replay.block.contains("let err_alpha_ ="),
-        "{}",
-        replay.block
-    );
-    assert!(
-        replay.block.contains("gain kp_Vm_theta_ ="),
-        "{}",
-        replay.block
-    );
+    for own in [
+        "let err_alpha_ =",
+        "gain kp_Vm_theta_ =",
+        "signal measured_alpha_ ",
+    ] {
+        assert!(replay.block.contains(own), "{own}\n{}", replay.block);
+    }
 }

@@ -950,9 +950,10 @@ impl SplitTape {
         unsafe { run(&self.slow_instrs, inputs, scratch) };
     }
 
-    /// [`SplitTape::eval_slow`], then write the outputs that depend on slow
-    /// inputs only into `out`, for [`SplitTape::eval_fast_changed`] to
-    /// leave them there. Panics as `eval_slow` does, or if `out` is shorter
+    /// [`SplitTape::eval_slow`], then write every output's slot into `out`:
+    /// the outputs that depend on slow inputs only are then final, for
+    /// [`SplitTape::eval_fast_changed`] to leave them there (the others hold
+    /// stale values until it runs). Panics as `eval_slow` does, or if `out` is shorter
     /// than the number of outputs.
     pub fn eval_slow_outputs(&self, inputs: &[f64], out: &mut [f64], scratch: &mut [f64]) {
         self.eval_slow(inputs, scratch);
