@@ -65,7 +65,6 @@ use crate::equation_error::{
 use crate::fit::{
     fit, values_from, with_estimates, Estimate, FitError, FitOptions, FitResult, Horizon, Offsets,
 };
-use crate::sensitivity::estimated_parameters;
 
 /// Smallest RMSE ratio (baseline / candidate) that counts as a found effect.
 pub const MIN_GAIN: f64 = 3.0;
@@ -494,11 +493,7 @@ pub fn diagnose_from(
     opts: &DiagnoseOptions,
 ) -> Result<Diagnosis, DiagnoseError> {
     let model = model_from_text("baseline", text)?;
-    let nuisance = opts
-        .fit
-        .free
-        .clone()
-        .unwrap_or_else(|| estimated_parameters(&model));
+    let nuisance = opts.fit.free_names(&model);
     let ee = EquationError::new(
         &model,
         &baseline.base,

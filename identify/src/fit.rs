@@ -177,6 +177,16 @@ pub struct WarmStart {
     blocks: Vec<(usize, usize, Vec<f64>)>,
 }
 
+impl FitOptions {
+    /// The names of the parameters fitted on `model`: [`FitOptions::free`],
+    /// or every `estimate` parameter.
+    pub fn free_names(&self, model: &Model) -> Vec<String> {
+        self.free
+            .clone()
+            .unwrap_or_else(|| estimated_parameters(model))
+    }
+}
+
 impl Default for FitOptions {
     fn default() -> Self {
         FitOptions {
@@ -1070,10 +1080,7 @@ pub fn fit_with_progress(
     if experiments.is_empty() {
         return Err(FitError::NoExperiments);
     }
-    let free_names = opts
-        .free
-        .clone()
-        .unwrap_or_else(|| estimated_parameters(model));
+    let free_names = opts.free_names(model);
     if free_names.is_empty() {
         return Err(FitError::NoFreeParameters);
     }
@@ -1350,10 +1357,7 @@ pub fn replay_follows(
     experiments: &[Experiment],
     opts: &FitOptions,
 ) -> Result<bool, FitError> {
-    let free_names = opts
-        .free
-        .clone()
-        .unwrap_or_else(|| estimated_parameters(model));
+    let free_names = opts.free_names(model);
     let setup = Setup::new(model, experiments, opts, &free_names)?;
     let pb = setup.problem(None);
     let pt = setup.start_point(&pb, &setup.free_values(&setup.base));

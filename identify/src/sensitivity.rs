@@ -117,7 +117,7 @@ impl Dim for Any {
 fn acceleration_jacobian<D: Dim>(
     dim: D,
     blocks: &[f64],
-    (m, bs): (usize, usize),
+    bs: usize,
     u: &[f64],
     acc: &[f64],
     minv: &[f64],
@@ -132,16 +132,12 @@ fn acceleration_jacobian<D: Dim>(
     for (blk, jd_d) in blocks.chunks_exact(bs).zip(jd.chunks_exact_mut(n)) {
         let (dm, rest) = blk.split_at(n * n);
         let (dr, db) = rest.split_at(n);
-        for i in 0..n {
-            let mut s = dr[i];
-            for j in 0..m {
-                s += db[i * m + j] * u[j];
+        // dr0 + dB u as the acceleration's r0 + B u, then - dM a
+        forces(dr, db, u, w);
+        for (i, wi) in w.iter_mut().enumerate() {
+            for (k, a) in dm[i * n..(i + 1) * n].iter().zip(acc.iter()) {
+                *wi -= k * a;
             }
-            let row = &dm[i * n..(i + 1) * n];
-            for (k, a) in row.iter().zip(acc.iter()) {
-                s -= k * a;
-            }
-            w[i] = s;
         }
         mat_vec(minv, n, w, jd_d);
     }
@@ -504,7 +500,7 @@ impl SensitivitySimulator {
             let blocks = &out[bs..bs * (nx + p + 1)];
             macro_rules! kernels {
                 ($dim:expr) => {{
-                    acceleration_jacobian($dim, blocks, (m, bs), u, &acc, &minv, &mut w, &mut jd);
+                    acceleration_jacobian($dim, blocks, bs, u, &acc, &minv, &mut w, &mut jd);
                     sensitivity_rates($dim, &jd, s, ds, (p, nc));
                 }};
             }

@@ -315,9 +315,9 @@ pub fn identify(
     // records an unstable plant's open-loop replay cannot follow, and no
     // law in the model: the story runs on the stabilised replay
     let Some(on) = stabilised_replay(&model, text, experiments, opts)? else {
-        return story(text, experiments, opts, progress);
+        return story((text, &model), experiments, opts, progress);
     };
-    let mut s = story(&on.text, &on.experiments, &on.opts, progress)?;
+    let mut s = story((&on.text, &on.model), &on.experiments, &on.opts, progress)?;
     let replay = on.replay;
     for st in &mut s.stages {
         st.text = replay.strip(&st.text);
@@ -330,8 +330,9 @@ pub fn identify(
 /// What the story runs on with a [`StabilisedReplay`].
 struct Stabilised {
     replay: StabilisedReplay,
-    /// The model text with the replay's block.
+    /// The model text with the replay's block, and that model.
     text: String,
+    model: Model,
     /// The records with its columns.
     experiments: Vec<Experiment>,
     /// The options, held-out records with its columns.
@@ -341,10 +342,11 @@ struct Stabilised {
 /// The model text with a [`StabilisedReplay`] block, the records and the
 /// options' held-out records with its columns, when the story needs one:
 /// the model holds no recorded controller, the closed loop is automatic,
-/// the horizon not fixed to segments, the model has one input, and the
-/// whole records replayed open loop from the start values leave the data.
-/// None when not needed or when no feedback could be designed (the fit
-/// then goes to segments as before).
+/// the horizon not fixed to segments, the model has one input, the whole
+/// records replayed open loop from the start values leave the data, and
+/// the model linearised at the data's mean position is unstable
+/// ([`StabilisedReplay::design`]). None when not needed or when no feedback
+/// could be designed (the fit then goes to segments as before).
 fn stabilised_replay(
     model: &Model,
     text: &str,
@@ -369,11 +371,11 @@ fn stabilised_replay(
         return Ok(None);
     };
     let text = format!("{text}{}", replay.block);
-    // a block the model check refuses (a name it shadows...) is no reason
-    // to fail: the story goes on without it
-    if model_from_text("model", &text).is_err() {
+    // a block the model check refuses is no reason to fail: the story goes
+    // on without it
+    let Ok(with_block) = model_from_text("model", &text) else {
         return Ok(None);
-    }
+    };
     let opts = StoryOptions {
         validate,
         diagnose: DiagnoseOptions {
@@ -385,21 +387,22 @@ fn stabilised_replay(
     Ok(Some(Stabilised {
         replay,
         text,
+        model: with_block,
         experiments: exps,
         opts,
     }))
 }
 
-/// The story proper (see [`identify`]).
+/// The story proper (see [`identify`]) for a model file's `text` and the
+/// model it holds.
 fn story(
-    text: &str,
+    (text, model): (&str, &Model),
     experiments: &[Experiment],
     opts: &StoryOptions,
     progress: &mut dyn FnMut(&StoryProgress),
 ) -> Result<Story, StoryError> {
-    let model = model_from_text("model", text).map_err(StoryError::Model)?;
     progress(&StoryProgress::Step("comparing the nominal model".into()));
-    let mut stages = vec![stage("nominal", text, &model, None, experiments, opts)?];
+    let mut stages = vec![stage("nominal", text, model, None, experiments, opts)?];
     let mut rounds: Vec<Round> = Vec::new();
     let mut current_text = text.to_string();
     let mut current_fit: Option<FitResult> = None;
