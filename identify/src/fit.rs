@@ -397,6 +397,12 @@ pub struct FitResult {
     pub simulated: Vec<Vec<Vec<f64>>>,
     /// Where the nuisance ended, to warm-start another fit from.
     pub warm: WarmStart,
+    /// The simulated measurements at the start (the free parameters at
+    /// their `start` values, the nuisance fitted there), as
+    /// [`FitResult::simulated`]; `None` when the fit ended on segments
+    /// (each from its own estimated state), the delay and offset scan moved
+    /// the start, or the start could not be simulated.
+    pub simulated_start: Option<Vec<Vec<Vec<f64>>>>,
 }
 
 impl fmt::Debug for FitResult {
@@ -1346,6 +1352,9 @@ pub fn fit_with_progress(
         notes,
         simulated,
         warm,
+        // (not when the scan moved a free parameter off its start value)
+        simulated_start: simulated_before
+            .filter(|_| segments.is_none() && start_pt.g[..p] == g0[..p]),
     })
 }
 

@@ -224,6 +224,42 @@ fn stage(
     experiments: &[Experiment],
     opts: &StoryOptions,
 ) -> Result<Stage, StoryError> {
+    stage_at(label, text, model, fitted, None, experiments, opts)
+}
+
+/// The nominal stage from the start of `fit`, a fit of `model` from its
+/// nominal values: the simulation there, with the nuisance fitted at the
+/// start, is what [`validate`] would compute again (on whole records; the
+/// diagnosis' first fit starts there, and that nuisance fit was 5 % of a
+/// whole case). [`validate`] when the fit has no such simulation or
+/// started elsewhere.
+fn nominal_stage(
+    text: &str,
+    model: &Model,
+    fit: &FitResult,
+    experiments: &[Experiment],
+    opts: &StoryOptions,
+) -> Result<Stage, StoryError> {
+    let at_nominal = fit.parameters.iter().all(|e| {
+        model
+            .parameter(&e.name)
+            .is_some_and(|p| p.value.to_bits() == e.start.to_bits())
+    });
+    let start = fit.simulated_start.as_ref().filter(|_| at_nominal);
+    stage_at("nominal", text, model, None, start, experiments, opts)
+}
+
+/// [`stage`], or at the nominal values with their simulation `at_start`
+/// when there is one.
+fn stage_at(
+    label: &str,
+    text: &str,
+    model: &Model,
+    fitted: Option<&FitResult>,
+    at_start: Option<&Vec<Vec<Vec<f64>>>>,
+    experiments: &[Experiment],
+    opts: &StoryOptions,
+) -> Result<Stage, StoryError> {
     let nominal;
     let base: &[f64] = match fitted {
         Some(f) => &f.base,
@@ -243,12 +279,16 @@ fn stage(
         horizon: None,
         ..ValidateOptions::default()
     };
-    let simulated = match fitted {
-        Some(f) => {
+    let simulated = match (fitted, at_start) {
+        (Some(f), _) => {
             let sims: Vec<Option<&Vec<Vec<f64>>>> = f.simulated.iter().map(Some).collect();
             as_experiments(model, experiments, &sims)
         }
-        None => {
+        (None, Some(start)) => {
+            let sims: Vec<Option<&Vec<Vec<f64>>>> = start.iter().map(Some).collect();
+            as_experiments(model, experiments, &sims)
+        }
+        (None, None) => {
             let v = validate(model, base, experiments, &vopts).map_err(StoryError::Fit)?;
             let sims: Vec<Option<&Vec<Vec<f64>>>> =
                 v.experiments.iter().map(|e| e.simulated.as_ref()).collect();
@@ -401,8 +441,7 @@ fn story(
     opts: &StoryOptions,
     progress: &mut dyn FnMut(&StoryProgress),
 ) -> Result<Story, StoryError> {
-    progress(&StoryProgress::Step("comparing the nominal model".into()));
-    let mut stages = vec![stage("nominal", text, model, None, experiments, opts)?];
+    let mut stages = Vec::new();
     let mut rounds: Vec<Round> = Vec::new();
     let mut current_text = text.to_string();
     let mut current_fit: Option<FitResult> = None;
@@ -422,6 +461,9 @@ fn story(
         .map_err(StoryError::Diagnose)?;
         let current_model = model_from_text("model", &current_text).map_err(StoryError::Model)?;
         if rounds.is_empty() {
+            // (the baseline as the diagnosis fitted it: a better baseline
+            // that decide() found started elsewhere)
+            stages.push(nominal_stage(text, model, &d.baseline, experiments, opts)?);
             stages.push(stage(
                 "nominal, refitted",
                 &current_text,
