@@ -8,6 +8,7 @@ pub mod diff;
 pub mod dual;
 pub mod expr;
 pub(crate) mod fxhash;
+mod jit;
 pub mod poly;
 pub mod present;
 pub mod print;

@@ -20,8 +20,10 @@
 
 use std::collections::{HashMap, HashSet};
 use std::fmt;
+use std::sync::Arc;
 
 use super::expr::{Expr, Func, Node, Symbol};
+use super::jit::Native;
 use super::rational::Rational;
 
 /// One tape instruction. Operands and destinations are scratch slot indices.
@@ -781,6 +783,9 @@ unsafe fn run(instrs: &[Instr], inputs: &[f64], s: &mut [f64]) {
 /// [`Tape::eval`] at the same inputs.
 #[derive(Clone)]
 pub struct SplitTape {
+    /// The fast part and its output copies as native code, where the
+    /// target has it ([`super::jit`]); interpreted otherwise.
+    native: Option<Arc<Native>>,
     slow: Vec<bool>,
     slow_instrs: Vec<Instr>,
     fast_instrs: Vec<Instr>,
@@ -895,12 +900,21 @@ impl Tape {
         );
         let fast_instrs = instrs.split_off(n_slow);
         let outputs: Vec<u32> = out_vals.iter().map(|v| slot_of[*v as usize]).collect();
-        let fast_outputs = (0u32..)
+        let fast_outputs: Vec<(u32, u32)> = (0u32..)
             .zip(&out_vals)
             .filter(|(_, v)| !is_slow[**v as usize])
             .map(|(i, _)| (i, outputs[i as usize]))
             .collect();
+        let native = Native::compile(
+            &fast_instrs,
+            &fast_outputs,
+            n_slots,
+            slow.len(),
+            outputs.len(),
+        )
+        .map(Arc::new);
         SplitTape {
+            native,
             slow: slow.to_vec(),
             slow_instrs: instrs,
             fast_instrs,
@@ -974,6 +988,12 @@ impl SplitTape {
         assert_eq!(inputs.len(), self.slow.len(), "tape input length");
         assert!(out.len() >= self.outputs.len(), "tape output length");
         assert!(scratch.len() >= self.n_slots, "tape scratch length");
+        if let Some(native) = &self.native {
+            // SAFETY: compiled for these bounds (n_slots, the input count,
+            // the output count); lengths asserted above
+            unsafe { native.run(inputs, scratch, out) };
+            return;
+        }
         // SAFETY: in_bounds at construction; lengths asserted above
         unsafe { run(&self.fast_instrs, inputs, scratch) };
         for &(o, slot) in &self.fast_outputs {
@@ -994,10 +1014,30 @@ impl SplitTape {
         assert_eq!(inputs.len(), self.slow.len(), "tape input length");
         assert!(out.len() >= self.outputs.len(), "tape output length");
         assert!(scratch.len() >= self.n_slots, "tape scratch length");
-        // SAFETY: in_bounds at construction; lengths asserted above
-        unsafe { run(&self.fast_instrs, inputs, scratch) };
+        match &self.native {
+            // SAFETY: compiled for these bounds (n_slots, the input count,
+            // the output count); lengths asserted above
+            Some(native) => unsafe { native.run(inputs, scratch, out) },
+            // SAFETY: in_bounds at construction; lengths asserted above
+            None => unsafe { run(&self.fast_instrs, inputs, scratch) },
+        }
         for (o, slot) in out.iter_mut().zip(&self.outputs) {
             *o = scratch[*slot as usize];
+        }
+    }
+
+    /// Does the fast part run as native code ([`super::jit`]: x86-64 Linux,
+    /// unless the environment sets `PLANTC_INTERPRET_TAPES`)?
+    pub fn is_native(&self) -> bool {
+        self.native.is_some()
+    }
+
+    /// The same tape with its fast part interpreted (to compare the two:
+    /// their results are bit-identical).
+    pub fn interpreted(&self) -> SplitTape {
+        SplitTape {
+            native: None,
+            ..self.clone()
         }
     }
 }
