@@ -114,26 +114,26 @@ impl Dim for Any {
 /// row-major), `M^-1 (dr0 + dB u - dM a)`. `w` is a buffer of `n`.
 #[allow(clippy::too_many_arguments)]
 #[inline(always)]
-fn acceleration_jacobian<D: Dim>(
-    dim: D,
+fn acceleration_jacobian<D: Dim, E: Dim>(
+    (dim, inputs): (D, E),
     blocks: &[f64],
-    bs: usize,
     u: &[f64],
     acc: &[f64],
     minv: &[f64],
     w: &mut [f64],
     jd: &mut [f64],
 ) {
-    let n = dim.n();
+    let (n, m) = (dim.n(), inputs.n());
     if n == 0 {
         return;
     }
-    let (acc, minv, w) = (&acc[..n], &minv[..n * n], &mut w[..n]);
+    let bs = n * n + n + n * m;
+    let (acc, minv, w, u) = (&acc[..n], &minv[..n * n], &mut w[..n], &u[..m]);
     for (blk, jd_d) in blocks.chunks_exact(bs).zip(jd.chunks_exact_mut(n)) {
         let (dm, rest) = blk.split_at(n * n);
         let (dr, db) = rest.split_at(n);
         // dr0 + dB u as the acceleration's r0 + B u, then - dM a
-        forces(dr, db, u, w);
+        forces(dr, &db[..n * m], u, w);
         for (i, wi) in w.iter_mut().enumerate() {
             for (k, a) in dm[i * n..(i + 1) * n].iter().zip(acc.iter()) {
                 *wi -= k * a;
@@ -159,9 +159,11 @@ fn sensitivity_rates<D: Dim>(
     ds[..n * nc].copy_from_slice(&s[n * nc..nx * nc]);
     for i in 0..n {
         let row = &mut ds[(n + i) * nc..(n + i + 1) * nc];
-        for (j, r) in row.iter_mut().enumerate() {
-            *r = if j < p { jd[(nx + j) * n + i] } else { 0.0 };
+        let (params, rest) = row.split_at_mut(p);
+        for (r, d) in params.iter_mut().zip(jd[nx * n..].chunks_exact(n)) {
+            *r = d[i];
         }
+        rest.fill(0.0);
         for k in 0..nx {
             let a = jd[k * n + i];
             if a != 0.0 {
@@ -499,16 +501,20 @@ impl SensitivitySimulator {
             let ds = &mut dz[nx..];
             let blocks = &out[bs..bs * (nx + p + 1)];
             macro_rules! kernels {
-                ($dim:expr) => {{
-                    acceleration_jacobian($dim, blocks, bs, u, &acc, &minv, &mut w, &mut jd);
+                ($dim:expr, $inputs:expr) => {{
+                    acceleration_jacobian(($dim, $inputs), blocks, u, &acc, &minv, &mut w, &mut jd);
                     sensitivity_rates($dim, &jd, s, ds, (p, nc));
                 }};
             }
-            match n {
-                1 => kernels!(Fixed::<1>),
-                2 => kernels!(Fixed::<2>),
-                3 => kernels!(Fixed::<3>),
-                _ => kernels!(Any(n)),
+            // (one input, the common case, known when compiling too)
+            match (n, m) {
+                (1, 1) => kernels!(Fixed::<1>, Fixed::<1>),
+                (2, 1) => kernels!(Fixed::<2>, Fixed::<1>),
+                (3, 1) => kernels!(Fixed::<3>, Fixed::<1>),
+                (1, _) => kernels!(Fixed::<1>, Any(m)),
+                (2, _) => kernels!(Fixed::<2>, Any(m)),
+                (3, _) => kernels!(Fixed::<3>, Any(m)),
+                _ => kernels!(Any(n), Any(m)),
             }
             // deadzone widths and saturation levels of inputs from the data:
             // M^-1 B d held/dtheta, with d held/d(w, L) from the held value
