@@ -175,9 +175,11 @@ fn stribeck_friction_on_the_pendulum_is_named_first() {
 /// refits stall (Fs = 0.056 N m: a spring on the arm credited at 1.50x).
 /// Measured 3 of 5 (stop 21: cases 2 and 3 missed; case 3 is borderline,
 /// found by `plantc diagnose` on the same spec synthesized from the CLI,
-/// whose base values differ in the last digits); required 3 of 5 so a
-/// regression shows. 278 s for this file's 16 tests x 5 cases (release,
-/// two threads).
+/// whose base values differ in the last digits); 4 of 5 since the leaders
+/// are refitted in turn until one reaches the noise floor (case 2, Fs =
+/// 0.056 N m, still a spring); required 3 of 5 so a regression shows. 129 s
+/// for this file's 16 tests x 5 cases (release, two threads; 278 s before
+/// that change).
 #[test]
 fn stribeck_friction_on_the_arm_is_mostly_named_first() {
     rate_at_least(
