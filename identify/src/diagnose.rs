@@ -631,26 +631,21 @@ pub fn diagnose_from(
     // demos). demo_coulomb: the Stribeck friction and the added inertia
     // not refitted after the Coulomb friction reached 0.86x, 30 % of the
     // case's time.
-    let mut not_refitted = Vec::new();
+    // (the refitted one that reached the floor, the leaders skipped)
+    let mut at_floor: Option<(String, Vec<String>)> = None;
     for &idx in &leaders {
         if let Some(done) = ranking
             .iter()
             .find(|r| explains_to_floor(r, floor) && passes(r, baseline.after_cost, floor, opts))
         {
-            not_refitted.push((idx, done.candidate.label()));
+            let label = done.candidate.label();
+            at_floor
+                .get_or_insert_with(|| (label, Vec::new()))
+                .1
+                .push(ranking[idx].candidate.label());
             continue;
         }
         refit_at(&mut ranking, idx);
-    }
-    if let Some((_, done)) = not_refitted.first() {
-        let names: Vec<String> = not_refitted
-            .iter()
-            .map(|(i, _)| ranking[*i].candidate.label())
-            .collect();
-        notes.push(format!(
-            "{done} explains the residual down to the noise floor: the equation-error leader(s) {} not refitted",
-            names.join(", ")
-        ));
     }
     for &idx in &leaders {
         second_at(&mut ranking, idx);
@@ -790,6 +785,23 @@ pub fn diagnose_from(
         opts,
         &mut notes,
     );
+    // the leaders skipped above that no later step refitted either
+    if let Some((done, skipped)) = at_floor {
+        let left: Vec<String> = skipped
+            .into_iter()
+            .filter(|l| {
+                ranking
+                    .iter()
+                    .any(|r| r.candidate.label() == *l && r.fit.is_none())
+            })
+            .collect();
+        if !left.is_empty() {
+            notes.push(format!(
+                "{done} explains the residual down to the noise floor: the equation-error leader(s) {} not refitted",
+                left.join(", ")
+            ));
+        }
+    }
     Ok(Diagnosis {
         baseline,
         ranking,

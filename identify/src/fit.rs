@@ -398,10 +398,11 @@ pub struct FitResult {
     /// Where the nuisance ended, to warm-start another fit from.
     pub warm: WarmStart,
     /// The simulated measurements at the start (the free parameters at
-    /// their `start` values, the nuisance fitted there), as
-    /// [`FitResult::simulated`]; `None` when the fit ended on segments
-    /// (each from its own estimated state), the delay and offset scan moved
-    /// the start, or the start could not be simulated.
+    /// their `start` values, the nuisance fitted there to the final
+    /// tolerance, as [`crate::validate()`] fits it), as
+    /// [`FitResult::simulated`]; `None` for a warm fit, when the fit ended
+    /// on segments (each from its own estimated state), the delay and
+    /// offset scan moved the start, or the start could not be simulated.
     pub simulated_start: Option<Vec<Vec<Vec<f64>>>>,
 }
 
@@ -1318,6 +1319,24 @@ pub fn fit_with_progress(
     let warm = setup.warm_at(&pb, &pt);
     let simulated_before = pb.predict(&start_pt).ok();
     run.simulations += 2;
+    // the start as a comparison of the start values: its nuisance fitted
+    // to the final tolerance as `validate` fits it (the fit's own start
+    // stops at 1e-3), from where the fit's start left it; not for a warm
+    // fit (its start kept the warm nuisance), on segments, or when the
+    // scan moved a free parameter off its start value
+    let simulated_start = if segments.is_none() && opts.warm.is_none() && start_pt.g[..p] == g0[..p]
+    {
+        let pbn = setup.nuisance_problem(None);
+        let mut q = start_pt.clone();
+        run.simulations += 1;
+        if lm_nuisance(&setup, &pbn, &mut q) {
+            pb.predict(&q).ok()
+        } else {
+            None
+        }
+    } else {
+        None
+    };
     let experiments_out = experiment_estimates(
         &setup,
         &pb,
@@ -1352,9 +1371,7 @@ pub fn fit_with_progress(
         notes,
         simulated,
         warm,
-        // (not when the scan moved a free parameter off its start value)
-        simulated_start: simulated_before
-            .filter(|_| segments.is_none() && start_pt.g[..p] == g0[..p]),
+        simulated_start,
     })
 }
 

@@ -228,11 +228,11 @@ fn stage(
 }
 
 /// The nominal stage from the start of `fit`, a fit of `model` from its
-/// nominal values: the simulation there, with the nuisance fitted at the
-/// start, is what [`validate`] would compute again (on whole records; the
-/// diagnosis' first fit starts there, and that nuisance fit was 5 % of a
-/// whole case). [`validate`] when the fit has no such simulation or
-/// started elsewhere.
+/// nominal values: its simulation there ([`FitResult::simulated_start`]:
+/// whole records, the nuisance fitted to the final tolerance from where
+/// the fit's own start left it) is what [`validate`] computes, without
+/// repeating that nuisance fit from the data (5 % of a whole case).
+/// [`validate`] when the fit has no such simulation or started elsewhere.
 fn nominal_stage(
     text: &str,
     model: &Model,

@@ -29,6 +29,12 @@
 
 use super::tape::Instr;
 
+/// Does the environment ask for interpreted tapes
+/// (`PLANTC_INTERPRET_TAPES` set to anything but empty or `0`)?
+pub(crate) fn interpret_tapes() -> bool {
+    std::env::var_os("PLANTC_INTERPRET_TAPES").is_some_and(|v| !v.is_empty() && v != "0")
+}
+
 /// A fast part translated to native code (see the module docs).
 pub(crate) struct Native {
     #[cfg(all(target_arch = "x86_64", target_os = "linux"))]
@@ -50,7 +56,7 @@ impl Native {
     ) -> Option<Native> {
         #[cfg(all(target_arch = "x86_64", target_os = "linux"))]
         {
-            if std::env::var_os("PLANTC_INTERPRET_TAPES").is_some() {
+            if interpret_tapes() {
                 return None;
             }
             let code = imp::compile(instrs, outputs, n_slots, n_inputs, n_outputs)?;
