@@ -149,6 +149,15 @@ pub enum SimError {
         /// The delay in s.
         value: f64,
     },
+    /// The dynamics at these parameter values need an RK4 substep below
+    /// [`MIN_SUBSTEP`] (a dry friction far stronger than the inertia it
+    /// acts on: its smoothed slope `F / w` through `M^-1`).
+    TooStiff {
+        /// Experiment name.
+        experiment: String,
+        /// The substep they would need, in s.
+        substep: f64,
+    },
     /// The state became non-finite or the mass matrix singular.
     Diverged {
         /// Experiment name.
@@ -193,6 +202,13 @@ impl fmt::Display for SimError {
             SimError::BadDelay { input, value } => write!(
                 f,
                 "the delay of input `{input}` must be a finite value >= 0 s, got {value} s"
+            ),
+            SimError::TooStiff {
+                experiment,
+                substep,
+            } => write!(
+                f,
+                "simulation of `{experiment}` would need an RK4 substep of {substep:.1e} s at these parameter values, below the {MIN_SUBSTEP:.0e} s floor: a dry friction far stronger than the inertia it acts on (a wider dry-friction smoothing width softens it)"
             ),
             SimError::Diverged { experiment, time } => write!(
                 f,
@@ -1041,6 +1057,12 @@ pub(crate) fn prepare_run(
             .map(|v| v.first().copied().unwrap_or(0.0))
             .collect();
         step.h = h.min(probe.limit(x0, &u0, params));
+        if step.h < MIN_SUBSTEP {
+            return Err(SimError::TooStiff {
+                experiment: sig.name.clone(),
+                substep: step.h,
+            });
+        }
         // away from zero speed the dry friction is not stiff: one substep
         // per sample up to 2 ms (RK4's error at the pendulum's 10 rad/s is
         // then ~3e-11 per step)
@@ -1053,6 +1075,14 @@ pub(crate) fn prepare_run(
     }
     Ok((step, effects, u))
 }
+
+/// The shortest automatic RK4 substep, in s. Below it a simulation is
+/// refused ([`SimError::TooStiff`]) rather than run at thousands of
+/// substeps per sample: a fit that wandered to a dry friction of 0.084 N m
+/// on the QUBE's arm (substep about 6 us) spent 285 s in 143 simulations.
+/// Ten times below what a gearbox holding the pendulum's arm needs
+/// (`Fg1 = 0.1 N m`, `w = 1e-3`: about 0.1 ms).
+pub const MIN_SUBSTEP: f64 = 1e-5;
 
 /// The substep for an experiment under `opts`.
 pub(crate) fn substep_for(sig: &Signals, opts: &SimOptions) -> Result<f64, SimError> {
@@ -1484,6 +1514,48 @@ pub(crate) mod tests {
             .map(|(k, p)| p.value * (1.0 + 0.01 * k as f64))
             .collect();
         ParameterValues::from_base(model, base).full
+    }
+
+    /// A gearbox friction that holds the arm (0.1 N m: a substep of about
+    /// 0.2 ms) simulates; one fifty times stronger would need about 4 us,
+    /// below [`MIN_SUBSTEP`], and is refused with its reason instead of
+    /// running thousands of substeps per sample.
+    #[test]
+    fn a_dry_friction_too_stiff_to_simulate_is_refused() {
+        let model = pendulum(false);
+        let sim = Simulator::new(&model, SimOptions::default()).expect("compiles");
+        let sig = signals(&model);
+        let fg1 = model
+            .parameters
+            .iter()
+            .position(|p| p.name == "Fg1")
+            .expect("Fg1");
+        let with = |v: f64| {
+            let mut base: Vec<f64> = model.parameters.iter().map(|p| p.value).collect();
+            base[fg1] = v;
+            ParameterValues::from_base(&model, base).full
+        };
+        sim.simulate(&sig, &with(0.1), 200)
+            .expect("a gearbox holding the arm simulates");
+        match sim.simulate(&sig, &with(5.0), 200) {
+            Err(SimError::TooStiff {
+                experiment,
+                substep,
+            }) => {
+                assert_eq!(experiment, "synthetic");
+                assert!(substep < MIN_SUBSTEP && substep > 0.0, "{substep}");
+                let msg = SimError::TooStiff {
+                    experiment,
+                    substep,
+                }
+                .to_string();
+                assert!(
+                    msg.contains("substep") && msg.contains("dry friction"),
+                    "{msg}"
+                );
+            }
+            other => panic!("expected TooStiff, got {:?}", other.map(|_| ())),
+        }
     }
 
     /// The split tape (parameter part once per simulation) reproduces the
