@@ -94,10 +94,16 @@ pub const FLOOR_BASELINE: f64 = 2.0;
 /// [`PARTIAL_GAIN`], and is refitted as anywhere else.)
 pub const NOTHING_LEFT: f64 = 1.1;
 
+/// Is a weighted cost at most `factor` times the noise floor `floor`
+/// (never without a floor)?
+fn within_floor(cost: f64, floor: f64, factor: f64) -> bool {
+    floor > 0.0 && cost <= factor * floor
+}
+
 /// Is a weighted cost at the noise floor `floor` ([`FLOOR_REACHED`] times it
 /// or less; never without a floor)?
 fn reaches_floor(cost: f64, floor: f64) -> bool {
-    floor > 0.0 && cost <= FLOOR_REACHED * floor
+    within_floor(cost, floor, FLOOR_REACHED)
 }
 
 /// Far above the noise floor (at least [`PARTIAL_BASELINE`] times), a
@@ -571,7 +577,7 @@ pub fn diagnose_from(
     // looked for below: that is not residual). In the round after an
     // effect that reached the floor this was a third of a whole case's
     // time (demo_coulomb: three refits, 1.2 s of 5.9 s).
-    let nothing_left = floor > 0.0 && baseline.after_cost <= NOTHING_LEFT * floor;
+    let nothing_left = within_floor(baseline.after_cost, floor, NOTHING_LEFT);
     if nothing_left {
         notes.push(format!(
             "the baseline is at the noise floor ({:.2}x): no effect candidate refitted, an effect could only fit the noise (sensor offsets still checked)",
@@ -1316,11 +1322,9 @@ pub const EXPLAINED: f64 = 1.0;
 /// Does refitted candidate `r` take the cost to the noise floor estimate
 /// or below ([`EXPLAINED`])?
 fn explains_to_floor(r: &Ranked, floor: f64) -> bool {
-    floor > 0.0
-        && r.error.is_none()
-        && r.fit
-            .as_ref()
-            .is_some_and(|f| f.after_cost <= EXPLAINED * floor)
+    r.fit
+        .as_ref()
+        .is_some_and(|f| within_floor(f.after_cost, floor, EXPLAINED))
 }
 
 /// Is the diagnosis settled by the refits so far: a candidate that gained
@@ -1391,6 +1395,7 @@ fn screening(opts: &DiagnoseOptions, start: Vec<f64>, horizon: Horizon) -> FitOp
         tolerance: SCREENING_TOLERANCE,
         warm: None,
         alternative_start: None,
+        simulate_start: false,
         ..opts.fit.clone()
     }
 }

@@ -163,6 +163,11 @@ pub struct FitOptions {
     /// cost is no proof of a better basin: the caller offers this only
     /// where any start will do (see the diagnosis' refits).
     pub alternative_start: Option<Vec<f64>>,
+    /// Keep the simulation at the start ([`FitResult::simulated_start`]):
+    /// one more nuisance fit and simulation, for a caller that shows the
+    /// start values as a stage of their own (the identify story's nominal
+    /// stage).
+    pub simulate_start: bool,
 }
 
 /// Where a fit's nuisance ended: per experiment its sensor offsets by
@@ -208,6 +213,7 @@ impl Default for FitOptions {
             tolerance: FINAL_TOLERANCE,
             warm: None,
             alternative_start: None,
+            simulate_start: false,
         }
     }
 }
@@ -400,7 +406,8 @@ pub struct FitResult {
     /// The simulated measurements at the start (the free parameters at
     /// their `start` values, the nuisance fitted there to the final
     /// tolerance, as [`crate::validate()`] fits it), as
-    /// [`FitResult::simulated`]; `None` for a warm fit, when the fit ended
+    /// [`FitResult::simulated`], when [`FitOptions::simulate_start`] asks;
+    /// `None` for a warm fit, when the fit ended
     /// on segments (each from its own estimated state), the delay and
     /// offset scan moved the start, or the start could not be simulated.
     pub simulated_start: Option<Vec<Vec<Vec<f64>>>>,
@@ -1324,7 +1331,10 @@ pub fn fit_with_progress(
     // stops at 1e-3), from where the fit's start left it; not for a warm
     // fit (its start kept the warm nuisance), on segments, or when the
     // scan moved a free parameter off its start value
-    let simulated_start = if segments.is_none() && opts.warm.is_none() && start_pt.g[..p] == g0[..p]
+    let simulated_start = if opts.simulate_start
+        && segments.is_none()
+        && opts.warm.is_none()
+        && start_pt.g[..p] == g0[..p]
     {
         let pbn = setup.nuisance_problem(None);
         let mut q = start_pt.clone();

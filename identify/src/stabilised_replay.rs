@@ -230,11 +230,12 @@ impl StabilisedReplay {
             .collect();
         // the signal columns the block adds: clear of the files' columns
         // and of every name of the model
+        let names = model_names(model);
         let mut taken: Vec<String> = experiments
             .iter()
             .flat_map(|e| e.channels.iter().map(|c| c.name.clone()))
             .collect();
-        taken.extend(model_names(model));
+        taken.extend(names.iter().cloned());
         let logged: Vec<String> = model
             .inputs
             .iter()
@@ -245,7 +246,7 @@ impl StabilisedReplay {
             .iter()
             .map(|c| unique(format!("measured_{}", c.name), &taken))
             .collect();
-        let name = unique("stabilised_replay".to_string(), &model_names(model));
+        let name = unique("stabilised_replay".to_string(), &names);
         let unit_of = |i: usize| match model.coordinates[i].kind {
             CoordinateKind::Angle => "rad",
             _ => "m",
@@ -262,7 +263,7 @@ impl StabilisedReplay {
         let input_scale = |j: usize| parse_unit(&input_unit(j)).map_or(1.0, |u| u.scale.to_f64());
         // the block's own names (errors and gains), clear of every name
         // the model or the block already uses
-        let mut used: Vec<String> = model_names(model);
+        let mut used = names;
         used.extend(logged.iter().chain(&measured).cloned());
         used.push(name.clone());
         let mut local = |base: String| {

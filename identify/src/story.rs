@@ -45,7 +45,11 @@ impl StoryOptions {
     /// options.
     fn diagnose_options(&self) -> DiagnoseOptions {
         DiagnoseOptions {
-            fit: self.fit.clone(),
+            // the first baseline's start is the nominal stage
+            fit: FitOptions {
+                simulate_start: true,
+                ..self.fit.clone()
+            },
             ..self.diagnose.clone()
         }
     }
@@ -279,16 +283,12 @@ fn stage_at(
         horizon: None,
         ..ValidateOptions::default()
     };
-    let simulated = match (fitted, at_start) {
-        (Some(f), _) => {
-            let sims: Vec<Option<&Vec<Vec<f64>>>> = f.simulated.iter().map(Some).collect();
+    let simulated = match fitted.map(|f| &f.simulated).or(at_start) {
+        Some(given) => {
+            let sims: Vec<Option<&Vec<Vec<f64>>>> = given.iter().map(Some).collect();
             as_experiments(model, experiments, &sims)
         }
-        (None, Some(start)) => {
-            let sims: Vec<Option<&Vec<Vec<f64>>>> = start.iter().map(Some).collect();
-            as_experiments(model, experiments, &sims)
-        }
-        (None, None) => {
+        None => {
             let v = validate(model, base, experiments, &vopts).map_err(StoryError::Fit)?;
             let sims: Vec<Option<&Vec<Vec<f64>>>> =
                 v.experiments.iter().map(|e| e.simulated.as_ref()).collect();
