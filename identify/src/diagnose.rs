@@ -25,7 +25,9 @@
 //!    or by [`PARTIAL_GAIN`] to it,
 //!    and only if the model without it, restarted from the candidate's
 //!    values, does not get there too (the gain is measured against the best
-//!    baseline, not a worse restart). Otherwise the model is *adequate* when
+//!    baseline, not a worse restart; not checked for a candidate refitted
+//!    from the baseline's own values whose parameters are significant:
+//!    no restart is in its gain). Otherwise the model is *adequate* when
 //!    the baseline is within [`FLOOR_BASELINE`] of the noise floor, and the
 //!    residual *unexplained* ([`Diagnosis::unexplained`]) when it is not.
 //!
@@ -273,15 +275,17 @@ pub struct Ranked {
     /// The evidence.
     pub evidence: Evidence,
     /// Whether the credited refit started from the baseline's own values of
-    /// the model's parameters (not a restart from other values: the
-    /// nominal ones, another candidate's fit).
+    /// the model's parameters, or from a fit that started there (a Stribeck
+    /// friction from the Coulomb fit on its target): no restart from other
+    /// values (the nominal ones) is in its gain.
     pub from_baseline: bool,
 }
 
 /// The outcome of [`diagnose`].
 #[derive(Clone, Debug, PartialEq)]
 pub struct Diagnosis {
-    /// Fit of the unchanged model.
+    /// Fit of the unchanged model (far above the noise floor, to the
+    /// screening tolerance only: [`FitOptions::coarse_far_above_floor`]).
     pub baseline: FitResult,
     /// Candidates, best first: the refitted ones by penalised RMSE, then the
     /// others in equation-error order.
@@ -616,17 +620,25 @@ pub fn diagnose_from(
     };
     // (each candidate's second start once)
     let second_started = std::cell::RefCell::new(Vec::new());
-    let second_at = |ranking: &mut [Ranked], idx: usize| {
+    // (`partial_counts`: whether a candidate that passes by a partial gain
+    // only, [`PARTIAL_GAIN`] far above the floor, ends the struggle)
+    let second_start_at = |ranking: &mut [Ranked], idx: usize, partial_counts: bool| {
         if !settled(ranking, floor) && !second_started.borrow().contains(&idx) {
             second_started.borrow_mut().push(idx);
             // far above the floor with nothing explaining it yet, the
             // baseline itself is suspect: every refitted candidate gets its
             // start from the nominal values
+            let explains = |r: &Ranked| {
+                passes(r, baseline.after_cost, floor, opts)
+                    && (partial_counts
+                        || r.gain >= opts.min_gain
+                        || r.fit
+                            .as_ref()
+                            .is_some_and(|f| reaches_floor(f.after_cost, floor)))
+            };
             let struggling = floor > 0.0
                 && baseline.after_cost >= PARTIAL_BASELINE * floor
-                && !ranking
-                    .iter()
-                    .any(|r| passes(r, baseline.after_cost, floor, opts));
+                && !ranking.iter().any(explains);
             second_start(
                 &mut ranking[idx],
                 &edited[idx].0,
@@ -637,6 +649,7 @@ pub fn diagnose_from(
             );
         }
     };
+    let second_at = |ranking: &mut [Ranked], idx: usize| second_start_at(ranking, idx, true);
     let mut leaders: Vec<usize> = (0..ranking.len())
         .filter(|&i| !nothing_left && (blind || edited[i].1 .0))
         .take(opts.refit)
@@ -663,20 +676,22 @@ pub fn diagnose_from(
     // case's time; a spring on the arm (1.03x) or an input delay (1.06x):
     // two leaders, a third of the case; cogging on the arm (30.5x, 1.17x
     // the floor): a drag and a spring.
-    // (the refitted one that reached the floor, the leaders skipped)
-    let mut at_floor: Option<(String, Vec<String>)> = None;
-    let mut from_coulomb_done: Vec<usize> = Vec::new();
+    // (the refitted one that explains it, its cost over the floor, the
+    // leaders skipped)
+    let mut at_floor: Option<(String, f64, Vec<String>)> = None;
+    let mut from_coulomb_done: Vec<(usize, f64)> = Vec::new();
     for &idx in &leaders {
         if let Some(done) = ranking.iter().find(|r| {
             passes(r, baseline.after_cost, floor, opts)
                 && (explains_to_floor(r, floor)
-                    || ((nothing_left_after(r, floor) || r.gain >= DECISIVE_GAIN)
+                    || ((nothing_left_after(r, floor) || decisive_at_floor(r, floor))
                         && !nests_pending(r, &ranking, &leaders)))
         }) {
             let label = done.candidate.label();
+            let ratio = done.fit.as_ref().map_or(f64::NAN, |f| f.after_cost / floor);
             at_floor
-                .get_or_insert_with(|| (label, Vec::new()))
-                .1
+                .get_or_insert_with(|| (label, ratio, Vec::new()))
+                .2
                 .push(ranking[idx].candidate.label());
             continue;
         }
@@ -767,8 +782,11 @@ pub fn diagnose_from(
             }
         }
     }
+    // (a candidate the later refits credited with a partial gain only does
+    // not end the struggle that these were deferred in: the leaders' second
+    // starts came before those refits)
     for idx in deferred {
-        second_at(&mut ranking, idx);
+        second_start_at(&mut ranking, idx, false);
     }
     // a candidate that explains the residual competes with the simpler
     // effect it contains (Stribeck friction with `Fs = Fc` is Coulomb
@@ -858,7 +876,7 @@ pub fn diagnose_from(
         &mut notes,
     );
     // the leaders skipped above that no later step refitted either
-    if let Some((done, skipped)) = at_floor {
+    if let Some((done, ratio, skipped)) = at_floor {
         let left: Vec<String> = skipped
             .into_iter()
             .filter(|l| {
@@ -869,7 +887,7 @@ pub fn diagnose_from(
             .collect();
         if !left.is_empty() {
             notes.push(format!(
-                "{done} explains the residual down to the noise floor: the equation-error leader(s) {} not refitted",
+                "{done} explains the residual ({ratio:.2}x the noise floor estimate): the equation-error leader(s) {} not refitted",
                 left.join(", ")
             ));
         }
@@ -979,7 +997,9 @@ fn decide(
         // model without it cannot do better than the baseline from there
         // but by the baseline's own unfinished descent (a spring on the
         // arm: 1.02x in 11 iterations, a sixth of the case's time)
-        if top.from_baseline && significant(top) {
+        // (against the first baseline only: a replaced one is not where
+        // the candidate started)
+        if checked.len() == 1 && top.from_baseline && significant(top) {
             return Some(top.candidate.clone());
         }
         // the model without the effect, from the candidate's values
@@ -1271,13 +1291,14 @@ fn stribeck_from_coulomb(
 /// A Stribeck friction refitted from the baseline can stall in the
 /// Coulomb-like minimum: for each Coulomb friction that passes but stays
 /// above the floor, the Stribeck friction on its target is refitted again
-/// from the Coulomb fit ([`stribeck_from_coulomb`]), once per pair (`done`
-/// holds the Coulomb frictions' indices), when `ready` says the Stribeck
-/// friction (its index) may be.
+/// from the Coulomb fit ([`stribeck_from_coulomb`]), when `ready` says the
+/// Stribeck friction (its index) may be: once per pair, and again when a
+/// later refit of the Coulomb friction (its second start) did better
+/// (`done`: the Coulomb frictions' indices and the costs refitted from).
 fn stribecks_from_coulombs(
     ranking: &mut [Ranked],
     edited: &[(Model, (bool, bool))],
-    done: &mut Vec<usize>,
+    done: &mut Vec<(usize, f64)>,
     ready: impl Fn(usize) -> bool,
     (base_cost, floor): (f64, f64),
     experiments: &[Experiment],
@@ -1288,7 +1309,10 @@ fn stribecks_from_coulombs(
         let Some(inner_fit) = &inner.fit else {
             continue;
         };
-        if done.contains(&j)
+        let from = inner_fit.after_cost;
+        if done
+            .iter()
+            .any(|&(k, cost)| k == j && from * SAME_MINIMUM >= cost)
             || inner.candidate.effect != "coulomb_friction"
             || !passes(inner, base_cost, floor, opts)
             || reaches_floor(inner_fit.after_cost, floor)
@@ -1304,7 +1328,8 @@ fn stribecks_from_coulombs(
         if !ready(i) {
             continue;
         }
-        done.push(j);
+        done.retain(|&(k, _)| k != j);
+        done.push((j, from));
         let inner_fit = inner_fit.clone();
         let inner_gain = inner.gain;
         let inner_from_baseline = inner.from_baseline;
@@ -1499,6 +1524,16 @@ fn nothing_left_after(r: &Ranked, floor: f64) -> bool {
         .is_some_and(|f| within_floor(f.after_cost, floor, NOTHING_LEFT))
 }
 
+/// Did refitted candidate `r` gain decisively ([`DECISIVE_GAIN`]) and
+/// reach the noise floor ([`FLOOR_REACHED`])? (Far above the floor a
+/// decisive gain can be a stand-in's: viscous friction for a drag.)
+fn decisive_at_floor(r: &Ranked, floor: f64) -> bool {
+    r.gain >= DECISIVE_GAIN
+        && r.fit
+            .as_ref()
+            .is_some_and(|f| reaches_floor(f.after_cost, floor))
+}
+
 /// Is a leader that contains candidate `r` ([`NESTED`]: a Stribeck
 /// friction over a Coulomb friction on the same target) still to be
 /// refitted?
@@ -1506,6 +1541,7 @@ fn nests_pending(r: &Ranked, ranking: &[Ranked], leaders: &[usize]) -> bool {
     leaders.iter().any(|&j| {
         let o = &ranking[j];
         o.fit.is_none()
+            && o.error.is_none()
             && o.candidate.target == r.candidate.target
             && NESTED
                 .iter()

@@ -150,13 +150,15 @@ pub struct FitOptions {
     /// by less than this fraction ([`FINAL_TOLERANCE`]; a screening fit,
     /// which only compares costs, can stop earlier).
     pub tolerance: f64,
-    /// On the whole records, stop at the screening tolerance
-    /// ([`crate::diagnose::SCREENING_TOLERANCE`]) while the weighted RMS
-    /// stays more than [`FAR_ABOVE_FLOOR`] times the noise floor estimate:
-    /// for a diagnosis' baseline, which is compared with screening refits
-    /// of candidate effects and replaced by the model with the effect it
-    /// lacks. Near the floor (nothing missing: the baseline is the answer)
-    /// [`FitOptions::tolerance`] holds.
+    /// On the final horizon (the whole records, or the segments), stop at
+    /// the screening tolerance ([`crate::diagnose::SCREENING_TOLERANCE`])
+    /// while the weighted RMS stays more than [`FAR_ABOVE_FLOOR`] times the
+    /// noise floor estimate: for a diagnosis' baseline, which is compared
+    /// with screening refits of candidate effects and replaced by the model
+    /// with the effect it lacks. Near the floor (nothing missing: the
+    /// baseline is the answer) [`FitOptions::tolerance`] holds; a story
+    /// whose first round finds no effect far above the floor fits its
+    /// baseline on to that tolerance.
     pub coarse_far_above_floor: bool,
     /// Start the nuisance (initial states of every block, per-experiment
     /// offsets) where an earlier fit of the same experiments ended
@@ -2180,4 +2182,3 @@ pub(crate) fn with_estimates(m: &Model, start: Vec<f64>, estimates: &[Estimate])
 pub fn full_parameters(model: &Model, base: Vec<f64>) -> Vec<f64> {
     ParameterValues::from_base(model, base).full
 }
-

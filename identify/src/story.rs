@@ -19,7 +19,7 @@ use crate::diagnose::{
 use crate::effect_edit::EffectInstance;
 use crate::fit::{
     fit, fit_with_progress, replay_follows, values_from, with_estimates, ClosedLoop, FitError,
-    FitOptions, FitProgress, FitResult, Horizon,
+    FitOptions, FitProgress, FitResult, Horizon, FAR_ABOVE_FLOOR,
 };
 use crate::metrics::{compare, FitReport};
 use crate::stabilised_replay::StabilisedReplay;
@@ -501,6 +501,36 @@ fn story(
             let improved = current_fit
                 .as_ref()
                 .is_some_and(|f| d.baseline.after_cost < 0.999 * f.after_cost);
+            // far above the floor the diagnosis' baseline stopped at the
+            // screening tolerance ([`FitOptions::coarse_far_above_floor`]):
+            // as the story's answer it is fitted on to the final one
+            if round == 1 && !improved && d.baseline.after_cost > FAR_ABOVE_FLOOR * d.floor {
+                let polished = fit_with_progress(
+                    &current_model,
+                    experiments,
+                    &FitOptions {
+                        start: Some(d.baseline.base.clone()),
+                        warm: Some(d.baseline.warm.clone()),
+                        multistart: 0,
+                        ..opts.fit.clone()
+                    },
+                    &mut |p| progress(&StoryProgress::Fit(p.clone())),
+                );
+                if let Ok(f) = polished {
+                    if f.after_cost <= d.baseline.after_cost {
+                        stages.pop();
+                        stages.push(stage(
+                            "nominal, refitted",
+                            &current_text,
+                            &current_model,
+                            Some(&f),
+                            experiments,
+                            opts,
+                        )?);
+                        current_fit = Some(f);
+                    }
+                }
+            }
             if improved && round > 1 {
                 better_start = Some(stages.len());
                 stages.push(stage(
