@@ -863,8 +863,18 @@ pub fn diagnose_from(
         }
     }
     // a sensor offset is absorbed by the per-experiment offsets of the
-    // baseline: judged against the baseline without them instead
-    sensor_offsets_from_nuisance(&mut ranking, text, &model, &baseline, experiments, opts);
+    // baseline: judged against the baseline without them instead. Not
+    // once a candidate explains the residual with those offsets free: a
+    // sensor offset alone would have left the baseline at the floor (a
+    // spring on the pendulum, its offsets agreeing without it: the
+    // baseline without them and the sensor offset refitted, 0.8 s, after
+    // the spring reached 0.85x)
+    let explained = ranking.iter().any(|r| {
+        passes(r, baseline.after_cost, floor, opts) && nothing_left_after(r, floor)
+    });
+    if !explained {
+        sensor_offsets_from_nuisance(&mut ranking, text, &model, &baseline, experiments, opts);
+    }
     let mut baseline = baseline;
     let verdict = decide(
         &mut ranking,
