@@ -2182,4 +2182,3 @@ pub(crate) fn with_estimates(m: &Model, start: Vec<f64>, estimates: &[Estimate])
 pub fn full_parameters(model: &Model, base: Vec<f64>) -> Vec<f64> {
     ParameterValues::from_base(model, base).full
 }
-
