@@ -714,7 +714,7 @@ pub fn diagnose_from(
             passes(r, baseline.after_cost, floor, opts)
                 && (explains_to_floor(r, floor)
                     || ((nothing_left_after(r, floor) || decisive_at_floor(r, floor))
-                        && !nests_pending(r, &ranking, &leaders)))
+                        && !nested_pending(r, &ranking, &leaders, true)))
         }) {
             let label = done.candidate.label();
             let ratio = done.fit.as_ref().map_or(f64::NAN, |f| f.after_cost / floor);
@@ -734,7 +734,7 @@ pub fn diagnose_from(
         // refit from the Coulomb fit below is its cheaper second chance (6
         // iterations against 24).
         let partial = (SECOND_START_GAIN..opts.min_gain).contains(&ranking[idx].gain);
-        if partial && !contains_pending(idx, &ranking, &leaders) {
+        if partial && !nested_pending(&ranking[idx], &ranking, &leaders, false) {
             second_at(&mut ranking, idx);
         }
         // a Coulomb friction that passes above the floor: the Stribeck
@@ -1578,33 +1578,20 @@ fn decisive_at_floor(r: &Ranked, floor: f64) -> bool {
             .is_some_and(|f| reaches_floor(f.after_cost, floor))
 }
 
-/// Is a leader that contains candidate `r` ([`NESTED`]: a Stribeck
-/// friction over a Coulomb friction on the same target) still to be
-/// refitted?
-fn nests_pending(r: &Ranked, ranking: &[Ranked], leaders: &[usize]) -> bool {
+/// Is a leader nested with candidate `r` ([`NESTED`], on its target)
+/// still to be refitted: one that contains `r` (`containing`: a Stribeck
+/// friction over the Coulomb friction `r`), or one that `r` contains (the
+/// Coulomb friction under the Stribeck friction `r`)?
+fn nested_pending(r: &Ranked, ranking: &[Ranked], leaders: &[usize], containing: bool) -> bool {
     leaders.iter().any(|&j| {
         let o = &ranking[j];
+        let (outer, inner) = if containing { (o, r) } else { (r, o) };
         o.fit.is_none()
             && o.error.is_none()
             && o.candidate.target == r.candidate.target
             && NESTED
                 .iter()
-                .any(|(outer, inner)| o.candidate.effect == *outer && r.candidate.effect == *inner)
-    })
-}
-
-/// Is a leader that candidate `idx` contains ([`NESTED`]: the Coulomb
-/// friction on a Stribeck friction's target) still to be refitted?
-fn contains_pending(idx: usize, ranking: &[Ranked], leaders: &[usize]) -> bool {
-    let r = &ranking[idx];
-    leaders.iter().any(|&j| {
-        let o = &ranking[j];
-        o.fit.is_none()
-            && o.error.is_none()
-            && o.candidate.target == r.candidate.target
-            && NESTED
-                .iter()
-                .any(|(outer, inner)| r.candidate.effect == *outer && o.candidate.effect == *inner)
+                .any(|(a, b)| outer.candidate.effect == *a && inner.candidate.effect == *b)
     })
 }
 
