@@ -688,21 +688,8 @@ pub fn diagnose_from(
     // score is inflated by that noise (demo_coulomb: added inertia first
     // by BIC, 1277 against the Coulomb friction's 909, 1.07x refitted). It
     // is refitted after the leaders whose columns do not share the
-    // residual's noise, unless it leads them by far more than that noise
-    // can add ([`INERTIA_LEAD`]; a hidden inertia on the pendulum: 17039
-    // against a deadzone's 868, refitted last after two that explained
-    // nothing). The order only decides what is refitted first: a wrong
-    // inertia does not pass and the loop goes on.
-    let best_other = leaders
-        .iter()
-        .filter(|&&i| ranking[i].candidate.line() != "inertia")
-        .map(|&i| ranking[i].evidence.bic_gain)
-        .fold(f64::NEG_INFINITY, f64::max);
-    let inertia_last = |i: usize| {
-        ranking[i].candidate.line() == "inertia"
-            && !(ranking[i].evidence.bic_gain >= INERTIA_LEAD * best_other && best_other > 0.0)
-    };
-    leaders.sort_by_key(|&i| inertia_last(i));
+    // residual's noise.
+    leaders.sort_by_key(|&i| ranking[i].candidate.line() == "inertia");
     // The leaders are refitted in that order until one explains the
     // residual: down to the noise floor estimate itself ([`EXPLAINED`]),
     // or, when no leader still to refit contains it ([`NESTED`]), to
@@ -1459,12 +1446,6 @@ pub const TRAPPED: f64 = 1.01;
 /// arm, refitted from nominal values, stopped at 2.05x with 1e-3 and went
 /// on to 53x with 2e-4).
 pub const SCREENING_TOLERANCE: f64 = 2e-4;
-
-/// An inertia candidate is refitted first, not after the other leaders,
-/// when its equation-error BIC gain is at least this multiple of theirs:
-/// the acceleration noise inflated an inertia that explains nothing to
-/// 1.4x the true effect's (demo_coulomb, 1277 against 909).
-const INERTIA_LEAD: f64 = 4.0;
 
 /// A refit gain from which a candidate shows some of the effect: worth a
 /// second start from the nominal values ([`second_start`]), for a leader
