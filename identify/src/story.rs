@@ -464,15 +464,37 @@ fn story(
             // (the baseline as the diagnosis fitted it: a better baseline
             // that decide() found started elsewhere)
             stages.push(nominal_stage(text, model, &d.baseline, experiments, opts)?);
+            // far above the floor the diagnosis' baseline stopped at the
+            // screening tolerance ([`FitOptions::coarse_far_above_floor`]):
+            // with no effect to follow it is the story's answer, fitted on
+            // to the final one
+            let finished = (d.verdict.is_none()
+                && d.baseline.after_cost > FAR_ABOVE_FLOOR * d.floor)
+                .then(|| {
+                    fit_with_progress(
+                        &current_model,
+                        experiments,
+                        &FitOptions {
+                            start: Some(d.baseline.base.clone()),
+                            warm: Some(d.baseline.warm.clone()),
+                            multistart: 0,
+                            ..opts.fit.clone()
+                        },
+                        &mut |p| progress(&StoryProgress::Fit(p.clone())),
+                    )
+                })
+                .and_then(Result::ok)
+                .filter(|f| f.after_cost <= d.baseline.after_cost);
+            let refitted = finished.unwrap_or_else(|| d.baseline.clone());
             stages.push(stage(
                 "nominal, refitted",
                 &current_text,
                 &current_model,
-                Some(&d.baseline),
+                Some(&refitted),
                 experiments,
                 opts,
             )?);
-            current_fit = Some(d.baseline.clone());
+            current_fit = Some(refitted);
         }
         let cost_before = d.baseline.after_cost;
         let top = d.verdict.as_ref().and_then(|_| d.ranking.first()).cloned();
@@ -501,36 +523,6 @@ fn story(
             let improved = current_fit
                 .as_ref()
                 .is_some_and(|f| d.baseline.after_cost < 0.999 * f.after_cost);
-            // far above the floor the diagnosis' baseline stopped at the
-            // screening tolerance ([`FitOptions::coarse_far_above_floor`]):
-            // as the story's answer it is fitted on to the final one
-            if round == 1 && !improved && d.baseline.after_cost > FAR_ABOVE_FLOOR * d.floor {
-                let polished = fit_with_progress(
-                    &current_model,
-                    experiments,
-                    &FitOptions {
-                        start: Some(d.baseline.base.clone()),
-                        warm: Some(d.baseline.warm.clone()),
-                        multistart: 0,
-                        ..opts.fit.clone()
-                    },
-                    &mut |p| progress(&StoryProgress::Fit(p.clone())),
-                );
-                if let Ok(f) = polished {
-                    if f.after_cost <= d.baseline.after_cost {
-                        stages.pop();
-                        stages.push(stage(
-                            "nominal, refitted",
-                            &current_text,
-                            &current_model,
-                            Some(&f),
-                            experiments,
-                            opts,
-                        )?);
-                        current_fit = Some(f);
-                    }
-                }
-            }
             if improved && round > 1 {
                 better_start = Some(stages.len());
                 stages.push(stage(

@@ -443,3 +443,58 @@ fn coulomb_friction_and_drag_on_another_rig_end_named_as_such() {
     eprintln!("{labels:?}; {}", story.stop);
     assert_coulomb_and_drag(&story);
 }
+
+/// A mild Stribeck hump on the arm, over the gearbox friction the model
+/// already estimates (`Fg1`): sliding level 0.015 N m, static 0.019 N m
+/// (1.27x, a common ratio for a geared joint; the rate survey's arm case
+/// has 3.5x), `vs` 0.2 rad/s. Every hump's linearised coefficient came out
+/// with the sign of no friction, so the equation error gave the candidate
+/// no column; a quadratic drag on the arm passed by a partial gain (1.69x)
+/// and the next round was left 3.9x above the floor, unexplained. The
+/// simulation-error refit of the Stribeck friction reaches the floor (by
+/// hand: `plantc fit` with the effect added, sliding 0.0150, static 0.0191,
+/// `vs` 0.1999): it must be named, with the hump's height and `vs` within
+/// 15 % of the synth truth (4e-3 N m, 0.2 rad/s).
+#[test]
+fn a_mild_stribeck_hump_on_the_arm_is_named() {
+    let text = pendulum_text();
+    let exps = synth(
+        "stribeck_arm_mild",
+        &text,
+        &["stribeck_friction:theta:Fc=4e-3,Fs=8e-3,vs=0.2"],
+        &[
+            ("J1", 1.45e-3),
+            ("l2", 0.159),
+            ("b1", 2.6e-3),
+            ("b2", 7e-4),
+            ("Fg1", 0.011),
+        ],
+        &[
+            "free_swing:alpha0=110deg,duration=15,name=fs1",
+            "free_swing:alpha0=160deg,duration=15,name=fs2",
+            "driven:alpha0=180deg,band=0.2-5,rms=1.2,seed=7,duration=15,name=driven",
+        ],
+        500.0,
+    );
+    let d = diagnose_with(&text, &exps, &DiagnoseOptions::default()).expect("diagnoses");
+    show("stribeck_arm_mild", &d);
+    assert_eq!(
+        verdict(&d).as_deref(),
+        Some("stribeck_friction@theta"),
+        "{}",
+        d.verdict_line()
+    );
+    let top = &d.ranking[0];
+    let value = |name: &str| {
+        top.parameters
+            .iter()
+            .find(|p| p.name == name)
+            .map(|p| p.value)
+            .expect(name)
+    };
+    let hump = value("Fs_theta") - value("Fc_theta");
+    let vs = value("vs_theta");
+    eprintln!("hump {hump:.4e} N m (truth 4e-3), vs {vs:.4} rad/s (truth 0.2)");
+    assert!((hump / 4e-3 - 1.0).abs() < 0.15, "hump = {hump}");
+    assert!((vs / 0.2 - 1.0).abs() < 0.15, "vs = {vs}");
+}

@@ -364,7 +364,7 @@ impl EquationError {
             }
         }
         let Some((_, nper, cols)) = best else {
-            return Ok(self.empty_score(names));
+            return Ok(self.empty_score(names, 0));
         };
         let full: Vec<Vec<f64>> = cols.iter().map(|c| self.column(&idx, c)).collect();
         let (mut score, coef, var) = self.finish(&self.r, &full, 1);
@@ -421,7 +421,7 @@ impl EquationError {
             .collect();
         let levels = level_grid(&mags);
         if levels.is_empty() {
-            return Ok(self.empty_score(std::slice::from_ref(&name.to_string())));
+            return Ok(self.empty_score(std::slice::from_ref(&name.to_string()), 0));
         }
         // the removed term for each level, as a stacked weighted column
         let term = |l: f64| -> Vec<f64> {
@@ -456,10 +456,10 @@ impl EquationError {
             c = term(level);
         }
         let target: Vec<f64> = self.r.iter().zip(&c).map(|(r, t)| r - t).collect();
+        // (a level that explains nothing still counts its column when it
+        // clips the input at all: a low BIC is no proof, the candidate is
+        // screened by simulation error when the leaders fail)
         let (mut score, _, _) = self.finish(&target, &[], 1);
-        if score.bic_gain <= 0.0 {
-            score.columns = 0;
-        }
         let spacing = widest_step(&levels);
         score.estimates = vec![LinearEstimate {
             name: name.to_string(),
@@ -512,7 +512,7 @@ impl EquationError {
             }
         }
         let Some((_, level)) = best else {
-            return Ok(self.empty_score(names));
+            return Ok(self.empty_score(names, usize::from(!levels.is_empty())));
         };
         let kbest = levels.iter().position(|&l| l == level).unwrap_or(0);
         let mut vmax = parabola_min(&levels, &reds, kbest);
@@ -581,7 +581,16 @@ impl EquationError {
             }
         }
         let Some((_, vs)) = best else {
-            return Ok(self.empty_score(names));
+            // (no Stribeck velocity the record's speeds could show: 0)
+            let scanned = STRIBECK_SPEEDS.iter().any(|&vs| 3.0 * vs <= top);
+            let columns = if !scanned {
+                0
+            } else if own {
+                1
+            } else {
+                2
+            };
+            return Ok(self.empty_score(names, columns));
         };
         let mut full = Vec::new();
         if !own {
@@ -616,14 +625,20 @@ impl EquationError {
         Ok(score)
     }
 
-    /// A score that explains nothing (no scan value found), with NaN
-    /// estimates.
-    fn empty_score(&self, names: &[String]) -> Score {
+    /// A score that explains nothing, with NaN estimates: no scan value
+    /// to try (`columns` 0: the candidate adds nothing the data can show),
+    /// or none admissible (`columns`: those the candidate would add). A
+    /// scan that finds no admissible value is no proof the effect is
+    /// absent (a Stribeck hump on an arm whose gearbox friction the model
+    /// already has: every hump's linearised coefficient came out positive,
+    /// while the simulation-error refit found the truth at the floor), so
+    /// such a candidate stays eligible for simulation-error screening.
+    fn empty_score(&self, names: &[String], columns: usize) -> Score {
         let (by_experiment, by_speed) = self.shares(&self.r0);
         Score {
             bic_gain: 0.0,
             residual_share: 0.0,
-            columns: 0,
+            columns,
             estimates: names
                 .iter()
                 .map(|n| LinearEstimate {
