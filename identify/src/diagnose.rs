@@ -1144,7 +1144,7 @@ fn decide(
 /// Is every parameter of refitted candidate `r`'s effect estimated at least
 /// [`SIGNIFICANT`] standard errors from zero (an effect the data tell from
 /// its absence; a parameter at a bound or without a standard error is not)?
-fn significant(r: &Ranked) -> bool {
+pub(crate) fn significant(r: &Ranked) -> bool {
     !r.parameters.is_empty()
         && r.parameters.iter().all(|e| {
             !e.at_bound

@@ -13,8 +13,8 @@ use plantc_derive::model::{Model, ParameterValues};
 
 use crate::data::Experiment;
 use crate::diagnose::{
-    diagnose_from, diagnose_with, model_from_text, DiagnoseError, DiagnoseOptions, Ranked, NESTED,
-    NESTED_GAIN,
+    diagnose_from, diagnose_with, model_from_text, significant, DiagnoseError, DiagnoseOptions,
+    Diagnosis, Ranked, FLOOR_REACHED, NESTED, NESTED_GAIN,
 };
 use crate::effect_edit::EffectInstance;
 use crate::fit::{
@@ -102,6 +102,13 @@ pub struct Round {
     pub cost_before: f64,
     /// See [`Round::cost_before`].
     pub cost_after: Option<f64>,
+    /// The effect passed no test alone (far above the noise floor, its
+    /// gain below what a verdict needs): it was added on trial and kept
+    /// because the next round's effect, with it in the model, explains the
+    /// residual ([`confirms`]). Two effects that each hide the other (a
+    /// spring on the arm and dry friction in the pendulum's joint: 1.12x
+    /// and 1.45x alone) are found this way.
+    pub tentative: bool,
 }
 
 /// The result of [`identify`].
@@ -447,6 +454,8 @@ fn story(
     let mut current_fit: Option<FitResult> = None;
     let mut better_start = None;
     let mut unexplained = false;
+    // the next round's diagnosis, when a trial made it already
+    let mut pending: Option<Diagnosis> = None;
     let stop;
     loop {
         let round = rounds.len() + 1;
@@ -454,9 +463,10 @@ fn story(
         let dopts = opts.diagnose_options();
         // later rounds diagnose against the last round's fit (the model as
         // it now stands, fitted under the same options)
-        let d = match current_fit.clone() {
-            Some(f) => diagnose_from(&current_text, experiments, f, &dopts),
-            None => diagnose_with(&current_text, experiments, &dopts),
+        let d = match (pending.take(), current_fit.clone()) {
+            (Some(d), _) => Ok(d),
+            (None, Some(f)) => diagnose_from(&current_text, experiments, f, &dopts),
+            (None, None) => diagnose_with(&current_text, experiments, &dopts),
         }
         .map_err(StoryError::Diagnose)?;
         let current_model = model_from_text("model", &current_text).map_err(StoryError::Model)?;
@@ -499,6 +509,42 @@ fn story(
         let cost_before = d.baseline.after_cost;
         let top = d.verdict.as_ref().and_then(|_| d.ranking.first()).cloned();
         let Some(top) = top else {
+            // far above the floor with nothing passing, the best candidate
+            // on trial: kept when the next round's effect then explains
+            // the residual
+            let room = rounds.len() + 2 <= opts.max_effects;
+            if room && d.unexplained() && dopts.partial_credit {
+                let trial = on_trial(
+                    (&current_text, &current_model, current_fit.as_ref()),
+                    &d,
+                    experiments,
+                    (opts, &dopts),
+                    progress,
+                )?;
+                if let Some(t) = trial {
+                    let label = format!("+ {}, fitted (on trial)", t.effect.label());
+                    stages.push(stage(
+                        &label,
+                        &t.text,
+                        &t.model,
+                        Some(&t.fit),
+                        experiments,
+                        opts,
+                    )?);
+                    rounds.push(Round {
+                        ranking: d.ranking,
+                        effect: Some(t.effect),
+                        fit: Some(t.fit.clone()),
+                        cost_before,
+                        cost_after: Some(t.fit.after_cost),
+                        tentative: true,
+                    });
+                    current_text = t.text;
+                    current_fit = Some(t.fit);
+                    pending = Some(t.next);
+                    continue;
+                }
+            }
             let caveat = d
                 .segments_caveat()
                 .map(|c| format!(" ({c})"))
@@ -541,46 +587,17 @@ fn story(
                 fit: None,
                 cost_before,
                 cost_after: None,
+                tentative: false,
             });
             break;
         };
-        let inst = fitted_instance(&top);
-        let edited = inst.apply(&current_text).map_err(|error| {
-            StoryError::Diagnose(DiagnoseError::Edit {
-                which: inst.label(),
-                error,
-            })
-        })?;
-        let m2 = model_from_text("with_effect", &edited).map_err(StoryError::Model)?;
-        // start from the refit's values (the effect's and the model's)
-        let mut start: Vec<f64> = m2.parameters.iter().map(|p| p.value).collect();
-        if let Some(f) = &top.fit {
-            if let Some(cf) = &current_fit {
-                start = values_from(&m2, (&current_model, &cf.base));
-            }
-            start = with_estimates(&m2, start, &f.parameters);
-        }
-        progress(&StoryProgress::Step(format!(
-            "fitting with {}",
-            inst.label()
-        )));
-        let f = fit_with_progress(
-            &m2,
+        let (inst, edited, m2, f) = add_and_fit(
+            &top,
+            (&current_text, &current_model, current_fit.as_ref()),
             experiments,
-            &FitOptions {
-                start: Some(start),
-                // from where the candidate's refit left the nuisance
-                warm: top.fit.as_ref().map(|f| f.warm.clone()),
-                // the candidate's refit (a verdict is always refitted)
-                // scanned its delays and offsets: from its values a scan
-                // finds the same start (main job, input delay: 40
-                // simulations that moved nothing)
-                scan: false,
-                ..opts.fit.clone()
-            },
-            &mut |p| progress(&StoryProgress::Fit(p.clone())),
-        )
-        .map_err(StoryError::Fit)?;
+            opts,
+            progress,
+        )?;
         let label = format!("+ {}, fitted", inst.label());
         stages.push(stage(&label, &edited, &m2, Some(&f), experiments, opts)?);
         rounds.push(Round {
@@ -589,6 +606,7 @@ fn story(
             fit: Some(f.clone()),
             cost_before,
             cost_after: Some(f.after_cost),
+            tentative: false,
         });
         current_text = edited;
         current_fit = Some(f);
@@ -617,6 +635,124 @@ fn story(
         stabilised: None,
         unexplained,
     })
+}
+
+/// Add candidate `top` (its fitted values) to the model as it stands
+/// (`current`: text, model, fit) and fit it from the candidate's values
+/// and the current fit's: the effect, the edited text and model, the fit.
+fn add_and_fit(
+    top: &Ranked,
+    (current_text, current_model, current_fit): (&str, &Model, Option<&FitResult>),
+    experiments: &[Experiment],
+    opts: &StoryOptions,
+    progress: &mut dyn FnMut(&StoryProgress),
+) -> Result<(EffectInstance, String, Model, FitResult), StoryError> {
+    let inst = fitted_instance(top);
+    let edited = inst.apply(current_text).map_err(|error| {
+        StoryError::Diagnose(DiagnoseError::Edit {
+            which: inst.label(),
+            error,
+        })
+    })?;
+    let m2 = model_from_text("with_effect", &edited).map_err(StoryError::Model)?;
+    // start from the refit's values (the effect's and the model's)
+    let mut start: Vec<f64> = m2.parameters.iter().map(|p| p.value).collect();
+    if let Some(f) = &top.fit {
+        if let Some(cf) = current_fit {
+            start = values_from(&m2, (current_model, &cf.base));
+        }
+        start = with_estimates(&m2, start, &f.parameters);
+    }
+    progress(&StoryProgress::Step(format!(
+        "fitting with {}",
+        inst.label()
+    )));
+    let f = fit_with_progress(
+        &m2,
+        experiments,
+        &FitOptions {
+            start: Some(start),
+            // from where the candidate's refit left the nuisance
+            warm: top.fit.as_ref().map(|f| f.warm.clone()),
+            // the candidate's refit (a verdict is always refitted)
+            // scanned its delays and offsets: from its values a scan
+            // finds the same start (main job, input delay: 40
+            // simulations that moved nothing)
+            scan: false,
+            ..opts.fit.clone()
+        },
+        &mut |p| progress(&StoryProgress::Fit(p.clone())),
+    )
+    .map_err(StoryError::Fit)?;
+    Ok((inst, edited, m2, f))
+}
+
+/// Smallest refit gain for a candidate to be put on trial ([`on_trial`]):
+/// the gain that earns a second start, some of the effect shown.
+const TRIAL_GAIN: f64 = 1.2;
+
+/// A candidate added on trial ([`on_trial`]) and the diagnosis that
+/// confirmed it.
+struct Trial {
+    effect: EffectInstance,
+    text: String,
+    model: Model,
+    fit: FitResult,
+    /// The diagnosis of the model with the effect (the next round's).
+    next: Diagnosis,
+}
+
+/// When a round ends far above the noise floor with no candidate passing
+/// (diagnosis `d` unexplained), two effects may each hide the other: the
+/// best refitted candidate that shows some of its effect ([`TRIAL_GAIN`],
+/// its parameters significant) is added and fitted, and the model with it
+/// diagnosed. It is kept when [`confirms`] holds for that diagnosis; None
+/// otherwise (the round then ends as before, unexplained).
+fn on_trial(
+    current: (&str, &Model, Option<&FitResult>),
+    d: &Diagnosis,
+    experiments: &[Experiment],
+    (opts, dopts): (&StoryOptions, &DiagnoseOptions),
+    progress: &mut dyn FnMut(&StoryProgress),
+) -> Result<Option<Trial>, StoryError> {
+    let Some(best) = d
+        .ranking
+        .iter()
+        .filter(|r| r.fit.is_some() && r.gain >= TRIAL_GAIN && significant(r))
+        .max_by(|a, b| a.gain.total_cmp(&b.gain))
+    else {
+        return Ok(None);
+    };
+    progress(&StoryProgress::Step(format!(
+        "nothing passes alone: {} on trial",
+        best.candidate.label()
+    )));
+    let (effect, text, model, fit) = add_and_fit(best, current, experiments, opts, progress)?;
+    let next =
+        diagnose_from(&text, experiments, fit.clone(), dopts).map_err(StoryError::Diagnose)?;
+    Ok(confirms(d, &next, dopts).then_some(Trial {
+        effect,
+        text,
+        model,
+        fit,
+        next,
+    }))
+}
+
+/// Does the diagnosis `next` of the model with an effect on trial confirm
+/// it? Its verdict's refit must take the cost of the first diagnosis' (`d`)
+/// baseline down by the verdict gain itself ([`DiagnoseOptions::min_gain`])
+/// or to the noise floor ([`FLOOR_REACHED`]): the two effects together pass
+/// where neither did alone.
+fn confirms(d: &Diagnosis, next: &Diagnosis, dopts: &DiagnoseOptions) -> bool {
+    let Some(top) = next.verdict.as_ref().and_then(|_| next.ranking.first()) else {
+        return false;
+    };
+    let Some(f) = &top.fit else {
+        return false;
+    };
+    f.after_cost * dopts.min_gain <= d.baseline.after_cost
+        || (d.floor > 0.0 && f.after_cost <= FLOOR_REACHED * d.floor)
 }
 
 /// The story's end steps, on the model its rounds built.

@@ -246,9 +246,14 @@ fn story(
         }
         match (&round.effect, &round.fit) {
             (Some(inst), Some(f)) => {
+                let what = if round.tentative {
+                    "effect on trial (it passes no test alone; kept because the next round's effect, with it in the model, explains the residual)"
+                } else {
+                    "missing effect"
+                };
                 let _ = writeln!(
                     out,
-                    "   missing effect: `{}` on `{}`; added to a copy of the model:\n{}",
+                    "   {what}: `{}` on `{}`; added to a copy of the model:\n{}",
                     inst.effect,
                     inst.target,
                     indent(&inst.snippet())
@@ -286,6 +291,7 @@ fn story(
                     "snippet": inst.snippet(),
                     "cost_before": round.cost_before,
                     "cost_after": round.cost_after,
+                    "tentative": round.tentative,
                     "fit": crate::commands::fit::fit_json(f),
                     "model": file,
                 }));
