@@ -11,7 +11,9 @@
 # free_swing_large, free_swing_small and driven, 20 s at 500 Hz, 4096-count
 # encoders) and one hidden effect, or none, or two (`two`), or another
 # sample rate (`*_100hz`, `*_2khz`: the same 20 s, so 2 kHz is 4 x the
-# samples), or noise (`noisy`). Then `plantc identify` runs on it, and the
+# samples), or noise (`noisy`); `two_hidden` has two effects that each hide
+# the other (found by a trial round), `stribeck_theta` a Stribeck hump on the
+# arm the equation error cannot see. Then `plantc identify` runs on it, and the
 # script prints its wall and CPU time (user + sys), the effects it added,
 # where it stopped, and whether the CPU time met the goal. The truth is in
 # each case's truth.json. PLANTC=path/to/plantc skips the cargo build.
@@ -45,6 +47,8 @@ cases=(
     "added_inertia|--effect added_inertia:alpha=3e-4"
     "cogging|--effect cogging:theta:A=1e-2,N=24,phi=0.5"
     "two|--effect coulomb_friction:alpha=5e-4 --effect quadratic_drag:alpha=1.5e-4"
+    "two_hidden|--effect spring:theta=2.5e-3 --effect coulomb_friction:alpha=5e-4"
+    "stribeck_theta|--effect stribeck_friction:theta:Fc=4e-3,Fs=8e-3,vs=0.2"
     "coulomb_100hz|--effect coulomb_friction:alpha=6e-4 --rate 100"
     "coulomb_2khz|--effect coulomb_friction:alpha=6e-4 --rate 2000"
     "noisy|--effect coulomb_friction:alpha=6e-4 --noise 1e-3"
