@@ -91,8 +91,8 @@ pub use sensitivity::{
     estimated_parameters, ExtraColumn, SensitivitySimulator, SensitivityTrajectory, SignalKind,
 };
 pub use story::{
-    fitted_instance, identify, Round, Simplification, Stage, Story, StoryError, StoryOptions,
-    StoryProgress,
+    fitted_instance, identify, Removal, Round, Simplification, Stage, Story, StoryError,
+    StoryOptions, StoryProgress,
 };
 pub use synth::{
     synthesize, EffectSpec, ExperimentSpec, SynthError, SynthOptions, SynthSpec, Synthesized,

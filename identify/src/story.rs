@@ -128,6 +128,9 @@ pub struct Story {
     /// Effects of earlier rounds replaced by their simpler form once the
     /// later ones were in (the final `text` and `fit` have them replaced).
     pub simplifications: Vec<Simplification>,
+    /// Effects of earlier rounds the model no longer needs, removed at the
+    /// end ([`Removal`]).
+    pub removals: Vec<Removal>,
     /// The stage of the model as it stood refitted to a better minimum
     /// found by the last diagnosis (then the story's fit), if any.
     pub better_start: Option<usize>,
@@ -150,7 +153,27 @@ impl Story {
                 .iter()
                 .filter(|x| x.then.is_some())
                 .count()
+            - self.removals.len()
     }
+}
+
+/// An effect found in an early round that did not pay for its parameters
+/// in its own round's fit and that, with the later rounds' effects in the
+/// model, the model does as well without: removed (a sensor offset on the
+/// pendulum credited from per-file offsets that a spring on it had made
+/// agree, fitted to 4.9e-5 rad once the spring was in).
+#[derive(Clone, Debug)]
+pub struct Removal {
+    /// The round (from 1) that found it.
+    pub round: usize,
+    /// The effect removed.
+    pub effect: EffectInstance,
+    /// Cost of the final model with it...
+    pub cost_with: f64,
+    /// ...and without it, refitted.
+    pub cost_without: f64,
+    /// Its stage in [`Story::stages`].
+    pub stage: usize,
 }
 
 /// An effect found in an early round that, with the later rounds' effects
@@ -621,6 +644,7 @@ fn story(
         text: current_text,
         fit,
         simplifications: Vec::new(),
+        removals: Vec::new(),
         stages,
     };
     end.run(text, &rounds, experiments, opts, progress)?;
@@ -631,6 +655,7 @@ fn story(
         text: end.text,
         stop,
         simplifications: end.simplifications,
+        removals: end.removals,
         better_start,
         stabilised: None,
         unexplained,
@@ -764,6 +789,7 @@ struct EndSteps {
     text: String,
     fit: FitResult,
     simplifications: Vec<Simplification>,
+    removals: Vec<Removal>,
     stages: Vec<Stage>,
 }
 
@@ -796,6 +822,27 @@ impl EndSteps {
         let found: Vec<usize> = (0..rounds.len())
             .filter(|&k| rounds[k].effect.is_some())
             .collect();
+        // an earlier round's effect that did not pay for its parameters in
+        // its own round's fit ([`DiagnoseOptions::per_parameter_gain`] each)
+        // is removed when the model without it, the later effects in, does
+        // as well on the same terms
+        let per = opts.diagnose.per_parameter_gain;
+        for &k in found.iter().take(found.len().saturating_sub(1)) {
+            let (Some(inst), Some(after)) = (&rounds[k].effect, rounds[k].cost_after) else {
+                continue;
+            };
+            let margin = 1.0 + per * inst.parameters.len() as f64;
+            if after * margin < rounds[k].cost_before {
+                continue;
+            }
+            let Some((text2, f2, _)) = self.rebuilt(text, k, None, experiments, opts, progress)
+            else {
+                continue;
+            };
+            if f2.after_cost <= margin * self.fit.after_cost {
+                self.remove(k, (text2, f2), experiments, opts)?;
+            }
+        }
         for &k in found.iter().take(found.len().saturating_sub(1)) {
             let Some((text2, f2, to)) = self.simpler(text, k, experiments, opts, progress) else {
                 continue;
@@ -900,11 +947,29 @@ impl EndSteps {
     ) -> Option<(String, FitResult, EffectInstance)> {
         let from = self.applied.get(k)?.as_ref()?;
         let (_, simpler) = NESTED.iter().find(|(outer, _)| *outer == from.effect)?;
-        progress(&StoryProgress::Step(format!(
-            "trying {simpler}@{} for {}",
-            from.target,
-            from.label()
-        )));
+        let (text, f, put) = self.rebuilt(text, k, Some(simpler), experiments, opts, progress)?;
+        Some((text, f, put?))
+    }
+
+    /// The model rebuilt from `text` with round `k`'s effect replaced by
+    /// effect `with` on its target, or left out (None), the other effects
+    /// as `applied` has them, fitted from the values of the model as it
+    /// stands: its text, fit and the effect put in; None when it cannot be
+    /// built or fitted.
+    fn rebuilt(
+        &self,
+        text: &str,
+        k: usize,
+        with: Option<&str>,
+        experiments: &[Experiment],
+        opts: &StoryOptions,
+        progress: &mut dyn FnMut(&StoryProgress),
+    ) -> Option<(String, FitResult, Option<EffectInstance>)> {
+        let from = self.applied.get(k)?.as_ref()?;
+        progress(&StoryProgress::Step(match with {
+            Some(w) => format!("trying {w}@{} for {}", from.target, from.label()),
+            None => format!("trying the model without {}", from.label()),
+        }));
         let mut current = text.to_string();
         let mut put = None;
         for (j, inst) in self.applied.iter().enumerate() {
@@ -912,8 +977,11 @@ impl EndSteps {
                 continue;
             };
             let inst = if j == k {
+                let Some(with) = with else {
+                    continue;
+                };
                 let m = model_from_text("simpler", &current).ok()?;
-                let to = EffectInstance::candidate(&m, simpler, &inst.target).ok()?;
+                let to = EffectInstance::candidate(&m, with, &inst.target).ok()?;
                 put = Some(to.clone());
                 to
             } else {
@@ -929,9 +997,39 @@ impl EndSteps {
             ..opts.fit.clone()
         };
         let f = fit(&m2, experiments, &fo).ok()?;
-        let mut put = put?;
-        write_fitted(&mut put, &f);
+        if let Some(put) = &mut put {
+            write_fitted(put, &f);
+        }
         Some((current, f, put))
+    }
+
+    /// Take round `k`'s effect out: the model becomes `text` fitted by `f`,
+    /// with its stage and record.
+    fn remove(
+        &mut self,
+        k: usize,
+        (text, f): (String, FitResult),
+        experiments: &[Experiment],
+        opts: &StoryOptions,
+    ) -> Result<(), StoryError> {
+        let Some(effect) = self.applied[k].take() else {
+            return Ok(());
+        };
+        let m = model_from_text("without", &text).map_err(StoryError::Model)?;
+        let removal = Removal {
+            round: k + 1,
+            effect,
+            cost_with: self.fit.after_cost,
+            cost_without: f.after_cost,
+            stage: self.stages.len(),
+        };
+        let label = format!("without {}, fitted", removal.effect.label());
+        self.stages
+            .push(stage(&label, &text, &m, Some(&f), experiments, opts)?);
+        self.removals.push(removal);
+        self.text = text;
+        self.fit = f;
+        Ok(())
     }
 
     /// Is round `k`'s effect, a Stribeck friction, fitted in the model as it

@@ -308,10 +308,42 @@ fn story(
             }
         }
     }
+    // earlier effects the model no longer needs (before the
+    // simplifications, as the story ran them)
+    let mut summary_removed = Vec::new();
+    for (i, removal) in s.removals.iter().enumerate() {
+        let n = 3 + s.rounds.len() + i;
+        let ratio = removal.cost_without / removal.cost_with.max(f64::MIN_POSITIVE);
+        let _ = writeln!(
+            out,
+            "\n{n}. removed: `{}` (round {}) did not pay for its parameters in its own round, and with the later effects in the model does as well without it (cost {:.3e} with it, {:.3e} without: {ratio:.3}x)",
+            removal.effect.label(),
+            removal.round,
+            removal.cost_with,
+            removal.cost_without,
+        );
+        if let Some(stage) = s.stages.get(removal.stage) {
+            let m2 = model_from_text("stage", &stage.text).map_err(fail)?;
+            show_stage(
+                (out, err),
+                (&staging, dir),
+                &format!("{n}-removed"),
+                &m2,
+                &measured,
+                stage,
+            )?;
+        }
+        summary_removed.push(serde_json::json!({
+            "round": removal.round,
+            "effect": removal.effect.label(),
+            "cost_with": removal.cost_with,
+            "cost_without": removal.cost_without,
+        }));
+    }
     // earlier effects replaced by their simpler form
     let mut summary_simplified = Vec::new();
     for (i, simple) in s.simplifications.iter().enumerate() {
-        let n = 3 + s.rounds.len() + i;
+        let n = 3 + s.rounds.len() + s.removals.len() + i;
         let ratio = simple.cost_simpler / simple.cost_with.max(f64::MIN_POSITIVE);
         match &simple.then {
             None => {
@@ -362,7 +394,7 @@ fn story(
             "cost_simpler": simple.cost_simpler,
         }));
     }
-    if !s.simplifications.is_empty() {
+    if !s.simplifications.is_empty() || !s.removals.is_empty() {
         write_estimates(out, &s.fit.parameters);
     }
     // the result
@@ -411,6 +443,7 @@ fn story(
         })),
         "rounds": summary_rounds,
         "simplified": summary_simplified,
+        "removed": summary_removed,
         "fit": crate::commands::fit::fit_json(&s.fit),
         "seconds": elapsed,
         "files": files,
