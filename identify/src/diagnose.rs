@@ -142,10 +142,6 @@ pub struct DiagnoseOptions {
     /// records under an unlogged disturbance, where a spring fitted the
     /// feedback's answer to it for 1.42x).
     pub partial_credit: bool,
-    /// LM's relative SSR decrease at which a screening refit of a
-    /// candidate stops ([`SCREENING_TOLERANCE`]; a refit that must be
-    /// thorough, [`FitOptions::tolerance`]).
-    pub screening_tolerance: f64,
 }
 
 impl Default for DiagnoseOptions {
@@ -157,7 +153,6 @@ impl Default for DiagnoseOptions {
             min_gain: MIN_GAIN,
             per_parameter_gain: 0.02,
             partial_credit: true,
-            screening_tolerance: SCREENING_TOLERANCE,
         }
     }
 }
@@ -835,10 +830,6 @@ pub fn diagnose_from(
             && (r.gain >= opts.min_gain || refit_within(r, floor, FLOOR_REACHED))
     };
     if !ranking.iter().any(clear) {
-        let thorough = DiagnoseOptions {
-            screening_tolerance: opts.fit.tolerance,
-            ..opts.clone()
-        };
         let partial_targets: Vec<String> = ranking
             .iter()
             .filter(|r| {
@@ -856,18 +847,17 @@ pub fn diagnose_from(
                     && c.target == target
                     && edited[j].1 .1
                 {
-                    // to the final tolerance, and from the nominal values
-                    // too: the template's tiny hump over the baseline's
-                    // gearbox friction stalled at 1.17x from the baseline
-                    // and at 1.28x from the nominal values at the screening
-                    // tolerance (the hump and `vs` crawl)
+                    // and from the nominal values too: the template's tiny
+                    // hump over the baseline's gearbox friction stalled at
+                    // 1.17x from the baseline, from the nominal values (the
+                    // template's hump, [`second_start`]) it reached the floor
                     refit(
                         &mut ranking[j],
                         &edited[j].0,
                         &model,
                         &baseline,
                         experiments,
-                        &thorough,
+                        opts,
                     );
                     if !settled(&ranking, floor) && may_restart() {
                         second_start(
@@ -876,7 +866,7 @@ pub fn diagnose_from(
                             &baseline,
                             true,
                             experiments,
-                            &thorough,
+                            opts,
                         );
                     }
                 }
@@ -1722,7 +1712,7 @@ fn screening(opts: &DiagnoseOptions, start: Vec<f64>, horizon: Horizon) -> FitOp
         horizon,
         multistart: 0,
         act_on_identifiability: false,
-        tolerance: opts.screening_tolerance,
+        tolerance: SCREENING_TOLERANCE,
         warm: None,
         alternative_start: None,
         simulate_start: false,
