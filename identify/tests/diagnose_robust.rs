@@ -499,21 +499,15 @@ fn a_mild_stribeck_hump_on_the_arm_is_named() {
     assert!((vs / 0.2 - 1.0).abs() < 0.15, "vs = {vs}");
 }
 
-/// Two effects that each hide the other: a spring on the arm (2.5e-3 N m
-/// per rad) and dry friction in the pendulum's joint (5e-4 N m). Alone, the
-/// Coulomb friction's refit gains 1.45x and the spring's 1.12x, 17.5x above
-/// the noise floor: no candidate passed and the story stopped with an
-/// unexplained residual. The story now puts the best candidate on trial,
-/// and the spring, with the friction in, reaches the floor (14.6x): both
-/// are kept, the first marked as on trial, each within 5 % of the synth
-/// truth, the final cost at the floor.
-#[test]
-fn two_effects_that_hide_each_other_are_found_on_trial() {
+/// The held-out-style rig of the tests below (values off nominal, a
+/// driven run and two free swings of 15 s at 500 Hz) with `effects`
+/// hidden, through the whole story.
+fn story_on_held_out_rig(test: &str, effects: &[&str]) -> plantc_identify::Story {
     let text = pendulum_text();
     let exps = synth(
-        "spring_arm_coulomb_pendulum",
+        test,
         &text,
-        &["spring:theta=2.5e-3", "coulomb_friction:alpha=5e-4"],
+        effects,
         &[
             ("J1", 1.45e-3),
             ("l2", 0.159),
@@ -537,6 +531,42 @@ fn two_effects_that_hide_each_other_are_found_on_trial() {
     .expect("identifies");
     common::show_rounds(&story);
     eprintln!("{}", story.stop);
+    story
+}
+
+/// The final model of `story`, checked to end at the noise floor (1.3x),
+/// and its fitted value of parameter `name`.
+fn final_at_floor(story: &plantc_identify::Story) -> impl Fn(&str) -> Option<f64> + '_ {
+    let floor = plantc_identify::weights::noise_cost(&story.fit.weights);
+    assert!(
+        story.fit.after_cost <= 1.3 * floor,
+        "final cost {:.3e} vs floor {floor:.3e}",
+        story.fit.after_cost
+    );
+    let model = plantc_identify::diagnose::model_from_text("final", &story.text).expect("checks");
+    move |name: &str| {
+        model
+            .parameters
+            .iter()
+            .position(|p| p.name == name)
+            .map(|i| story.fit.base[i])
+    }
+}
+
+/// Two effects that each hide the other: a spring on the arm (2.5e-3 N m
+/// per rad) and dry friction in the pendulum's joint (5e-4 N m). Alone, the
+/// Coulomb friction's refit gains 1.45x and the spring's 1.12x, 17.5x above
+/// the noise floor: no candidate passed and the story stopped with an
+/// unexplained residual. The story now puts the best candidate on trial,
+/// and the spring, with the friction in, reaches the floor (14.6x): both
+/// are kept, the first marked as on trial, each within 5 % of the synth
+/// truth, the final cost at the floor.
+#[test]
+fn two_effects_that_hide_each_other_are_found_on_trial() {
+    let story = story_on_held_out_rig(
+        "spring_arm_coulomb_pendulum",
+        &["spring:theta=2.5e-3", "coulomb_friction:alpha=5e-4"],
+    );
     let found: Vec<(String, bool)> = story
         .rounds
         .iter()
@@ -552,22 +582,8 @@ fn two_effects_that_hide_each_other_are_found_on_trial() {
         found.iter().any(|(_, t)| *t),
         "no round on trial: {found:?}"
     );
-    let floor = plantc_identify::weights::noise_cost(&story.fit.weights);
-    assert!(
-        story.fit.after_cost <= 1.3 * floor,
-        "final cost {:.3e} vs floor {floor:.3e}",
-        story.fit.after_cost
-    );
-    let model = plantc_identify::diagnose::model_from_text("final", &story.text).expect("checks");
-    let value = |name: &str| {
-        model
-            .parameters
-            .iter()
-            .position(|p| p.name == name)
-            .map(|i| story.fit.base[i])
-            .expect(name)
-    };
-    let (k, fc) = (value("k_theta"), value("Fc_alpha"));
+    let value = final_at_floor(&story);
+    let (k, fc) = (value("k_theta").expect("k"), value("Fc_alpha").expect("Fc"));
     eprintln!("k {k:.4e} (truth 2.5e-3), Fc {fc:.4e} (truth 5e-4)");
     assert!((k / 2.5e-3 - 1.0).abs() < 0.05, "k = {k}");
     assert!((fc / 5e-4 - 1.0).abs() < 0.05, "Fc = {fc}");
@@ -585,33 +601,10 @@ fn two_effects_that_hide_each_other_are_found_on_trial() {
 /// no sensor offset, within 5 % of the synth truth, at the floor.
 #[test]
 fn an_effect_the_later_ones_make_unnecessary_is_removed() {
-    let text = pendulum_text();
-    let exps = synth(
+    let story = story_on_held_out_rig(
         "spring_pendulum_delay",
-        &text,
         &["input_delay:Vm=4e-3", "spring:alpha=2e-3"],
-        &[
-            ("J1", 1.45e-3),
-            ("l2", 0.159),
-            ("b1", 2.6e-3),
-            ("b2", 7e-4),
-            ("Fg1", 0.011),
-        ],
-        &[
-            "driven:alpha0=180deg,band=0.2-5,rms=1.2,seed=7,duration=15,name=driven",
-            "free_swing:alpha0=110deg,duration=15,name=fs1",
-            "free_swing:alpha0=160deg,duration=15,name=fs2",
-        ],
-        500.0,
     );
-    let story = plantc_identify::identify(
-        &text,
-        &exps,
-        &plantc_identify::StoryOptions::default(),
-        &mut |_| {},
-    )
-    .expect("identifies");
-    common::show_rounds(&story);
     for r in &story.removals {
         eprintln!(
             "removed {} (round {}): {:.4e} -> {:.4e}",
@@ -621,23 +614,9 @@ fn an_effect_the_later_ones_make_unnecessary_is_removed() {
             r.cost_without
         );
     }
-    let model = plantc_identify::diagnose::model_from_text("final", &story.text).expect("checks");
-    assert!(model.parameter("d_alpha").is_none(), "{}", story.text);
-    let floor = plantc_identify::weights::noise_cost(&story.fit.weights);
-    assert!(
-        story.fit.after_cost <= 1.3 * floor,
-        "final cost {:.3e} vs floor {floor:.3e}",
-        story.fit.after_cost
-    );
-    let value = |name: &str| {
-        model
-            .parameters
-            .iter()
-            .position(|p| p.name == name)
-            .map(|i| story.fit.base[i])
-            .expect(name)
-    };
-    let (k, td) = (value("k_alpha"), value("Td_Vm"));
+    let value = final_at_floor(&story);
+    assert!(value("d_alpha").is_none(), "{}", story.text);
+    let (k, td) = (value("k_alpha").expect("k"), value("Td_Vm").expect("Td"));
     eprintln!("k {k:.4e} (truth 2e-3), Td {td:.4e} (truth 4e-3)");
     assert!((k / 2e-3 - 1.0).abs() < 0.05, "k = {k}");
     assert!((td / 4e-3 - 1.0).abs() < 0.05, "Td = {td}");
