@@ -639,6 +639,12 @@ pub fn diagnose_from(
                 replay_follows(&model, experiments, &nominal).unwrap_or(true)
             })
     };
+    // a candidate that passes by more than a partial gain: the verdict
+    // gain, or to the floor
+    let passes_clearly = |r: &Ranked| {
+        passes(r, baseline.after_cost, floor, opts)
+            && (r.gain >= opts.min_gain || refit_within(r, floor, FLOOR_REACHED))
+    };
     // (`partial_counts`: whether a candidate that passes by a partial gain
     // only, [`PARTIAL_GAIN`] far above the floor, ends the struggle)
     let second_start_at = |ranking: &mut [Ranked], idx: usize, partial_counts: bool| {
@@ -648,10 +654,11 @@ pub fn diagnose_from(
             // baseline itself is suspect: every refitted candidate gets its
             // start from the nominal values
             let explains = |r: &Ranked| {
-                passes(r, baseline.after_cost, floor, opts)
-                    && (partial_counts
-                        || r.gain >= opts.min_gain
-                        || refit_within(r, floor, FLOOR_REACHED))
+                if partial_counts {
+                    passes(r, baseline.after_cost, floor, opts)
+                } else {
+                    passes_clearly(r)
+                }
             };
             let struggling = floor > 0.0
                 && baseline.after_cost >= PARTIAL_BASELINE * floor
@@ -707,23 +714,21 @@ pub fn diagnose_from(
     let mut explained_by: Option<(String, f64)> = None;
     let mut from_coulomb_done: Vec<(usize, f64)> = Vec::new();
     for &idx in &leaders {
-        if explained_by.is_none() {
-            explained_by = ranking
-                .iter()
-                .find(|r| {
-                    let decisive = r.gain >= DECISIVE_GAIN && refit_within(r, floor, FLOOR_REACHED);
-                    passes(r, baseline.after_cost, floor, opts)
-                        && (refit_within(r, floor, EXPLAINED)
-                            || ((refit_within(r, floor, NOTHING_LEFT) || decisive)
-                                && !nested_pending(r, &ranking, &leaders, true)))
-                })
-                .map(|r| {
-                    let cost = r.fit.as_ref().map_or(f64::NAN, |f| f.after_cost);
-                    (r.candidate.label(), cost / floor)
-                });
-        }
+        explained_by = ranking
+            .iter()
+            .find(|r| {
+                let decisive = r.gain >= DECISIVE_GAIN && refit_within(r, floor, FLOOR_REACHED);
+                passes(r, baseline.after_cost, floor, opts)
+                    && (refit_within(r, floor, EXPLAINED)
+                        || ((refit_within(r, floor, NOTHING_LEFT) || decisive)
+                            && !nested_pending(r, &ranking, &leaders, true)))
+            })
+            .map(|r| {
+                let cost = r.fit.as_ref().map_or(f64::NAN, |f| f.after_cost);
+                (r.candidate.label(), cost / floor)
+            });
         if explained_by.is_some() {
-            continue;
+            break;
         }
         refit_at(&mut ranking, idx);
         // a leader that shows some of the effect, but less than a clear
@@ -820,16 +825,13 @@ pub fn diagnose_from(
     // A speed force that passes by a partial gain only, while nothing
     // passes clearly, bends like the missing force over part of the
     // speeds only: the other speed forces on its target are refitted too,
-    // whatever their equation-error rank (a Stribeck friction on the arm
-    // over its gearbox friction: no admissible hump by equation error, a
-    // quadratic drag credited with 1.69x and the next round 3.9x the
-    // floor unexplained; the Stribeck friction refitted from the nominal
-    // values reaches the floor).
-    let clear = |r: &Ranked| {
-        passes(r, baseline.after_cost, floor, opts)
-            && (r.gain >= opts.min_gain || refit_within(r, floor, FLOOR_REACHED))
-    };
-    if !ranking.iter().any(clear) {
+    // whatever their equation-error rank, and started again from the
+    // nominal values as struggling candidates (a Stribeck friction on the
+    // arm over its gearbox friction: no admissible hump by equation error,
+    // a quadratic drag credited with 1.69x and the next round 3.9x the
+    // floor unexplained; the hump stalled at 1.17x from the baseline, from
+    // the template ([`second_start`]) it reached the floor).
+    if !ranking.iter().any(passes_clearly) {
         let partial_targets: Vec<String> = ranking
             .iter()
             .filter(|r| {
@@ -838,39 +840,19 @@ pub fn diagnose_from(
             })
             .map(|r| r.candidate.target.clone())
             .collect();
-        for target in partial_targets {
-            for j in 0..ranking.len() {
+        let others: Vec<usize> = (0..ranking.len())
+            .filter(|&j| {
                 let c = &ranking[j].candidate;
-                if ranking[j].fit.is_none()
+                ranking[j].fit.is_none()
                     && ranking[j].error.is_none()
                     && SPEED_FORCES.contains(&c.effect.as_str())
-                    && c.target == target
+                    && partial_targets.contains(&c.target)
                     && edited[j].1 .1
-                {
-                    // and from the nominal values too: the template's tiny
-                    // hump over the baseline's gearbox friction stalled at
-                    // 1.17x from the baseline, from the nominal values (the
-                    // template's hump, [`second_start`]) it reached the floor
-                    refit(
-                        &mut ranking[j],
-                        &edited[j].0,
-                        &model,
-                        &baseline,
-                        experiments,
-                        opts,
-                    );
-                    if !settled(&ranking, floor) && may_restart() {
-                        second_start(
-                            &mut ranking[j],
-                            &edited[j].0,
-                            &baseline,
-                            true,
-                            experiments,
-                            opts,
-                        );
-                    }
-                }
-            }
+            })
+            .collect();
+        for j in others {
+            refit_at(&mut ranking, j);
+            second_start_at(&mut ranking, j, false);
         }
     }
     // a candidate that explains the residual competes with the simpler
@@ -1252,7 +1234,7 @@ fn sensor_offsets_from_nuisance(
                     e.value = mean;
                 }
                 match refit_from(
-                    r,
+                    &r.parameters,
                     &m,
                     horizon,
                     Some((model, baseline)),
@@ -1535,7 +1517,7 @@ fn refit(
     // the candidate is judged on the baseline's terms: the same horizon
     let horizon = baseline.segments.map_or(Horizon::Whole, Horizon::Segments);
     let base = Some((model, baseline));
-    let mut outcome = refit_from(r, m, horizon, base, true, experiments, opts);
+    let mut outcome = refit_from(&r.parameters, m, horizon, base, true, experiments, opts);
     // The candidate's model contains the baseline's (the effect at zero),
     // so a refit that ends above the baseline's cost ([`TRAPPED`]) is trapped where the
     // warm start put it (the vocabulary's deadzone: 0.80x): again from the
@@ -1549,16 +1531,16 @@ fn refit(
             .as_ref()
             .map_or(true, |f| f.after_cost > TRAPPED * baseline.after_cost);
     if trapped {
-        let cold = refit_from(r, m, horizon, base, false, experiments, opts);
+        let cold = refit_from(&r.parameters, m, horizon, base, false, experiments, opts);
         outcome = match (outcome, cold) {
             (Ok(a), Ok(b)) => Ok(if b.after_cost < a.after_cost { b } else { a }),
             (Ok(a), Err(_)) => Ok(a),
             (Err(_), cold) => cold,
         };
     }
-    let outcome = outcome
-        .map(|f| (f, true))
-        .or_else(|_| refit_from(r, m, horizon, None, false, experiments, opts).map(|f| (f, false)));
+    let outcome = outcome.map(|f| (f, true)).or_else(|_| {
+        refit_from(&r.parameters, m, horizon, None, false, experiments, opts).map(|f| (f, false))
+    });
     match outcome {
         Ok((f, from_baseline)) => credit(r, f, baseline.after_cost, from_baseline),
         Err(e) => r.error = Some(e.to_string()),
@@ -1599,14 +1581,10 @@ fn second_start(
     // where its first refit stalled (a Stribeck hump on the arm over its
     // gearbox friction: 1.28x from the stalled hump, the floor from the
     // template's)
+    // (an empty equation-error score explains nothing at all)
     let unscored = r.evidence.bic_gain == 0.0 && r.evidence.residual_share == 0.0;
-    let mut from = r.clone();
-    if unscored {
-        for p in &mut from.parameters {
-            p.value = f64::NAN;
-        }
-    }
-    if let Ok(f) = refit_from(&from, m, horizon, None, false, experiments, opts) {
+    let estimates: &[Estimate] = if unscored { &[] } else { &r.parameters };
+    if let Ok(f) = refit_from(estimates, m, horizon, None, false, experiments, opts) {
         // (the same minimum found again is the first refit's, from the
         // baseline)
         if f.after_cost * SAME_MINIMUM < first.after_cost {
@@ -1663,7 +1641,7 @@ fn settled(ranking: &[Ranked], floor: f64) -> bool {
 /// starts the nuisance where the baseline's ended and goes straight to its
 /// horizon (see [`FitOptions::warm`]).
 fn refit_from(
-    r: &Ranked,
+    estimates: &[Estimate],
     m: &Model,
     horizon: Horizon,
     from: Option<(&Model, &FitResult)>,
@@ -1686,7 +1664,7 @@ fn refit_from(
     let at_floor = from
         .is_some_and(|(_, b)| reaches_floor(b.after_cost, crate::weights::noise_cost(&b.weights)));
     let alternative = at_floor.then(|| start.clone());
-    for e in &r.parameters {
+    for e in estimates {
         if let Some(j) = m.parameters.iter().position(|q| q.name == e.name) {
             if let Some((lo, hi)) = m.parameters[j].estimate {
                 // a linearised estimate well inside the box is a better start

@@ -531,97 +531,89 @@ fn story(
         }
         let cost_before = d.baseline.after_cost;
         let top = d.verdict.as_ref().and_then(|_| d.ranking.first()).cloned();
-        let Some(top) = top else {
-            // far above the floor with nothing passing, the best candidate
-            // on trial: kept when the next round's effect then explains
-            // the residual
-            let room = rounds.len() + 2 <= opts.max_effects;
-            if room && d.unexplained() && dopts.partial_credit {
-                let trial = on_trial(
+        // far above the floor with nothing passing, the best candidate on
+        // trial: kept when the next round's effect then explains the
+        // residual
+        let trial = if top.is_none()
+            && rounds.len() + 2 <= opts.max_effects
+            && d.unexplained()
+            && dopts.partial_credit
+        {
+            on_trial(
+                (&current_text, &current_model, current_fit.as_ref()),
+                &d,
+                experiments,
+                (opts, &dopts),
+                progress,
+            )?
+        } else {
+            None
+        };
+        let (inst, edited, m2, f, tentative) = match (trial, top) {
+            (Some(t), _) => {
+                pending = Some(t.next);
+                (t.effect, t.text, t.model, t.fit, true)
+            }
+            (None, Some(top)) => {
+                let (inst, edited, m2, f) = add_and_fit(
+                    &top,
                     (&current_text, &current_model, current_fit.as_ref()),
-                    &d,
                     experiments,
-                    (opts, &dopts),
+                    opts,
                     progress,
                 )?;
-                if let Some(t) = trial {
-                    let label = format!("+ {}, fitted (on trial)", t.effect.label());
-                    stages.push(stage(
-                        &label,
-                        &t.text,
-                        &t.model,
-                        Some(&t.fit),
-                        experiments,
-                        opts,
-                    )?);
-                    rounds.push(Round {
-                        ranking: d.ranking,
-                        effect: Some(t.effect),
-                        fit: Some(t.fit.clone()),
-                        cost_before,
-                        cost_after: Some(t.fit.after_cost),
-                        tentative: true,
-                    });
-                    current_text = t.text;
-                    current_fit = Some(t.fit);
-                    pending = Some(t.next);
-                    continue;
-                }
+                (inst, edited, m2, f, false)
             }
-            let caveat = d
-                .segments_caveat()
-                .map(|c| format!(" ({c})"))
-                .unwrap_or_default();
-            unexplained = d.unexplained();
-            stop = if unexplained {
-                d.verdict_line()
-            } else if d.nothing_left {
-                format!(
+            (None, None) => {
+                let caveat = d
+                    .segments_caveat()
+                    .map(|c| format!(" ({c})"))
+                    .unwrap_or_default();
+                unexplained = d.unexplained();
+                stop = if unexplained {
+                    d.verdict_line()
+                } else if d.nothing_left {
+                    format!(
                     "the residual is at the noise floor ({:.2}x): nothing left to explain{caveat}",
                     d.above_floor()
                 )
-            } else if round == 1 {
-                format!("adequate: no candidate effect lowers the cost clearly{caveat}")
-            } else {
-                format!("no further effect lowers the cost clearly{caveat}")
-            };
-            // the diagnosis may have found the model as it stands a better
-            // minimum (its baseline refitted from a candidate's values: rate
-            // survey, Coulomb friction and drag, the round-1 model 2x lower
-            // from the drag candidate's values); that fit is the story's
-            let improved = current_fit
-                .as_ref()
-                .is_some_and(|f| d.baseline.after_cost < 0.999 * f.after_cost);
-            if improved && round > 1 {
-                better_start = Some(stages.len());
-                stages.push(stage(
-                    "refitted from a better start",
-                    &current_text,
-                    &current_model,
-                    Some(&d.baseline),
-                    experiments,
-                    opts,
-                )?);
-                current_fit = Some(d.baseline.clone());
+                } else if round == 1 {
+                    format!("adequate: no candidate effect lowers the cost clearly{caveat}")
+                } else {
+                    format!("no further effect lowers the cost clearly{caveat}")
+                };
+                // the diagnosis may have found the model as it stands a better
+                // minimum (its baseline refitted from a candidate's values: rate
+                // survey, Coulomb friction and drag, the round-1 model 2x lower
+                // from the drag candidate's values); that fit is the story's
+                let improved = current_fit
+                    .as_ref()
+                    .is_some_and(|f| d.baseline.after_cost < 0.999 * f.after_cost);
+                if improved && round > 1 {
+                    better_start = Some(stages.len());
+                    stages.push(stage(
+                        "refitted from a better start",
+                        &current_text,
+                        &current_model,
+                        Some(&d.baseline),
+                        experiments,
+                        opts,
+                    )?);
+                    current_fit = Some(d.baseline.clone());
+                }
+                rounds.push(Round {
+                    ranking: d.ranking,
+                    effect: None,
+                    fit: None,
+                    cost_before,
+                    cost_after: None,
+                    tentative: false,
+                });
+                break;
             }
-            rounds.push(Round {
-                ranking: d.ranking,
-                effect: None,
-                fit: None,
-                cost_before,
-                cost_after: None,
-                tentative: false,
-            });
-            break;
         };
-        let (inst, edited, m2, f) = add_and_fit(
-            &top,
-            (&current_text, &current_model, current_fit.as_ref()),
-            experiments,
-            opts,
-            progress,
-        )?;
-        let label = format!("+ {}, fitted", inst.label());
+        let on_trial = if tentative { " (on trial)" } else { "" };
+        let label = format!("+ {}, fitted{on_trial}", inst.label());
         stages.push(stage(&label, &edited, &m2, Some(&f), experiments, opts)?);
         rounds.push(Round {
             ranking: d.ranking,
@@ -629,7 +621,7 @@ fn story(
             fit: Some(f.clone()),
             cost_before,
             cost_after: Some(f.after_cost),
-            tentative: false,
+            tentative,
         });
         current_text = edited;
         current_fit = Some(f);
@@ -908,7 +900,6 @@ impl EndSteps {
         let Some(from) = self.applied[k].replace(to.clone()) else {
             return Ok(());
         };
-        let m = model_from_text("simplified", &text).map_err(StoryError::Model)?;
         let simple = Simplification {
             round: k + 1,
             from,
@@ -918,13 +909,25 @@ impl EndSteps {
             cost_simpler: f.after_cost,
             stage: self.stages.len(),
         };
-        let label = simple.stage_label();
-        self.stages
-            .push(stage(&label, &text, &m, Some(&f), experiments, opts)?);
+        self.advance(&simple.stage_label(), (text, f), experiments, opts)?;
         self.simplifications.push(simple);
         if then.is_some() {
             self.applied.push(then);
         }
+        Ok(())
+    }
+
+    /// The model becomes `text` fitted by `f`, shown as a stage `label`.
+    fn advance(
+        &mut self,
+        label: &str,
+        (text, f): (String, FitResult),
+        experiments: &[Experiment],
+        opts: &StoryOptions,
+    ) -> Result<(), StoryError> {
+        let m = model_from_text("model", &text).map_err(StoryError::Model)?;
+        self.stages
+            .push(stage(label, &text, &m, Some(&f), experiments, opts)?);
         self.text = text;
         self.fit = f;
         Ok(())
@@ -1015,7 +1018,6 @@ impl EndSteps {
         let Some(effect) = self.applied[k].take() else {
             return Ok(());
         };
-        let m = model_from_text("without", &text).map_err(StoryError::Model)?;
         let removal = Removal {
             round: k + 1,
             effect,
@@ -1024,11 +1026,8 @@ impl EndSteps {
             stage: self.stages.len(),
         };
         let label = format!("without {}, fitted", removal.effect.label());
-        self.stages
-            .push(stage(&label, &text, &m, Some(&f), experiments, opts)?);
+        self.advance(&label, (text, f), experiments, opts)?;
         self.removals.push(removal);
-        self.text = text;
-        self.fit = f;
         Ok(())
     }
 

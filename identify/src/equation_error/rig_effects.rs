@@ -564,7 +564,12 @@ impl EquationError {
         // is a smooth speed-dependent force, not a breakaway (on Coulomb
         // data the scan took vs = 5 rad/s of a 5.5 rad/s record, and the
         // refit from there stuck the arm: cost 130x the baseline)
-        for &vs in STRIBECK_SPEEDS.iter().filter(|&&vs| 3.0 * vs <= top) {
+        let speeds: Vec<f64> = STRIBECK_SPEEDS
+            .iter()
+            .copied()
+            .filter(|&vs| 3.0 * vs <= top)
+            .collect();
+        for &vs in &speeds {
             let cols = if own {
                 vec![hump(vs)]
             } else {
@@ -581,14 +586,13 @@ impl EquationError {
             }
         }
         let Some((_, vs)) = best else {
-            // (no Stribeck velocity the record's speeds could show: 0)
-            let scanned = STRIBECK_SPEEDS.iter().any(|&vs| 3.0 * vs <= top);
-            let columns = if !scanned {
-                0
-            } else if own {
-                1
-            } else {
-                2
+            // (none when no Stribeck velocity the record's speeds could
+            // show was scanned; the hump, and the Coulomb level unless the
+            // model's own, otherwise)
+            let columns = match (speeds.is_empty(), own) {
+                (true, _) => 0,
+                (false, true) => 1,
+                (false, false) => 2,
             };
             return Ok(self.empty_score(names, columns));
         };
