@@ -57,7 +57,10 @@ fn doc_blocks() -> Vec<(String, String)> {
         docs.extend(rd.filter_map(|e| e.ok().map(|e| e.path())));
     }
     docs.sort();
-    for d in docs.iter().filter(|d| d.extension().is_some_and(|x| x == "md")) {
+    for d in docs
+        .iter()
+        .filter(|d| d.extension().is_some_and(|x| x == "md"))
+    {
         let text = std::fs::read_to_string(d).unwrap_or_default();
         let mut block: Option<(usize, String)> = None;
         for (i, line) in text.lines().enumerate() {
@@ -239,8 +242,23 @@ fn the_highlight_query_compiles_against_the_grammar() {
 
 /// Keywords the parser recognises by context (not in `parser::KEYWORDS`).
 const CONTEXTUAL: &[&str] = &[
-    "limits", "estimate", "place", "poles", "lqr", "gains", "linearize", "gain", "surface", "mode",
-    "switch", "wrap", "when", "and", "or", "swing_up", "signal",
+    "limits",
+    "estimate",
+    "place",
+    "poles",
+    "lqr",
+    "gains",
+    "linearize",
+    "gain",
+    "surface",
+    "mode",
+    "switch",
+    "wrap",
+    "when",
+    "and",
+    "or",
+    "swing_up",
+    "signal",
 ];
 
 #[test]
