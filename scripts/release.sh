@@ -10,7 +10,8 @@
 # (`rustup target add TARGET`) and a linker for it. The crates themselves
 # go to crates.io with `cargo publish -p NAME` in dependency order (fsio,
 # derive, codegen, runtime, identify, lsp, plantc); `cargo package
-# --workspace` checks them first.
+# --workspace --exclude rotpen-controller` checks them first (the example
+# reads the repository's models and is not published).
 set -euo pipefail
 cd "$(dirname "$0")/.."
 host=$(rustc -vV | sed -n 's/^host: //p')
