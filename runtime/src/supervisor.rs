@@ -466,13 +466,18 @@ impl fmt::Display for NotEngaged {
                 self.alpha.abs()
             };
             let wider = deg(closest).ceil() + 1.0;
-            let mut how = format!("widen it with --catch-window {wider:.0}deg");
-            if wider.to_radians() >= self.fall_angle_rad {
-                how.push_str(&format!(
-                    " and --fall-angle above it (now {:.1}deg; the catch window must be smaller)",
+            // a catch window is a neighbourhood of upright: past the
+            // horizontal the pendulum needs a swing-up, not a wider window
+            let how = if wider >= 90.0 {
+                "it never rose above the horizontal: a balancing controller engages only near upright, so start it near upright or use a controller with a swing-up mode (`mode name = controller swing_up`)".to_string()
+            } else if wider.to_radians() >= self.fall_angle_rad {
+                format!(
+                    "widen it with --catch-window {wider:.0}deg and --fall-angle above it (now {:.1}deg; the catch window must be smaller), or start it closer to upright",
                     deg(self.fall_angle_rad)
-                ));
-            }
+                )
+            } else {
+                format!("widen it with --catch-window {wider:.0}deg, or start it closer to upright")
+            };
             let hanging = match self.hanging_window_rad {
                 Some(h) => format!(
                     ", nor within the hanging window of {:.1}deg for swing-up (--hanging-window)",
@@ -481,7 +486,7 @@ impl fmt::Display for NotEngaged {
                 None => String::new(),
             };
             reasons.push(format!(
-                "the pendulum came no closer to upright than {:.2}deg (at t={:.3}s; now alpha = {:.1}deg), outside the catch window of {:.2}deg{hanging}; {how}, or start it closer to upright",
+                "the pendulum came no closer to upright than {:.2}deg (at t={:.3}s; now alpha = {:.1}deg), outside the catch window of {:.2}deg{hanging}; {how}",
                 deg(closest),
                 self.closest_t,
                 deg(self.alpha),
@@ -560,6 +565,13 @@ mod tests {
             text.contains("--catch-window 36deg and --fall-angle above it"),
             "{text}"
         );
+        // hanging: no window advice, a swing-up
+        let mut s = Supervisor::new(SupervisorConfig::default(), 2);
+        s.arm(0.0);
+        s.check(0.0, &x(177.0), &[0, 1]);
+        let text = s.not_engaged(1.0, &x(178.0)).unwrap().to_string();
+        assert!(text.contains("never rose above the horizontal"), "{text}");
+        assert!(!text.contains("--catch-window"), "{text}");
         // an engaged run has nothing to say
         let mut s = Supervisor::new(SupervisorConfig::default(), 2);
         s.arm(0.0);
