@@ -885,7 +885,6 @@ pub fn execute(
             let _ = writeln!(err_cell.borrow_mut(), "supervisor: {n}");
         },
     );
-    drop(err_cell);
     alloc_count::count_on_this_thread(false);
     let report = result.map_err(|e| RigError::Failure(e.to_string()))?;
     let _ = write!(out, "{report}");
