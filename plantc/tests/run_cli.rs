@@ -429,16 +429,21 @@ fn the_observer_tolerates_encoder_noise_and_input_delay() {
 #[test]
 fn a_run_that_never_engages_says_why_and_fails() {
     let model = model();
-    let (code, out, err) = plantc(&[
-        "run",
-        &model,
-        "--controller",
-        "sliding_mode",
-        "--x0",
-        "alpha=10deg",
-        "--duration",
-        "2",
-    ]);
+    let run = |extra: &[&str]| {
+        let mut args = vec![
+            "run",
+            model.as_str(),
+            "--controller",
+            "sliding_mode",
+            "--x0",
+            "alpha=10deg",
+            "--duration",
+            "2",
+        ];
+        args.extend_from_slice(extra);
+        plantc(&args)
+    };
+    let (code, out, err) = run(&[]);
     assert_eq!(code, 1, "{out}{err}");
     assert!(err.contains("supervisor: t=1.00"), "{err}");
     assert!(err.contains("s not engaged: "), "{err}");
@@ -448,18 +453,7 @@ fn a_run_that_never_engages_says_why_and_fails() {
     assert!(err.contains("the controller never engaged"), "{err}");
     assert!(out.contains("never engaged;"), "{out}");
     // with the window widened as told it engages and exits 0
-    let (code, out, err) = plantc(&[
-        "run",
-        &model,
-        "--controller",
-        "sliding_mode",
-        "--x0",
-        "alpha=10deg",
-        "--catch-window",
-        "12deg",
-        "--duration",
-        "2",
-    ]);
+    let (code, out, err) = run(&["--catch-window", "12deg"]);
     assert_eq!(code, 0, "{out}{err}");
     assert!(!err.contains("not engaged"), "{err}");
 }
