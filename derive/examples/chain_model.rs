@@ -1,4 +1,5 @@
-//! Print the model file of an n-link planar pendulum:
+//! Print the model file of an n-link planar pendulum, in the canonical
+//! layout of `plantc fmt` (as `models/chain4.plant` and `chain10.plant`):
 //! `cargo run -p plantc-derive --example chain_model -- 10 > chain10.plant`.
 
 fn main() {
@@ -6,5 +7,10 @@ fn main() {
         .nth(1)
         .and_then(|a| a.parse().ok())
         .unwrap_or(4);
-    print!("{}", plantc_derive::model::n_link_chain_source(n));
+    let text = plantc_derive::model::n_link_chain_source(n);
+    // the generator lays its tables out by hand; the formatter aligns them
+    print!(
+        "{}",
+        plantc_derive::lang::format::format(&text).unwrap_or(text)
+    );
 }

@@ -12,6 +12,8 @@
 /// @ts-check
 
 const PREC = {
+  or: 1,
+  and: 2,
   additive: 1,
   multiplicative: 2,
   unary: 3,
@@ -44,6 +46,7 @@ module.exports = grammar({
       $.signal_effect_declaration,
       $.set_block,
       $.controller_block,
+      $.recorded_controller_block,
     ),
 
     model_declaration: $ => seq('model', field('name', $.identifier), optional(field('title', $.string))),
@@ -103,8 +106,9 @@ module.exports = grammar({
       field('value', $._expression),
     ),
 
+    // `sensor q = ...`, `actuator u = ...`, `inertia q = ...`: one effect call each
     signal_effect_declaration: $ => seq(
-      choice('sensor', 'actuator'),
+      choice('sensor', 'actuator', 'inertia'),
       field('target', $.identifier),
       '=',
       field('value', $._expression),
@@ -136,7 +140,83 @@ module.exports = grammar({
       $.gains_statement,
       $.linearize_statement,
       $.gain_statement,
+      $.surface_statement,
+      $.mode_statement,
+      $.switch_statement,
+      $.wrap_statement,
       $.law_statement,
+    ),
+
+    // `surface s poles [...]` or `surface s = expr` (sliding mode)
+    surface_statement: $ => seq(
+      'surface',
+      field('name', $.identifier),
+      choice(
+        seq('poles', '[', commaSep($.pole), ']'),
+        seq('=', field('value', $._expression)),
+      ),
+    ),
+
+    // `mode name = controller [swing_up]` (hybrid controllers)
+    mode_statement: $ => seq(
+      'mode',
+      field('name', $.identifier),
+      '=',
+      field('controller', $.identifier),
+      optional('swing_up'),
+    ),
+
+    // `switch a -> b when condition`
+    switch_statement: $ => seq(
+      'switch',
+      field('from', $.identifier),
+      '->',
+      field('to', $.identifier),
+      'when',
+      field('condition', $._condition),
+    ),
+
+    // `wrap q`: the modes and conditions see angle q wrapped into [-pi, pi)
+    wrap_statement: $ => seq('wrap', field('coordinate', $.identifier)),
+
+    _condition: $ => choice($.comparison, $.condition),
+
+    condition: $ => choice(
+      prec.left(PREC.or, seq(field('left', $._condition), field('operator', 'or'), field('right', $._condition))),
+      prec.left(PREC.and, seq(field('left', $._condition), field('operator', 'and'), field('right', $._condition))),
+    ),
+
+    comparison: $ => seq(
+      field('left', $._expression),
+      field('operator', choice('<', '<=', '>', '>=')),
+      field('right', $._expression),
+    ),
+
+    // `recorded controller name "title" { ... }`: the law that made a
+    // recording's input, replayed by identification
+    recorded_controller_block: $ => seq(
+      'recorded',
+      'controller',
+      field('name', $.identifier),
+      optional(field('title', $.string)),
+      '{',
+      repeat($._recorded_statement),
+      '}',
+    ),
+
+    _recorded_statement: $ => choice(
+      $.signal_statement,
+      $.gain_statement,
+      $.let_declaration,
+      $.law_statement,
+    ),
+
+    // `signal name [unit] "doc"`: a data column the law reads
+    signal_statement: $ => seq(
+      'signal',
+      field('name', $.identifier),
+      optional(field('unit', $.unit)),
+      optional(field('doc', $.string)),
     ),
 
     place_statement: $ => seq('place', 'poles', '[', commaSep($.pole), ']'),

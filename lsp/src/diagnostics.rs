@@ -6,9 +6,8 @@ use lsp_types::{
     CodeAction, CodeActionKind, CodeActionOrCommand, Diagnostic, DiagnosticRelatedInformation,
     DiagnosticSeverity, Location, NumberOrString, Range, TextEdit, Uri, WorkspaceEdit,
 };
-use plantc_derive::lang::check::suggest;
 use plantc_derive::lang::diagnostic::Severity;
-use plantc_derive::lang::units::UNITS;
+use plantc_derive::lang::units::readings;
 use plantc_derive::lang::Span;
 use std::collections::HashMap;
 
@@ -85,7 +84,8 @@ fn is_number(s: &str) -> bool {
 /// Quick fixes for the diagnostics that overlap `range`:
 /// - a misspelt name (the help says "did you mean `x`?"): replace it;
 /// - a number without its unit (the help names the unit): add it;
-/// - an unknown unit: the nearest known units.
+/// - an unknown unit: what it was meant to be, when that has one dimension
+///   (`[kgm^2]` -> `[kg*m^2]`; see `units::readings`).
 pub fn code_actions(a: &Analysis, uri: &Uri, range: Range) -> Vec<CodeActionOrCommand> {
     let (lo, hi) = (a.doc.offset(range.start), a.doc.offset(range.end));
     let lsp = to_lsp(a, uri);
@@ -117,8 +117,9 @@ pub fn code_actions(a: &Analysis, uri: &Uri, range: Range) -> Vec<CodeActionOrCo
                 }
             }
         }
+        // only what the text meant, of one dimension (`units::readings`)
         if d.code == "plantc::unknown_unit" && is_name(&here) {
-            for u in suggest(&here, UNITS.iter().map(|u| u.name)) {
+            for u in readings(&here) {
                 fixes.push((format!("Replace unit `{here}` with `{u}`"), d.primary, u));
             }
         }

@@ -114,14 +114,31 @@ fn quick_fixes_add_a_missing_unit_and_fix_a_keyword() {
     );
     assert_eq!(a[0]["title"], "Replace `kinetik` with `kinetic`");
 
-    let t = SMALL.replace("[kg]", "[kgs]");
-    let (s, d) = open(&t);
-    let a = req(
-        &s,
-        "textDocument/codeAction",
-        json!({"textDocument": {"uri": URI}, "range": d[0]["range"], "context": {"diagnostics": []}}),
-    );
-    assert_eq!(a[0]["title"], "Replace unit `kgs` with `kg`", "{a}");
+    // unit fixes keep the dimension the text meant (units::readings)
+    let fixes = |unit: &str| {
+        let t = SMALL.replace("[kg]", unit);
+        let (s, d) = open(&t);
+        let a = req(
+            &s,
+            "textDocument/codeAction",
+            json!({"textDocument": {"uri": URI}, "range": d[0]["range"], "context": {"diagnostics": []}}),
+        );
+        a.as_array()
+            .unwrap()
+            .iter()
+            .map(|x| {
+                x["edit"]["changes"][URI][0]["newText"]
+                    .as_str()
+                    .unwrap()
+                    .to_string()
+            })
+            .collect::<Vec<_>>()
+    };
+    // `[kgm^2]` is kg*m^2, never kg
+    assert_eq!(fixes("[kgm^2]"), vec!["kg*m"]);
+    assert_eq!(fixes("[kgg]"), vec!["kg"]);
+    // kg*s or a plural kg: not known, so no fix
+    assert!(fixes("[kgs]").is_empty());
 }
 
 #[test]
@@ -341,5 +358,44 @@ fn formatting_edits_only_the_lines_that_change() {
     assert_eq!(
         e[0]["newText"],
         "coordinate q : angle\nparameter m = 1 [kg]\n"
+    );
+}
+
+/// Issue 28: a rename to a name already taken answers an error that says so
+/// and where the name is declared.
+#[test]
+fn rename_to_a_taken_name_says_so() {
+    let rename = |text: &str, at: &str, new: &str| {
+        let (s, _) = open(text);
+        let r = s.request(Request::new(
+            RequestId::from(3),
+            "textDocument/rename".into(),
+            json!({"textDocument": {"uri": URI}, "position": after(text, at), "newName": new}),
+        ));
+        let e = r.response_result.expect_err("an error");
+        // RequestFailed (LSP 3.17)
+        assert_eq!(e.code, -32803);
+        e.message
+    };
+    // `let I` -> `m`, a parameter on line 4
+    let m = rename(SMALL, "let I", "m");
+    assert_eq!(
+        m,
+        "`m` is already taken: the parameter `m` is declared on line 4; choose another name"
+    );
+    // a set -> a controller's name (one namespace)
+    let t = format!("{SMALL}controller pp {{ place poles [-1, -2] }}\n");
+    let m = rename(&t, "set s", "pp");
+    assert!(
+        m.contains("`pp` is already taken: the set or controller `pp`"),
+        "{m}"
+    );
+    // a model name -> a recorded controller's own name
+    let t =
+        format!("{SMALL}recorded controller r {{\n    signal ref [rad]\n    u = 2*(ref - q)\n}}\n");
+    let m = rename(&t, "parameter l", "ref");
+    assert!(
+        m.contains("`ref` is already taken: the recorded controller's signal `ref`"),
+        "{m}"
     );
 }

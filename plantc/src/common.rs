@@ -336,6 +336,20 @@ pub fn same_file(a: &Path, b: &Path) -> bool {
     }
 }
 
+/// A model text in the canonical layout of `plantc fmt`: every model file
+/// plantc writes goes through it. The formatter refuses only texts with
+/// syntax errors, which a model that loaded cannot have, and texts whose
+/// meaning it would change (its own bug, caught by its check); such a text is
+/// returned as it is rather than lost.
+pub fn canonical(text: &str) -> String {
+    plantc_derive::lang::format::format(text).unwrap_or_else(|_| text.to_string())
+}
+
+/// Writes a model file (crash-safe) in the canonical layout.
+pub fn write_model(path: &Path, text: &str) -> Result<(), CliError> {
+    write_output(path, canonical(text))
+}
+
 /// Writes `bytes` to `path` crash-safely (temporary file, fsync, rename):
 /// a kill at any moment leaves the old complete file or the new one.
 pub fn write_output(path: &Path, bytes: impl AsRef<[u8]>) -> Result<(), CliError> {

@@ -7,27 +7,38 @@ use common::{plantc, repo, s, tmp};
 use std::io::Write;
 use std::process::{Command, Stdio};
 
+/// A bundled model with its tables no longer aligned (the bundled models
+/// are canonical): every run of blanks inside a line squeezed to one.
+fn squeezed(m: &str) -> String {
+    let text = std::fs::read_to_string(repo().join("models").join(m)).unwrap();
+    text.lines()
+        .map(|l| {
+            let indent = l.len() - l.trim_start().len();
+            let rest = l[indent..].split(' ').filter(|w| !w.is_empty());
+            format!("{}{}\n", &l[..indent], rest.collect::<Vec<_>>().join(" "))
+        })
+        .collect()
+}
+
 #[test]
 fn formats_files_and_directories_in_place() {
     let dir = tmp("fmt");
     let models = ["rotary_pendulum.plant", "cart_pole.plant", "pendubot.plant"];
     for m in models {
-        std::fs::copy(repo().join("models").join(m), dir.join(m)).unwrap();
+        std::fs::write(dir.join(m), squeezed(m)).unwrap();
     }
     std::fs::write(dir.join("notes.txt"), "not a model").unwrap();
 
     let (code, out, err) = plantc(&["fmt", "--check", &s(&dir)]);
     assert_eq!(code, 1, "{out}{err}");
+    // cart_pole's coordinates, aligned on line 6, are its first table
     assert!(
-        out.contains("cart_pole.plant: not formatted (first difference on line 13)"),
+        out.contains("cart_pole.plant: not formatted (first difference on line 6)"),
         "{out}"
     );
     // --check writes nothing
     for m in models {
-        assert_eq!(
-            std::fs::read_to_string(dir.join(m)).unwrap(),
-            std::fs::read_to_string(repo().join("models").join(m)).unwrap()
-        );
+        assert_eq!(std::fs::read_to_string(dir.join(m)).unwrap(), squeezed(m));
     }
 
     let (code, out, err) = plantc(&["fmt", &s(&dir)]);
@@ -35,10 +46,8 @@ fn formats_files_and_directories_in_place() {
     assert_eq!(out.matches("formatted ").count(), 3, "{out}");
     for m in models {
         let text = std::fs::read_to_string(dir.join(m)).unwrap();
-        let want = plantc_derive::lang::format::format(
-            &std::fs::read_to_string(repo().join("models").join(m)).unwrap(),
-        )
-        .unwrap();
+        // the canonical layout of the squeezed copy is the bundled model
+        let want = std::fs::read_to_string(repo().join("models").join(m)).unwrap();
         assert_eq!(text, want, "{m}");
     }
     assert_eq!(
@@ -111,5 +120,65 @@ fn standard_input_to_standard_output() {
     assert_eq!(
         String::from_utf8(out.stdout).unwrap(),
         "model m  # the model\nparameter a = 1 [kg]\n"
+    );
+}
+
+/// Every model file of the repository (tracked by git; the whole tree when
+/// git is not at hand) outside `tests/` directories (those keep the layouts
+/// their tests are about) is in the canonical layout: `plantc fmt --check`
+/// over them passes. Run `plantc fmt FILE` on a file this names.
+#[test]
+fn every_model_file_of_the_repository_is_canonical() {
+    fn walk(dir: &std::path::Path, out: &mut Vec<std::path::PathBuf>) {
+        let mut entries: Vec<_> = std::fs::read_dir(dir)
+            .unwrap()
+            .filter_map(|e| e.ok().map(|e| e.path()))
+            .collect();
+        entries.sort();
+        for p in entries {
+            let name = p.file_name().and_then(|n| n.to_str()).unwrap_or("");
+            if p.is_dir() {
+                if !(name.starts_with('.') || ["target", "node_modules"].contains(&name)) {
+                    walk(&p, out);
+                }
+            } else if name.ends_with(".plant") {
+                out.push(p);
+            }
+        }
+    }
+    let tracked = Command::new("git")
+        .args(["ls-files", "-z", "--", "*.plant"])
+        .current_dir(repo())
+        .output()
+        .ok()
+        .filter(|o| o.status.success() && !o.stdout.is_empty());
+    let mut files: Vec<std::path::PathBuf> = match tracked {
+        Some(o) => String::from_utf8_lossy(&o.stdout)
+            .split('\0')
+            .filter(|f| !f.is_empty())
+            .map(|f| repo().join(f))
+            .collect(),
+        None => {
+            let mut v = Vec::new();
+            walk(&repo(), &mut v);
+            v
+        }
+    };
+    files.retain(|f| {
+        !f.strip_prefix(repo())
+            .unwrap_or(f)
+            .components()
+            .any(|c| c.as_os_str() == "tests")
+    });
+    // models/ (10) at least
+    assert!(files.len() >= 10, "{files:?}");
+    let args: Vec<String> = ["fmt".to_string(), "--check".to_string()]
+        .into_iter()
+        .chain(files.iter().map(|f| s(f)))
+        .collect();
+    let (code, out, err) = plantc(&args);
+    assert_eq!(
+        code, 0,
+        "not canonical (run `plantc fmt` on them):\n{out}{err}"
     );
 }

@@ -422,3 +422,38 @@ fn the_observer_tolerates_encoder_noise_and_input_delay() {
     assert!(tail < 1f64.to_radians(), "{} deg", tail.to_degrees());
     assert!(der.is_err(), "{der:?}");
 }
+
+/// Issue 28: the sliding-mode controller released at 10 deg with the default
+/// catch window (10 deg; the encoder reads 10.02 deg) never engages: the run
+/// says why after a second, how to widen the window, and exits non-zero.
+#[test]
+fn a_run_that_never_engages_says_why_and_fails() {
+    let model = model();
+    let run = |extra: &[&str]| {
+        let mut args = vec![
+            "run",
+            model.as_str(),
+            "--controller",
+            "sliding_mode",
+            "--x0",
+            "alpha=10deg",
+            "--duration",
+            "2",
+        ];
+        args.extend_from_slice(extra);
+        plantc(&args)
+    };
+    let (code, out, err) = run(&[]);
+    assert_eq!(code, 1, "{out}{err}");
+    assert!(err.contains("supervisor: t=1.00"), "{err}");
+    assert!(err.contains("s not engaged: "), "{err}");
+    // 114 encoder counts: 10.02 deg
+    assert!(err.contains("no closer to upright than 10.02deg"), "{err}");
+    assert!(err.contains("--catch-window 12deg"), "{err}");
+    assert!(err.contains("the controller never engaged"), "{err}");
+    assert!(out.contains("never engaged;"), "{out}");
+    // with the window widened as told it engages and exits 0
+    let (code, out, err) = run(&["--catch-window", "12deg"]);
+    assert_eq!(code, 0, "{out}{err}");
+    assert!(!err.contains("not engaged"), "{err}");
+}

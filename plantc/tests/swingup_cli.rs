@@ -333,7 +333,8 @@ fn swing_up_refuses_the_observer_and_a_balancing_controller_never_engages_hangin
     assert_ne!(code, 0, "{out}{err}");
     assert!(err.contains("use --velocity derivative"), "{err}");
     assert!(!rig.exists());
-    // pole placement alone from hanging: the supervisor stays armed (0 V)
+    // pole placement alone from hanging: the supervisor stays armed (0 V),
+    // the run says why and fails (issue 28)
     let (code, out, err) = plantc(&[
         "run",
         &model,
@@ -344,8 +345,10 @@ fn swing_up_refuses_the_observer_and_a_balancing_controller_never_engages_hangin
         "--duration",
         "1",
     ]);
-    assert_eq!(code, 0, "{out}{err}");
+    assert_eq!(code, 1, "{out}{err}");
     assert!(out.contains("final state armed"), "{out}");
+    assert!(err.contains("the controller never engaged"), "{err}");
+    assert!(err.contains("swing-up mode"), "{err}");
     let (code, _, err) = plantc(&[
         "run",
         &model,

@@ -11,7 +11,7 @@ use crate::plant::Plant;
 use crate::reference_pendulum::RotaryPendulumReference;
 use crate::report::{ModeSwitch, RunReport};
 use crate::rt_os::try_realtime;
-use crate::supervisor::{FaultKind, Supervisor, SupervisorConfig, Transition};
+use crate::supervisor::{FaultKind, NotEngaged, Supervisor, SupervisorConfig, Transition};
 use crate::velocity_observer::ObserverSpec;
 use std::panic::{catch_unwind, AssertUnwindSafe};
 use std::sync::atomic::{AtomicBool, Ordering};
@@ -165,6 +165,7 @@ fn configured_estimator(
 
 struct Outcome {
     fault_detail: Option<BackendError>,
+    not_engaged: Option<NotEngaged>,
 }
 
 /// Runs the control loop with the velocity estimator `config` asks for; see
@@ -199,8 +200,31 @@ pub fn run_with_estimator(
     backend: &mut dyn Backend,
     controller: &mut dyn Controller,
     estimator: Option<&mut dyn VelocityEstimator>,
+    log: Option<&mut LogWriter>,
+    on_event: &mut dyn FnMut(&Transition),
+) -> Result<RunReport, RuntimeError> {
+    run_with_notes(
+        config,
+        backend,
+        controller,
+        estimator,
+        log,
+        on_event,
+        &mut |_| {},
+    )
+}
+
+/// [`run_with_estimator`], also calling `on_not_engaged` once when the
+/// controller has not engaged [`crate::supervisor::NOT_ENGAGED_AFTER_S`]
+/// after the start (the note is in the report too).
+pub fn run_with_notes(
+    config: &RunConfig,
+    backend: &mut dyn Backend,
+    controller: &mut dyn Controller,
+    estimator: Option<&mut dyn VelocityEstimator>,
     mut log: Option<&mut LogWriter>,
     on_event: &mut dyn FnMut(&Transition),
+    on_not_engaged: &mut dyn FnMut(&NotEngaged),
 ) -> Result<RunReport, RuntimeError> {
     let maps: Vec<EncoderMap> = backend.encoders().to_vec();
     let nq = maps.len();
@@ -278,6 +302,7 @@ pub fn run_with_estimator(
             &mut transitions,
             &mut stats,
             on_event,
+            on_not_engaged,
             Modes {
                 names: &mode_names,
                 switches: &mut mode_switches,
@@ -309,6 +334,7 @@ pub fn run_with_estimator(
     }
     Ok(RunReport {
         transitions,
+        not_engaged: outcome.not_engaged,
         final_state: sup.state(),
         fault_detail: outcome.fault_detail.map(|e| e.to_string()),
         samples: stats.samples,
@@ -341,6 +367,7 @@ fn cycle_loop(
     transitions: &mut Vec<Transition>,
     stats: &mut Stats,
     on_event: &mut dyn FnMut(&Transition),
+    on_not_engaged: &mut dyn FnMut(&NotEngaged),
     modes: Modes<'_>,
 ) -> Outcome {
     let nq = maps.len();
@@ -357,6 +384,7 @@ fn cycle_loop(
         .map(|d| (d * config.rate_hz).round().max(0.0) as u64 + 1);
     let period_ns = (period * 1e9) as u64;
     let mut fault_detail = None;
+    let mut not_engaged = None;
     let mut prev_wake: Option<Instant> = None;
     // a hybrid controller starts (reset) in its first mode
     let mut last_mode: Option<usize> = None;
@@ -425,6 +453,10 @@ fn cycle_loop(
         }
         let was_engaged = sup.output_enabled();
         emit(sup.check(t, &x, &counts), transitions);
+        if let Some(n) = sup.not_engaged(t, &x) {
+            on_not_engaged(&n);
+            not_engaged = Some(n);
+        }
 
         u_cmd[0] = 0.0;
         if sup.output_enabled() {
@@ -519,5 +551,8 @@ fn cycle_loop(
             break;
         }
     }
-    Outcome { fault_detail }
+    Outcome {
+        fault_detail,
+        not_engaged,
+    }
 }

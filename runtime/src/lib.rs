@@ -63,7 +63,9 @@ pub mod velocity_observer;
 
 pub use alloc_count::CountingAllocator;
 pub use backend::{Backend, BackendError, EncoderMap, Tick};
-pub use control_loop::{run, run_with_estimator, run_with_events, RunConfig, MAX_RATE_HZ};
+pub use control_loop::{
+    run, run_with_estimator, run_with_events, run_with_notes, RunConfig, MAX_RATE_HZ,
+};
 pub use controller::{Controller, Mode, StateFeedback};
 pub use error::RuntimeError;
 pub use estimator::{DerivativeEstimator, VelocityEstimator};
@@ -81,6 +83,7 @@ pub use report::{ModeSwitch, Percentiles, RunReport};
 pub use rig::{rig_main, ObserverInfo, RigInfo, RigModel};
 pub use sim::{SimBackend, SimConfig, SimNoise};
 pub use supervisor::{
-    FaultKind, Supervisor, SupervisorConfig, SupervisorState, SwingUpLimits, Transition,
+    FaultKind, NotEngaged, Supervisor, SupervisorConfig, SupervisorState, SwingUpLimits,
+    Transition, NOT_ENGAGED_AFTER_S,
 };
 pub use velocity_observer::{ObserverSpec, VelocityObserver};

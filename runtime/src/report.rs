@@ -1,6 +1,6 @@
 //! The summary of a run: supervisor transitions and timing statistics.
 
-use crate::supervisor::{SupervisorState, Transition};
+use crate::supervisor::{NotEngaged, SupervisorState, Transition};
 use std::fmt;
 
 /// Percentiles of a latency distribution, in nanoseconds.
@@ -32,6 +32,9 @@ pub struct ModeSwitch {
 pub struct RunReport {
     /// Supervisor transitions in order.
     pub transitions: Vec<Transition>,
+    /// Why the controller had not engaged a second after the start, if it
+    /// had not ([`crate::supervisor::NOT_ENGAGED_AFTER_S`]).
+    pub not_engaged: Option<NotEngaged>,
     /// The state at the end of the loop.
     pub final_state: SupervisorState,
     /// The backend error behind a fault, if any (e.g. the HIL code and message).
@@ -66,6 +69,16 @@ pub struct RunReport {
     pub mode_switches: Vec<ModeSwitch>,
 }
 
+impl RunReport {
+    /// Whether the controller drove the input at some point (the supervisor
+    /// reached `engaged` or `swing_up`).
+    pub fn engaged(&self) -> bool {
+        self.transitions
+            .iter()
+            .any(|t| matches!(t.to, SupervisorState::Engaged | SupervisorState::SwingUp))
+    }
+}
+
 fn us(ns: u64) -> f64 {
     ns as f64 / 1000.0
 }
@@ -87,6 +100,11 @@ impl fmt::Display for RunReport {
         )?;
         for t in &self.transitions {
             writeln!(f, "  {t}")?;
+        }
+        if let Some(n) = &self.not_engaged {
+            if !self.engaged() {
+                writeln!(f, "  never engaged; {n}")?;
+            }
         }
         for m in &self.mode_switches {
             let name = |i: usize| self.mode_names.get(i).map_or("?", String::as_str);

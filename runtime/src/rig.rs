@@ -19,7 +19,7 @@ use std::path::{Path, PathBuf};
 
 use crate::alloc_count;
 use crate::backend::Backend;
-use crate::control_loop::{run_with_estimator, RunConfig};
+use crate::control_loop::{run_with_notes, RunConfig};
 use crate::controller::{Controller, Mode};
 use crate::estimator::{DerivativeEstimator, VelocityEstimator};
 use crate::log::LogWriter;
@@ -871,14 +871,18 @@ pub fn execute(
         first: 0,
         last: 0,
     };
-    let result = run_with_estimator(
+    let err_cell = std::cell::RefCell::new(&mut *err);
+    let result = run_with_notes(
         &config,
         backend.as_mut(),
         &mut probe,
         Some(estimator.as_mut()),
         log.as_mut(),
         &mut |t| {
-            let _ = writeln!(err, "supervisor: {t}");
+            let _ = writeln!(err_cell.borrow_mut(), "supervisor: {t}");
+        },
+        &mut |n| {
+            let _ = writeln!(err_cell.borrow_mut(), "supervisor: {n}");
         },
     );
     alloc_count::count_on_this_thread(false);
@@ -895,6 +899,13 @@ pub fn execute(
     match report.final_state {
         SupervisorState::Fault(FaultKind::Stopped) => Err(RigError::Stopped),
         s @ SupervisorState::Fault(_) => Err(RigError::Fault(s)),
+        _ if !report.engaged() => Err(RigError::Failure(format!(
+            "the controller never engaged: {}",
+            report.not_engaged.map_or_else(
+                || "the run ended before the pendulum entered the catch window".to_string(),
+                |n| n.to_string()
+            )
+        ))),
         _ => Ok(report),
     }
 }

@@ -213,6 +213,10 @@ pub struct Supervisor {
     consecutive_overruns: u32,
     last_counts: Vec<i32>,
     counts_changed_at: f64,
+    armed_at: Option<f64>,
+    /// While armed: the smallest |alpha| seen and when.
+    closest: (f64, f64),
+    waiting_told: bool,
 }
 
 impl Supervisor {
@@ -224,6 +228,9 @@ impl Supervisor {
             consecutive_overruns: 0,
             last_counts: vec![0; n_encoders],
             counts_changed_at: 0.0,
+            armed_at: None,
+            closest: (f64::INFINITY, 0.0),
+            waiting_told: false,
         }
     }
 
@@ -257,6 +264,7 @@ impl Supervisor {
     /// Idle -> Armed (the loop has started).
     pub fn arm(&mut self, t: f64) -> Option<Transition> {
         if self.state == SupervisorState::Idle {
+            self.armed_at = Some(t);
             self.go(t, SupervisorState::Armed)
         } else {
             None
@@ -311,6 +319,9 @@ impl Supervisor {
         }
         match self.state {
             SupervisorState::Armed => {
+                if alpha.abs() < self.closest.0 {
+                    self.closest = (alpha.abs(), t);
+                }
                 if alpha.abs() <= self.config.catch_window_rad
                     && theta.abs() < self.config.arm_limit_rad
                 {
@@ -373,6 +384,135 @@ impl Supervisor {
         }
         None
     }
+
+    /// Once, [`NOT_ENGAGED_AFTER_S`] after arming, if still `Armed`: why the
+    /// measured state `x` does not let the controller engage.
+    pub fn not_engaged(&mut self, t: f64, x: &[f64]) -> Option<NotEngaged> {
+        let armed_at = self.armed_at?;
+        if self.waiting_told
+            || self.state != SupervisorState::Armed
+            || t - armed_at < NOT_ENGAGED_AFTER_S
+        {
+            return None;
+        }
+        self.waiting_told = true;
+        Some(NotEngaged {
+            t,
+            closest_alpha: self.closest.0,
+            closest_t: self.closest.1,
+            theta: x.get(self.config.arm_index).copied().unwrap_or(f64::NAN),
+            alpha: wrap_pi(
+                x.get(self.config.pendulum_index)
+                    .copied()
+                    .unwrap_or(f64::NAN),
+            ),
+            catch_window_rad: self.config.catch_window_rad,
+            fall_angle_rad: self.config.fall_angle_rad,
+            arm_limit_rad: self.config.arm_limit_rad,
+            hanging_window_rad: self.config.swing_up.map(|l| l.hanging_window_rad),
+        })
+    }
+}
+
+/// How long after arming a run that has not engaged says why (s). A
+/// pendulum started inside the catch window engages on the first sample; one
+/// outside it falls away from upright within about a second (the rotary
+/// pendulum's unstable pole is at 7.37 rad/s, `plantc linearize
+/// models/rotary_pendulum.plant`: an e-folding time of 0.14 s, so 10 deg grows
+/// past 90 deg in 0.3 s), so after a second waiting longer rarely helps and
+/// the user should hear why.
+pub const NOT_ENGAGED_AFTER_S: f64 = 1.0;
+
+/// Why a run has not engaged its controller yet ([`Supervisor::not_engaged`]),
+/// with the `plantc run` options (also the rig binaries') that widen the
+/// windows.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct NotEngaged {
+    /// Loop time of the note (s).
+    pub t: f64,
+    /// Arm angle (rad).
+    pub theta: f64,
+    /// Pendulum angle from upright, wrapped into [-pi, pi) (rad).
+    pub alpha: f64,
+    /// The smallest |alpha| since the start (rad): the widest catch window
+    /// needed to engage.
+    pub closest_alpha: f64,
+    /// When it was seen (s).
+    pub closest_t: f64,
+    /// The catch window (rad).
+    pub catch_window_rad: f64,
+    /// The fall angle (rad); the catch window must stay below it.
+    pub fall_angle_rad: f64,
+    /// The arm limit (rad).
+    pub arm_limit_rad: f64,
+    /// The hanging window when swing-up is allowed (rad).
+    pub hanging_window_rad: Option<f64>,
+}
+
+impl fmt::Display for NotEngaged {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        let deg = f64::to_degrees;
+        write!(f, "t={:.3}s not engaged: ", self.t)?;
+        if !(self.alpha.is_finite() && self.theta.is_finite()) {
+            return write!(f, "the measured angles are not finite");
+        }
+        let mut reasons = Vec::new();
+        if self.alpha.abs() > self.catch_window_rad {
+            // the next whole degree past the closest approach, with one to
+            // spare: the window that would have engaged then
+            let closest = if self.closest_alpha.is_finite() {
+                self.closest_alpha
+            } else {
+                self.alpha.abs()
+            };
+            let wider = deg(closest).ceil() + 1.0;
+            // a catch window is a neighbourhood of upright: past the
+            // horizontal the pendulum needs a swing-up, not a wider window
+            let how = if wider >= 90.0 {
+                "it never rose above the horizontal: a balancing controller engages only near upright, so start it near upright or use a controller with a swing-up mode (`mode name = controller swing_up`)".to_string()
+            } else if wider.to_radians() >= self.fall_angle_rad {
+                format!(
+                    "widen it with --catch-window {wider:.0}deg and --fall-angle above it (now {:.1}deg; the catch window must be smaller), or start it closer to upright",
+                    deg(self.fall_angle_rad)
+                )
+            } else {
+                format!("widen it with --catch-window {wider:.0}deg, or start it closer to upright")
+            };
+            let hanging = match self.hanging_window_rad {
+                Some(h) => format!(
+                    ", nor within the hanging window of {:.1}deg for swing-up (--hanging-window)",
+                    deg(h)
+                ),
+                None => String::new(),
+            };
+            reasons.push(format!(
+                "the pendulum came no closer to upright than {:.2}deg (at t={:.3}s; now alpha = {:.1}deg), outside the catch window of {:.2}deg{hanging}; {how}",
+                deg(closest),
+                self.closest_t,
+                deg(self.alpha),
+                deg(self.catch_window_rad),
+            ));
+        }
+        if self.theta.abs() >= self.arm_limit_rad {
+            reasons.push(format!(
+                "the arm is at theta = {:.1}deg, beyond the arm limit of {:.1}deg (--arm-limit)",
+                deg(self.theta),
+                deg(self.arm_limit_rad)
+            ));
+        }
+        if reasons.is_empty() {
+            // inside both windows now (it moved there this sample, or the
+            // swing-up speeds are exceeded)
+            return write!(
+                f,
+                "alpha = {:.1}deg, theta = {:.1}deg (within the catch window of {:.1}deg)",
+                deg(self.alpha),
+                deg(self.theta),
+                deg(self.catch_window_rad)
+            );
+        }
+        f.write_str(&reasons.join("; "))
+    }
 }
 
 #[cfg(test)]
@@ -392,6 +532,51 @@ mod tests {
         // Fault is terminal.
         assert!(s.fault(0.3, FaultKind::Stopped).is_none());
         assert_eq!(s.state().label(), "fault:pendulum_fell");
+    }
+
+    #[test]
+    fn says_once_why_it_has_not_engaged_after_a_second() {
+        let mut s = Supervisor::new(SupervisorConfig::default(), 2);
+        s.arm(0.0);
+        // released at 10.5 deg (closest), falling away
+        let x = |a: f64| [0.0, a.to_radians(), 0.0, 0.0];
+        assert!(s.check(0.0, &x(10.5), &[0, 1]).is_none());
+        assert!(s.not_engaged(0.0, &x(10.5)).is_none());
+        assert!(s.check(0.5, &x(20.0), &[0, 2]).is_none());
+        assert!(s.not_engaged(0.5, &x(20.0)).is_none());
+        assert!(s.check(1.0, &x(40.0), &[0, 3]).is_none());
+        let n = s.not_engaged(1.0, &x(40.0)).expect("a note after 1 s");
+        assert!(s.not_engaged(1.1, &x(41.0)).is_none(), "said once");
+        let text = n.to_string();
+        // the window that would have caught it at its closest: ceil(10.5) + 1
+        assert!(
+            text.contains("no closer to upright than 10.50deg (at t=0.000s; now alpha = 40.0deg)"),
+            "{text}"
+        );
+        assert!(text.contains("catch window of 10.00deg"), "{text}");
+        assert!(text.contains("--catch-window 12deg"), "{text}");
+        assert!(!text.contains("--fall-angle"), "{text}");
+        // a window that would need to reach the fall angle says so
+        let mut s = Supervisor::new(SupervisorConfig::default(), 2);
+        s.arm(0.0);
+        s.check(0.0, &x(35.0), &[0, 1]);
+        let text = s.not_engaged(1.0, &x(35.0)).unwrap().to_string();
+        assert!(
+            text.contains("--catch-window 36deg and --fall-angle above it"),
+            "{text}"
+        );
+        // hanging: no window advice, a swing-up
+        let mut s = Supervisor::new(SupervisorConfig::default(), 2);
+        s.arm(0.0);
+        s.check(0.0, &x(177.0), &[0, 1]);
+        let text = s.not_engaged(1.0, &x(178.0)).unwrap().to_string();
+        assert!(text.contains("never rose above the horizontal"), "{text}");
+        assert!(!text.contains("--catch-window"), "{text}");
+        // an engaged run has nothing to say
+        let mut s = Supervisor::new(SupervisorConfig::default(), 2);
+        s.arm(0.0);
+        s.check(0.0, &x(5.0), &[0, 1]);
+        assert!(s.not_engaged(1.0, &x(5.0)).is_none());
     }
 
     #[test]

@@ -163,6 +163,40 @@ impl miette::Diagnostic for Diagnostic {
 /// summary line still counts them all.
 pub const MAX_RENDERED: usize = 200;
 
+/// One diagnostic as JSON: severity, code, message, the primary location
+/// (1-based `line`/`column` and `end_line`/`end_column`, columns in
+/// characters), label, help and the secondary labels as `related`. The shape
+/// of `plantc check --json`'s `diagnostics`.
+pub fn to_json(source: &SourceFile, d: &Diagnostic) -> serde_json::Value {
+    let at = |span: Span| {
+        let (line, column) = source.line_col(span.start);
+        let (end_line, end_column) = source.line_col(span.end);
+        serde_json::json!({
+            "line": line,
+            "column": column,
+            "end_line": end_line,
+            "end_column": end_column,
+        })
+    };
+    let mut v = serde_json::json!({
+        "severity": d.severity.as_str(),
+        "code": d.code,
+        "message": d.message,
+        "file": source.name,
+        "label": d.label,
+        "help": d.help,
+        "related": d.secondary.iter().map(|l| {
+            let mut r = at(l.span);
+            r["message"] = serde_json::Value::from(l.text.clone());
+            r
+        }).collect::<Vec<_>>(),
+    });
+    if let (Some(o), serde_json::Value::Object(p)) = (v.as_object_mut(), at(d.primary)) {
+        o.extend(p);
+    }
+    v
+}
+
 /// Renders diagnostics as deterministic plain text (no colour, no terminal
 /// width): a header `severity[code]: message`, a `--> file:line:col` line, the
 /// source lines involved with `^` under the primary span and `-` under

@@ -9,6 +9,8 @@
 //!
 //! ```text
 //! # comment to end of line
+//! # a statement starts with one of: model coordinate input output parameter let
+//! # kinetic potential force sensor actuator inertia set controller recorded
 //! model rotary_pendulum "Rotary inverted pendulum"
 //!
 //! coordinate theta : angle  "arm angle"        # angle (rad) | length (m)
@@ -54,6 +56,13 @@
 //!     mode catch = pp
 //!     switch pump -> catch when abs(alpha) < 15 [deg]
 //!     switch catch -> pump when abs(alpha) > 25 [deg] }
+//!
+//! recorded controller pd "the law that made the logged voltage" {
+//!     signal target_alpha [rad] "reference column"  # a data column it reads
+//!     gain kp = 30 [V/rad]
+//!     gain kd = 2.5 [V*s/rad]
+//!     let e = target_alpha - alpha
+//!     Vm = kp*e + kd*derivative(e, 50 [rad/s]) }    # filtered derivative
 //! ```
 //!
 //! ## Lines
@@ -165,6 +174,28 @@
 //! coordinates' velocities at 0 plus `V - V|q=0` (for the rotary pendulum,
 //! `energy(alpha) = J2h*alpha'^2/2 + m2*g*l2*(cos(alpha) - 1)`, 0 upright at
 //! rest).
+//!
+//! ## Recorded controllers
+//! `recorded controller name "title" { ... }` describes the discrete-time law
+//! that drove an input while data were recorded (closed-loop data), so
+//! identification can replay it in the loop. Its lines: `signal name [unit]
+//! "doc"` (a data column the law reads: a reference, a feedforward),
+//! `gain name = value`, `let name = expr` and one law per driven input,
+//! `Vm = expr`, with that input's unit. It sees the measured coordinates
+//! (positions only), its signals, gains and lets, and the model's
+//! parameters; velocities come from `derivative(x, wc)`, the filtered
+//! difference of `x` with cutoff `wc` (a rate, e.g. `50 [rad/s]`) at the
+//! record's sample rate, not nested. Names are local to the block but may
+//! not shadow a model name; a recorded controller's name may not be a
+//! controller's. See [`check`] (`check_recorded.rs`) and plantc-identify's
+//! closed-loop replay.
+//!
+//! ## Contextual keywords
+//! `surface`, `mode`, `switch`, `wrap` (in controllers) and `signal` (in
+//! recorded controllers) are keywords only when a name follows them; `when`,
+//! `and`, `or` only in switch conditions; `poles`, `Q`, `R`, `output` only after
+//! `place`, `lqr`, `linearize`; `swing_up` only after a mode's controller.
+//! Elsewhere they are ordinary names.
 
 pub mod ast;
 pub mod check;

@@ -142,3 +142,23 @@ fn miette_diagnostic_impl() {
     assert_eq!(d.code().unwrap().to_string(), "plantc::unknown_name");
     assert_eq!(d.labels().unwrap().count(), 1);
 }
+
+/// Quick-fix readings of unknown unit names: one dimension or none.
+#[test]
+fn unit_readings_keep_the_written_dimension() {
+    use super::units::readings;
+    // letters that spell known units are read as their product
+    assert_eq!(readings("kgm"), vec!["kg*m"]);
+    assert_eq!(readings("Nm"), vec!["N*m"]);
+    // a case slip
+    assert_eq!(readings("hz"), vec!["Hz"]);
+    // a typo (kg*g, two masses, is no reading)
+    assert_eq!(readings("kgg"), vec!["kg"]);
+    // ambiguous: kg*s or a plural kg; N*m*s or N*ms
+    assert!(readings("kgs").is_empty());
+    assert!(readings("Nms").is_empty());
+    // nothing near
+    assert!(readings("furlong").is_empty());
+    // a long run of letters stays bounded
+    assert!(readings(&"m".repeat(60)).len() <= 16);
+}

@@ -529,6 +529,90 @@ pub fn lookup(name: &str) -> Option<&'static UnitDef> {
     UNITS.iter().find(|u| u.name == name)
 }
 
+/// What an unknown unit name was meant to be, for quick fixes, in this
+/// order: a known unit that differs only in case (`hz` -> `Hz`); else the
+/// products of known units its letters spell, as a unit is written on paper
+/// (`kgm` -> `kg*m`, so `[kgm^2]` becomes `[kg*m^2]`; products of two units
+/// of one dimension, `kg*g`, are no reading), with a plural `s` dropped as
+/// another reading (`kgs`: kg*s or kg); else the known units nearest in
+/// spelling ([`super::check::suggest`]: `kgg` -> `kg`). The readings are
+/// returned only when they all have one dimension: when they disagree (`kgs`,
+/// or `Nms`: N*m*s, an energy times a time, and N*ms, a force times a time)
+/// what the text meant is not known and the result is empty, so a quick fix
+/// never changes the dimension the author wrote.
+pub fn readings(name: &str) -> Vec<String> {
+    let mut out: Vec<(String, Dim)> = UNITS
+        .iter()
+        .filter(|u| u.name != name && u.name.eq_ignore_ascii_case(name))
+        .map(|u| (u.name.to_string(), (u.dim)()))
+        .collect();
+    if out.is_empty() {
+        out = spellings(name);
+        if let Some(u) = name
+            .strip_suffix('s')
+            .filter(|n| n.len() >= 2)
+            .and_then(lookup)
+        {
+            out.push((u.name.to_string(), (u.dim)()));
+        }
+    }
+    if out.is_empty() {
+        out = super::check::suggest(name, UNITS.iter().map(|u| u.name))
+            .into_iter()
+            .filter_map(|n| lookup(&n).map(|u| (n, (u.dim)())))
+            .collect();
+        // only the nearest: a farther candidate is a different guess
+        if let Some(best) = out
+            .iter()
+            .map(|(n, _)| super::check::edit_distance(name, n))
+            .min()
+        {
+            out.retain(|(n, _)| super::check::edit_distance(name, n) == best);
+        }
+    }
+    match out.first() {
+        Some((_, d)) if out.iter().all(|(_, e)| e == d) => {
+            out.into_iter().map(|(n, _)| n).collect()
+        }
+        _ => Vec::new(),
+    }
+}
+
+/// Most readings [`spellings`] collects: the search stops there (a name
+/// with more readings than this is no unit anyone meant).
+const MAX_SPELLINGS: usize = 16;
+
+/// Every way `name` is a concatenation of two or more known unit symbols of
+/// different dimensions, as `a*b*...` with its dimension.
+fn spellings(name: &str) -> Vec<(String, Dim)> {
+    // each part has a dimension the earlier ones lack, so the depth is at
+    // most the number of distinct dimensions in UNITS
+    fn go(rest: &str, parts: &mut Vec<&'static UnitDef>, out: &mut Vec<(String, Dim)>) {
+        if out.len() >= MAX_SPELLINGS {
+            return;
+        }
+        if rest.is_empty() {
+            if parts.len() >= 2 {
+                let text = parts.iter().map(|u| u.name).collect::<Vec<_>>().join("*");
+                let dim = parts.iter().fold(Dim::NONE, |d, u| d * (u.dim)());
+                out.push((text, dim));
+            }
+            return;
+        }
+        for u in UNITS {
+            let fresh = parts.iter().all(|p| (p.dim)() != (u.dim)());
+            if let Some(r) = rest.strip_prefix(u.name).filter(|_| fresh) {
+                parts.push(u);
+                go(r, parts, out);
+                parts.pop();
+            }
+        }
+    }
+    let mut out = Vec::new();
+    go(name, &mut Vec::new(), &mut out);
+    out
+}
+
 /// A unit expression that could not be understood. `start..end` are byte
 /// offsets into the unit text.
 #[derive(Debug, Clone, PartialEq, Eq)]

@@ -79,3 +79,31 @@ test('every model tokenizes with comments and strings closed on their line', asy
     assert.doesNotMatch(scopeOf(t, 'after'), /string|comment|meta\.unit/, m);
   }
 });
+
+test('hybrid, sliding-mode and recorded controllers, rig effects', async () => {
+  const rp = await tokenize(fs.readFileSync(path.join(root, 'models', 'rotary_pendulum.plant'), 'utf8'));
+  for (const kw of ['wrap', 'mode', 'switch', 'when', 'surface']) {
+    assert.match(scopeOf(rp, kw), /keyword\.other/, kw);
+  }
+  // `swing_up` is a controller's name and, after `mode name = controller`, a marker
+  assert.ok(rp.some((x) => x.text === 'swing_up' && /keyword\.other/.test(x.scopes)));
+  assert.match(scopeOf(rp, '->'), /keyword\.operator/);
+  assert.match(scopeOf(rp, 'sat'), /support\.function\.builtin/);
+  assert.match(scopeOf(rp, 'energy'), /support\.function\.builtin/);
+  const qube = await tokenize(fs.readFileSync(path.join(root, 'models', 'qube_servo.plant'), 'utf8'));
+  assert.match(scopeOf(qube, 'recorded'), /keyword\.declaration/);
+  assert.match(scopeOf(qube, 'qube_pd'), /entity\.name\.namespace/);
+  assert.match(scopeOf(qube, 'signal'), /keyword\.other/);
+  assert.match(scopeOf(qube, 'derivative'), /support\.function\.builtin/);
+  const t = await tokenize(
+    'inertia theta = added_inertia(Jr)\nactuator Vm = saturation(L)\nforce q = cogging(A, N) + speed_limit(v, c)\n' +
+      'switch a -> b when abs(alpha) < 15 [deg] and theta >= 0 or q <= 1\n',
+  );
+  assert.match(scopeOf(t, 'inertia'), /keyword\.declaration/);
+  for (const e of ['added_inertia', 'saturation', 'cogging', 'speed_limit']) {
+    assert.match(scopeOf(t, e), /support\.function\.effect/, e);
+  }
+  assert.match(scopeOf(t, 'and'), /keyword\.operator\.logical/);
+  assert.match(scopeOf(t, 'or'), /keyword\.operator\.logical/);
+  assert.match(scopeOf(t, 'deg'), /meta\.unit/);
+});

@@ -13,7 +13,7 @@ use crate::cli::DiagnoseArgs;
 use crate::commands::fit::with_progress;
 
 use crate::common::{
-    fit_options, load, read_data, refuse_to_clobber, write_json, write_output,
+    fit_options, load, read_data, refuse_to_clobber, write_json, write_model,
     write_parameter_values, CliError,
 };
 
@@ -111,7 +111,7 @@ pub fn run(args: &DiagnoseArgs, out: &mut dyn Write, err: &mut dyn Write) -> Res
                 let values = f.parameters.iter().map(|e| (e.name.as_str(), e.value));
                 edited = write_parameter_values(&edited, model, values)?;
             }
-            write_output(o, edited)?;
+            write_model(o, &edited)?;
             let _ = writeln!(
                 err,
                 "model with {} added -> {}",

@@ -15,7 +15,7 @@ use plantc_identify::{
 use crate::cli::FitArgs;
 use crate::common::{
     channel_fits, fit_options, load, name_list, read_data, read_held_out, refuse_to_clobber,
-    values, write_json, write_output, write_parameter_values, CliError,
+    values, write_json, write_model, write_parameter_values, CliError,
 };
 
 /// Runs `work` while showing elapsed time and the latest status that
@@ -333,7 +333,7 @@ pub fn run(args: &FitArgs, out: &mut dyn Write, err: &mut dyn Write) -> Result<(
             }
         });
         let text = write_parameter_values(&text, model, values)?;
-        write_output(o, text)?;
+        write_model(o, &text)?;
         let _ = writeln!(err, "fitted model -> {}", o.display());
     }
     if args.json {

@@ -35,7 +35,12 @@ fn fail(e: impl std::fmt::Display) -> CliError {
 }
 
 fn write_file(path: &Path, text: &str) -> Result<(), CliError> {
-    // crash-safe (temporary file, fsync, rename)
+    // crash-safe (temporary file, fsync, rename); models in the canonical layout
+    let text = if path.extension().is_some_and(|e| e == "plant") {
+        crate::common::canonical(text)
+    } else {
+        text.to_string()
+    };
     plantc_fsio::write_atomic(path, text).map_err(fail)
 }
 

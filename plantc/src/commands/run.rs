@@ -8,7 +8,7 @@ use plantc_derive::linear::{observer_plant, ObserverPlantError};
 use plantc_derive::mechanics::NumericDynamics;
 use plantc_derive::model::{Model, ParameterValues};
 use plantc_runtime::{
-    run_with_events, stop_on_signals, Backend, FaultKind, LogWriter, ModelController, ModelPlant,
+    run_with_notes, stop_on_signals, Backend, FaultKind, LogWriter, ModelController, ModelPlant,
     ObserverSpec, Q2Usb, Q2UsbConfig, RunConfig, SimBackend, SimConfig, SupervisorState,
     SwingUpLimits,
 };
@@ -126,13 +126,18 @@ pub fn run(args: &RunArgs, out: &mut dyn Write, err: &mut dyn Write) -> Result<(
             "note: signal handlers not installed ({e}); Ctrl-C or kill will end the process without the 0 V stop"
         );
     }
-    let report = run_with_events(
+    let err_cell = std::cell::RefCell::new(&mut *err);
+    let report = run_with_notes(
         &config,
         backend.as_mut(),
         &mut controller,
+        None,
         log.as_mut(),
         &mut |t| {
-            let _ = writeln!(err, "supervisor: {t}");
+            let _ = writeln!(err_cell.borrow_mut(), "supervisor: {t}");
+        },
+        &mut |n| {
+            let _ = writeln!(err_cell.borrow_mut(), "supervisor: {n}");
         },
     );
     // the safe stop is complete once the board is closed and the log flushed
@@ -150,6 +155,18 @@ pub fn run(args: &RunArgs, out: &mut dyn Write, err: &mut dyn Write) -> Result<(
             message: format!("stopped by {name} (0 V written, board closed, log flushed)"),
             code,
         });
+    }
+    if !report.engaged() && !matches!(report.final_state, SupervisorState::Fault(_)) {
+        let why = match &report.not_engaged {
+            Some(n) => n.to_string(),
+            None => format!(
+                "the run ({} s) ended before the pendulum entered the catch window ({})",
+                args.duration, args.catch_window
+            ),
+        };
+        return Err(CliError::failure(format!(
+            "error: the controller never engaged: {why}"
+        )));
     }
     if report.fault_detail.is_some() || matches!(report.final_state, SupervisorState::Fault(_)) {
         // A fault that ends the run (other than the planned end) is a failure.
