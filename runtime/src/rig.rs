@@ -828,26 +828,26 @@ pub fn execute(
             .map(|m| m.counts_per_rev)
             .find(|c| *c != o.counts_per_rev);
         if let Some(c) = other {
-            let _ = backend.close();
-            return Err(usage(format!(
+            let e = usage(format!(
                 "the observer was designed for {} counts/rev encoders, the backend has {c}; \
                  regenerate or use --velocity derivative",
                 o.counts_per_rev
-            )));
+            ));
+            return Err(with_close(backend.as_mut(), e));
         }
     }
     let mut log = match &args.log {
         Some(path) => {
             if path.exists() && !args.force {
-                let _ = backend.close();
-                return Err(usage(format!(
+                let e = usage(format!(
                     "log {} exists; pass --force to overwrite it",
                     path.display()
-                )));
+                ));
+                return Err(with_close(backend.as_mut(), e));
             }
             let mut l = LogWriter::create(path).map_err(|e| {
-                let _ = backend.close();
-                RigError::Failure(format!("{}: {e}", path.display()))
+                let e = RigError::Failure(format!("{}: {e}", path.display()));
+                with_close(backend.as_mut(), e)
             })?;
             l.set_full_precision(args.log_full_precision);
             Some(l)
@@ -884,6 +884,14 @@ pub fn execute(
     alloc_count::count_on_this_thread(false);
     let report = result.map_err(|e| RigError::Failure(e.to_string()))?;
     let _ = write!(out, "{report}");
+    if !report.stop_errors.is_empty() {
+        // The safe stop was not clean: a failure whatever the final state.
+        return Err(RigError::Failure(format!(
+            "run ended in {} and the safe stop failed: {}",
+            report.final_state,
+            report.stop_errors.join("; ")
+        )));
+    }
     if alloc_count::installed() && probe.calls > 1 {
         let _ = writeln!(
             out,
@@ -896,6 +904,21 @@ pub fn execute(
         SupervisorState::Fault(FaultKind::Stopped) => Err(RigError::Stopped),
         s @ SupervisorState::Fault(_) => Err(RigError::Fault(s)),
         _ => Ok(report),
+    }
+}
+
+/// Closes `backend` on a path that ends the run with `error`; a failed
+/// close is added to the error (a failure then), never dropped.
+fn with_close(backend: &mut dyn Backend, error: RigError) -> RigError {
+    match backend.close() {
+        Ok(()) => error,
+        Err(c) => {
+            let first = match &error {
+                RigError::Usage(m) | RigError::Failure(m) => m.clone(),
+                other => other.to_string(),
+            };
+            RigError::Failure(format!("{first}; then {c}"))
+        }
     }
 }
 

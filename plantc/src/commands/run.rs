@@ -141,6 +141,23 @@ pub fn run(args: &RunArgs, out: &mut dyn Write, err: &mut dyn Write) -> Result<(
     plantc_runtime::stop_completed();
     let report = report.map_err(|e| fail(&e))?;
     let _ = writeln!(out, "{report}");
+    if !report.stop_errors.is_empty() {
+        // The safe stop was not clean (a failed 0 V write or close): a
+        // failure whatever the final state, each failure said on stderr.
+        for e in &report.stop_errors {
+            let _ = writeln!(err, "error: safe stop: {e}");
+        }
+        return Err(CliError::failure(format!(
+            "run ended in {} and the safe stop failed ({} error{}; see above)",
+            report.final_state,
+            report.stop_errors.len(),
+            if report.stop_errors.len() == 1 {
+                ""
+            } else {
+                "s"
+            }
+        )));
+    }
     if report.final_state == SupervisorState::Fault(FaultKind::Stopped) {
         // Exit code of a process ended by the signal, by convention
         // (128 + signal number: 130 SIGINT, 143 SIGTERM, 129 SIGHUP, 131 SIGQUIT).
