@@ -14,8 +14,7 @@ use plantc_derive::model::Model;
 
 use crate::emit::camel;
 use crate::krate::{
-    remove_stale, standalone_package, write_files, CrateOptions, RigOptions, RuntimeSource,
-    README_MARK,
+    standalone_package, write_files, CrateOptions, RigOptions, RuntimeSource, README_MARK,
 };
 use crate::{fnv1a64, Error, HEADER_PREFIX};
 
@@ -385,14 +384,13 @@ The report ends with the loop's allocation count (expected 0).\n",
         cpr = o.counts_per_rev,
     );
 
-    remove_stale(&opts.dir, true)?;
     let files = [
         ("Cargo.toml", cargo),
         ("README.md", readme),
         ("src/model.rs", model_rs),
         ("src/main.rs", main_rs),
     ];
-    write_files(&opts.dir, &files)?;
+    write_files(&opts.dir, &files, opts.force)?;
     Ok(files.iter().map(|(p, _)| opts.dir.join(p)).collect())
 }
 

@@ -40,7 +40,7 @@ impl Board {
             let mut it = line.split_whitespace().skip(1);
             let what = it.next().unwrap_or("");
             let rest: Vec<&str> = it.collect();
-            let injected = rest.iter().any(|w| *w == "err=injected");
+            let injected = rest.contains(&"err=injected");
             if injected {
                 b.injected += 1;
                 continue;

@@ -97,26 +97,24 @@ pub fn run(args: &SynthArgs, out: &mut dyn Write, _err: &mut dyn Write) -> Resul
             }
         }
     }
-    // All files appear together: written into a copy of DIR swapped in at
-    // the end (other entries of DIR are kept). In the current directory,
-    // which cannot be swapped, each file is still replaced crash-safely.
-    let fresh = match plantc_fsio::FreshDir::create(&args.out) {
-        Ok(f) => Some(f),
-        Err(plantc_fsio::Error::CurrentDirectory { .. }) => None,
-        Err(e) => return Err(CliError::failure(format!("error: {e}"))),
-    };
+    // All files are written aside and moved in at the end; only synth's own
+    // files (its manifest) are replaced, the user's stay where they are, and
+    // synth's earlier files of other names are kept.
+    let fresh = plantc_fsio::FreshDir::create(&args.out, "synth")
+        .map_err(|e| CliError::failure(format!("error: {e}")))?
+        .replace_unlisted(args.force)
+        .keep_earlier_files();
     // long experiments take seconds: a progress line on a terminal
     let data = with_progress("synthesizing", |_| synthesize(&text, &spec)).map_err(synth_error)?;
-    let staging = fresh.as_ref().map_or(args.out.as_path(), |f| f.path());
+    let staging = fresh.path();
     let write = |name: &str, content: &str| write_output(&staging.join(name), content);
     for f in &data.files {
         write(&f.file_name, &f.text)?;
     }
     write("truth.json", &data.truth)?;
-    if let Some(f) = fresh {
-        f.commit_keeping(|n| !names.iter().any(|w| n == std::path::Path::new(w)))
-            .map_err(|e| CliError::failure(format!("error: {e}")))?;
-    }
+    fresh
+        .commit()
+        .map_err(|e| CliError::failure(format!("error: {e}")))?;
     for f in &data.files {
         let _ = writeln!(
             out,
