@@ -22,7 +22,7 @@ use crate::backend::Backend;
 use crate::control_loop::{run_with_estimator, RunConfig};
 use crate::controller::{Controller, Mode};
 use crate::estimator::{DerivativeEstimator, VelocityEstimator};
-use crate::log::LogWriter;
+use crate::log::{LogError, LogWriter};
 use crate::plant::Plant;
 use crate::q2usb::{Q2Usb, Q2UsbConfig};
 use crate::report::RunReport;
@@ -845,8 +845,19 @@ pub fn execute(
                 ));
                 return Err(with_close(backend.as_mut(), e));
             }
-            let mut l = LogWriter::create(path).map_err(|e| {
-                let e = RigError::Failure(format!("{}: {e}", path.display()));
+            // O_EXCL without --force: a run started meanwhile with the same
+            // log is refused, not interleaved
+            let mut l = LogWriter::open(path, args.force).map_err(|e| {
+                let e = match e {
+                    LogError::Io {
+                        kind: std::io::ErrorKind::AlreadyExists,
+                        ..
+                    } => usage(format!(
+                        "log {} exists; pass --force to overwrite it",
+                        path.display()
+                    )),
+                    e => RigError::Failure(format!("{}: {e}", path.display())),
+                };
                 with_close(backend.as_mut(), e)
             })?;
             l.set_full_precision(args.log_full_precision);

@@ -109,7 +109,19 @@ pub fn run(args: &RunArgs, out: &mut dyn Write, err: &mut dyn Write) -> Result<(
     let mut log = match &args.log {
         Some(path) => {
             refuse_overwrite(path, args.force, "log")?;
-            let mut log = LogWriter::create(path).map_err(|e| fail(&e))?;
+            // O_EXCL without --force: a run started meanwhile with the same
+            // log is refused, not interleaved (the check above is only the
+            // early, friendly refusal)
+            let mut log = LogWriter::open(path, args.force).map_err(|e| match e {
+                plantc_runtime::LogError::Io {
+                    kind: std::io::ErrorKind::AlreadyExists,
+                    ..
+                } => CliError::input(format!(
+                    "error: log `{}` already exists; pass --force to overwrite it",
+                    path.display()
+                )),
+                e => fail(&e),
+            })?;
             log.set_full_precision(args.log_precision == LogPrecision::Full);
             Some(log)
         }
