@@ -212,3 +212,52 @@ fn invalid_utf8_names_line_and_column() {
     assert!(e.contains("UTF-16"), "{e}");
     std::fs::remove_dir_all(&dir).unwrap();
 }
+
+proptest! {
+    /// The banded distance is the full Levenshtein distance whenever that is
+    /// within the band, and `None` exactly when it is not (issue 31, r03).
+    #[test]
+    fn banded_edit_distance_agrees_with_the_full_one(
+        a in "[abc_é]{0,12}", b in "[abc_é]{0,12}", max in 0usize..6
+    ) {
+        use plantc_derive::lang::check::{edit_distance, edit_distance_within};
+        let full = edit_distance(&a, &b);
+        let banded = edit_distance_within(&a, &b, max);
+        prop_assert_eq!(banded, (full <= max).then_some(full), "{} {} {}", a, b, max);
+    }
+}
+
+/// Issue 31 (r03): an unknown name of 100,000 characters next to a declared
+/// one of the same length: the suggestion is computed in a band, so `check`
+/// answers at once (54 s before), and the name is still suggested.
+#[test]
+fn a_huge_misspelt_name_gets_its_suggestion_without_quadratic_work() {
+    let n = 100_000;
+    let name = "z".repeat(n);
+    let misspelt = format!("{}y", "z".repeat(n - 1));
+    let text = FIXTURE
+        .replace(
+            "parameter g  = 9.81",
+            &format!("parameter {name} = 1\nparameter g  = 9.81"),
+        )
+        .replace(
+            "let c   = m2*L1*l2",
+            &format!("let c   = m2*L1*l2 + 0*{misspelt}"),
+        );
+    assert!(text.contains(&misspelt) && text.len() > FIXTURE.len() + 2 * n);
+    let t = std::time::Instant::now();
+    let checked = parse_and_check("long.plant", &text);
+    let err = checked
+        .diagnostics
+        .iter()
+        .find(|d| d.is_error())
+        .expect("the misspelt name is an error");
+    assert!(
+        err.help
+            .as_deref()
+            .is_some_and(|h| h.contains("did you mean")),
+        "{err:?}"
+    );
+    // no timing assertion (benchmarks measure speed); printed for the record
+    println!("check of a 100,000-character name: {:?}", t.elapsed());
+}
