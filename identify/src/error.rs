@@ -85,6 +85,22 @@ pub enum DataError {
         /// This time (s).
         value: f64,
     },
+    /// One sampling interval is longer than [`crate::data::MAX_GAP_INTERVALS`]
+    /// median intervals: a gap in the recording, or a wrong stamp.
+    TimeGap {
+        /// The file.
+        file: PathBuf,
+        /// The line of the sample after the gap (text files).
+        line: Option<u64>,
+        /// 1-based index of the sample after the gap.
+        sample: usize,
+        /// Time before the gap (s).
+        from: f64,
+        /// Time after the gap (s).
+        to: f64,
+        /// The median sampling interval (s).
+        median_dt: f64,
+    },
     /// Fewer samples than the minimum.
     TooShort {
         /// The file.
@@ -176,6 +192,7 @@ impl DataError {
             | DuplicateColumn { file, .. }
             | BadCell { file, .. }
             | TimeNotIncreasing { file, .. }
+            | TimeGap { file, .. }
             | TooShort { file, .. }
             | UnknownUnit { file, .. }
             | IncompatibleUnit { file, .. }
@@ -194,6 +211,7 @@ impl DataError {
             BadCell { line, .. } | TimeNotIncreasing { line, .. } | FieldCount { line, .. } => {
                 Some(*line)
             }
+            TimeGap { line, .. } => *line,
             DuplicateColumn { .. } | UnknownUnit { .. } | IncompatibleUnit { .. } => Some(1),
             // in a text file: the header lacks the column; the file ends
             // after its last sample
@@ -264,6 +282,18 @@ impl DataError {
                     format!("time goes backwards: {value} s after {previous} s")
                 }
             }
+            TimeGap {
+                sample,
+                from,
+                to,
+                median_dt,
+                ..
+            } => format!(
+                "the time jumps from {from} s to {to} s at sample {sample}: {:.3e} median \
+                 sampling intervals ({median_dt} s); a gap this long is not one sampled \
+                 experiment (the simulation would hold the input across it)",
+                (to - from) / median_dt
+            ),
             TooShort {
                 samples, minimum, ..
             } => format!("file too short: {samples} samples, at least {minimum} needed"),
@@ -315,6 +345,9 @@ impl DataError {
             }
             TimeNotIncreasing { .. } => {
                 "time in column `t` must strictly increase; remove repeated or out-of-order rows".into()
+            }
+            TimeGap { .. } => {
+                "fix the stamp if it is wrong, or split the file at this sample into two experiments".into()
             }
             TooShort { .. } => "record a longer experiment".into(),
             UnknownUnit { kind, .. } | IncompatibleUnit { expected: kind, .. } => {

@@ -21,6 +21,11 @@ use std::time::Instant;
 /// Highest supported loop rate (the Q2-USB's closed-loop limit).
 pub const MAX_RATE_HZ: f64 = 2000.0;
 
+/// Most samples of one run: 2^53, the largest count for which the sample
+/// count and the loop time `k / rate` are exact in `f64` (a duration of 2e16 s
+/// at 1 kHz overflowed the count to 0 samples and the run "ended" at once).
+pub const MAX_SAMPLES: f64 = 9_007_199_254_740_992.0;
+
 /// Settings of a run.
 #[derive(Debug, Clone)]
 pub struct RunConfig {
@@ -106,6 +111,15 @@ impl RunConfig {
         if let Some(d) = self.duration_s {
             if !(d.is_finite() && d >= 0.0) {
                 return bad(format!("duration {d} s"));
+            }
+            let samples = d * self.rate_hz;
+            if samples >= MAX_SAMPLES {
+                return bad(format!(
+                    "duration {d} s at {} Hz is {samples:.3e} samples; a run counts at most \
+                     2^53 samples ({:.2e} s at this rate), exactly, in its loop time",
+                    self.rate_hz,
+                    MAX_SAMPLES / self.rate_hz
+                ));
             }
         }
         let s = &self.supervisor;
@@ -370,9 +384,10 @@ fn cycle_loop(
     let mut q_unwrapped = vec![0.0; nq];
     let mut velocities = vec![0.0; nq];
     let (lo, hi) = config.input_limits[0];
+    // (validated: below 2^53, so the count and its + 1 are exact)
     let total = config
         .duration_s
-        .map(|d| (d * config.rate_hz).round().max(0.0) as u64 + 1);
+        .map(|d| ((d * config.rate_hz).round().max(0.0) as u64).saturating_add(1));
     let period_ns = (period * 1e9) as u64;
     let mut fault_detail = None;
     let mut stop_errors = Vec::new();

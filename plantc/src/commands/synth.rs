@@ -19,6 +19,10 @@ fn synth_error(e: SynthError) -> CliError {
     }
 }
 
+/// Most samples of one synthesised experiment: 1e7, the size `compare` is
+/// measured on for a recording (issue 31: under 1 GB and a few minutes).
+const MAX_SYNTH_SAMPLES: usize = 10_000_000;
+
 pub fn run(args: &SynthArgs, out: &mut dyn Write, _err: &mut dyn Write) -> Result<(), CliError> {
     let effects = args
         .effects
@@ -32,6 +36,19 @@ pub fn run(args: &SynthArgs, out: &mut dyn Write, _err: &mut dyn Write) -> Resul
         .map(|t| parse_experiment_spec(t))
         .collect::<Result<Vec<_>, _>>()
         .map_err(synth_error)?;
+    // the sample count is checked before anything is allocated (a duration
+    // of 1e9 s asked for 12 TB at once)
+    for e in &experiments {
+        let samples = e.duration * args.rate;
+        if samples > MAX_SYNTH_SAMPLES as f64 {
+            return Err(CliError::input(format!(
+                "error: `{}`: {} s at {} Hz is {samples:.3e} samples; synth writes at most \
+                 {:.0e} per experiment (the largest recording the identification commands are \
+                 measured on): shorten the duration or lower --rate",
+                e.token, e.duration, args.rate, MAX_SYNTH_SAMPLES as f64
+            )));
+        }
+    }
     let mut parameter_set = None;
     let mut values = Vec::new();
     for item in &args.set {
