@@ -14,7 +14,7 @@ use std::path::{Path, PathBuf};
 
 use plantc_derive::model::load_model;
 
-use crate::emit::camel;
+use crate::emit::controller_type;
 use crate::{fnv1a64, Error, ObserverOptions, HEADER_PREFIX};
 
 /// How a rig crate finds plantc-runtime.
@@ -100,6 +100,41 @@ fn is_empty_dir(dir: &Path) -> bool {
     }
 }
 
+/// Crate names of Rust's own distribution: a package of that name would
+/// shadow it (`use std::*` in its example).
+const STD_CRATES: [&str; 5] = ["std", "core", "alloc", "proc_macro", "test"];
+
+/// Longest package name generated: 64 bytes (crates.io's limit; a
+/// 300-character model name made cargo's file names too long). A longer
+/// name keeps its first 47 bytes and a hash of the whole.
+const MAX_PACKAGE_NAME: usize = 64;
+
+/// The package name of a model's crate: the model name with `-` for `_`,
+/// prefixed `plant-` when the model name cannot name a crate (a Rust
+/// keyword, a leading `_`, a crate of Rust's distribution), shortened with a
+/// hash beyond [`MAX_PACKAGE_NAME`]. The library crate is the package name
+/// with `_` for `-`.
+pub fn package_name(model_name: &str) -> String {
+    let unusable = syn::parse_str::<syn::Ident>(model_name).is_err()
+        || model_name.starts_with('_')
+        || STD_CRATES.contains(&model_name);
+    let base = if unusable {
+        format!("plant-{model_name}")
+    } else {
+        model_name.to_string()
+    };
+    let name = base.replace('_', "-");
+    if name.len() <= MAX_PACKAGE_NAME {
+        return name;
+    }
+    let keep: String = name.chars().take(47).collect();
+    format!(
+        "{}-{:016x}",
+        keep.trim_end_matches('-'),
+        fnv1a64(model_name.as_bytes())
+    )
+}
+
 /// The `[package]` table of a generated crate named `name` and the empty
 /// `[workspace]` that keeps it standalone (both manifests start with it).
 pub(crate) fn standalone_package(name: &str) -> String {
@@ -126,7 +161,7 @@ pub fn write_crate(opts: &CrateOptions) -> Result<Vec<PathBuf>, Error> {
     }
     let loaded = load_model(&opts.model).map_err(|e| Error::Load(e.render()))?;
     let model = &loaded.model;
-    let shown = opts.model.display().to_string().replace('\\', "/");
+    let shown = crate::shown_path(&opts.model);
     let body = crate::emit::generate_body(&crate::emit::Spec {
         model,
         model_file: &shown,
@@ -138,7 +173,7 @@ pub fn write_crate(opts: &CrateOptions) -> Result<Vec<PathBuf>, Error> {
     if let Some(rig) = &opts.rig {
         return crate::rig::write_rig(opts, rig, model, &shown, &body);
     }
-    let name = model.name.replace('_', "-");
+    let name = package_name(&model.name);
     let lib_body = format!(
         "//! Generated controller crate for the model `{}` (see [`MODEL`] for states and units).\n\
          //!\n\
@@ -163,10 +198,10 @@ pub fn write_crate(opts: &CrateOptions) -> Result<Vec<PathBuf>, Error> {
          libm = {{ version = \"0.2\", optional = true }}\n",
         standalone_package(&name)
     );
-    let krate = model.name.clone();
+    let krate = name.replace('-', "_");
     let sim = match opts.controllers.first() {
         Some(c) => {
-            let ty = camel(c);
+            let ty = controller_type(c);
             format!(
                 "{HEADER_PREFIX} from {shown}. Do not edit.\n\
                  //! Closed-loop simulation of `{c}` with the generated plant: RK4, h = 1e-4 s,\n\
@@ -254,4 +289,25 @@ pub(crate) fn write_files(dir: &Path, files: &[(&str, String)], force: bool) -> 
         plantc_fsio::write_atomic(&p, text).map_err(|e| io(&dir.join(rel))(&e))?;
     }
     fresh.commit().map_err(|e| io(dir)(&e))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::package_name;
+
+    #[test]
+    fn package_names_are_always_usable() {
+        assert_eq!(package_name("rotary_pendulum"), "rotary-pendulum");
+        assert_eq!(package_name("fn"), "plant-fn");
+        assert_eq!(package_name("std"), "plant-std");
+        assert_eq!(package_name("_x"), "plant--x");
+        let long = "a".repeat(300);
+        let p = package_name(&long);
+        assert_eq!(p.len(), 64, "{p}");
+        assert_ne!(
+            p,
+            package_name(&"a".repeat(299)),
+            "the hash keeps them apart"
+        );
+    }
 }

@@ -12,7 +12,7 @@ use std::process::Command;
 
 use plantc_derive::model::Model;
 
-use crate::emit::camel;
+use crate::emit::controller_type;
 use crate::krate::{
     standalone_package, write_files, CrateOptions, RigOptions, RuntimeSource, README_MARK,
 };
@@ -46,7 +46,7 @@ fn with_header(shown: &str, body: &str) -> String {
 
 /// The package (and binary) name of a model's rig crate.
 pub fn rig_package_name(model_name: &str) -> String {
-    format!("{}-rig", model_name.replace('_', "-"))
+    format!("{}-rig", crate::krate::package_name(model_name))
 }
 
 pub(crate) fn write_rig(
@@ -127,7 +127,7 @@ pub(crate) fn write_rig(
     let mut gain_arms = String::new();
     let mut ctrl_arms = String::new();
     for c in &opts.controllers {
-        let ty = camel(c);
+        let ty = controller_type(c);
         let name = rust_str(c);
         gain_arms.push_str(&format!(
             "            {name} => &model::{ty}::GAIN_NAMES,\n"

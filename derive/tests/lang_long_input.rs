@@ -261,3 +261,61 @@ fn a_huge_misspelt_name_gets_its_suggestion_without_quadratic_work() {
     // no timing assertion (benchmarks measure speed); printed for the record
     println!("check of a 100,000-character name: {:?}", t.elapsed());
 }
+
+/// Issue 31 (r06): names Rust cannot spell even as raw identifiers are
+/// refused by `check` where they are declared (gen used to panic on them);
+/// other Rust keywords stay fine (generated as `r#fn`).
+#[test]
+fn names_rust_reserves_are_refused_where_declared() {
+    let replace_word = |text: &str, from: &str, to: &str| -> String {
+        // whole words only
+        let mut out = String::new();
+        let b = text.as_bytes();
+        let is_w = |c: u8| c.is_ascii_alphanumeric() || c == b'_';
+        let mut i = 0;
+        while i < text.len() {
+            if text[i..].starts_with(from)
+                && (i == 0 || !is_w(b[i - 1]))
+                && b.get(i + from.len()).is_none_or(|c| !is_w(*c))
+            {
+                out.push_str(to);
+                i += from.len();
+            } else {
+                let c = text[i..].chars().next().unwrap();
+                out.push(c);
+                i += c.len_utf8();
+            }
+        }
+        out
+    };
+    for (from, what) in [
+        ("Kg", "parameter"),
+        ("rotary_pendulum", "model"),
+        ("pole_placement", "controller"),
+        ("zeta", "gain"),
+        ("quanser_manual", "set"),
+    ] {
+        for reserved in plantc_derive::lang::check::RUST_RESERVED {
+            let text = replace_word(FIXTURE, from, reserved);
+            let checked = parse_and_check("r.plant", &text);
+            let errors: Vec<_> = checked
+                .diagnostics
+                .iter()
+                .filter(|d| d.code == "plantc::reserved_name")
+                .collect();
+            assert!(
+                !errors.is_empty() && errors[0].message.contains(&format!("`{reserved}`")),
+                "{what} `{reserved}`: {:?}",
+                checked.diagnostics
+            );
+        }
+    }
+    // a Rust keyword that can be raw is a fine name
+    let text = replace_word(FIXTURE, "Kg", "fn");
+    let checked = parse_and_check("r.plant", &text);
+    assert!(
+        !checked.diagnostics.iter().any(|d| d.is_error()),
+        "{:?}",
+        checked.diagnostics
+    );
+}

@@ -266,6 +266,11 @@ pub fn eval_si(expr: &Expr, symbols: &Symbols) -> Option<f64> {
 /// instead of `O(n m)` (a 100,000-character name took 54 s).
 pub const MAX_SUGGESTION_EDITS: usize = 8;
 
+/// Names Rust reserves even as raw identifiers (`r#self` is not allowed):
+/// refused as names in a model, since `plantc gen` writes Rust from them.
+/// Other Rust keywords are fine (generated as raw identifiers, `r#fn`).
+pub const RUST_RESERVED: [&str; 5] = ["_", "self", "Self", "crate", "super"];
+
 /// Up to three names from `candidates` close to `name` (edit distance at
 /// most a third of its length, [`MAX_SUGGESTION_EDITS`] at most, or equal
 /// ignoring case), best first.
@@ -1007,6 +1012,51 @@ impl Checker {
         }
     }
 
+    /// Refuses, where they are declared, the names the generated Rust code
+    /// cannot spell even as raw identifiers ([`RUST_RESERVED`]).
+    fn check_rust_reserved(&mut self, file: &ModelFile) {
+        use super::visit::{occurrences, Role, SymbolRef};
+        let mut seen = std::collections::BTreeSet::new();
+        let model = file
+            .model
+            .iter()
+            .map(|m| (m.name.name.as_str(), m.name.span));
+        let declared = occurrences(file)
+            .into_iter()
+            .filter(|o| o.role == Role::Declaration)
+            .filter_map(|o| {
+                let name = match o.symbol {
+                    SymbolRef::Model(n)
+                    | SymbolRef::Gain(_, n)
+                    | SymbolRef::Block(n)
+                    | SymbolRef::Surface(_, n)
+                    | SymbolRef::Mode(_, n) => n,
+                    _ => return None,
+                };
+                Some((name, o.span))
+            })
+            .collect::<Vec<_>>();
+        let all = model.map(|(n, s)| (n.to_string(), s)).chain(declared);
+        for (name, span) in all {
+            if RUST_RESERVED.contains(&name.as_str()) && seen.insert(span.start) {
+                self.diags.push(
+                    Diagnostic::error(
+                        "plantc::reserved_name",
+                        format!("`{name}` cannot be a name in a model"),
+                        span,
+                        "reserved in the generated Rust code",
+                    )
+                    .with_help(format!(
+                        "Rust cannot name anything `{}` (not even as a raw identifier), and plantc \
+                         generates Rust from the model: choose another name, e.g. `{}`",
+                        name,
+                        if name == "_" { "x_".to_string() } else { format!("{}_", name.to_lowercase()) }
+                    )),
+                );
+            }
+        }
+    }
+
     fn declare(&mut self, name: &Ident, kind: SymbolKind, dim: Option<Dim>) {
         if BUILTINS.iter().any(|(n, _)| *n == name.name) || name.name == "pi" {
             self.diags.push(
@@ -1067,6 +1117,7 @@ impl Checker {
     }
 
     fn check(&mut self, mut file: ModelFile) -> ModelFile {
+        self.check_rust_reserved(&file);
         if file.model.is_none() {
             self.diags.push(
                 Diagnostic::error(
