@@ -319,3 +319,66 @@ fn names_rust_reserves_are_refused_where_declared() {
         checked.diagnostics
     );
 }
+
+/// Issue 31 (r13): constant expressions that overflow or are undefined at
+/// the nominal values are check errors at the operation that fails (derive
+/// printed `inf` with exit 0); a coordinate without inertia is an error.
+#[test]
+fn non_finite_constants_and_missing_inertia_are_check_errors() {
+    for (e, at) in [
+        ("1e308*10", "1e308*10"),
+        ("1/(g-g)*g", "1/(g-g)"),
+        ("1/4.9e-324", "1/4.9e-324"),
+        ("exp(1000)", "exp(1000)"),
+        ("sqrt(-1)", "sqrt(-1)"),
+        ("ln(0)", "ln(0)"),
+        ("10^400", "10^400"),
+    ] {
+        let text = FIXTURE.replace("let c   = m2*L1*l2", &format!("let c   = m2*L1*l2*({e})"));
+        let checked = parse_and_check("nf.plant", &text);
+        let d = checked
+            .diagnostics
+            .iter()
+            .find(|d| d.code == "plantc::not_finite")
+            .unwrap_or_else(|| panic!("{e}: {:?}", checked.diagnostics));
+        let shown = &text[d.primary.start..d.primary.end];
+        let shown = shown
+            .strip_prefix('(')
+            .and_then(|x| x.strip_suffix(')'))
+            .unwrap_or(shown);
+        assert_eq!(shown, at, "{e}");
+    }
+    // finite at the nominal values: fine
+    let text = FIXTURE.replace("let c   = m2*L1*l2", "let c   = m2*L1*l2*exp(700)/exp(690)");
+    let checked = parse_and_check("ok.plant", &text);
+    assert!(
+        !checked.diagnostics.iter().any(|d| d.is_error()),
+        "{:?}",
+        checked.diagnostics
+    );
+
+    let cart = "model cart\ncoordinate x : length\ncoordinate th : angle\ninput F [N]\n\
+                parameter m = 1 [kg]\nparameter l = 1 [m]\n\
+                kinetic T = 1/2*m*l^2*th'^2\nforce x = F\n";
+    let checked = parse_and_check("cart.plant", cart);
+    let d = checked
+        .diagnostics
+        .iter()
+        .find(|d| d.code == "plantc::no_inertia")
+        .unwrap_or_else(|| panic!("{:?}", checked.diagnostics));
+    assert!(d.message.contains("`x`"), "{d:?}");
+    // an `inertia` line or a let carrying x' gives it inertia
+    let with_let = cart.replace(
+        "kinetic T = 1/2*m*l^2*th'^2",
+        "let v = x'\nkinetic T = 1/2*m*l^2*th'^2 + 1/2*m*v^2",
+    );
+    let checked = parse_and_check("cart.plant", &with_let);
+    assert!(
+        !checked
+            .diagnostics
+            .iter()
+            .any(|d| d.code == "plantc::no_inertia"),
+        "{:?}",
+        checked.diagnostics
+    );
+}

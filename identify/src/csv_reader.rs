@@ -183,7 +183,13 @@ pub(crate) fn read_csv(
         }
         for (k, plan) in plans.iter().enumerate() {
             let cell = record.get(plan.index).unwrap_or("");
-            let parsed = parse_cell(cell);
+            let parsed = parse_cell(cell).and_then(|v| {
+                if (v * plan.factor).abs() <= crate::data::MAX_ABS_VALUE {
+                    Ok(v)
+                } else {
+                    Err(CellProblem::TooLarge(cell.trim().to_string()))
+                }
+            });
             match parsed {
                 Ok(v) => values[k].push(v * plan.factor),
                 Err(problem) if plan.needed => {

@@ -324,6 +324,12 @@ pub(crate) fn experiment_name(path: &Path) -> String {
         .unwrap_or_else(|| path.display().to_string())
 }
 
+/// Largest magnitude of a value read (SI units): 1e150. Fit %, RMSE and the
+/// fit's cost sum squares of values and residuals; with |v| up to 1e150 a
+/// sum over 1e7 samples stays below f64's 1.8e308 (1e300 in one cell made
+/// fit % NaN with exit 0). No measurement of a rig comes near.
+pub const MAX_ABS_VALUE: f64 = 1e150;
+
 /// Longest sampling interval accepted, in median intervals: 1000. Dropped
 /// samples make intervals of a few periods; at the 100 Hz-10 kHz rates of
 /// the rigs, 1000 periods are 0.1-10 s without a measurement while the

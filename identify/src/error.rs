@@ -16,6 +16,8 @@ pub enum CellProblem {
     NotFinite(String),
     /// The cell is not a number.
     Unparsable(String),
+    /// The value (in SI units) is beyond [`crate::data::MAX_ABS_VALUE`].
+    TooLarge(String),
 }
 
 /// A measurement file that cannot be used. Fields name the place of the problem.
@@ -272,6 +274,11 @@ impl DataError {
                 CellProblem::Unparsable(s) => {
                     format!("cannot parse `{s}` as a number in column `{column_name}`")
                 }
+                CellProblem::TooLarge(s) => format!(
+                    "value `{s}` in column `{column_name}` is beyond {:e} in SI units: its square \
+                     overflows (fit % and RMSE would be NaN)",
+                    crate::data::MAX_ABS_VALUE
+                ),
             },
             TimeNotIncreasing {
                 previous, value, ..

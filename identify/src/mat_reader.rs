@@ -234,15 +234,18 @@ pub(crate) fn read_mat(
         .enumerate()
     {
         let vals = if k == 0 { t.clone() } else { row(k) };
-        if let Some(j) = vals.iter().position(|v| !v.is_finite()) {
+        if let Some(j) = vals
+            .iter()
+            .position(|v| !v.is_finite() || v.abs() > crate::data::MAX_ABS_VALUE)
+        {
             return Err(mat_err(
                 format!(
-                    "non-finite value {} in row {} (`{name}`) at sample {}",
+                    "value {} in row {} (`{name}`) at sample {} is not a finite number within 1e150",
                     vals[j],
                     k + 1,
                     j + 1
                 ),
-                "every sample must be a finite number",
+                "every sample must be a finite number of magnitude at most 1e150",
             ));
         }
     }

@@ -411,3 +411,28 @@ fn endless_lines_and_non_regular_files_are_refused() {
         assert!(msg.contains("not a regular file"), "{msg}");
     }
 }
+
+/// Issue 31: a value whose square overflows (1e300) is an error at its
+/// cell, not a NaN fit % later; in an extra column it drops the column.
+#[test]
+fn absurd_magnitudes_are_errors_at_their_cell() {
+    let s = good_csv(20).replacen(",0.500", ",1e300", 1);
+    let (e, msg) = fail("huge", &s);
+    assert!(
+        msg.contains("bad.csv:2:4:") && msg.contains("beyond 1e150"),
+        "{msg}"
+    );
+    assert!(matches!(e, DataError::BadCell { .. }), "{e:?}");
+    let mut s = String::from("t,theta,alpha,Vm,x\n");
+    s += &rows(12, |k, t| {
+        format!("{t},0.1,3.1,0.5,{}", if k == 3 { "1e200" } else { "1" })
+    });
+    let p = write("hugeextra", "x.csv", &s);
+    let (e, w) = read_experiment(&p, &pendulum_spec()).unwrap();
+    assert!(e.channel("x").is_none());
+    assert!(
+        w.iter()
+            .any(|w| matches!(w, DataWarning::DroppedColumn { line: 5, .. })),
+        "{w:?}"
+    );
+}

@@ -361,14 +361,13 @@ pub fn serve(connection: &Connection) -> Result<(), ServerError> {
                 // a bug in the analysis of one text reports itself instead of
                 // ending the session
                 let method = n.method.clone();
-                let outs = std::panic::catch_unwind(std::panic::AssertUnwindSafe(|| {
-                    state.notify(n)
-                }))
-                .unwrap_or_else(|_| {
-                    vec![show_error(format!(
+                let outs =
+                    std::panic::catch_unwind(std::panic::AssertUnwindSafe(|| state.notify(n)))
+                        .unwrap_or_else(|_| {
+                            vec![show_error(format!(
                         "plantc-lsp failed on `{method}` (a bug: please report it with the file)"
                     ))]
-                });
+                        });
                 for out in outs {
                     send(Message::Notification(out))?;
                 }

@@ -266,6 +266,55 @@ pub fn eval_si(expr: &Expr, symbols: &Symbols) -> Option<f64> {
 /// instead of `O(n m)` (a 100,000-character name took 54 s).
 pub const MAX_SUGGESTION_EDITS: usize = 8;
 
+/// [`eval_si`] that also finds, in one pass, the first node whose operands
+/// are finite numbers but whose value is not; it goes to `first`.
+fn eval_reporting<'e>(
+    expr: &'e Expr,
+    symbols: &Symbols,
+    first: &mut Option<(&'e Expr, f64)>,
+) -> Option<f64> {
+    let v = match &expr.kind {
+        ExprKind::Neg(a) => -eval_reporting(a, symbols, first)?,
+        ExprKind::Binary(op, a, b) => {
+            let x = eval_reporting(a, symbols, first);
+            let y = eval_reporting(b, symbols, first);
+            let (a, b) = (x?, y?);
+            if !(a.is_finite() && b.is_finite()) {
+                return Some(f64::NAN);
+            }
+            match op {
+                BinOp::Add => a + b,
+                BinOp::Sub => a - b,
+                BinOp::Mul => a * b,
+                BinOp::Div => a / b,
+                BinOp::Pow => a.powf(b),
+            }
+        }
+        ExprKind::Call(_, args) => {
+            let mut all = Some(());
+            let mut finite = true;
+            for a in args {
+                match eval_reporting(a, symbols, first) {
+                    Some(v) => finite &= v.is_finite(),
+                    None => all = None,
+                }
+            }
+            all?;
+            if !finite {
+                return Some(f64::NAN);
+            }
+            eval_si(expr, symbols)?
+        }
+        _ => eval_si(expr, symbols)?,
+    };
+    // (a literal that overflows is reported by the parser already)
+    let operation = matches!(expr.kind, ExprKind::Binary(..) | ExprKind::Call(..));
+    if operation && !v.is_finite() && first.is_none() {
+        *first = Some((expr, v));
+    }
+    Some(v)
+}
+
 /// Names Rust reserves even as raw identifiers (`r#self` is not allowed):
 /// refused as names in a model, since `plantc gen` writes Rust from them.
 /// Other Rust keywords are fine (generated as raw identifiers, `r#fn`).
@@ -1012,6 +1061,68 @@ impl Checker {
         }
     }
 
+    /// A coordinate whose velocity appears nowhere in the kinetic energy
+    /// (directly or through a `let`) and that no `inertia` line targets has
+    /// no inertia: its row of the mass matrix is zero, so `M` is singular in
+    /// every state and the equations of motion do not exist (derive used to
+    /// print `det M = 0` and `f` with `inf`).
+    fn check_inertia(&mut self, file: &ModelFile) {
+        let [t] = file.kinetic.as_slice() else {
+            return;
+        };
+        let lets: HashMap<&str, &Expr> = file
+            .lets
+            .iter()
+            .map(|l| (l.name.name.as_str(), &l.expr))
+            .collect();
+        let mut moving = std::collections::BTreeSet::new();
+        let mut seen_lets = std::collections::BTreeSet::new();
+        let mut todo = vec![&t.expr];
+        while let Some(e) = todo.pop() {
+            e.walk(&mut |x| match &x.kind {
+                ExprKind::Deriv(n, _) => {
+                    moving.insert(n.clone());
+                }
+                ExprKind::Name(n) => {
+                    if let Some(&l) = lets.get(n.as_str()) {
+                        if seen_lets.insert(n.clone()) {
+                            todo.push(l);
+                        }
+                    }
+                }
+                _ => {}
+            });
+        }
+        // a velocity of no coordinate (a misspelling) is reported already;
+        // the missing inertia would only follow from it
+        if moving
+            .iter()
+            .any(|m| !file.coordinates.iter().any(|c| &c.name.name == m))
+        {
+            return;
+        }
+        for c in &file.coordinates {
+            let name = &c.name.name;
+            let added = file.inertias.iter().any(|i| &i.target.name == name);
+            if !moving.contains(name) && !added {
+                self.diags.push(
+                    Diagnostic::error(
+                        "plantc::no_inertia",
+                        format!("coordinate `{name}` has no inertia"),
+                        c.name.span,
+                        format!("`{name}'` appears nowhere in the kinetic energy"),
+                    )
+                    .with_label(t.span, "the kinetic energy")
+                    .with_help(format!(
+                        "without a term in `{name}'` the mass matrix is singular for every state \
+                         (no equation of motion gives `{name}''`): add its kinetic energy, e.g. \
+                         `1/2*m*{name}'^2`, or an `inertia {name} = added_inertia(J)` line"
+                    )),
+                );
+            }
+        }
+    }
+
     /// Refuses, where they are declared, the names the generated Rust code
     /// cannot spell even as raw identifiers ([`RUST_RESERVED`]).
     fn check_rust_reserved(&mut self, file: &ModelFile) {
@@ -1208,6 +1319,7 @@ impl Checker {
             self.declare(&e.name, SymbolKind::Energy, Some(Dim::energy()));
         }
         self.check_lets(&file);
+        self.check_inertia(&file);
         // outputs
         let mut output_names: BTreeMap<String, Span> = BTreeMap::new();
         for o in &file.outputs {
@@ -2012,6 +2124,47 @@ impl Checker {
                     }
                 }
             });
+        }
+        // parameter-only parts of every expression, at the nominal values:
+        // the first operation that turns finite operands into a value that
+        // is not (an overflow, a logarithm of 0, a square root of -1, ...)
+        // (set entries and gains: below, named by their set or controller)
+        let literal_divisions: Vec<Span> = found.iter().map(|d| d.primary).collect();
+        let mut model_exprs: Vec<&Expr> = Vec::new();
+        model_exprs.extend(file.lets.iter().map(|l| &l.expr));
+        model_exprs.extend(file.outputs.iter().filter_map(|o| o.expr.as_ref()));
+        model_exprs.extend(file.kinetic.iter().chain(&file.potential).map(|e| &e.expr));
+        model_exprs.extend(file.forces.iter().map(|f| &f.written));
+        model_exprs.extend(file.sensors.iter().chain(&file.actuators).map(|s| &s.call));
+        for c in &file.controllers {
+            for s in &c.body {
+                if let ControllerStmt::Law { expr, .. } = s {
+                    model_exprs.push(expr);
+                }
+            }
+        }
+        for e in &model_exprs {
+            let mut first = None;
+            let _ = eval_reporting(e, &self.syms, &mut first);
+            let Some((x, v)) = first else {
+                continue;
+            };
+            let near = |s: &Span| x.span.start <= s.start && s.end <= x.span.end;
+            if literal_divisions.iter().any(near) {
+                continue;
+            }
+            found.push(
+                Diagnostic::error(
+                    "plantc::not_finite",
+                    format!("this expression is not a finite number ({v})"),
+                    x.span,
+                    format!("evaluates to {v} (parameters at their nominal values)"),
+                )
+                .with_help(
+                    "every value of a model must be finite: check the numbers here and the \
+                     values of the parameters it uses",
+                ),
+            );
         }
         // constant values: set entries and gains, with the nominal values
         let mut constants: Vec<(&Expr, String)> = Vec::new();
