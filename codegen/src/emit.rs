@@ -43,6 +43,71 @@ pub(crate) fn camel(name: &str) -> String {
         .collect()
 }
 
+/// Type names a controller's type must not take: the generated module's own
+/// items and the names Rust's prelude puts in scope there (a controller
+/// named `default` made a type `Default` that shadowed the prelude trait).
+const TAKEN_TYPE_NAMES: &[&str] = &[
+    "Plant",
+    "PlantCoeffs",
+    "Params",
+    "Derived",
+    "Control",
+    "Option",
+    "Some",
+    "None",
+    "Result",
+    "Ok",
+    "Err",
+    "Default",
+    "Clone",
+    "Copy",
+    "Send",
+    "Sync",
+    "Sized",
+    "Unpin",
+    "Drop",
+    "Fn",
+    "FnMut",
+    "FnOnce",
+    "Box",
+    "String",
+    "Vec",
+    "ToString",
+    "ToOwned",
+    "Iterator",
+    "IntoIterator",
+    "DoubleEndedIterator",
+    "ExactSizeIterator",
+    "Extend",
+    "Eq",
+    "PartialEq",
+    "Ord",
+    "PartialOrd",
+    "AsRef",
+    "AsMut",
+    "Into",
+    "From",
+    "TryFrom",
+    "TryInto",
+    "FromIterator",
+];
+
+/// The Rust type of the controller `name`: its CamelCase (`pole_placement`
+/// -> `PolePlacement`), with `Controller` appended when that is taken
+/// ([`TAKEN_TYPE_NAMES`]) and prepended when it would not start with a
+/// letter (`_1` -> `Controller1`). Deterministic: every place that names a
+/// controller's type calls this.
+pub(crate) fn controller_type(name: &str) -> String {
+    let c = camel(name);
+    if !c.starts_with(|ch: char| ch.is_ascii_alphabetic()) {
+        format!("Controller{c}")
+    } else if TAKEN_TYPE_NAMES.contains(&c.as_str()) {
+        format!("{c}Controller")
+    } else {
+        c
+    }
+}
+
 fn doc(text: &str) -> TokenStream {
     let lines = text.lines().map(|l| format!(" {l}"));
     quote!(#(#[doc = #lines])*)
@@ -228,6 +293,20 @@ pub(crate) fn generate_body(spec: &Spec) -> Result<String, Error> {
         if !emitted.iter().any(|e| e == rc.name()) {
             emitted.push(rc.name().to_string());
             ctrl_items.push(controller(model, &rc)?);
+        }
+    }
+    // two controllers whose names differ only in case or underscores would
+    // share a type name
+    for (i, a) in emitted.iter().enumerate() {
+        if let Some(b) = emitted[..i]
+            .iter()
+            .find(|b| controller_type(b) == controller_type(a))
+        {
+            return Err(Error::Generate(format!(
+                "controllers `{b}` and `{a}` would both generate the type `{}`; rename one of \
+                 them (names that differ only in case or underscores cannot both be generated)",
+                controller_type(a)
+            )));
         }
     }
 
@@ -449,14 +528,7 @@ pub(crate) fn generate_body(spec: &Spec) -> Result<String, Error> {
 }
 
 fn controller(model: &Model, rc: &ResolvedController) -> Result<TokenStream, Error> {
-    let type_name = camel(rc.name());
-    if ["Plant", "PlantCoeffs", "Params", "Derived", "Control"].contains(&type_name.as_str()) {
-        return Err(Error::Generate(format!(
-            "controller `{}` would generate the type `{type_name}`, which the generated \
-             module already defines; rename the controller",
-            rc.name()
-        )));
-    }
+    let type_name = controller_type(rc.name());
     let sname = format_ident!("{}", type_name);
     let limits_doc = model
         .inputs
@@ -964,7 +1036,7 @@ fn hybrid_controller(
     for (i, m) in modes.iter().enumerate() {
         let field = format_ident!("mode_{}", m.name);
         let field_mut = format_ident!("mode_{}_mut", m.name);
-        let ty = format_ident!("{}", camel(m.controller.name()));
+        let ty = format_ident!("{}", controller_type(m.controller.name()));
         fields.push(quote!(#field: #ty,));
         match &m.controller {
             ResolvedController::StateFeedback { .. } => inits.push(quote!(#field: #ty::new(),)),

@@ -216,7 +216,7 @@ impl Builder {
     pub fn emit(&self) -> Result<(String, String), Error> {
         let path = self.model_path()?;
         let loaded = load_model(path).map_err(|e| Error::Load(e.render()))?;
-        let shown = path.display().to_string().replace('\\', "/");
+        let shown = shown_path(path);
         let code = generate(
             &loaded.model,
             &shown,
@@ -291,6 +291,24 @@ pub fn generate(
         observer: None,
     })?;
     Ok(with_header(model_file, &body))
+}
+
+/// A path as the generated files show it (in comments and docs): `/` for
+/// `\\`, and control characters escaped (`\\n`), so a path can never end
+/// a comment line and inject the text after it into `Cargo.toml` or Rust.
+pub(crate) fn shown_path(path: &std::path::Path) -> String {
+    path.display()
+        .to_string()
+        .replace('\\', "/")
+        .chars()
+        .map(|c| {
+            if c.is_control() {
+                c.escape_default().to_string()
+            } else {
+                c.to_string()
+            }
+        })
+        .collect()
 }
 
 fn with_header(model_file: &str, body: &str) -> String {

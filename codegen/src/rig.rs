@@ -12,10 +12,9 @@ use std::process::Command;
 
 use plantc_derive::model::Model;
 
-use crate::emit::camel;
+use crate::emit::controller_type;
 use crate::krate::{
-    remove_stale, standalone_package, write_files, CrateOptions, RigOptions, RuntimeSource,
-    README_MARK,
+    standalone_package, write_files, CrateOptions, RigOptions, RuntimeSource, README_MARK,
 };
 use crate::{fnv1a64, Error, HEADER_PREFIX};
 
@@ -47,7 +46,7 @@ fn with_header(shown: &str, body: &str) -> String {
 
 /// The package (and binary) name of a model's rig crate.
 pub fn rig_package_name(model_name: &str) -> String {
-    format!("{}-rig", model_name.replace('_', "-"))
+    format!("{}-rig", crate::krate::package_name(model_name))
 }
 
 pub(crate) fn write_rig(
@@ -128,7 +127,7 @@ pub(crate) fn write_rig(
     let mut gain_arms = String::new();
     let mut ctrl_arms = String::new();
     for c in &opts.controllers {
-        let ty = camel(c);
+        let ty = controller_type(c);
         let name = rust_str(c);
         gain_arms.push_str(&format!(
             "            {name} => &model::{ty}::GAIN_NAMES,\n"
@@ -385,14 +384,13 @@ The report ends with the loop's allocation count (expected 0).\n",
         cpr = o.counts_per_rev,
     );
 
-    remove_stale(&opts.dir, true)?;
     let files = [
         ("Cargo.toml", cargo),
         ("README.md", readme),
         ("src/model.rs", model_rs),
         ("src/main.rs", main_rs),
     ];
-    write_files(&opts.dir, &files)?;
+    write_files(&opts.dir, &files, opts.force)?;
     Ok(files.iter().map(|(p, _)| opts.dir.join(p)).collect())
 }
 

@@ -212,3 +212,173 @@ fn invalid_utf8_names_line_and_column() {
     assert!(e.contains("UTF-16"), "{e}");
     std::fs::remove_dir_all(&dir).unwrap();
 }
+
+proptest! {
+    /// The banded distance is the full Levenshtein distance whenever that is
+    /// within the band, and `None` exactly when it is not (issue 31, r03).
+    #[test]
+    fn banded_edit_distance_agrees_with_the_full_one(
+        a in "[abc_é]{0,12}", b in "[abc_é]{0,12}", max in 0usize..6
+    ) {
+        use plantc_derive::lang::check::{edit_distance, edit_distance_within};
+        let full = edit_distance(&a, &b);
+        let banded = edit_distance_within(&a, &b, max);
+        prop_assert_eq!(banded, (full <= max).then_some(full), "{} {} {}", a, b, max);
+    }
+}
+
+/// Issue 31 (r03): an unknown name of 100,000 characters next to a declared
+/// one of the same length: the suggestion is computed in a band, so `check`
+/// answers at once (54 s before), and the name is still suggested.
+#[test]
+fn a_huge_misspelt_name_gets_its_suggestion_without_quadratic_work() {
+    let n = 100_000;
+    let name = "z".repeat(n);
+    let misspelt = format!("{}y", "z".repeat(n - 1));
+    let text = FIXTURE
+        .replace(
+            "parameter g  = 9.81",
+            &format!("parameter {name} = 1\nparameter g  = 9.81"),
+        )
+        .replace(
+            "let c   = m2*L1*l2",
+            &format!("let c   = m2*L1*l2 + 0*{misspelt}"),
+        );
+    assert!(text.contains(&misspelt) && text.len() > FIXTURE.len() + 2 * n);
+    let t = std::time::Instant::now();
+    let checked = parse_and_check("long.plant", &text);
+    let err = checked
+        .diagnostics
+        .iter()
+        .find(|d| d.is_error())
+        .expect("the misspelt name is an error");
+    assert!(
+        err.help
+            .as_deref()
+            .is_some_and(|h| h.contains("did you mean")),
+        "{err:?}"
+    );
+    // no timing assertion (benchmarks measure speed); printed for the record
+    println!("check of a 100,000-character name: {:?}", t.elapsed());
+}
+
+/// Issue 31 (r06): names Rust cannot spell even as raw identifiers are
+/// refused by `check` where they are declared (gen used to panic on them);
+/// other Rust keywords stay fine (generated as `r#fn`).
+#[test]
+fn names_rust_reserves_are_refused_where_declared() {
+    let replace_word = |text: &str, from: &str, to: &str| -> String {
+        // whole words only
+        let mut out = String::new();
+        let b = text.as_bytes();
+        let is_w = |c: u8| c.is_ascii_alphanumeric() || c == b'_';
+        let mut i = 0;
+        while i < text.len() {
+            if text[i..].starts_with(from)
+                && (i == 0 || !is_w(b[i - 1]))
+                && b.get(i + from.len()).is_none_or(|c| !is_w(*c))
+            {
+                out.push_str(to);
+                i += from.len();
+            } else {
+                let c = text[i..].chars().next().unwrap();
+                out.push(c);
+                i += c.len_utf8();
+            }
+        }
+        out
+    };
+    for (from, what) in [
+        ("Kg", "parameter"),
+        ("rotary_pendulum", "model"),
+        ("pole_placement", "controller"),
+        ("zeta", "gain"),
+        ("quanser_manual", "set"),
+    ] {
+        for reserved in plantc_derive::lang::check::RUST_RESERVED {
+            let text = replace_word(FIXTURE, from, reserved);
+            let checked = parse_and_check("r.plant", &text);
+            let errors: Vec<_> = checked
+                .diagnostics
+                .iter()
+                .filter(|d| d.code == "plantc::reserved_name")
+                .collect();
+            assert!(
+                !errors.is_empty() && errors[0].message.contains(&format!("`{reserved}`")),
+                "{what} `{reserved}`: {:?}",
+                checked.diagnostics
+            );
+        }
+    }
+    // a Rust keyword that can be raw is a fine name
+    let text = replace_word(FIXTURE, "Kg", "fn");
+    let checked = parse_and_check("r.plant", &text);
+    assert!(
+        !checked.diagnostics.iter().any(|d| d.is_error()),
+        "{:?}",
+        checked.diagnostics
+    );
+}
+
+/// Issue 31 (r13): constant expressions that overflow or are undefined at
+/// the nominal values are check errors at the operation that fails (derive
+/// printed `inf` with exit 0); a coordinate without inertia is an error.
+#[test]
+fn non_finite_constants_and_missing_inertia_are_check_errors() {
+    for (e, at) in [
+        ("1e308*10", "1e308*10"),
+        ("1/(g-g)*g", "1/(g-g)"),
+        ("1/4.9e-324", "1/4.9e-324"),
+        ("exp(1000)", "exp(1000)"),
+        ("sqrt(-1)", "sqrt(-1)"),
+        ("ln(0)", "ln(0)"),
+        ("10^400", "10^400"),
+    ] {
+        let text = FIXTURE.replace("let c   = m2*L1*l2", &format!("let c   = m2*L1*l2*({e})"));
+        let checked = parse_and_check("nf.plant", &text);
+        let d = checked
+            .diagnostics
+            .iter()
+            .find(|d| d.code == "plantc::not_finite")
+            .unwrap_or_else(|| panic!("{e}: {:?}", checked.diagnostics));
+        let shown = &text[d.primary.start..d.primary.end];
+        let shown = shown
+            .strip_prefix('(')
+            .and_then(|x| x.strip_suffix(')'))
+            .unwrap_or(shown);
+        assert_eq!(shown, at, "{e}");
+    }
+    // finite at the nominal values: fine
+    let text = FIXTURE.replace("let c   = m2*L1*l2", "let c   = m2*L1*l2*exp(700)/exp(690)");
+    let checked = parse_and_check("ok.plant", &text);
+    assert!(
+        !checked.diagnostics.iter().any(|d| d.is_error()),
+        "{:?}",
+        checked.diagnostics
+    );
+
+    let cart = "model cart\ncoordinate x : length\ncoordinate th : angle\ninput F [N]\n\
+                parameter m = 1 [kg]\nparameter l = 1 [m]\n\
+                kinetic T = 1/2*m*l^2*th'^2\nforce x = F\n";
+    let checked = parse_and_check("cart.plant", cart);
+    let d = checked
+        .diagnostics
+        .iter()
+        .find(|d| d.code == "plantc::no_inertia")
+        .unwrap_or_else(|| panic!("{:?}", checked.diagnostics));
+    assert!(d.message.contains("`x`"), "{d:?}");
+    // an `inertia` line or a let carrying x' gives it inertia
+    let with_let = cart.replace(
+        "kinetic T = 1/2*m*l^2*th'^2",
+        "let v = x'\nkinetic T = 1/2*m*l^2*th'^2 + 1/2*m*v^2",
+    );
+    let checked = parse_and_check("cart.plant", &with_let);
+    assert!(
+        !checked
+            .diagnostics
+            .iter()
+            .any(|d| d.code == "plantc::no_inertia"),
+        "{:?}",
+        checked.diagnostics
+    );
+}

@@ -56,8 +56,10 @@ fn clean_leftovers(parent: &Path, name: &std::ffi::OsString) {
 
 impl AtomicFile {
     /// Starts replacing (or creating) the file at `path`. The directory must
-    /// exist; `path` must not be a directory. A symbolic link is followed: the
-    /// file it points to is replaced.
+    /// exist; `path` must not be a directory nor a read-only file
+    /// ([`Error::ReadOnly`]: a rename would replace it, permissions
+    /// notwithstanding). A symbolic link is followed: the file it points to
+    /// is replaced.
     pub fn create(path: impl AsRef<Path>) -> Result<AtomicFile, Error> {
         let target = resolve(path.as_ref())?;
         if target.is_dir() {
@@ -65,6 +67,9 @@ impl AtomicFile {
                 path: path.as_ref().to_path_buf(),
                 expected: "a file",
             });
+        }
+        if fs::metadata(&target).is_ok_and(|m| m.permissions().readonly()) {
+            return Err(Error::ReadOnly { path: target });
         }
         let (parent, name) = names::split(&target)?;
         clean_leftovers(&parent, &name);

@@ -21,11 +21,24 @@ pub enum Error {
         /// What was expected: "a file" or "a directory".
         expected: &'static str,
     },
-    /// A fresh directory cannot replace the current directory (or one of its
-    /// ancestors): the process (and the user's shell) would be left in a
-    /// removed directory.
-    CurrentDirectory {
-        /// The directory.
+    /// The output path is a symbolic link: plantc writes output directories
+    /// only at their real path (the output would go elsewhere than named).
+    SymbolicLink {
+        /// The link.
+        path: PathBuf,
+        /// Where it points.
+        to: PathBuf,
+    },
+    /// The file is read-only: plantc does not replace (or delete) a file the
+    /// user made read-only.
+    ReadOnly {
+        /// The file.
+        path: PathBuf,
+    },
+    /// A file plantc did not write (not in its manifest) is where a new
+    /// output file goes; replacing it needs the command's `--force`.
+    WouldReplace {
+        /// The file.
         path: PathBuf,
     },
     /// Creating, writing or syncing the temporary file or directory failed.
@@ -57,7 +70,9 @@ impl Error {
         match self {
             Error::NoFileName { path }
             | Error::WrongKind { path, .. }
-            | Error::CurrentDirectory { path }
+            | Error::SymbolicLink { path, .. }
+            | Error::ReadOnly { path }
+            | Error::WouldReplace { path }
             | Error::Write { path, .. }
             | Error::Replace { path, .. }
             | Error::Read { path, .. } => path,
@@ -74,9 +89,24 @@ impl fmt::Display for Error {
             Error::WrongKind { path, expected } => {
                 write!(f, "cannot write `{}`: expected {expected}", path.display())
             }
-            Error::CurrentDirectory { path } => write!(
+            Error::SymbolicLink { path, to } => write!(
                 f,
-                "cannot replace `{}`: it is the current directory (or contains it); choose a subdirectory",
+                "cannot write into `{}`: it is a symbolic link (to `{}`); plantc writes an output \
+                 directory only at its real path: name `{}` itself, or remove the link",
+                path.display(),
+                to.display(),
+                to.display()
+            ),
+            Error::ReadOnly { path } => write!(
+                f,
+                "cannot replace `{}`: the file is read-only; plantc does not replace a read-only \
+                 file (make it writable first, e.g. `chmod u+w`)",
+                path.display()
+            ),
+            Error::WouldReplace { path } => write!(
+                f,
+                "cannot replace `{}`: plantc did not write it (it is not in the directory's \
+                 manifest); move it away, or pass --force to replace it",
                 path.display()
             ),
             Error::Write { path, source } => {

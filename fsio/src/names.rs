@@ -1,5 +1,6 @@
-//! Names of the temporaries next to a target: `.<name>.plantc-<kind>-<pid>-<n>`,
-//! and the cleanup of those a killed process left behind.
+//! Names of the temporaries next to a target: `.<name>.plantc-<kind>-<pid>-<n>`
+//! (a file's) or inside an output directory: `.plantc-<kind>-<pid>-<n>`, and
+//! the cleanup of those a killed process left behind.
 
 use std::ffi::OsString;
 use std::path::{Path, PathBuf};
@@ -14,11 +15,14 @@ pub(crate) enum Kind {
     Tmp,
     /// A directory being built by [`crate::FreshDir`].
     New,
-    /// The previous directory, moved aside during a swap (platforms without
-    /// an atomic exchange).
+    /// The previous directory, moved aside during a swap (left by plantc
+    /// versions that swapped whole directories).
     Old,
-    /// The journal of entries carried from the old directory into the new.
+    /// The journal of entries carried from the old directory into the new
+    /// (left by plantc versions that swapped whole directories).
     Carried,
+    /// The journal of an output directory's commit ([`crate::FreshDir`]).
+    Commit,
 }
 
 impl Kind {
@@ -28,6 +32,7 @@ impl Kind {
             Kind::New => "new",
             Kind::Old => "old",
             Kind::Carried => "carried",
+            Kind::Commit => "commit",
         }
     }
 
@@ -37,6 +42,7 @@ impl Kind {
             "new" => Kind::New,
             "old" => Kind::Old,
             "carried" => Kind::Carried,
+            "commit" => Kind::Commit,
             _ => return None,
         })
     }
@@ -62,15 +68,25 @@ fn prefix(name: &OsString) -> String {
     format!(".{short}.plantc-")
 }
 
-/// A fresh, unique temporary name for the target named `name`.
-pub(crate) fn temporary(name: &OsString, kind: Kind) -> (String, String) {
+/// A fresh, unique id: `<pid>-<n>`.
+pub(crate) fn fresh_id() -> String {
     static COUNTER: AtomicU64 = AtomicU64::new(0);
-    let id = format!(
+    format!(
         "{}-{}",
         std::process::id(),
         COUNTER.fetch_add(1, Ordering::Relaxed)
-    );
+    )
+}
+
+/// A fresh, unique temporary name for the target named `name`.
+pub(crate) fn temporary(name: &OsString, kind: Kind) -> (String, String) {
+    let id = fresh_id();
     (format!("{}{}-{id}", prefix(name), kind.tag()), id)
+}
+
+/// The name of a temporary of `kind` inside an output directory.
+pub(crate) fn inside_with_id(kind: Kind, id: &str) -> String {
+    format!(".plantc-{}-{id}", kind.tag())
 }
 
 /// The name of a temporary of `kind` with a known id.
@@ -87,14 +103,22 @@ pub(crate) struct Leftover {
 
 /// Temporaries of the target `name` in `parent` whose process is gone.
 pub(crate) fn leftovers(parent: &Path, name: &OsString) -> Vec<Leftover> {
-    let pre = prefix(name);
+    leftovers_with_prefix(parent, &prefix(name))
+}
+
+/// Temporaries inside the output directory `dir` whose process is gone.
+pub(crate) fn leftovers_inside(dir: &Path) -> Vec<Leftover> {
+    leftovers_with_prefix(dir, ".plantc-")
+}
+
+fn leftovers_with_prefix(parent: &Path, pre: &str) -> Vec<Leftover> {
     let Ok(entries) = std::fs::read_dir(parent) else {
         return Vec::new();
     };
     let mut found = Vec::new();
     for e in entries.flatten() {
         let file = e.file_name();
-        let Some(rest) = file.to_str().and_then(|f| f.strip_prefix(&pre)) else {
+        let Some(rest) = file.to_str().and_then(|f| f.strip_prefix(pre)) else {
             continue;
         };
         let Some((tag, id)) = rest.split_once('-') else {

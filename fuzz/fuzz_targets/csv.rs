@@ -16,6 +16,7 @@ fuzz_target!(|data: &[u8]| {
         .input("Vm", Kind::Voltage);
     let options = ReadOptions {
         mat_channels: parse_channel_map("theta,alpha,Vm").ok(),
+        ..ReadOptions::default()
     };
     let _ = read_experiment_with(&path, &spec, &options);
 });

@@ -40,11 +40,16 @@ pub(crate) fn read_csv(
         .flexible(true)
         .trim(csv::Trim::All)
         .comment(Some(b'#'))
-        .from_reader(std::io::BufReader::new(reader));
+        .from_reader(LineCap::new(std::io::BufReader::new(reader)));
     let csv_err = |e: csv::Error| DataError::Csv {
         file: file.clone(),
         line: e.position().map(|p| p.line()),
-        message: e.to_string(),
+        message: match e.kind() {
+            csv::ErrorKind::Io(io) if io.kind() == std::io::ErrorKind::InvalidData => {
+                io.to_string()
+            }
+            _ => e.to_string(),
+        },
     };
     let headers = rdr.headers().map_err(csv_err)?.clone();
     let mut warnings = Vec::new();
@@ -146,6 +151,9 @@ pub(crate) fn read_csv(
     let mut dropped: Vec<Option<u64>> = vec![None; plans.len()];
     let mut record = csv::StringRecord::new();
     let width = headers.len();
+    // (row index, line) wherever the line stops being row index + 2
+    // (comment or blank lines): the line of any row, without a line per row
+    let mut line_breaks: Vec<(usize, u64)> = Vec::new();
     loop {
         match rdr.read_record(&mut record) {
             Ok(true) => {}
@@ -153,6 +161,13 @@ pub(crate) fn read_csv(
             Err(e) => return Err(csv_err(e)),
         }
         let line = record.position().map(|p| p.line()).unwrap_or(0);
+        let row = values[0].len();
+        let expected = line_breaks
+            .last()
+            .map_or(row as u64 + 2, |&(r, l)| l + (row - r) as u64);
+        if line != expected {
+            line_breaks.push((row, line));
+        }
         if record.len() != width {
             return Err(DataError::FieldCount {
                 file,
@@ -168,7 +183,13 @@ pub(crate) fn read_csv(
         }
         for (k, plan) in plans.iter().enumerate() {
             let cell = record.get(plan.index).unwrap_or("");
-            let parsed = parse_cell(cell);
+            let parsed = parse_cell(cell).and_then(|v| {
+                if (v * plan.factor).abs() <= crate::data::MAX_ABS_VALUE {
+                    Ok(v)
+                } else {
+                    Err(CellProblem::TooLarge(cell.trim().to_string()))
+                }
+            });
             match parsed {
                 Ok(v) => values[k].push(v * plan.factor),
                 Err(problem) if plan.needed => {
@@ -210,6 +231,21 @@ pub(crate) fn read_csv(
         });
     }
 
+    if let Some((sample, median_dt)) = crate::data::first_gap(&values[0]) {
+        let line = line_breaks
+            .iter()
+            .rev()
+            .find(|&&(r, _)| r <= sample)
+            .map_or(sample as u64 + 2, |&(r, l)| l + (sample - r) as u64);
+        return Err(DataError::TimeGap {
+            file,
+            line: Some(line),
+            sample: sample + 1,
+            from: values[0][sample - 1],
+            to: values[0][sample],
+            median_dt,
+        });
+    }
     let mut columns = values.into_iter();
     let t = columns.next().unwrap_or_default();
     let mut channels = Vec::new();
@@ -248,6 +284,48 @@ pub(crate) fn read_csv(
         },
         warnings,
     ))
+}
+
+/// Longest CSV line read: 1 MiB. A row of numbers is under 1 KB (20
+/// columns of 24 characters) and a header of 1000 named columns under
+/// 64 KB; a file without line ends (or of NUL bytes) would otherwise be read
+/// into one record of its whole size.
+pub const MAX_LINE_BYTES: usize = 1 << 20;
+
+/// A reader that fails ([`std::io::ErrorKind::InvalidData`]) once a line
+/// runs longer than [`MAX_LINE_BYTES`].
+struct LineCap<R> {
+    inner: R,
+    since_newline: usize,
+}
+
+impl<R> LineCap<R> {
+    fn new(inner: R) -> Self {
+        Self {
+            inner,
+            since_newline: 0,
+        }
+    }
+}
+
+impl<R: std::io::Read> std::io::Read for LineCap<R> {
+    fn read(&mut self, buf: &mut [u8]) -> std::io::Result<usize> {
+        let n = self.inner.read(buf)?;
+        match buf[..n].iter().rposition(|&b| b == b'\n') {
+            Some(i) => self.since_newline = n - i - 1,
+            None => self.since_newline += n,
+        }
+        if self.since_newline > MAX_LINE_BYTES {
+            return Err(std::io::Error::new(
+                std::io::ErrorKind::InvalidData,
+                format!(
+                    "a line longer than {} MiB: not a CSV recording (rows of numbers end with a line break)",
+                    MAX_LINE_BYTES >> 20
+                ),
+            ));
+        }
+        Ok(n)
+    }
 }
 
 /// The factor to SI and the unit note of a column with unit suffix `unit`

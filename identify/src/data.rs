@@ -234,6 +234,7 @@ pub fn read_experiment_with(
         renamed = expected.renamed(&options.rename);
         &renamed
     };
+    check_regular(path, None)?;
     let (mut exp, mut warnings) = match ext.as_deref() {
         Some("mat") => crate::mat_reader::read_mat(path, expected, options)?,
         Some("csv") | Some("txt") | None => crate::csv_reader::read_csv(path, expected)?,
@@ -321,6 +322,64 @@ pub(crate) fn experiment_name(path: &Path) -> String {
     path.file_stem()
         .map(|s| s.to_string_lossy().into_owned())
         .unwrap_or_else(|| path.display().to_string())
+}
+
+/// Largest magnitude of a value read (SI units): 1e150. Fit %, RMSE and the
+/// fit's cost sum squares of values and residuals; with |v| up to 1e150 a
+/// sum over 1e7 samples stays below f64's 1.8e308 (1e300 in one cell made
+/// fit % NaN with exit 0). No measurement of a rig comes near.
+pub const MAX_ABS_VALUE: f64 = 1e150;
+
+/// Longest sampling interval accepted, in median intervals: 1000. Dropped
+/// samples make intervals of a few periods; at the 100 Hz-10 kHz rates of
+/// the rigs, 1000 periods are 0.1-10 s without a measurement while the
+/// simulation holds the input, which is no longer one sampled experiment but
+/// two (or one wrong stamp: `1e6` at the end of a 20 s record made `compare`
+/// simulate for minutes).
+pub const MAX_GAP_INTERVALS: f64 = 1000.0;
+
+/// The first sampling interval longer than [`MAX_GAP_INTERVALS`] median
+/// intervals: (index of the sample after it, median interval).
+pub(crate) fn first_gap(t: &[f64]) -> Option<(usize, f64)> {
+    let med = median_dt(t)?;
+    t.windows(2)
+        .position(|w| w[1] - w[0] > MAX_GAP_INTERVALS * med)
+        .map(|i| (i + 1, med))
+}
+
+/// Refuses a path that is not a regular file (a FIFO would block the open,
+/// a device like `/dev/zero` never end) or, when `max` is given, one larger
+/// than `max` bytes.
+pub(crate) fn check_regular(path: &Path, max: Option<u64>) -> Result<(), DataError> {
+    let io = |message: String| DataError::Io {
+        file: path.to_path_buf(),
+        message,
+    };
+    let m = std::fs::metadata(path).map_err(|e| io(e.to_string()))?;
+    if !m.is_file() {
+        return Err(io(if m.is_dir() {
+            "a directory, not a recording".into()
+        } else {
+            "not a regular file (a FIFO, socket or device): recordings are read from files".into()
+        }));
+    }
+    if let Some(max) = max.filter(|&max| m.len() > max) {
+        return Err(io(format!(
+            "the file has {} bytes; the reader's limit is {} MiB",
+            m.len(),
+            max >> 20
+        )));
+    }
+    Ok(())
+}
+
+/// The bytes of a regular file of at most `max` bytes.
+pub(crate) fn read_regular(path: &Path, max: u64) -> Result<Vec<u8>, DataError> {
+    check_regular(path, Some(max))?;
+    std::fs::read(path).map_err(|e| DataError::Io {
+        file: path.to_path_buf(),
+        message: e.to_string(),
+    })
 }
 
 /// Index of the first sample whose time does not exceed the previous one.

@@ -16,6 +16,8 @@ pub enum CellProblem {
     NotFinite(String),
     /// The cell is not a number.
     Unparsable(String),
+    /// The value (in SI units) is beyond [`crate::data::MAX_ABS_VALUE`].
+    TooLarge(String),
 }
 
 /// A measurement file that cannot be used. Fields name the place of the problem.
@@ -84,6 +86,22 @@ pub enum DataError {
         previous: f64,
         /// This time (s).
         value: f64,
+    },
+    /// One sampling interval is longer than [`crate::data::MAX_GAP_INTERVALS`]
+    /// median intervals: a gap in the recording, or a wrong stamp.
+    TimeGap {
+        /// The file.
+        file: PathBuf,
+        /// The line of the sample after the gap (text files).
+        line: Option<u64>,
+        /// 1-based index of the sample after the gap.
+        sample: usize,
+        /// Time before the gap (s).
+        from: f64,
+        /// Time after the gap (s).
+        to: f64,
+        /// The median sampling interval (s).
+        median_dt: f64,
     },
     /// Fewer samples than the minimum.
     TooShort {
@@ -176,6 +194,7 @@ impl DataError {
             | DuplicateColumn { file, .. }
             | BadCell { file, .. }
             | TimeNotIncreasing { file, .. }
+            | TimeGap { file, .. }
             | TooShort { file, .. }
             | UnknownUnit { file, .. }
             | IncompatibleUnit { file, .. }
@@ -194,6 +213,7 @@ impl DataError {
             BadCell { line, .. } | TimeNotIncreasing { line, .. } | FieldCount { line, .. } => {
                 Some(*line)
             }
+            TimeGap { line, .. } => *line,
             DuplicateColumn { .. } | UnknownUnit { .. } | IncompatibleUnit { .. } => Some(1),
             // in a text file: the header lacks the column; the file ends
             // after its last sample
@@ -254,6 +274,11 @@ impl DataError {
                 CellProblem::Unparsable(s) => {
                     format!("cannot parse `{s}` as a number in column `{column_name}`")
                 }
+                CellProblem::TooLarge(s) => format!(
+                    "value `{s}` in column `{column_name}` is beyond {:e} in SI units: its square \
+                     overflows (fit % and RMSE would be NaN)",
+                    crate::data::MAX_ABS_VALUE
+                ),
             },
             TimeNotIncreasing {
                 previous, value, ..
@@ -264,6 +289,18 @@ impl DataError {
                     format!("time goes backwards: {value} s after {previous} s")
                 }
             }
+            TimeGap {
+                sample,
+                from,
+                to,
+                median_dt,
+                ..
+            } => format!(
+                "the time jumps from {from} s to {to} s at sample {sample}: {:.3e} median \
+                 sampling intervals ({median_dt} s); a gap this long is not one sampled \
+                 experiment (the simulation would hold the input across it)",
+                (to - from) / median_dt
+            ),
             TooShort {
                 samples, minimum, ..
             } => format!("file too short: {samples} samples, at least {minimum} needed"),
@@ -315,6 +352,9 @@ impl DataError {
             }
             TimeNotIncreasing { .. } => {
                 "time in column `t` must strictly increase; remove repeated or out-of-order rows".into()
+            }
+            TimeGap { .. } => {
+                "fix the stamp if it is wrong, or split the file at this sample into two experiments".into()
             }
             TooShort { .. } => "record a longer experiment".into(),
             UnknownUnit { kind, .. } | IncompatibleUnit { expected: kind, .. } => {

@@ -16,6 +16,94 @@ use crate::data::{
 use crate::error::{DataError, DataWarning};
 use crate::units::{split_header, Kind};
 
+/// Most bytes of MAT data read, compressed elements inflated: 256 MiB,
+/// 3.3e7 doubles (time and three signals over 8e6 samples: 2.2 h at 1 kHz).
+/// The reader holds the data about three times (the file, the parsed
+/// matrix, the channels), so a file at the limit stays under 1 GB; beyond,
+/// a zlib stream that inflates 1000-fold (a 4 MB file declaring 4 GB) is
+/// refused while it is inflated, before anything of its size is allocated.
+pub const MAX_MAT_BYTES: u64 = 256 << 20;
+
+/// MAT v5 element types the reader keeps at the top level.
+const MI_MATRIX: u32 = 14;
+const MI_COMPRESSED: u32 = 15;
+
+/// The file with every top-level compressed element inflated in place
+/// (under [`MAX_MAT_BYTES`] in all) and the top-level elements that are not
+/// matrices dropped, so the MAT parser sees only uncompressed matrices and
+/// never inflates or allocates on its own. A file whose header or element
+/// tags do not add up is passed on as it is, for the parser's error.
+fn inflate_elements(bytes: Vec<u8>) -> Result<Vec<u8>, String> {
+    inflate_elements_within(bytes, MAX_MAT_BYTES)
+}
+
+/// [`inflate_elements`] with a budget of `max` inflated bytes.
+fn inflate_elements_within(bytes: Vec<u8>, max: u64) -> Result<Vec<u8>, String> {
+    use std::io::Read;
+    if bytes.len() < 128 {
+        return Ok(bytes);
+    }
+    let little = match &bytes[126..128] {
+        b"IM" => true,
+        b"MI" => false,
+        _ => return Ok(bytes),
+    };
+    let word = |at: usize| {
+        let b = [bytes[at], bytes[at + 1], bytes[at + 2], bytes[at + 3]];
+        if little {
+            u32::from_le_bytes(b)
+        } else {
+            u32::from_be_bytes(b)
+        }
+    };
+    let mut out = bytes[..128].to_vec();
+    let mut budget = max;
+    let mut pos = 128;
+    while pos + 8 <= bytes.len() {
+        let (ty, size) = (word(pos), word(pos + 4) as usize);
+        let Some(end) = (pos + 8).checked_add(size).filter(|&e| e <= bytes.len()) else {
+            out.extend_from_slice(&bytes[pos..]);
+            break;
+        };
+        if ty & 0xFFFF_0000 != 0 {
+            // a small element at the top level: not a variable
+            out.extend_from_slice(&bytes[pos..]);
+            break;
+        }
+        let padded = end.div_ceil(8) * 8;
+        match ty {
+            MI_COMPRESSED => {
+                let mut inflated = Vec::new();
+                let decoder = libflate::zlib::Decoder::new(&bytes[pos + 8..end])
+                    .map_err(|e| format!("a compressed element does not inflate: {e}"))?;
+                decoder
+                    .take(budget + 1)
+                    .read_to_end(&mut inflated)
+                    .map_err(|e| format!("a compressed element does not inflate: {e}"))?;
+                if inflated.len() as u64 > budget {
+                    return Err(format!(
+                        "the compressed data inflate beyond the reader's limit of {} MiB (from \
+                         a {} KB element): a recording this large (or a zip bomb) is refused",
+                        max >> 20,
+                        size / 1000
+                    ));
+                }
+                budget -= inflated.len() as u64;
+                out.extend_from_slice(&inflated);
+                out.resize(out.len().div_ceil(8) * 8, 0);
+                pos = end; // compressed elements are not padded
+            }
+            MI_MATRIX => {
+                out.extend_from_slice(&bytes[pos..padded.min(bytes.len())]);
+                out.resize(out.len().div_ceil(8) * 8, 0);
+                pos = padded;
+            }
+            _ => pos = padded,
+        }
+    }
+    Ok(out)
+}
+
 /// Reads a MAT experiment. See [`crate::read_experiment_with`].
 pub(crate) fn read_mat(
     path: &Path,
@@ -28,9 +116,12 @@ pub(crate) fn read_mat(
         message,
         help: help.to_string(),
     };
-    let bytes = std::fs::read(path).map_err(|e| DataError::Io {
-        file: file.clone(),
-        message: e.to_string(),
+    let bytes = crate::data::read_regular(path, MAX_MAT_BYTES)?;
+    let bytes = inflate_elements(bytes).map_err(|m| {
+        mat_err(
+            m,
+            "a recording of this size is not supported: save a shorter one (or fewer signals)",
+        )
     })?;
     let parsed = std::panic::catch_unwind(|| matfile::MatFile::parse(bytes.as_slice()));
     let mat = match parsed {
@@ -143,15 +234,18 @@ pub(crate) fn read_mat(
         .enumerate()
     {
         let vals = if k == 0 { t.clone() } else { row(k) };
-        if let Some(j) = vals.iter().position(|v| !v.is_finite()) {
+        if let Some(j) = vals
+            .iter()
+            .position(|v| !v.is_finite() || v.abs() > crate::data::MAX_ABS_VALUE)
+        {
             return Err(mat_err(
                 format!(
-                    "non-finite value {} in row {} (`{name}`) at sample {}",
+                    "value {} in row {} (`{name}`) at sample {} is not a finite number within 1e150",
                     vals[j],
                     k + 1,
                     j + 1
                 ),
-                "every sample must be a finite number",
+                "every sample must be a finite number of magnitude at most 1e150",
             ));
         }
     }
@@ -165,6 +259,17 @@ pub(crate) fn read_mat(
             ),
             "the first row must be strictly increasing time in s",
         ));
+    }
+
+    if let Some((sample, median_dt)) = crate::data::first_gap(&t) {
+        return Err(DataError::TimeGap {
+            file,
+            line: None,
+            sample: sample + 1,
+            from: t[sample - 1],
+            to: t[sample],
+            median_dt,
+        });
     }
 
     // Build channels: spec order first, then extras in mapping order.
@@ -248,5 +353,76 @@ fn to_f64(data: &matfile::NumericData) -> Option<Vec<f64>> {
                 Some(real.iter().map(|&v| v as f64).collect())
             }
         }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use std::io::Write;
+
+    fn element(ty: u32, payload: &[u8]) -> Vec<u8> {
+        let mut e = ty.to_le_bytes().to_vec();
+        e.extend((payload.len() as u32).to_le_bytes());
+        e.extend(payload);
+        e.resize(e.len().div_ceil(8) * 8, 0);
+        e
+    }
+
+    /// A MAT v5 file (little endian) holding one 2 x `n` double matrix
+    /// `data`, its element zlib-compressed when `compress`.
+    fn mat_file(n: usize, compress: bool) -> Vec<u8> {
+        let mut m = element(6, &[6, 0, 0, 0, 0, 0, 0, 0]); // flags: double
+        m.extend(element(5, &[2, 0, 0, 0, n as u8, 0, 0, 0])); // dims 2 x n
+        m.extend(element(1, b"data"));
+        let values: Vec<u8> = (0..2 * n).flat_map(|k| (k as f64).to_le_bytes()).collect();
+        m.extend(element(9, &values));
+        let matrix = element(MI_MATRIX, &m);
+        let mut file = b"MATLAB 5.0 MAT-file".to_vec();
+        file.resize(116, b' ');
+        file.extend([0u8; 8]);
+        file.extend(0x0100u16.to_le_bytes());
+        file.extend(b"IM");
+        if compress {
+            let mut enc = libflate::zlib::Encoder::new(Vec::new()).unwrap();
+            enc.write_all(&matrix).unwrap();
+            let z = enc.finish().into_result().unwrap();
+            file.extend(MI_COMPRESSED.to_le_bytes());
+            file.extend((z.len() as u32).to_le_bytes());
+            file.extend(z);
+        } else {
+            file.extend(matrix);
+        }
+        file
+    }
+
+    #[test]
+    fn compressed_elements_inflate_to_the_uncompressed_file() {
+        let plain = mat_file(20, false);
+        let inflated = inflate_elements_within(mat_file(20, true), 1 << 20).unwrap();
+        assert_eq!(inflated, plain);
+        let m = matfile::MatFile::parse(inflated.as_slice()).unwrap();
+        assert_eq!(m.arrays()[0].size(), &[2, 20]);
+    }
+
+    /// Issue 31 (r08): a stream that inflates beyond the budget is refused
+    /// while it inflates (here 2 x 200 doubles = 3.2 KB against 1 KB).
+    #[test]
+    fn a_zip_bomb_is_refused_within_the_budget() {
+        let e = inflate_elements_within(mat_file(200, true), 1024).unwrap_err();
+        assert!(
+            e.contains("limit of 0 MiB") || e.contains("inflate beyond"),
+            "{e}"
+        );
+        // the budget counts every element of the file
+        let mut two = mat_file(20, true);
+        let one = two[128..].to_vec();
+        two.extend(one);
+        let single = inflate_elements_within(mat_file(20, true), 1 << 20)
+            .unwrap()
+            .len()
+            - 128;
+        assert!(inflate_elements_within(two.clone(), single as u64 + 100).is_err());
+        assert!(inflate_elements_within(two, 2 * single as u64).is_ok());
     }
 }

@@ -353,3 +353,86 @@ fn shared_data_files_load() {
         }
     }
 }
+
+/// Issue 31 (r10): one wrong stamp (1e6 s at the end of a 40 ms record) is
+/// an error naming its line before anything is simulated; a comment line
+/// before it keeps the line number right.
+#[test]
+fn a_time_gap_is_an_error_at_its_line() {
+    let mut s = good_csv(20);
+    s = s.replacen("0.0100,", "# a comment line\n0.0100,", 1);
+    let last = s.lines().last().unwrap().to_string();
+    let bad = format!("1000000.0{}", &last[last.find(',').unwrap()..]);
+    s = s.replace(&last, &bad);
+    let (e, msg) = fail("gap", &s);
+    // 20 rows from line 2, one comment line: the last row is line 22
+    assert!(msg.contains("bad.csv:22:"), "{msg}");
+    assert!(
+        msg.contains("the time jumps from 0.036 s to 1000000 s"),
+        "{msg}"
+    );
+    assert!(matches!(e, DataError::TimeGap { sample: 20, .. }), "{e:?}");
+    // dropped samples are not a gap: 500 missing periods are accepted
+    let mut s = String::from("t,theta,alpha,Vm\n");
+    s += &rows(30, |k, t| {
+        let t = if k >= 15 { t + 1.0 } else { t };
+        format!("{t},0.1,3.1,0.5")
+    });
+    let p = write("nogap", "ok.csv", &s);
+    assert!(read_experiment(&p, &pendulum_spec()).is_ok());
+}
+
+/// Issue 31 (r08): a file without line breaks is refused at 1 MiB, not
+/// read into one record of its size; FIFOs and devices are refused before
+/// they are opened.
+#[test]
+fn endless_lines_and_non_regular_files_are_refused() {
+    let p = write("longline", "zeros.csv", &"\0".repeat(3 << 20));
+    let msg = read_experiment(&p, &pendulum_spec())
+        .unwrap_err()
+        .to_string();
+    assert!(msg.contains("a line longer than 1 MiB"), "{msg}");
+    #[cfg(unix)]
+    {
+        let msg = read_experiment(std::path::Path::new("/dev/zero"), &pendulum_spec())
+            .unwrap_err()
+            .to_string();
+        assert!(msg.contains("not a regular file"), "{msg}");
+        let fifo = scratch("fifo").join("pipe.csv");
+        let _ = std::fs::remove_file(&fifo);
+        assert!(std::process::Command::new("mkfifo")
+            .arg(&fifo)
+            .status()
+            .unwrap()
+            .success());
+        let msg = read_experiment(&fifo, &pendulum_spec())
+            .unwrap_err()
+            .to_string();
+        assert!(msg.contains("not a regular file"), "{msg}");
+    }
+}
+
+/// Issue 31: a value whose square overflows (1e300) is an error at its
+/// cell, not a NaN fit % later; in an extra column it drops the column.
+#[test]
+fn absurd_magnitudes_are_errors_at_their_cell() {
+    let s = good_csv(20).replacen(",0.500", ",1e300", 1);
+    let (e, msg) = fail("huge", &s);
+    assert!(
+        msg.contains("bad.csv:2:4:") && msg.contains("beyond 1e150"),
+        "{msg}"
+    );
+    assert!(matches!(e, DataError::BadCell { .. }), "{e:?}");
+    let mut s = String::from("t,theta,alpha,Vm,x\n");
+    s += &rows(12, |k, t| {
+        format!("{t},0.1,3.1,0.5,{}", if k == 3 { "1e200" } else { "1" })
+    });
+    let p = write("hugeextra", "x.csv", &s);
+    let (e, w) = read_experiment(&p, &pendulum_spec()).unwrap();
+    assert!(e.channel("x").is_none());
+    assert!(
+        w.iter()
+            .any(|w| matches!(w, DataWarning::DroppedColumn { line: 5, .. })),
+        "{w:?}"
+    );
+}

@@ -10,7 +10,8 @@
 //! (`plantc fmt`'s layout). Documents are synced incrementally; positions are
 //! UTF-16 as LSP requires.
 //!
-//! Entry points: [`run_stdio`] (what `plantc lsp` calls) and [`serve`] on any
+//! Entry points: [`run_stdio`] (what `plantc lsp` calls: the bounded framing
+//! of [`transport`], so no frame ends the server) and [`serve`] on any
 //! [`lsp_server::Connection`] (tests and benches use an in-memory one).
 
 mod analysis;
@@ -23,7 +24,9 @@ mod navigate;
 mod outline;
 mod server;
 mod tokens;
+pub mod transport;
 
 pub use analysis::Analysis;
+pub use diagnostics::MAX_PUBLISHED;
 pub use document::Document;
 pub use server::{capabilities, run_stdio, serve, ServerError, State};

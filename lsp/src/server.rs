@@ -2,11 +2,11 @@
 
 use crate::analysis::Analysis;
 use crate::document::Document;
-use crate::{complete, diagnostics, hover, inlay, navigate, outline, tokens};
+use crate::{complete, diagnostics, hover, inlay, navigate, outline, tokens, transport};
 use lsp_server::{Connection, ErrorCode, Message, Notification, Request, Response};
 use lsp_types::notification::{
-    DidChangeTextDocument, DidCloseTextDocument, DidOpenTextDocument, Notification as _,
-    PublishDiagnostics,
+    DidChangeTextDocument, DidCloseTextDocument, DidOpenTextDocument, Exit, Notification as _,
+    PublishDiagnostics, ShowMessage,
 };
 use lsp_types::request::{
     CodeActionRequest, Completion, DocumentSymbolRequest, Formatting, GotoDefinition, HoverRequest,
@@ -25,6 +25,8 @@ pub enum ServerError {
     Protocol(String),
     /// Reading or writing the stream failed.
     Io(std::io::Error),
+    /// The client sent `exit` without `shutdown` first (LSP: exit code 1).
+    ExitWithoutShutdown,
 }
 
 impl fmt::Display for ServerError {
@@ -32,6 +34,9 @@ impl fmt::Display for ServerError {
         match self {
             ServerError::Protocol(m) => write!(f, "protocol error: {m}"),
             ServerError::Io(e) => write!(f, "i/o error: {e}"),
+            ServerError::ExitWithoutShutdown => {
+                write!(f, "`exit` without a `shutdown` request first")
+            }
         }
     }
 }
@@ -40,6 +45,11 @@ impl std::error::Error for ServerError {}
 
 impl From<lsp_server::ProtocolError> for ServerError {
     fn from(e: lsp_server::ProtocolError) -> Self {
+        if e.channel_is_disconnected() {
+            return ServerError::Protocol(
+                "the input ended before `shutdown` and `exit` (the client went away)".into(),
+            );
+        }
         ServerError::Protocol(e.to_string())
     }
 }
@@ -104,8 +114,15 @@ impl State {
                 d.uri
             }
             DidChangeTextDocument::METHOD => {
-                let Ok(p) = serde_json::from_value::<DidChangeTextDocumentParams>(n.params) else {
-                    return Vec::new();
+                let p = match serde_json::from_value::<DidChangeTextDocumentParams>(n.params) {
+                    Ok(p) => p,
+                    // the editor's text and ours would silently differ: say so
+                    Err(e) => {
+                        return vec![show_error(format!(
+                        "plantc-lsp could not apply a change ({e}); its copy of the document may \
+                         differ from the editor's: close and reopen the file"
+                    ))]
+                    }
                 };
                 let uri = p.text_document.uri;
                 let Some(old) = self.docs.remove(&uri) else {
@@ -256,6 +273,17 @@ impl State {
     }
 }
 
+/// A `window/showMessage` error notification.
+fn show_error(message: String) -> Notification {
+    Notification::new(
+        ShowMessage::METHOD.into(),
+        ShowMessageParams {
+            typ: MessageType::ERROR,
+            message,
+        },
+    )
+}
+
 /// `plantc fmt`'s layout as one edit of the lines that change (the common
 /// first and last lines are left out, so marks and the cursor elsewhere stay);
 /// no edit when the file is already formatted or has syntax errors.
@@ -326,8 +354,21 @@ pub fn serve(connection: &Connection) -> Result<(), ServerError> {
                     });
                 send(Message::Response(resp))?;
             }
+            Message::Notification(n) if n.method == Exit::METHOD => {
+                return Err(ServerError::ExitWithoutShutdown);
+            }
             Message::Notification(n) => {
-                for out in state.notify(n) {
+                // a bug in the analysis of one text reports itself instead of
+                // ending the session
+                let method = n.method.clone();
+                let outs =
+                    std::panic::catch_unwind(std::panic::AssertUnwindSafe(|| state.notify(n)))
+                        .unwrap_or_else(|_| {
+                            vec![show_error(format!(
+                        "plantc-lsp failed on `{method}` (a bug: please report it with the file)"
+                    ))]
+                        });
+                for out in outs {
                     send(Message::Notification(out))?;
                 }
             }
@@ -337,10 +378,55 @@ pub fn serve(connection: &Connection) -> Result<(), ServerError> {
     Ok(())
 }
 
-/// Runs the server over standard input and output (`plantc lsp`).
+/// Runs the server over standard input and output (`plantc lsp`), framed
+/// by [`crate::transport`]: no input ends it except the end of the stream or
+/// `exit`; a malformed frame gets an error reply.
 pub fn run_stdio() -> Result<(), ServerError> {
-    let (connection, io) = Connection::stdio();
-    serve(&connection)?;
-    drop(connection);
-    io.join().map_err(ServerError::Io)
+    let (server, client) = Connection::memory();
+    let Connection {
+        sender: to_server,
+        receiver: from_server,
+    } = client;
+    // frames in: messages to the server, error replies straight out
+    std::thread::Builder::new()
+        .name("plantc-lsp-reader".into())
+        .spawn(move || {
+            let stdin = std::io::stdin();
+            let mut input = std::io::BufReader::new(stdin.lock());
+            while let Ok(Some(incoming)) = transport::read_message(&mut input) {
+                match incoming {
+                    transport::Incoming::Message(m) => {
+                        let exit =
+                            matches!(&m, Message::Notification(n) if n.method == Exit::METHOD);
+                        if to_server.send(m).is_err() || exit {
+                            return;
+                        }
+                    }
+                    transport::Incoming::Reply(v) => {
+                        let body = serde_json::to_vec(&v).unwrap_or_default();
+                        if transport::write_frame(&mut std::io::stdout().lock(), &body).is_err() {
+                            return;
+                        }
+                    }
+                }
+            }
+        })
+        .map_err(ServerError::Io)?;
+    // messages out, one whole frame at a time
+    let writer = std::thread::Builder::new()
+        .name("plantc-lsp-writer".into())
+        .spawn(move || -> std::io::Result<()> {
+            for m in from_server {
+                transport::write_message(&mut std::io::stdout().lock(), &m)?;
+            }
+            Ok(())
+        })
+        .map_err(ServerError::Io)?;
+    let result = serve(&server);
+    drop(server);
+    let written = writer
+        .join()
+        .unwrap_or_else(|_| Err(std::io::Error::other("the writer thread panicked")));
+    result?;
+    written.map_err(ServerError::Io)
 }

@@ -399,3 +399,29 @@ fn rename_to_a_taken_name_says_so() {
         "{m}"
     );
 }
+
+/// Issue 31 (r04): a line of 20,000 `$` gives 20,000 errors from `check`;
+/// the first 1000 are published with their UTF-16 columns, then one note
+/// with the count of the others.
+#[test]
+fn diagnostics_of_a_long_line_are_capped_and_placed() {
+    let text = format!("{SMALL}{}\n", "$".repeat(20_000));
+    let (_, diags) = open(&text);
+    assert_eq!(diags.len(), plantc_lsp::MAX_PUBLISHED + 1);
+    let line = SMALL.matches('\n').count();
+    for (k, d) in diags.iter().take(plantc_lsp::MAX_PUBLISHED).enumerate() {
+        assert_eq!(
+            d["range"]["start"],
+            json!({"line": line, "character": k}),
+            "{d}"
+        );
+    }
+    let last = diags.last().unwrap();
+    assert!(
+        last["message"]
+            .as_str()
+            .unwrap()
+            .starts_with("19000 more diagnostics not shown"),
+        "{last}"
+    );
+}

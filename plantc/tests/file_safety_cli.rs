@@ -199,3 +199,94 @@ fn regenerating_a_crate_keeps_its_build_cache_and_unchanged_files() {
     );
     assert_eq!(names(&dir), ["rotpen"], "no temporaries left");
 }
+
+/// Issue 31 (r18): an output directory given as a symbolic link is refused
+/// with a message; the link and the directory it names are left as they were.
+#[cfg(unix)]
+#[test]
+fn an_output_directory_that_is_a_symbolic_link_is_refused() {
+    let dir = tmp("gen_link");
+    let real = dir.join("real");
+    let gen = |out: &Path| {
+        plantc(&[
+            "gen",
+            &model(),
+            "--controller",
+            "pole_placement",
+            "-o",
+            &s(out),
+        ])
+    };
+    let (code, _, err) = gen(&real);
+    assert_eq!(code, 0, "{err}");
+    std::fs::write(real.join("notes.txt"), "mine").unwrap();
+    let before = names(&real);
+    std::os::unix::fs::symlink("real", dir.join("out")).unwrap();
+    let (code, _, err) = gen(&dir.join("out"));
+    assert_ne!(code, 0, "{err}");
+    assert!(
+        err.contains("symbolic link") && err.contains("real"),
+        "{err}"
+    );
+    let out_meta = std::fs::symlink_metadata(dir.join("out")).unwrap();
+    assert!(
+        out_meta.file_type().is_symlink(),
+        "the link is still a link"
+    );
+    assert_eq!(names(&real), before);
+}
+
+/// Issue 31 (r02, r09): a crate directory holds the user's files next to
+/// plantc's; regenerating (and switching to the rig layout) replaces and
+/// removes only the files plantc listed in its manifest, whatever they are
+/// named.
+#[test]
+fn regenerating_touches_only_the_files_plantc_listed() {
+    let dir = tmp("gen_manifest");
+    let krate = dir.join("rotpen");
+    let gen = |extra: &[&str]| {
+        let mut args = vec![
+            "gen".to_string(),
+            model(),
+            "--controller".into(),
+            "pole_placement".into(),
+            "-o".into(),
+            s(&krate),
+        ];
+        args.extend(extra.iter().map(|a| a.to_string()));
+        plantc(&args)
+    };
+    let (code, _, err) = gen(&[]);
+    assert_eq!(code, 0, "{err}");
+    let mine = [
+        ("src/lib2.rs", "// mine"),
+        ("examples/mine.rs", "fn main() {}"),
+        ("2024-06-01-notes.txt", "notes"),
+    ];
+    for (rel, text) in mine {
+        std::fs::write(krate.join(rel), text).unwrap();
+    }
+    // the rig layout: lib.rs and examples/simulate.rs were plantc's, so go
+    let (code, _, err) = gen(&["--rig"]);
+    assert_eq!(code, 0, "{err}");
+    assert!(!krate.join("src/lib.rs").exists());
+    assert!(!krate.join("examples/simulate.rs").exists());
+    assert!(krate.join("src/main.rs").exists());
+    for (rel, text) in mine {
+        assert_eq!(
+            std::fs::read_to_string(krate.join(rel)).unwrap(),
+            text,
+            "{rel}"
+        );
+    }
+    let listed = plantc_fsio::manifest(&krate, "gen").unwrap();
+    assert!(listed.contains(Path::new("src/main.rs")), "{listed:?}");
+    assert!(!listed.iter().any(|p| p.ends_with("lib2.rs")), "{listed:?}");
+    assert!(
+        !names(&krate)
+            .iter()
+            .any(|n| n.contains("plantc-new") || n.contains("plantc-commit")),
+        "{:?}",
+        names(&krate)
+    );
+}

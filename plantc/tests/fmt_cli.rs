@@ -182,3 +182,45 @@ fn every_model_file_of_the_repository_is_canonical() {
         "not canonical (run `plantc fmt` on them):\n{out}{err}"
     );
 }
+
+/// Issue 31 (r07, r17, FIFO): links back to a directory are not followed (each
+/// file once, no endless walk), a FIFO is refused without blocking, a
+/// read-only file is not rewritten; each is reported and the other files
+/// are still formatted.
+#[cfg(unix)]
+#[test]
+fn links_fifos_and_read_only_files_are_handled_without_hanging() {
+    let dir = tmp("fmt_hostile");
+    let unformatted = squeezed("cart_pole.plant");
+    std::fs::write(dir.join("m.plant"), &unformatted).unwrap();
+    std::os::unix::fs::symlink(".", dir.join("a")).unwrap();
+    std::os::unix::fs::symlink(".", dir.join("b")).unwrap();
+    let (code, out, err) = plantc(&["fmt", "--check", &s(&dir)]);
+    assert_eq!(code, 1, "{err}");
+    assert_eq!(out.matches("not formatted").count(), 1, "{out}");
+
+    let fifo = dir.join("pipe.plant");
+    let st = Command::new("mkfifo").arg(&fifo).status().unwrap();
+    assert!(st.success());
+    let (code, _, err) = plantc(&["fmt", "--check", &s(&fifo)]);
+    assert_eq!(code, 2, "{err}");
+    assert!(err.contains("not a regular file"), "{err}");
+    let (code, _, err) = plantc(&["check", &s(&fifo)]);
+    assert_eq!(code, 2, "{err}");
+    assert!(err.contains("not a regular file"), "{err}");
+    std::fs::remove_file(&fifo).unwrap();
+
+    let ro = dir.join("ro.plant");
+    std::fs::write(&ro, &unformatted).unwrap();
+    let mut p = std::fs::metadata(&ro).unwrap().permissions();
+    p.set_readonly(true);
+    std::fs::set_permissions(&ro, p).unwrap();
+    let (code, out, err) = plantc(&["fmt", &s(&dir)]);
+    assert_eq!(code, 1, "{out}{err}");
+    assert!(err.contains("read-only"), "{err}");
+    assert_eq!(std::fs::read_to_string(&ro).unwrap(), unformatted);
+    assert!(
+        out.contains("formatted") && out.contains("m.plant"),
+        "{out}"
+    );
+}

@@ -1,7 +1,11 @@
 //! `kill -9` at random moments of `fit -o`, `diagnose --apply -o`,
 //! `identify -o`, `gen -o` and `synth -o` (reliability reproducers 01, 02,
-//! 07): afterwards the target is either the old complete file or directory or
-//! the new complete one, never empty, truncated or mixed.
+//! 07; issue 31's r09): afterwards the target is either the old complete file
+//! or directory or the new complete one, never empty or truncated; the
+//! user's files inside the output directories are where they were, with
+//! their content, after every kill. An output directory killed while its
+//! files are being moved in (journaled: `.plantc-commit-*`) holds each file
+//! old or new, and the next run finishes the move.
 //!
 //! Each case first runs the command to completion (the new state and its
 //! duration T), then, from the old state, starts it again and SIGKILLs it
@@ -58,6 +62,15 @@ fn snapshot(p: &Path) -> BTreeMap<PathBuf, Vec<u8>> {
     m
 }
 
+/// Writes the user's files (relative path, content) below `dir`.
+fn put(dir: &Path, files: &[(&str, &str)]) {
+    for (rel, text) in files {
+        let p = dir.join(rel);
+        std::fs::create_dir_all(p.parent().unwrap()).unwrap();
+        std::fs::write(p, text).unwrap();
+    }
+}
+
 fn copy_tree(from: &Path, to: &Path) {
     let _ = std::fs::remove_dir_all(to);
     let _ = std::fs::remove_file(to);
@@ -98,14 +111,14 @@ fn run(args: &[String], cwd: &Path) -> Duration {
 }
 
 /// Kills `args` (which write `target`) `kills` times at random moments from
-/// the state in `old` (a copy of the target's old content, or absent);
-/// `same` compares a state with the new one (exact bytes by default).
+/// the state in `old` (a copy of the target's old content, or absent), in
+/// which `users` (relative path, content) are the user's files.
 fn kill_case(
     name: &str,
     dir: &Path,
     args: &[String],
-    target: &Path,
-    old: Option<&Path>,
+    (target, old): (&Path, Option<&Path>),
+    users: &[(&str, &str)],
     kills: usize,
 ) {
     let reset = || match old {
@@ -126,7 +139,7 @@ fn kill_case(
         "{name}: old and new must differ"
     );
     let mut rng = Rng(name.len() as u64 * 7919);
-    let (mut old_seen, mut new_seen) = (0, 0);
+    let (mut old_seen, mut new_seen, mut mid_commit) = (0, 0, 0);
     for k in 0..kills {
         reset();
         let delay = full.mul_f64(1.2 * rng.unit());
@@ -146,6 +159,33 @@ fn kill_case(
             None => state.is_empty(),
         };
         let is_new = state == new_state;
+        for (rel, bytes) in users {
+            assert_eq!(
+                state.get(Path::new(rel)),
+                Some(&bytes.as_bytes().to_vec()),
+                "{name}: kill {k} after {delay:?}: the user's {rel} is not where it was"
+            );
+        }
+        // killed while the files were moved in: each one old or new, and the
+        // journal that lets the next run finish
+        let journaled = std::fs::read_dir(target).is_ok_and(|d| {
+            d.flatten().any(|e| {
+                e.file_name()
+                    .to_string_lossy()
+                    .starts_with(".plantc-commit-")
+            })
+        });
+        let empty = BTreeMap::new();
+        let old_files = old_state.as_ref().unwrap_or(&empty);
+        let each_old_or_new = state
+            .keys()
+            .chain(new_state.keys())
+            .chain(old_files.keys())
+            .all(|p| state.get(p) == old_files.get(p) || state.get(p) == new_state.get(p));
+        if journaled && each_old_or_new && !is_old && !is_new {
+            mid_commit += 1;
+            continue;
+        }
         assert!(
             is_old || is_new,
             "{name}: kill {k} after {delay:?} (full run {full:?}) left neither the old nor the new {}: files {:?}",
@@ -158,7 +198,9 @@ fn kill_case(
             old_seen += 1;
         }
     }
-    println!("{name}: {kills} kills, old {old_seen}, new {new_seen} (full run {full:?})");
+    println!(
+        "{name}: {kills} kills, old {old_seen}, new {new_seen}, mid-commit {mid_commit} (full run {full:?})"
+    );
 }
 
 /// A small synthetic data set (hidden dry friction) for the identification
@@ -201,7 +243,7 @@ fn cases(kills: usize) {
         "--force".into(),
     ];
     args[1] = s(&target);
-    kill_case("fit -o", &dir, &args, &target, Some(&old), kills);
+    kill_case("fit -o", &dir, &args, (&target, Some(&old)), &[], kills);
 
     // diagnose --apply -o
     let target = dir.join("with_effect.plant");
@@ -218,8 +260,8 @@ fn cases(kills: usize) {
         "diagnose --apply -o",
         &dir,
         &args,
-        &target,
-        Some(&old),
+        (&target, Some(&old)),
+        &[],
         kills,
     );
 
@@ -239,12 +281,18 @@ fn cases(kills: usize) {
         ]
     };
     run(&gen("thesis", &old_crate), &dir);
+    let users = [
+        ("notes.txt", "mine"),
+        ("src/mine.rs", "// mine"),
+        ("data/run1.csv", "t,theta,alpha,Vm\n"),
+    ];
+    put(&old_crate, &users);
     kill_case(
         "gen -o",
         &dir,
         &gen("quanser_manual", &krate),
-        &krate,
-        Some(&old_crate),
+        (&krate, Some(&old_crate)),
+        &users,
         kills,
     );
 
@@ -270,12 +318,14 @@ fn cases(kills: usize) {
     };
     let old_data = dir.join("old_data");
     run(&synth("1", &old_data), &dir);
+    let users = [("model.plant", "model m\n"), ("run1.csv", "t\n1\n")];
+    put(&old_data, &users);
     kill_case(
         "synth -o",
         &dir,
         &synth("2", &dir.join("data2")),
-        &dir.join("data2"),
-        Some(&old_data),
+        (&dir.join("data2"), Some(&old_data)),
+        &users,
         kills,
     );
 
@@ -292,14 +342,25 @@ fn cases(kills: usize) {
         ]
     };
     run(&identify(&old_out), &dir);
-    // the earlier run's output differs: an extra (stale) figure
+    // the earlier run's output differs: a stale figure of its own (listed
+    // in its manifest as if it had written it)
     std::fs::write(old_out.join("1-nominal/stale.svg"), "<svg/>").unwrap();
+    let manifest = old_out.join(".plantc-manifest-identify");
+    let listed = std::fs::read_to_string(&manifest).unwrap() + "1-nominal/stale.svg\n";
+    std::fs::write(&manifest, listed).unwrap();
+    // and the user's files, named like identify's (reproducer r02)
+    let users = [
+        ("2024-06-01-notes.txt", "notes"),
+        ("3-extra.csv", "mine"),
+        ("1-nominal/my_notes.txt", "mine"),
+    ];
+    put(&old_out, &users);
     kill_case(
         "identify -o",
         &dir,
         &identify(&out),
-        &out,
-        Some(&old_out),
+        (&out, Some(&old_out)),
+        &users,
         kills,
     );
     let _ = std::fs::remove_dir_all(&dir);

@@ -430,3 +430,86 @@ fn plantc_lsp_over_stdio() {
         std::thread::sleep(Duration::from_millis(20));
     }
 }
+
+/// Issue 31 (r05, r14): malformed frames, batches, odd ids, a huge
+/// Content-Length and an unusable didChange each get an answer (an error
+/// reply or a message) and the server goes on; `exit` without `shutdown`
+/// ends with code 1.
+#[test]
+fn no_frame_ends_the_server() {
+    let mut c = Client::start();
+    c.request("initialize", json!({"capabilities": {}}));
+    c.notify("initialized", json!({}));
+    let raw = |c: &mut Client, bytes: &[u8]| {
+        c.stdin.write_all(bytes).unwrap();
+        c.stdin.flush().unwrap();
+    };
+    let frame = |body: &str| format!("Content-Length: {}\r\n\r\n{body}", body.len()).into_bytes();
+    for (body, code, id) in [
+        (r#"{"jsonrpc": "2.0", "id": 9, "#, -32700, Value::Null),
+        (
+            r#"[{"jsonrpc":"2.0","id":9,"method":"x"}]"#,
+            -32600,
+            Value::Null,
+        ),
+        (r#"{"jsonrpc":"2.0","id":9,"method":7}"#, -32600, json!(9)),
+        (
+            r#"{"jsonrpc":"2.0","method":"x","params":"\ud83d"}"#,
+            -32700,
+            Value::Null,
+        ),
+        (
+            r#"{"jsonrpc":"2.0","id":3000000000,"method":"textDocument/hover"}"#,
+            -32600,
+            json!(3000000000u64),
+        ),
+        (
+            r#"{"jsonrpc":"2.0","id":1.5,"method":"textDocument/hover"}"#,
+            -32600,
+            json!(1.5),
+        ),
+    ] {
+        raw(&mut c, &frame(body));
+        let r = c.wait(|m| m.get("error").is_some());
+        assert_eq!(r["error"]["code"], json!(code), "{body}: {r}");
+        assert_eq!(r["id"], id, "{body}: {r}");
+    }
+    // announced lengths the server will not allocate: refused once read
+    raw(&mut c, b"Content-Length: 18446744073709551616\r\n\r\n");
+    let r = c.wait(|m| m.get("error").is_some());
+    assert_eq!(r["error"]["code"], json!(-32700), "{r}");
+    let mut big = b"Content-Length: 67108865\r\n\r\n".to_vec();
+    big.resize(big.len() + 67_108_865, b' ');
+    raw(&mut c, &big);
+    let r = c.wait(|m| m.get("error").is_some());
+    assert!(
+        r["error"]["message"].as_str().unwrap().contains("67108865"),
+        "{r}"
+    );
+    // a change the server cannot apply is said, not dropped silently
+    c.notify(
+        "textDocument/didOpen",
+        json!({"textDocument": {"uri": URI, "languageId": "plant", "version": 1, "text": "model m\n"}}),
+    );
+    c.diagnostics(1);
+    c.notify(
+        "textDocument/didChange",
+        json!({"textDocument": {"uri": URI, "version": 2}, "contentChanges": [
+            {"range": {"start": {"line": 0, "character": 4294967296u64},
+                       "end": {"line": 0, "character": 4294967296u64}}, "text": "x"}]}),
+    );
+    let m = c.wait(|m| m["method"] == "window/showMessage");
+    assert!(
+        m["params"]["message"].as_str().unwrap().contains("reopen"),
+        "{m}"
+    );
+    // still answering
+    let r = c.request(
+        "textDocument/hover",
+        json!({"textDocument": {"uri": URI}, "position": {"line": 0, "character": 1}}),
+    );
+    assert!(r.get("result").is_some(), "{r}");
+    c.notify("exit", Value::Null);
+    let status = c.child.wait().unwrap();
+    assert_eq!(status.code(), Some(1), "exit without shutdown");
+}

@@ -255,3 +255,28 @@ fn run_help_names_the_default_hil_libraries() {
         );
     }
 }
+
+/// Issue 31 (r16): started under `nohup` (SIGHUP ignored), `plantc run` keeps
+/// SIGHUP ignored: a hang-up does not stop the run.
+#[test]
+fn nohup_keeps_sighup_ignored() {
+    let dir = tmp("nohup");
+    let log = dir.join("run.csv");
+    let mut child = Command::new("nohup")
+        .arg(env!("CARGO_BIN_EXE_plantc"))
+        .args(["run", &model(), "--controller", "pole_placement"])
+        .args(["--x0", "alpha=5deg", "--realtime", "--duration", "1.5"])
+        .args(["--log", log.to_str().unwrap()])
+        .current_dir(&dir)
+        .stdout(Stdio::null())
+        .stderr(Stdio::piped())
+        .spawn()
+        .unwrap();
+    wait_for_rows(&mut child, &log, 200);
+    // SAFETY: plain kill(2) on our own child.
+    assert_eq!(unsafe { kill(child.id() as i32, 1) }, 0);
+    let status = child.wait().unwrap();
+    assert_eq!(status.code(), Some(0), "stopped by the ignored SIGHUP");
+    let (_, state, complete) = last_row(&log);
+    assert_eq!((state.as_str(), complete), ("engaged", true));
+}

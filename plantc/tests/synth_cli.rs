@@ -248,6 +248,11 @@ fn bad_specs_exit_2_naming_the_token() {
             &["outside its limits [-10, 10]"],
         ),
         ("free_swing:alpha0", &["`alpha0` is not KEY=VALUE"]),
+        // issue 31 (r08): refused before anything is allocated
+        (
+            "free_swing:alpha0=120deg,duration=1e9",
+            &["5.000e11 samples", "at most 1e7 per experiment"],
+        ),
     ];
     for (e, needles) in experiments {
         let (code, out, err) = plantc(&["synth", &model(), "--experiment", e, "-o", &o]);

@@ -105,6 +105,16 @@ pub enum BackendError {
     NotStarted,
     /// The backend was already closed.
     Closed,
+    /// Stopping the board safely met errors: every failed call in order
+    /// (failed 0 V writes included, none dropped) and what holds the output
+    /// now. Returned by [`Backend::close`] (and by an open that failed and
+    /// could not close cleanly).
+    SafeStop {
+        /// The failed calls, in order.
+        failures: Vec<BackendError>,
+        /// What holds the output after them.
+        output: OutputHold,
+    },
     /// The simulated plant's state is no longer finite (NaN or infinite):
     /// the simulation diverged (stiff or unstable parameters, a huge initial
     /// state). Real encoders cannot report this.
@@ -137,6 +147,16 @@ impl fmt::Display for BackendError {
             BackendError::InvalidConfig(s) => write!(f, "invalid backend configuration: {s}"),
             BackendError::NotStarted => write!(f, "backend not started"),
             BackendError::Closed => write!(f, "backend already closed"),
+            BackendError::SafeStop { failures, output } => {
+                write!(f, "stopping the board: ")?;
+                for (i, e) in failures.iter().enumerate() {
+                    if i > 0 {
+                        write!(f, "; ")?;
+                    }
+                    write!(f, "{e}")?;
+                }
+                write!(f, "; {output}")
+            }
             BackendError::PlantDiverged { t, state } => write!(
                 f,
                 "the simulated plant diverged at t = {t} s (state no longer finite: {state}); \
@@ -149,6 +169,65 @@ impl fmt::Display for BackendError {
 
 impl std::error::Error for BackendError {}
 
+/// What holds a board's output once its backend stopped.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub enum OutputHold {
+    /// A 0 V write was confirmed by the board (and nothing was written after it).
+    ZeroConfirmed,
+    /// The watchdog had expired: the output is in its 0 V expiration state.
+    WatchdogExpired,
+    /// No 0 V write was confirmed; the board was left open with its watchdog
+    /// armed (expiration state 0 V, not reloaded any more): it drives the
+    /// output to 0 V within `timeout_s` of its last reload.
+    WatchdogArmed {
+        /// The watchdog's timeout (s).
+        timeout_s: f64,
+    },
+    /// No 0 V write was confirmed and no watchdog could be armed: the output
+    /// may still be at the last voltage the board accepted.
+    Unknown {
+        /// The last voltage the board accepted (V).
+        last_volts: f64,
+    },
+}
+
+impl OutputHold {
+    /// Whether the output is known to be at 0 V now or to get there by itself.
+    pub fn is_safe(self) -> bool {
+        !matches!(self, OutputHold::Unknown { .. })
+    }
+}
+
+impl fmt::Display for OutputHold {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        match self {
+            OutputHold::ZeroConfirmed => write!(f, "the output is at 0 V (write confirmed)"),
+            OutputHold::WatchdogExpired => {
+                write!(
+                    f,
+                    "the watchdog expired: the output is in its 0 V expiration state"
+                )
+            }
+            OutputHold::WatchdogArmed { timeout_s } => write!(
+                f,
+                "no 0 V write was confirmed: the board is left open with its watchdog armed \
+                 (expiration state 0 V, no longer reloaded), which drives the output to 0 V \
+                 within {timeout_s} s"
+            ),
+            OutputHold::Unknown { last_volts } if last_volts.is_nan() => write!(
+                f,
+                "no 0 V write was confirmed and no hardware watchdog is armed: the output is \
+                 where it was before the board was opened; switch the amplifier off"
+            ),
+            OutputHold::Unknown { last_volts } => write!(
+                f,
+                "no 0 V write was confirmed and no hardware watchdog is armed: the output may \
+                 still be at {last_volts:.3} V; switch the amplifier off"
+            ),
+        }
+    }
+}
+
 /// A data-acquisition backend: the simulator or a Quanser board.
 ///
 /// Call order: [`Backend::start`] once, then per sample
@@ -156,7 +235,9 @@ impl std::error::Error for BackendError {}
 /// [`Backend::reload_watchdog`], [`Backend::write_voltage`]; finally
 /// [`Backend::close`], which must write 0 V and be idempotent. Implementations
 /// must also write 0 V when dropped without `close`. Per-sample calls must not
-/// allocate except to report an error.
+/// allocate except to report an error. A `close` that cannot confirm 0 V
+/// returns [`BackendError::SafeStop`] naming every failed call and leaves
+/// whatever hardware fallback it has (a watchdog) armed.
 pub trait Backend {
     /// The encoder-to-angle maps, one per encoder, in state order (positions).
     fn encoders(&self) -> &[EncoderMap];
@@ -174,6 +255,7 @@ pub trait Backend {
     fn reload_watchdog(&mut self) -> Result<(), BackendError> {
         Ok(())
     }
-    /// Stops the clock, writes 0 V and releases the hardware. Idempotent.
+    /// Stops the clock, writes 0 V and releases the hardware. Idempotent
+    /// once it has succeeded; an error lists every failed call.
     fn close(&mut self) -> Result<(), BackendError>;
 }

@@ -21,6 +21,11 @@ use std::time::Instant;
 /// Highest supported loop rate (the Q2-USB's closed-loop limit).
 pub const MAX_RATE_HZ: f64 = 2000.0;
 
+/// Most samples of one run: 2^53, the largest count for which the sample
+/// count and the loop time `k / rate` are exact in `f64` (a duration of 2e16 s
+/// at 1 kHz overflowed the count to 0 samples and the run "ended" at once).
+pub const MAX_SAMPLES: f64 = 9_007_199_254_740_992.0;
+
 /// Settings of a run.
 #[derive(Debug, Clone)]
 pub struct RunConfig {
@@ -107,6 +112,15 @@ impl RunConfig {
             if !(d.is_finite() && d >= 0.0) {
                 return bad(format!("duration {d} s"));
             }
+            let samples = d * self.rate_hz;
+            if samples >= MAX_SAMPLES {
+                return bad(format!(
+                    "duration {d} s at {} Hz is {samples:.3e} samples; a run counts at most \
+                     2^53 samples ({:.2e} s at this rate), exactly, in its loop time",
+                    self.rate_hz,
+                    MAX_SAMPLES / self.rate_hz
+                ));
+            }
         }
         let s = &self.supervisor;
         if s.arm_index >= n_encoders || s.pendulum_index >= n_encoders {
@@ -166,6 +180,20 @@ fn configured_estimator(
 struct Outcome {
     fault_detail: Option<BackendError>,
     not_engaged: Option<NotEngaged>,
+    /// Every failed 0 V write of the loop (after a fault), in order.
+    stop_errors: Vec<String>,
+}
+
+/// Closes the backend on a path that ends the run with `error`: a failed
+/// close is attached to it, never dropped.
+fn close_with(backend: &mut dyn Backend, error: RuntimeError) -> RuntimeError {
+    match backend.close() {
+        Ok(()) => error,
+        Err(close) => RuntimeError::CloseFailed {
+            cause: Some(Box::new(error)),
+            close,
+        },
+    }
 }
 
 /// Runs the control loop with the velocity estimator `config` asks for; see
@@ -194,7 +222,9 @@ struct Modes<'a> {
 /// Returns `Err` only if the run could not start (bad configuration, backend
 /// start failure) or the loop itself panicked; faults during the run end it
 /// with `Ok(report)` whose `final_state` is `Fault(_)`. On every path the
-/// backend is closed, which writes 0 V.
+/// backend is closed, which writes 0 V; a 0 V write or a close that failed
+/// is in [`RunReport::stop_errors`] (or [`RuntimeError::CloseFailed`]),
+/// never dropped.
 pub fn run_with_estimator(
     config: &RunConfig,
     backend: &mut dyn Backend,
@@ -229,8 +259,7 @@ pub fn run_with_notes(
     let maps: Vec<EncoderMap> = backend.encoders().to_vec();
     let nq = maps.len();
     if let Err(e) = config.validate(nq) {
-        let _ = backend.close();
-        return Err(e);
+        return Err(close_with(backend, e));
     }
     let period = 1.0 / config.rate_hz;
     let mut notes = Vec::new();
@@ -239,10 +268,7 @@ pub fn run_with_notes(
         Some(e) => e,
         None => match configured_estimator(config, &maps, period) {
             Ok(e) => &mut **own_estimator.insert(e),
-            Err(e) => {
-                let _ = backend.close();
-                return Err(e);
-            }
+            Err(e) => return Err(close_with(backend, e)),
         },
     };
     notes.push(estimator.describe());
@@ -253,8 +279,7 @@ pub fn run_with_notes(
             l.with_mode_column();
         }
         if let Err(e) = l.begin(&config.state_names, nq, &config.input_names) {
-            let _ = backend.close();
-            return Err(e.into());
+            return Err(close_with(backend, e.into()));
         }
     }
     let mut stats = Stats {
@@ -271,8 +296,7 @@ pub fn run_with_notes(
     let mut sup = Supervisor::new(config.supervisor.clone(), nq);
     let virtual_time = backend.is_virtual_time();
     if let Err(e) = backend.start(period) {
-        let _ = backend.close();
-        return Err(e.into());
+        return Err(close_with(backend, e.into()));
     }
     let mut _rt_guard = None;
     if !virtual_time && config.os_realtime {
@@ -318,7 +342,7 @@ pub fn run_with_notes(
             notes.push(format!("log: {e}"));
         }
     }
-    let outcome = match result {
+    let mut outcome = match result {
         Ok(o) => o,
         Err(p) => {
             let msg = p
@@ -326,17 +350,25 @@ pub fn run_with_notes(
                 .map(|s| s.to_string())
                 .or_else(|| p.downcast_ref::<String>().cloned())
                 .unwrap_or_else(|| "unknown panic".to_string());
-            return Err(RuntimeError::Panic(msg));
+            let panic = RuntimeError::Panic(msg);
+            return Err(match close_result {
+                Ok(()) => panic,
+                Err(close) => RuntimeError::CloseFailed {
+                    cause: Some(Box::new(panic)),
+                    close,
+                },
+            });
         }
     };
     if let Err(e) = close_result {
-        notes.push(format!("close: {e}"));
+        outcome.stop_errors.push(format!("close: {e}"));
     }
     Ok(RunReport {
         transitions,
         not_engaged: outcome.not_engaged,
         final_state: sup.state(),
         fault_detail: outcome.fault_detail.map(|e| e.to_string()),
+        stop_errors: outcome.stop_errors,
         samples: stats.samples,
         samples_logged: log.as_deref().map_or(0, |l| l.rows()),
         period_s: period,
@@ -379,12 +411,14 @@ fn cycle_loop(
     let mut q_unwrapped = vec![0.0; nq];
     let mut velocities = vec![0.0; nq];
     let (lo, hi) = config.input_limits[0];
+    // (validated: below 2^53, so the count and its + 1 are exact)
     let total = config
         .duration_s
-        .map(|d| (d * config.rate_hz).round().max(0.0) as u64 + 1);
+        .map(|d| ((d * config.rate_hz).round().max(0.0) as u64).saturating_add(1));
     let period_ns = (period * 1e9) as u64;
     let mut fault_detail = None;
     let mut not_engaged = None;
+    let mut stop_errors = Vec::new();
     let mut prev_wake: Option<Instant> = None;
     // a hybrid controller starts (reset) in its first mode
     let mut last_mode: Option<usize> = None;
@@ -510,12 +544,17 @@ fn cycle_loop(
             0.0
         };
         if let Err(e) = backend.write_voltage(u_out[0]) {
-            if !sup.state().is_fault() {
+            if sup.state().is_fault() {
+                // u_out was 0 V: a failed write of the safe state.
+                stop_errors.push(format!("t={t:.3} s: the 0 V write after the fault: {e}"));
+            } else {
                 emit(sup.fault(t, FaultKind::WriteError), transitions);
                 fault_detail = Some(e);
             }
             u_out[0] = 0.0;
-            let _ = backend.write_voltage(0.0);
+            if let Err(e) = backend.write_voltage(0.0) {
+                stop_errors.push(format!("t={t:.3} s: the 0 V write after the fault: {e}"));
+            }
         }
         let work = wake.elapsed().as_nanos() as u64;
         stats.work.record(work);
@@ -529,7 +568,9 @@ fn cycle_loop(
             emit(sup.overrun(t, overran), transitions);
             if sup.state().is_fault() {
                 u_out[0] = 0.0;
-                let _ = backend.write_voltage(0.0);
+                if let Err(e) = backend.write_voltage(0.0) {
+                    stop_errors.push(format!("t={t:.3} s: the 0 V write after the fault: {e}"));
+                }
             }
         }
         if let Some(l) = log.as_deref_mut() {
@@ -554,5 +595,6 @@ fn cycle_loop(
     Outcome {
         fault_detail,
         not_engaged,
+        stop_errors,
     }
 }

@@ -16,6 +16,14 @@ pub enum RuntimeError {
     Log(LogError),
     /// The loop itself panicked (a bug); the backend was closed at 0 V.
     Panic(String),
+    /// Closing the backend failed (every failed call and what holds the
+    /// output are in `close`), after `cause` ended the run.
+    CloseFailed {
+        /// Why the run ended before the close, if it did not end normally.
+        cause: Option<Box<RuntimeError>>,
+        /// The close's error ([`BackendError::SafeStop`] for a board).
+        close: BackendError,
+    },
 }
 
 impl fmt::Display for RuntimeError {
@@ -25,6 +33,12 @@ impl fmt::Display for RuntimeError {
             RuntimeError::Backend(e) => write!(f, "backend: {e}"),
             RuntimeError::Log(e) => write!(f, "{e}"),
             RuntimeError::Panic(s) => write!(f, "control loop panicked: {s}"),
+            RuntimeError::CloseFailed { cause, close } => {
+                if let Some(c) = cause {
+                    write!(f, "{c}; then ")?;
+                }
+                write!(f, "{close}")
+            }
         }
     }
 }

@@ -50,7 +50,8 @@ pub const INFINITE: t_uint32 = u32::MAX;
 
 /// `hil_open`.
 pub type FnOpen = unsafe extern "C" fn(*const c_char, *const c_char, *mut t_card) -> t_error;
-/// `hil_close`, `hil_watchdog_reload`, `hil_watchdog_stop`, `hil_watchdog_clear`.
+/// `hil_close`, `hil_watchdog_reload`, `hil_watchdog_stop`, `hil_watchdog_clear`,
+/// `hil_watchdog_is_expired`.
 pub type FnCard = unsafe extern "C" fn(t_card) -> t_error;
 /// `hil_set_card_specific_options`.
 pub type FnSetOptions = unsafe extern "C" fn(t_card, *const c_char, usize) -> t_error;
@@ -131,6 +132,8 @@ pub struct HilApi {
     pub watchdog_stop: Option<FnCard>,
     /// `hil_watchdog_clear` (optional).
     pub watchdog_clear: Option<FnCard>,
+    /// `hil_watchdog_is_expired` (optional): > 0 expired, 0 not, < 0 error.
+    pub watchdog_is_expired: Option<FnCard>,
     /// The encoder-reader task functions, if all are exported.
     pub task: Option<TaskApi>,
     /// `msg_get_error_messageA` (from the HIL library or `quanser_common`).
@@ -299,6 +302,7 @@ impl HilApi {
                 watchdog_reload: sym(&lib, "hil_watchdog_reload"),
                 watchdog_stop: sym(&lib, "hil_watchdog_stop"),
                 watchdog_clear: sym(&lib, "hil_watchdog_clear"),
+                watchdog_is_expired: sym(&lib, "hil_watchdog_is_expired"),
                 task,
                 get_error_message,
                 path,

@@ -10,7 +10,9 @@
 //! Ctrl-C (or SIGQUIT) terminates the process at once (exit code
 //! `128 + signal` on Unix), for a loop stuck in a driver call; on a board the
 //! armed watchdog then takes the output to its 0 V expiration state. A
-//! repeated SIGTERM or SIGHUP is a duplicate and changes nothing.
+//! repeated SIGTERM or SIGHUP is a duplicate and changes nothing. A signal
+//! ignored when the process started (`nohup`, a script's background job)
+//! stays ignored.
 //!
 //! On Windows the close, logoff and shutdown events end the process when
 //! the handler returns, so the handler waits (at most [`WINDOWS_GRACE`]) until
@@ -114,6 +116,7 @@ mod imp {
     const SIGQUIT: c_int = 3;
     const SIGTERM: c_int = 15;
     const SIG_ERR: usize = usize::MAX;
+    const SIG_IGN: usize = 1;
     /// The signals handled, with their names.
     const SIGNALS: [(c_int, &str); 4] = [
         (SIGINT, "SIGINT (Ctrl-C)"),
@@ -161,6 +164,12 @@ mod imp {
             let r = unsafe { signal(sig, handler as usize) };
             if r == SIG_ERR {
                 return Err(std::io::Error::last_os_error());
+            }
+            if r == SIG_IGN {
+                // ignored when plantc started (`nohup`, a script's background
+                // job): it stays ignored, as shells do
+                // SAFETY: restores the inherited disposition.
+                unsafe { signal(sig, SIG_IGN) };
             }
         }
         Ok(())

@@ -40,6 +40,7 @@ pub mod control_loop;
 pub mod controller;
 pub mod error;
 pub mod estimator;
+pub mod hil_deadline;
 pub mod hil_ffi;
 pub mod histogram;
 pub mod integrate;
@@ -62,7 +63,7 @@ pub mod velocity_filter;
 pub mod velocity_observer;
 
 pub use alloc_count::CountingAllocator;
-pub use backend::{Backend, BackendError, EncoderMap, Tick};
+pub use backend::{Backend, BackendError, EncoderMap, OutputHold, Tick};
 pub use control_loop::{
     run, run_with_estimator, run_with_events, run_with_notes, RunConfig, MAX_RATE_HZ,
 };

@@ -65,6 +65,27 @@ impl LogWriter {
         Ok(Self::from_writer(Box::new(f)))
     }
 
+    /// Creates a log file that must not exist yet (`O_EXCL`: of two runs
+    /// started together with the same file, the second gets an
+    /// [`io::ErrorKind::AlreadyExists`] error instead of writing into the
+    /// first one's log).
+    pub fn create_new(path: impl AsRef<Path>) -> Result<Self, LogError> {
+        let f = std::fs::OpenOptions::new()
+            .write(true)
+            .create_new(true)
+            .open(path)?;
+        Ok(Self::from_writer(Box::new(f)))
+    }
+
+    /// [`LogWriter::create`] with `overwrite`, else [`LogWriter::create_new`].
+    pub fn open(path: impl AsRef<Path>, overwrite: bool) -> Result<Self, LogError> {
+        if overwrite {
+            Self::create(path)
+        } else {
+            Self::create_new(path)
+        }
+    }
+
     /// A log writing to any writer (e.g. a `Vec<u8>` in tests).
     pub fn from_writer(out: Box<dyn Write + Send>) -> Self {
         Self {
@@ -237,5 +258,24 @@ impl LogWriter {
 impl Drop for LogWriter {
     fn drop(&mut self) {
         self.flush();
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn create_new_refuses_an_existing_log_and_leaves_it() {
+        let p = std::env::temp_dir().join(format!("plantc-log-excl-{}.csv", std::process::id()));
+        std::fs::write(&p, "t,x\n1,2\n").unwrap();
+        match LogWriter::create_new(&p) {
+            Err(LogError::Io { kind, .. }) => assert_eq!(kind, io::ErrorKind::AlreadyExists),
+            Ok(_) => panic!("an existing log was opened"),
+        }
+        assert_eq!(std::fs::read_to_string(&p).unwrap(), "t,x\n1,2\n");
+        assert!(LogWriter::open(&p, true).is_ok(), "--force truncates");
+        assert_eq!(std::fs::read_to_string(&p).unwrap(), "");
+        std::fs::remove_file(&p).unwrap();
     }
 }

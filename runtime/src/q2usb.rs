@@ -5,15 +5,33 @@
 //! range, initial 0 V write, watchdog analog expiration state 0 V, encoder
 //! counts zeroed. `start` arms the watchdog and starts an encoder-reader task
 //! on `HARDWARE_CLOCK_0` as the loop clock (falling back to `hil_read_encoder`
-//! with OS timing if the task cannot be created). Close: 0 V, stop and delete
-//! the task, stop/clear the watchdog, final 0 V write, `hil_close`.
+//! with OS timing if the task cannot be created).
+//!
+//! Close (the safe stop; rule: the watchdog stays armed until a 0 V write is
+//! confirmed): stop and delete the task, write 0 V (one retry). Confirmed:
+//! stop the watchdog, `hil_close`. Not confirmed but the watchdog has expired
+//! (seen by a reload or `hil_watchdog_is_expired`): the output is in its 0 V
+//! expiration state; `hil_close` without clearing it. Neither: the watchdog is
+//! left armed (armed now if it was not running) and never reloaded again, and
+//! the board is left open, since what `hil_close` does to an armed watchdog is
+//! not documented (`quanser-hil.md`) while the watchdog alone is known to
+//! drive the output to 0 V. Every failed call is returned in
+//! [`BackendError::SafeStop`] with what holds the output
+//! ([`OutputHold`]); none is dropped.
+//!
+//! Every HIL call after `hil_open` runs under a deadline
+//! ([`crate::hil_deadline`]): a call that hangs ends the process with the
+//! watchdog armed.
 //!
 //! If the board refuses the watchdog expiration state, [`Q2Usb::open`] fails
 //! with [`BackendError::WatchdogRefused`] unless
 //! [`Q2UsbConfig::allow_no_watchdog`] is set.
 
-use crate::backend::{Backend, BackendError, EncoderMap, Tick};
-use crate::hil_ffi::{null_card, null_task, t_card, t_task, HilApi, HARDWARE_CLOCK_0, INFINITE};
+use crate::backend::{Backend, BackendError, EncoderMap, OutputHold, Tick};
+use crate::hil_deadline::{deadline_for, CallDeadline, HilCall};
+use crate::hil_ffi::{
+    null_card, null_task, t_card, t_error, t_task, HilApi, HARDWARE_CLOCK_0, INFINITE,
+};
 use crate::pacer::Pacer;
 use std::f64::consts::PI;
 use std::ffi::CString;
@@ -58,6 +76,10 @@ pub struct Q2UsbConfig {
     pub use_task: bool,
     /// Samples in the task buffer (default 100).
     pub task_buffer_samples: u32,
+    /// Deadline of one HIL call (s) after which the process ends
+    /// ([`crate::hil_deadline`]); `None` (default): ten times the longer of
+    /// the loop period and the watchdog timeout.
+    pub call_deadline_s: Option<f64>,
 }
 
 impl Default for Q2UsbConfig {
@@ -91,6 +113,7 @@ impl Default for Q2UsbConfig {
             allow_no_watchdog: false,
             use_task: true,
             task_buffer_samples: 100,
+            call_deadline_s: None,
         }
     }
 }
@@ -106,13 +129,23 @@ pub struct Q2Usb {
     counts: Vec<i32>,
     watchdog_available: bool,
     watchdog_running: bool,
+    /// The expiration state (0 V) was accepted by the board.
+    expiration_state_set: bool,
+    /// A reload reported that the watchdog had expired.
+    watchdog_expired: bool,
+    /// The last voltage the board accepted (V, as written after the sign).
+    last_volts: f64,
     pacer: Option<Pacer>,
     period: f64,
     first_read: Option<Instant>,
     k: u64,
     started: bool,
+    /// `close` was called (per-sample calls are refused from then on).
     closed: bool,
+    /// `hil_close` was called: the card handle is gone.
+    released: bool,
     notes: Vec<String>,
+    deadline: CallDeadline,
 }
 
 impl Q2Usb {
@@ -131,6 +164,13 @@ impl Q2Usb {
                 "motor_sign must be +1 or -1".into(),
             ));
         }
+        if let Some(d) = config.call_deadline_s {
+            if !(d.is_finite() && d > 0.0) {
+                return Err(BackendError::InvalidConfig(
+                    "call deadline must be > 0 s".into(),
+                ));
+            }
+        }
         let api = HilApi::load(config.library_path.as_deref())?;
         let card_type = CString::new(config.card_type.as_str())
             .map_err(|_| BackendError::InvalidConfig("card type contains NUL".into()))?;
@@ -143,6 +183,13 @@ impl Q2Usb {
             return Err(api.error("hil_open", r.min(-1)));
         }
         let n = config.encoders.len();
+        let deadline = CallDeadline::start(
+            config
+                .call_deadline_s
+                .map(std::time::Duration::from_secs_f64)
+                .unwrap_or_else(|| deadline_for(0.0, config.watchdog_timeout_s)),
+            config.watchdog_timeout_s,
+        );
         let mut me = Self {
             card,
             task: null_task(),
@@ -151,20 +198,52 @@ impl Q2Usb {
             counts: vec![0; n],
             watchdog_available: false,
             watchdog_running: false,
+            expiration_state_set: false,
+            watchdog_expired: false,
+            last_volts: f64::NAN,
             pacer: None,
             period: 1e-3,
             first_read: None,
             k: 0,
             started: false,
             closed: false,
+            released: false,
             notes: Vec::new(),
+            deadline,
             config,
             api,
         };
         me.notes.push(format!("HIL library: {}", me.api.origin()));
-        // On error `me` is dropped, which writes 0 V and closes the card.
-        me.initialise()?;
+        if let Err(e) = me.initialise() {
+            // The safe stop, its failures reported after the cause.
+            return Err(match me.close() {
+                Ok(()) => e,
+                Err(BackendError::SafeStop {
+                    mut failures,
+                    output,
+                }) => {
+                    failures.insert(0, e);
+                    BackendError::SafeStop { failures, output }
+                }
+                Err(c) => BackendError::SafeStop {
+                    failures: vec![e, c],
+                    output: OutputHold::Unknown {
+                        last_volts: me.last_volts,
+                    },
+                },
+            });
+        }
         Ok(me)
+    }
+
+    /// Runs one HIL call under the deadline.
+    fn hil<R>(&self, which: HilCall, f: impl FnOnce() -> R) -> R {
+        self.deadline.call(which, f)
+    }
+
+    fn set_watchdog_running(&mut self, running: bool) {
+        self.watchdog_running = running;
+        self.deadline.set_watchdog_armed(running);
     }
 
     fn initialise(&mut self) -> Result<(), BackendError> {
@@ -176,7 +255,9 @@ impl Q2Usb {
             let c = CString::new(opts)
                 .map_err(|_| BackendError::InvalidConfig("card options contain NUL".into()))?;
             // SAFETY: valid card and string with its length (without NUL, as Quanser's code passes).
-            let r = unsafe { f(card, c.as_ptr(), opts.len()) };
+            let r = self.hil(HilCall::SetOptions, || unsafe {
+                f(card, c.as_ptr(), opts.len())
+            });
             if r < 0 {
                 return Err(self.api.error("hil_set_card_specific_options", r));
             }
@@ -184,13 +265,15 @@ impl Q2Usb {
         if let Some(f) = self.api.watchdog_clear {
             // An error meaning "nothing to clear" is expected and ignored.
             // SAFETY: valid card.
-            let _ = unsafe { f(card) };
+            let _ = self.hil(HilCall::WatchdogClear, || unsafe { f(card) });
         }
         let ch = [self.config.motor_channel];
         if let Some(f) = self.api.set_analog_output_ranges {
             let (lo, hi) = self.config.analog_range;
             // SAFETY: one channel, one minimum, one maximum.
-            let r = unsafe { f(card, ch.as_ptr(), 1, &lo, &hi) };
+            let r = self.hil(HilCall::SetRanges, || unsafe {
+                f(card, ch.as_ptr(), 1, &lo, &hi)
+            });
             if r < 0 {
                 return Err(self.api.error("hil_set_analog_output_ranges", r));
             }
@@ -200,7 +283,12 @@ impl Q2Usb {
             Some(f) => {
                 let zero = [0.0f64];
                 // SAFETY: one channel, one voltage.
-                let r = unsafe { f(card, ch.as_ptr(), 1, zero.as_ptr()) };
+                let r = self.hil(HilCall::WatchdogSetExpiration, || unsafe {
+                    f(card, ch.as_ptr(), 1, zero.as_ptr())
+                });
+                if r >= 0 {
+                    self.expiration_state_set = true;
+                }
                 if r < 0 {
                     if !self.config.allow_no_watchdog {
                         return Err(BackendError::WatchdogRefused {
@@ -231,14 +319,14 @@ impl Q2Usb {
         }
         let zeros = vec![0i32; self.channels.len()];
         // SAFETY: channel and value arrays of equal length.
-        let r = unsafe {
+        let r = self.hil(HilCall::SetEncoderCounts, || unsafe {
             (self.api.set_encoder_counts)(
                 card,
                 self.channels.as_ptr(),
                 self.channels.len() as u32,
                 zeros.as_ptr(),
             )
-        };
+        });
         if r < 0 {
             return Err(self.api.error("hil_set_encoder_counts", r));
         }
@@ -263,22 +351,112 @@ impl Q2Usb {
     fn write_raw(&mut self, volts: f64) -> Result<(), BackendError> {
         let ch = [self.config.motor_channel];
         let v = [volts * self.config.motor_sign];
+        let card = self.card;
+        let write = self.api.write_analog;
         // SAFETY: valid card, one channel, one value.
-        let r = unsafe { (self.api.write_analog)(self.card, ch.as_ptr(), 1, v.as_ptr()) };
+        let r = self.hil(HilCall::WriteAnalog, || unsafe {
+            write(card, ch.as_ptr(), 1, v.as_ptr())
+        });
         if r < 0 {
             return Err(self.api.error("hil_write_analog", r));
         }
+        self.last_volts = v[0];
+        self.deadline.set_last_volts(v[0]);
         Ok(())
     }
 
-    fn stop_task(&mut self) {
+    fn card_call(&self, which: HilCall, f: crate::hil_ffi::FnCard) -> t_error {
+        let card = self.card;
+        // SAFETY: valid card (every caller checks `released`).
+        self.hil(which, || unsafe { f(card) })
+    }
+
+    /// Stops and deletes the encoder task; failures go to `failures`.
+    fn stop_task(&mut self, failures: &mut Vec<BackendError>) {
         if let (false, Some(t)) = (self.task.is_null(), self.api.task) {
+            let task = self.task;
             // SAFETY: a task created by us and not yet deleted.
-            unsafe {
-                let _ = (t.stop)(self.task);
-                let _ = (t.delete)(self.task);
+            let r = self.hil(HilCall::TaskStop, || unsafe { (t.stop)(task) });
+            if r < 0 {
+                failures.push(self.api.error("hil_task_stop", r));
+            }
+            // SAFETY: as above; deleted once.
+            let r = self.hil(HilCall::TaskDelete, || unsafe { (t.delete)(task) });
+            if r < 0 {
+                failures.push(self.api.error("hil_task_delete", r));
             }
             self.task = null_task();
+        }
+    }
+
+    /// Writes 0 V, one retry (a transient USB error passes on a retry, a
+    /// persistent one fails twice); every failed attempt goes to `failures`.
+    fn write_zero_confirmed(&mut self, failures: &mut Vec<BackendError>) -> bool {
+        for _ in 0..2 {
+            match self.write_raw(0.0) {
+                Ok(()) => return true,
+                Err(e) => failures.push(e),
+            }
+        }
+        false
+    }
+
+    /// Whether the watchdog is known to have expired (its outputs in the
+    /// 0 V expiration state): a reload said so, or `hil_watchdog_is_expired`.
+    fn watchdog_known_expired(&mut self, failures: &mut Vec<BackendError>) -> bool {
+        if self.watchdog_expired {
+            return true;
+        }
+        let Some(f) = self.api.watchdog_is_expired else {
+            return false;
+        };
+        if !(self.watchdog_running && self.expiration_state_set) {
+            return false;
+        }
+        let r = self.card_call(HilCall::WatchdogIsExpired, f);
+        if r < 0 {
+            failures.push(self.api.error("hil_watchdog_is_expired", r));
+        }
+        r > 0
+    }
+
+    /// Arms the watchdog (expiration state 0 V, started, never reloaded)
+    /// when it is not running; failures go to `failures`.
+    fn arm_watchdog_for_safe_stop(&mut self, failures: &mut Vec<BackendError>) {
+        if self.watchdog_running {
+            return;
+        }
+        if !self.expiration_state_set {
+            let Some(f) = self.api.watchdog_set_analog_expiration_state else {
+                return;
+            };
+            let ch = [self.config.motor_channel];
+            let zero = [0.0f64];
+            let card = self.card;
+            // SAFETY: one channel, one voltage.
+            let r = self.hil(HilCall::WatchdogSetExpiration, || unsafe {
+                f(card, ch.as_ptr(), 1, zero.as_ptr())
+            });
+            if r < 0 {
+                failures.push(
+                    self.api
+                        .error("hil_watchdog_set_analog_expiration_state", r),
+                );
+                return;
+            }
+            self.expiration_state_set = true;
+        }
+        let Some(f) = self.api.watchdog_start else {
+            return;
+        };
+        let card = self.card;
+        let timeout = self.config.watchdog_timeout_s;
+        // SAFETY: valid card.
+        let r = self.hil(HilCall::WatchdogStart, || unsafe { f(card, timeout) });
+        if r < 0 {
+            failures.push(self.api.error("hil_watchdog_start", r));
+        } else {
+            self.set_watchdog_running(true);
         }
     }
 }
@@ -300,47 +478,66 @@ impl Backend for Q2Usb {
             return Err(BackendError::InvalidConfig("period must be > 0".into()));
         }
         self.period = period_s;
+        if self.config.call_deadline_s.is_none() {
+            self.deadline
+                .set_deadline(deadline_for(period_s, self.config.watchdog_timeout_s));
+        }
         if self.watchdog_available {
             if let Some(f) = self.api.watchdog_start {
+                let card = self.card;
+                let timeout = self.config.watchdog_timeout_s;
                 // SAFETY: valid card.
-                let r = unsafe { f(self.card, self.config.watchdog_timeout_s) };
+                let r = self.hil(HilCall::WatchdogStart, || unsafe { f(card, timeout) });
                 if r < 0 {
                     if !self.config.allow_no_watchdog {
-                        return Err(BackendError::WatchdogRefused {
+                        return Err(BackendError::Hil {
+                            function: "hil_watchdog_start",
                             code: r,
-                            message: self.api.error_message(r),
+                            message: format!(
+                                "{}; refusing to drive the motor without a hardware watchdog \
+                                 (override: allow_no_watchdog)",
+                                self.api.error_message(r)
+                            ),
                         });
                     }
                     self.notes.push(format!(
                         "hil_watchdog_start failed ({r}); running without watchdog"
                     ));
                 } else {
-                    self.watchdog_running = true;
+                    self.set_watchdog_running(true);
                 }
             }
         }
         self.task = null_task();
         if let (true, Some(t)) = (self.config.use_task, self.api.task) {
             let mut task = null_task();
+            let card = self.card;
+            let samples = self.config.task_buffer_samples.max(2);
             // SAFETY: valid card, channel array with its length, out-pointer.
-            let r = unsafe {
+            let r = self.hil(HilCall::TaskCreate, || unsafe {
                 (t.create_encoder_reader)(
-                    self.card,
-                    self.config.task_buffer_samples.max(2),
+                    card,
+                    samples,
                     self.channels.as_ptr(),
                     self.channels.len() as u32,
                     &mut task,
                 )
-            };
+            });
             if r >= 0 && !task.is_null() {
                 // SAFETY: a freshly created task.
-                let r2 = unsafe { (t.start)(task, HARDWARE_CLOCK_0, 1.0 / period_s, INFINITE) };
+                let r2 = self.hil(HilCall::TaskStart, || unsafe {
+                    (t.start)(task, HARDWARE_CLOCK_0, 1.0 / period_s, INFINITE)
+                });
                 if r2 >= 0 {
                     self.task = task;
                 } else {
                     // SAFETY: created above, not started.
-                    unsafe {
-                        let _ = (t.delete)(task);
+                    let r3 = self.hil(HilCall::TaskDelete, || unsafe { (t.delete)(task) });
+                    if r3 < 0 {
+                        self.notes.push(format!(
+                            "hil_task_delete of the task that did not start failed ({})",
+                            self.api.error_message(r3)
+                        ));
                     }
                     self.notes.push(format!(
                         "hil_task_start failed ({}); falling back to hil_read_encoder with OS timing",
@@ -379,8 +576,12 @@ impl Backend for Q2Usb {
             return Err(BackendError::NotStarted);
         };
         // Blocks until the hardware clock's next sample.
+        let task = self.task;
+        let counts = self.counts.as_mut_ptr();
         // SAFETY: started task; buffer holds one sample of every channel.
-        let r = unsafe { (t.read_encoder)(self.task, 1, self.counts.as_mut_ptr()) };
+        let r = self.deadline.call(HilCall::TaskReadEncoder, || unsafe {
+            (t.read_encoder)(task, 1, counts)
+        });
         if r < 0 {
             return Err(self.api.error("hil_task_read_encoder", r));
         }
@@ -399,15 +600,13 @@ impl Backend for Q2Usb {
             return Err(BackendError::NotStarted);
         }
         if self.task.is_null() {
+            let (card, read) = (self.card, self.api.read_encoder);
+            let (channels, n) = (self.channels.as_ptr(), self.channels.len() as u32);
+            let buffer = self.counts.as_mut_ptr();
             // SAFETY: channel and buffer arrays of equal length.
-            let r = unsafe {
-                (self.api.read_encoder)(
-                    self.card,
-                    self.channels.as_ptr(),
-                    self.channels.len() as u32,
-                    self.counts.as_mut_ptr(),
-                )
-            };
+            let r = self.deadline.call(HilCall::ReadEncoder, || unsafe {
+                read(card, channels, n, buffer)
+            });
             if r < 0 {
                 return Err(self.api.error("hil_read_encoder", r));
             }
@@ -438,55 +637,84 @@ impl Backend for Q2Usb {
         let Some(f) = self.api.watchdog_reload else {
             return Ok(());
         };
-        // SAFETY: valid card.
-        let r = unsafe { f(self.card) };
+        if self.closed {
+            return Err(BackendError::Closed);
+        }
+        let r = self.card_call(HilCall::WatchdogReload, f);
         match r {
             1.. => Ok(()),
-            0 => Err(BackendError::WatchdogExpired),
+            0 => {
+                self.watchdog_expired = true;
+                Err(BackendError::WatchdogExpired)
+            }
             _ => Err(self.api.error("hil_watchdog_reload", r)),
         }
     }
 
     fn close(&mut self) -> Result<(), BackendError> {
-        if self.closed {
+        if self.released {
             return Ok(());
         }
         self.closed = true;
-        let mut first_err = self.write_raw(0.0).err();
-        self.stop_task();
-        if self.watchdog_running {
-            // SAFETY: valid card.
-            unsafe {
+        let mut failures = Vec::new();
+        self.stop_task(&mut failures);
+        let output = if self.write_zero_confirmed(&mut failures) {
+            if self.watchdog_running {
                 if let Some(f) = self.api.watchdog_stop {
-                    let _ = f(self.card);
-                }
-                if let Some(f) = self.api.watchdog_clear {
-                    let _ = f(self.card);
+                    // After a confirmed 0 V a watchdog that fails to stop is
+                    // harmless (it would drive 0 V), but it is reported.
+                    let r = self.card_call(HilCall::WatchdogStop, f);
+                    if r < 0 {
+                        failures.push(self.api.error("hil_watchdog_stop", r));
+                    } else {
+                        self.set_watchdog_running(false);
+                    }
                 }
             }
-            self.watchdog_running = false;
-        }
-        // Final voltage (also after a watchdog expiry has been cleared).
-        if let Err(e) = self.write_raw(0.0) {
-            first_err.get_or_insert(e);
+            OutputHold::ZeroConfirmed
+        } else if self.watchdog_known_expired(&mut failures) {
+            // The expiration state holds 0 V; not cleared (a clear would
+            // hand the output back before a write could be confirmed).
+            OutputHold::WatchdogExpired
         } else {
-            first_err = None;
-        }
-        // SAFETY: valid card, closed once.
-        let r = unsafe { (self.api.close)(self.card) };
+            self.arm_watchdog_for_safe_stop(&mut failures);
+            return Err(BackendError::SafeStop {
+                failures,
+                output: if self.watchdog_running {
+                    OutputHold::WatchdogArmed {
+                        timeout_s: self.config.watchdog_timeout_s,
+                    }
+                } else {
+                    OutputHold::Unknown {
+                        last_volts: self.last_volts * self.config.motor_sign,
+                    }
+                },
+            });
+        };
+        let close = self.api.close;
+        let r = self.card_call(HilCall::Close, close);
+        self.released = true;
         self.card = null_card();
         if r < 0 {
-            first_err.get_or_insert(self.api.error("hil_close", r));
+            failures.push(self.api.error("hil_close", r));
         }
-        match first_err {
-            Some(e) => Err(e),
-            None => Ok(()),
+        if failures.is_empty() {
+            Ok(())
+        } else {
+            Err(BackendError::SafeStop { failures, output })
         }
     }
 }
 
 impl Drop for Q2Usb {
+    /// Closes if nobody did; an error is printed (never dropped). A close
+    /// that already failed is not repeated: its error went to the caller and
+    /// the board stays as that close left it (watchdog armed).
     fn drop(&mut self) {
-        let _ = self.close();
+        if !self.closed {
+            if let Err(e) = self.close() {
+                eprintln!("error: closing the board: {e}");
+            }
+        }
     }
 }

@@ -39,6 +39,10 @@ pub struct RunReport {
     pub final_state: SupervisorState,
     /// The backend error behind a fault, if any (e.g. the HIL code and message).
     pub fault_detail: Option<String>,
+    /// Failures of the safe stop: every 0 V write that failed after a fault
+    /// and a failed close (with what holds the output). Not empty: the stop
+    /// was not clean, whatever the final state (callers exit non-zero).
+    pub stop_errors: Vec<String>,
     /// Samples executed.
     pub samples: u64,
     /// Rows written to the log.
@@ -112,6 +116,9 @@ impl fmt::Display for RunReport {
         }
         if let Some(d) = &self.fault_detail {
             writeln!(f, "  fault detail: {d}")?;
+        }
+        for e in &self.stop_errors {
+            writeln!(f, "  SAFE STOP FAILED: {e}")?;
         }
         writeln!(
             f,

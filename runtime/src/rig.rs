@@ -22,7 +22,7 @@ use crate::backend::Backend;
 use crate::control_loop::{run_with_notes, RunConfig};
 use crate::controller::{Controller, Mode};
 use crate::estimator::{DerivativeEstimator, VelocityEstimator};
-use crate::log::LogWriter;
+use crate::log::{LogError, LogWriter};
 use crate::plant::Plant;
 use crate::q2usb::{Q2Usb, Q2UsbConfig};
 use crate::report::RunReport;
@@ -828,26 +828,37 @@ pub fn execute(
             .map(|m| m.counts_per_rev)
             .find(|c| *c != o.counts_per_rev);
         if let Some(c) = other {
-            let _ = backend.close();
-            return Err(usage(format!(
+            let e = usage(format!(
                 "the observer was designed for {} counts/rev encoders, the backend has {c}; \
                  regenerate or use --velocity derivative",
                 o.counts_per_rev
-            )));
+            ));
+            return Err(with_close(backend.as_mut(), e));
         }
     }
     let mut log = match &args.log {
         Some(path) => {
             if path.exists() && !args.force {
-                let _ = backend.close();
-                return Err(usage(format!(
+                let e = usage(format!(
                     "log {} exists; pass --force to overwrite it",
                     path.display()
-                )));
+                ));
+                return Err(with_close(backend.as_mut(), e));
             }
-            let mut l = LogWriter::create(path).map_err(|e| {
-                let _ = backend.close();
-                RigError::Failure(format!("{}: {e}", path.display()))
+            // O_EXCL without --force: a run started meanwhile with the same
+            // log is refused, not interleaved
+            let mut l = LogWriter::open(path, args.force).map_err(|e| {
+                let e = match e {
+                    LogError::Io {
+                        kind: std::io::ErrorKind::AlreadyExists,
+                        ..
+                    } => usage(format!(
+                        "log {} exists; pass --force to overwrite it",
+                        path.display()
+                    )),
+                    e => RigError::Failure(format!("{}: {e}", path.display())),
+                };
+                with_close(backend.as_mut(), e)
             })?;
             l.set_full_precision(args.log_full_precision);
             Some(l)
@@ -888,6 +899,14 @@ pub fn execute(
     alloc_count::count_on_this_thread(false);
     let report = result.map_err(|e| RigError::Failure(e.to_string()))?;
     let _ = write!(out, "{report}");
+    if !report.stop_errors.is_empty() {
+        // The safe stop was not clean: a failure whatever the final state.
+        return Err(RigError::Failure(format!(
+            "run ended in {} and the safe stop failed: {}",
+            report.final_state,
+            report.stop_errors.join("; ")
+        )));
+    }
     if alloc_count::installed() && probe.calls > 1 {
         let _ = writeln!(
             out,
@@ -907,6 +926,21 @@ pub fn execute(
             )
         ))),
         _ => Ok(report),
+    }
+}
+
+/// Closes `backend` on a path that ends the run with `error`; a failed
+/// close is added to the error (a failure then), never dropped.
+fn with_close(backend: &mut dyn Backend, error: RigError) -> RigError {
+    match backend.close() {
+        Ok(()) => error,
+        Err(c) => {
+            let first = match &error {
+                RigError::Usage(m) | RigError::Failure(m) => m.clone(),
+                other => other.to_string(),
+            };
+            RigError::Failure(format!("{first}; then {c}"))
+        }
     }
 }
 

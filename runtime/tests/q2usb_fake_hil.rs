@@ -147,8 +147,28 @@ fn slow_calls_fault_as_overruns() {
 #[test]
 fn watchdog_not_reloaded_expires() {
     let o = run_fake("no_reload", "alpha0=5deg,fault=no_reload@1.0", 10.0, false);
-    assert_fault(&o, FaultKind::WatchdogExpired);
+    // The expired board refuses writes: the output is 0 V by its expiration
+    // state (not by a write); the refused 0 V writes are reported, the
+    // watchdog is not cleared before the card is closed.
+    let r = o.result.as_ref().expect("run");
+    assert_eq!(
+        r.final_state,
+        SupervisorState::Fault(FaultKind::WatchdogExpired),
+        "{r}"
+    );
+    assert_eq!(o.rows.last().unwrap().vm, 0.0);
     assert!(o.trace.expired);
+    assert_eq!(o.trace.close_output, Some(0.0));
+    assert!(!o.trace.lines.iter().any(|l| l.contains("watchdog_clear")));
+    assert!(
+        r.stop_errors.len() >= 2
+            && r.stop_errors
+                .last()
+                .unwrap()
+                .contains("0 V expiration state"),
+        "{:?}",
+        r.stop_errors
+    );
     let t = o.rows.last().unwrap().t;
     assert!(
         (1.09..1.2).contains(&t),

@@ -163,6 +163,16 @@ fn invalid_configuration_is_an_error_not_a_panic() {
         run(&c, &mut be, &mut ctl, None),
         Err(RuntimeError::InvalidConfig(_))
     ));
+    // issue 31 (r12): a duration whose sample count leaves f64's exact
+    // integers is refused (2e16 s at 1 kHz used to run 0 samples, "ok")
+    for d in [1.8e16, 2e16, 1e300] {
+        let mut c = cfg(1.0);
+        c.duration_s = Some(d);
+        match run(&c, &mut be, &mut ctl, None) {
+            Err(RuntimeError::InvalidConfig(m)) => assert!(m.contains("2^53"), "{m}"),
+            other => panic!("duration {d}: {other:?}"),
+        }
+    }
     assert_eq!(be.last_written(), 0.0);
 }
 

@@ -257,22 +257,143 @@ pub fn eval_si(expr: &Expr, symbols: &Symbols) -> Option<f64> {
     })
 }
 
-/// Up to three names from `candidates` close to `name` (edit distance),
-/// best first.
+/// The most edits a suggestion may be away from the name written. The rule
+/// is a third of the name's length (a misspelling is a few keystrokes in a
+/// name); the cap of 8 leaves every suggestion for names of up to 26
+/// characters as the rule alone gives it (the longest names of the bundled
+/// models have 15) and bounds the work on a hostile name: the distance is
+/// computed in a band of `2 * 8 + 1` diagonals, `O(17 n)` per candidate
+/// instead of `O(n m)` (a 100,000-character name took 54 s).
+pub const MAX_SUGGESTION_EDITS: usize = 8;
+
+/// [`eval_si`] that also finds, in one pass, the first node whose operands
+/// are finite numbers but whose value is not; it goes to `first`.
+fn eval_reporting<'e>(
+    expr: &'e Expr,
+    symbols: &Symbols,
+    first: &mut Option<(&'e Expr, f64)>,
+) -> Option<f64> {
+    let v = match &expr.kind {
+        ExprKind::Neg(a) => -eval_reporting(a, symbols, first)?,
+        ExprKind::Binary(op, a, b) => {
+            let x = eval_reporting(a, symbols, first);
+            let y = eval_reporting(b, symbols, first);
+            let (a, b) = (x?, y?);
+            if !(a.is_finite() && b.is_finite()) {
+                return Some(f64::NAN);
+            }
+            match op {
+                BinOp::Add => a + b,
+                BinOp::Sub => a - b,
+                BinOp::Mul => a * b,
+                BinOp::Div => a / b,
+                BinOp::Pow => a.powf(b),
+            }
+        }
+        ExprKind::Call(_, args) => {
+            let mut all = Some(());
+            let mut finite = true;
+            for a in args {
+                match eval_reporting(a, symbols, first) {
+                    Some(v) => finite &= v.is_finite(),
+                    None => all = None,
+                }
+            }
+            all?;
+            if !finite {
+                return Some(f64::NAN);
+            }
+            eval_si(expr, symbols)?
+        }
+        _ => eval_si(expr, symbols)?,
+    };
+    // (a literal that overflows is reported by the parser already)
+    let operation = matches!(expr.kind, ExprKind::Binary(..) | ExprKind::Call(..));
+    if operation && !v.is_finite() && first.is_none() {
+        *first = Some((expr, v));
+    }
+    Some(v)
+}
+
+/// Names Rust reserves even as raw identifiers (`r#self` is not allowed):
+/// refused as names in a model, since `plantc gen` writes Rust from them.
+/// Other Rust keywords are fine (generated as raw identifiers, `r#fn`).
+pub const RUST_RESERVED: [&str; 5] = ["_", "self", "Self", "crate", "super"];
+
+/// Up to three names from `candidates` close to `name` (edit distance at
+/// most a third of its length, [`MAX_SUGGESTION_EDITS`] at most, or equal
+/// ignoring case), best first.
 pub fn suggest<'a>(name: &str, candidates: impl IntoIterator<Item = &'a str>) -> Vec<String> {
-    let max = (name.chars().count() / 3).max(1);
+    let max = (name.chars().count() / 3).clamp(1, MAX_SUGGESTION_EDITS);
     let mut v: Vec<(usize, String)> = candidates
         .into_iter()
         .filter(|c| *c != name)
-        .map(|c| (edit_distance(name, c), c.to_string()))
-        .filter(|(d, c)| *d <= max || (c.to_lowercase() == name.to_lowercase()))
+        .filter_map(|c| {
+            let d = edit_distance_within(name, c, max).or_else(|| {
+                // equal but for case: the count of differing characters
+                (c.len() == name.len() && c.to_lowercase() == name.to_lowercase())
+                    .then(|| c.chars().zip(name.chars()).filter(|(x, y)| x != y).count())
+            })?;
+            Some((d, c.to_string()))
+        })
         .collect();
     v.sort();
     v.dedup();
     v.into_iter().take(3).map(|(_, c)| c).collect()
 }
 
-/// Levenshtein distance over chars.
+/// Levenshtein distance over chars, if it is at most `max` (`None` beyond).
+/// Only the band of diagonals `|i - j| <= max` is computed: `O(max * n)`.
+pub fn edit_distance_within(a: &str, b: &str, max: usize) -> Option<usize> {
+    let a: Vec<char> = a.chars().collect();
+    let b: Vec<char> = b.chars().collect();
+    if a.len().abs_diff(b.len()) > max {
+        return None;
+    }
+    let (n, m) = (a.len(), b.len());
+    let inf = max + 1;
+    // row i holds columns j in [i - max, i + max], stored at j - i + max
+    let width = 2 * max + 1;
+    let mut prev = vec![inf; width];
+    for (k, p) in prev.iter_mut().enumerate() {
+        // row 0: distance j for j = k - max >= 0
+        if k >= max && k - max <= m {
+            *p = (k - max).min(inf);
+        }
+    }
+    let mut cur = vec![inf; width];
+    for i in 1..=n {
+        let mut row_min = inf;
+        for k in 0..width {
+            cur[k] = inf;
+            let Some(j) = (i + k).checked_sub(max) else {
+                continue;
+            };
+            if j > m {
+                continue;
+            }
+            let v = if j == 0 {
+                i.min(inf)
+            } else {
+                let sub = prev[k] + usize::from(a[i - 1] != b[j - 1]);
+                let del = if k + 1 < width { prev[k + 1] + 1 } else { inf };
+                let ins = if k > 0 { cur[k - 1] + 1 } else { inf };
+                sub.min(del).min(ins).min(inf)
+            };
+            cur[k] = v;
+            row_min = row_min.min(v);
+        }
+        if row_min > max {
+            return None;
+        }
+        std::mem::swap(&mut prev, &mut cur);
+    }
+    let d = prev[m + max - n];
+    (d <= max).then_some(d)
+}
+
+/// Levenshtein distance over chars. Cost `O(n m)`: for names the user
+/// wrote, use [`edit_distance_within`].
 pub fn edit_distance(a: &str, b: &str) -> usize {
     let a: Vec<char> = a.chars().collect();
     let b: Vec<char> = b.chars().collect();
@@ -940,6 +1061,113 @@ impl Checker {
         }
     }
 
+    /// A coordinate whose velocity appears nowhere in the kinetic energy
+    /// (directly or through a `let`) and that no `inertia` line targets has
+    /// no inertia: its row of the mass matrix is zero, so `M` is singular in
+    /// every state and the equations of motion do not exist (derive used to
+    /// print `det M = 0` and `f` with `inf`).
+    fn check_inertia(&mut self, file: &ModelFile) {
+        let [t] = file.kinetic.as_slice() else {
+            return;
+        };
+        let lets: HashMap<&str, &Expr> = file
+            .lets
+            .iter()
+            .map(|l| (l.name.name.as_str(), &l.expr))
+            .collect();
+        let mut moving = std::collections::BTreeSet::new();
+        let mut seen_lets = std::collections::BTreeSet::new();
+        let mut todo = vec![&t.expr];
+        while let Some(e) = todo.pop() {
+            e.walk(&mut |x| match &x.kind {
+                ExprKind::Deriv(n, _) => {
+                    moving.insert(n.clone());
+                }
+                ExprKind::Name(n) => {
+                    if let Some(&l) = lets.get(n.as_str()) {
+                        if seen_lets.insert(n.clone()) {
+                            todo.push(l);
+                        }
+                    }
+                }
+                _ => {}
+            });
+        }
+        // a velocity of no coordinate (a misspelling) is reported already;
+        // the missing inertia would only follow from it
+        if moving
+            .iter()
+            .any(|m| !file.coordinates.iter().any(|c| &c.name.name == m))
+        {
+            return;
+        }
+        for c in &file.coordinates {
+            let name = &c.name.name;
+            let added = file.inertias.iter().any(|i| &i.target.name == name);
+            if !moving.contains(name) && !added {
+                self.diags.push(
+                    Diagnostic::error(
+                        "plantc::no_inertia",
+                        format!("coordinate `{name}` has no inertia"),
+                        c.name.span,
+                        format!("`{name}'` appears nowhere in the kinetic energy"),
+                    )
+                    .with_label(t.span, "the kinetic energy")
+                    .with_help(format!(
+                        "without a term in `{name}'` the mass matrix is singular for every state \
+                         (no equation of motion gives `{name}''`): add its kinetic energy, e.g. \
+                         `1/2*m*{name}'^2`, or an `inertia {name} = added_inertia(J)` line"
+                    )),
+                );
+            }
+        }
+    }
+
+    /// Refuses, where they are declared, the names the generated Rust code
+    /// cannot spell even as raw identifiers ([`RUST_RESERVED`]).
+    fn check_rust_reserved(&mut self, file: &ModelFile) {
+        use super::visit::{occurrences, Role, SymbolRef};
+        let mut seen = std::collections::BTreeSet::new();
+        let model = file
+            .model
+            .iter()
+            .map(|m| (m.name.name.as_str(), m.name.span));
+        let declared = occurrences(file)
+            .into_iter()
+            .filter(|o| o.role == Role::Declaration)
+            .filter_map(|o| {
+                let name = match o.symbol {
+                    SymbolRef::Model(n)
+                    | SymbolRef::Gain(_, n)
+                    | SymbolRef::Block(n)
+                    | SymbolRef::Surface(_, n)
+                    | SymbolRef::Mode(_, n) => n,
+                    _ => return None,
+                };
+                Some((name, o.span))
+            })
+            .collect::<Vec<_>>();
+        let all = model.map(|(n, s)| (n.to_string(), s)).chain(declared);
+        for (name, span) in all {
+            if RUST_RESERVED.contains(&name.as_str()) && seen.insert(span.start) {
+                self.diags.push(
+                    Diagnostic::error(
+                        "plantc::reserved_name",
+                        format!("`{name}` cannot be a name in a model"),
+                        span,
+                        "reserved in the generated Rust code",
+                    )
+                    .with_help(format!(
+                        "Rust cannot name anything `{}` (not even as a raw identifier), and plantc \
+                         generates Rust from the model: choose another name, e.g. `{}`",
+                        name,
+                        if name == "_" { "x_".to_string() } else { format!("{}_", name.to_lowercase()) }
+                    )),
+                );
+            }
+        }
+    }
+
     fn declare(&mut self, name: &Ident, kind: SymbolKind, dim: Option<Dim>) {
         if BUILTINS.iter().any(|(n, _)| *n == name.name) || name.name == "pi" {
             self.diags.push(
@@ -1000,6 +1228,7 @@ impl Checker {
     }
 
     fn check(&mut self, mut file: ModelFile) -> ModelFile {
+        self.check_rust_reserved(&file);
         if file.model.is_none() {
             self.diags.push(
                 Diagnostic::error(
@@ -1090,6 +1319,7 @@ impl Checker {
             self.declare(&e.name, SymbolKind::Energy, Some(Dim::energy()));
         }
         self.check_lets(&file);
+        self.check_inertia(&file);
         // outputs
         let mut output_names: BTreeMap<String, Span> = BTreeMap::new();
         for o in &file.outputs {
@@ -1894,6 +2124,47 @@ impl Checker {
                     }
                 }
             });
+        }
+        // parameter-only parts of every expression, at the nominal values:
+        // the first operation that turns finite operands into a value that
+        // is not (an overflow, a logarithm of 0, a square root of -1, ...)
+        // (set entries and gains: below, named by their set or controller)
+        let literal_divisions: Vec<Span> = found.iter().map(|d| d.primary).collect();
+        let mut model_exprs: Vec<&Expr> = Vec::new();
+        model_exprs.extend(file.lets.iter().map(|l| &l.expr));
+        model_exprs.extend(file.outputs.iter().filter_map(|o| o.expr.as_ref()));
+        model_exprs.extend(file.kinetic.iter().chain(&file.potential).map(|e| &e.expr));
+        model_exprs.extend(file.forces.iter().map(|f| &f.written));
+        model_exprs.extend(file.sensors.iter().chain(&file.actuators).map(|s| &s.call));
+        for c in &file.controllers {
+            for s in &c.body {
+                if let ControllerStmt::Law { expr, .. } = s {
+                    model_exprs.push(expr);
+                }
+            }
+        }
+        for e in &model_exprs {
+            let mut first = None;
+            let _ = eval_reporting(e, &self.syms, &mut first);
+            let Some((x, v)) = first else {
+                continue;
+            };
+            let near = |s: &Span| x.span.start <= s.start && s.end <= x.span.end;
+            if literal_divisions.iter().any(near) {
+                continue;
+            }
+            found.push(
+                Diagnostic::error(
+                    "plantc::not_finite",
+                    format!("this expression is not a finite number ({v})"),
+                    x.span,
+                    format!("evaluates to {v} (parameters at their nominal values)"),
+                )
+                .with_help(
+                    "every value of a model must be finite: check the numbers here and the \
+                     values of the parameters it uses",
+                ),
+            );
         }
         // constant values: set entries and gains, with the nominal values
         let mut constants: Vec<(&Expr, String)> = Vec::new();

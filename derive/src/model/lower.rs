@@ -116,10 +116,29 @@ pub fn load_model(path: &Path) -> Result<LoadedModel, LoadError> {
     load_model_text(&path.display().to_string(), &text)
 }
 
+/// The bytes of a regular file (a symbolic link to one is followed). A FIFO,
+/// a device or a directory is refused before it is opened: opening a FIFO
+/// blocks until a writer appears, and reading `/dev/zero` never ends.
+pub fn read_regular_file(path: &Path) -> std::io::Result<Vec<u8>> {
+    let m = std::fs::metadata(path)?;
+    if !m.is_file() {
+        let kind = if m.is_dir() {
+            "a directory"
+        } else {
+            "not a regular file (a FIFO, socket or device)"
+        };
+        return Err(std::io::Error::new(
+            std::io::ErrorKind::InvalidInput,
+            format!("{kind}: plantc reads model files only"),
+        ));
+    }
+    std::fs::read(path)
+}
+
 /// The text of a model file. A file that is not UTF-8 is an error at the
 /// line and column of its first bad byte (UTF-16 files are named as such).
 pub fn read_source(path: &Path) -> Result<String, LoadError> {
-    let bytes = std::fs::read(path).map_err(|e| LoadError::Io {
+    let bytes = read_regular_file(path).map_err(|e| LoadError::Io {
         path: path.display().to_string(),
         message: e.to_string(),
     })?;

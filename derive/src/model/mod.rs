@@ -8,7 +8,9 @@ mod modes;
 mod values;
 
 pub use chain::n_link_chain_source;
-pub use lower::{load_model, load_model_text, lower, read_source, LoadError, LoadedModel};
+pub use lower::{
+    load_model, load_model_text, lower, read_regular_file, read_source, LoadError, LoadedModel,
+};
 pub use modes::{Guard, ModeSpec, SurfaceSpec, SwitchSpec};
 pub use values::{ParameterValues, ValuesError};
 

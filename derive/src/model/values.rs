@@ -5,7 +5,7 @@ use std::collections::HashMap;
 use std::fmt;
 
 use super::Model;
-use crate::lang::check::edit_distance;
+use crate::lang::check::edit_distance_within;
 use crate::sym::Symbol;
 
 /// Why a parameter selection failed.
@@ -70,8 +70,13 @@ pub struct ParameterValues {
 /// Up to three names close to `name` (edit distance at most 2, or a prefix).
 pub(crate) fn nearest<'a>(name: &str, known: impl Iterator<Item = &'a str>) -> Vec<String> {
     let mut v: Vec<(usize, &str)> = known
-        .map(|k| (edit_distance(name, k), k))
-        .filter(|(d, k)| *d <= 2 || k.starts_with(name))
+        .filter_map(|k| match edit_distance_within(name, k, 2) {
+            Some(d) => Some((d, k)),
+            // a prefix: the distance is the length difference
+            None => k
+                .starts_with(name)
+                .then(|| (k.chars().count() - name.chars().count(), k)),
+        })
         .collect();
     v.sort();
     v.into_iter()

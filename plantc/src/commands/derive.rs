@@ -24,6 +24,15 @@ pub fn run(
     let model = &loaded.model;
     let eqs = derive_equations(model).map_err(|e| CliError::failure(format!("error: {e}")))?;
     let p = present_equations(&eqs, expand);
+    if p.det_mass.is_some_and(|d| d.is_zero()) {
+        // (a coordinate without any inertia is a check error already; this
+        // is M of lower rank, e.g. T = 1/2*m*(x' + y')^2)
+        return Err(CliError::input(format!(
+            "error: {}: the mass matrix is singular for every state (det M = 0): the kinetic \
+             energy does not determine every acceleration; give each coordinate its own inertia",
+            path.display()
+        )));
+    }
     let n = eqs.coords.len();
     let names = model.state_names();
     if json {

@@ -44,7 +44,10 @@ pub fn run(
     let mut failed: Option<i32> = None;
     for path in &files {
         let name = path.display().to_string();
-        let text = match std::fs::read_to_string(path) {
+        let text = match plantc_derive::model::read_regular_file(path).and_then(|b| {
+            String::from_utf8(b)
+                .map_err(|e| std::io::Error::new(std::io::ErrorKind::InvalidData, e))
+        }) {
             Ok(t) => t,
             Err(e) => {
                 let _ = writeln!(err, "error: cannot read {name}: {e}");
@@ -73,9 +76,13 @@ pub fn run(
             );
         } else {
             // crash-safe: a temporary file in the same directory, synced and
-            // renamed over the original (permissions and symbolic links kept)
-            plantc_fsio::write_atomic(path, &formatted)
-                .map_err(|e| CliError::failure(format!("error: {e} (the file is unchanged)")))?;
+            // renamed over the original (permissions and symbolic links kept;
+            // a read-only file is refused)
+            if let Err(e) = plantc_fsio::write_atomic(path, &formatted) {
+                let _ = writeln!(err, "error: {e} (the file is unchanged)");
+                failed = failed.max(Some(EXIT_FAILURE));
+                continue;
+            }
             let _ = writeln!(out, "formatted {name}");
         }
     }
@@ -104,22 +111,14 @@ fn format_error(name: &str, text: &str, e: FormatError) -> CliError {
     }
 }
 
-/// `path` itself, or the `*.plant` files under a directory (sorted).
+/// `path` itself, or the `*.plant` files under a directory (sorted). The
+/// walk does not follow symbolic links to directories (a link back to `.`
+/// would list the same files again, two would never end); a file reached
+/// twice (through a link) is formatted once.
 fn collect(path: &Path, files: &mut Vec<PathBuf>) -> Result<(), CliError> {
+    let mut seen = std::collections::BTreeSet::new();
     if path.is_dir() {
-        let mut entries: Vec<PathBuf> = std::fs::read_dir(path)
-            .map_err(|e| CliError::input(format!("error: cannot read {}: {e}", path.display())))?
-            .filter_map(|e| e.ok().map(|e| e.path()))
-            .collect();
-        entries.sort();
-        for p in entries {
-            if p.is_dir() {
-                collect(&p, files)?;
-            } else if p.extension().is_some_and(|x| x == "plant") {
-                files.push(p);
-            }
-        }
-        Ok(())
+        walk(path, files, &mut seen)
     } else if path.exists() {
         files.push(path.to_path_buf());
         Ok(())
@@ -129,6 +128,31 @@ fn collect(path: &Path, files: &mut Vec<PathBuf>) -> Result<(), CliError> {
             path.display()
         )))
     }
+}
+
+fn walk(
+    dir: &Path,
+    files: &mut Vec<PathBuf>,
+    seen: &mut std::collections::BTreeSet<PathBuf>,
+) -> Result<(), CliError> {
+    let mut entries: Vec<PathBuf> = std::fs::read_dir(dir)
+        .map_err(|e| CliError::input(format!("error: cannot read {}: {e}", dir.display())))?
+        .filter_map(|e| e.ok().map(|e| e.path()))
+        .collect();
+    entries.sort();
+    for p in entries {
+        let link = std::fs::symlink_metadata(&p).is_ok_and(|m| m.file_type().is_symlink());
+        if p.is_dir() {
+            if !link {
+                walk(&p, files, seen)?;
+            }
+        } else if p.extension().is_some_and(|x| x == "plant")
+            && seen.insert(std::fs::canonicalize(&p).unwrap_or_else(|_| p.clone()))
+        {
+            files.push(p);
+        }
+    }
+    Ok(())
 }
 
 /// 1-based number of the first line that differs.

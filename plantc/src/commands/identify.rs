@@ -143,7 +143,7 @@ fn story(
         && !made_by_identify(dir)
     {
         return Err(CliError::input(format!(
-            "error: `{}` exists, is not empty and was not written by `plantc identify`; choose a new directory or pass --force (identify's files are replaced, others kept)",
+            "error: `{}` exists, is not empty and was not written by `plantc identify`; choose a new directory or pass --force (identify then writes its files beside yours: a file of yours at one of its paths is replaced, no other is touched)",
             dir.display()
         )));
     }
@@ -178,7 +178,9 @@ fn story(
     };
     // inputs are checked before anything is written; the new directory is
     // built aside and swapped in at the end: a killed run leaves the old one
-    let fresh = plantc_fsio::FreshDir::create(dir).map_err(fail)?;
+    let fresh = plantc_fsio::FreshDir::create(dir, "identify")
+        .map_err(fail)?
+        .replace_unlisted(args.force || made_by_identify_before_manifests(dir));
     let staging = fresh.path().to_path_buf();
     let channels: Vec<&str> = model.coordinates.iter().map(|c| c.name.as_str()).collect();
     let s = with_progress("identifying", |set| {
@@ -476,11 +478,9 @@ fn story(
     let mut buf = Vec::new();
     write_json(&mut buf, &summary);
     write_file(&staging.join("report.json"), &String::from_utf8_lossy(&buf))?;
-    // swap the complete directory in; entries identify never writes (the
-    // user's, with --force) are kept
-    fresh
-        .commit_keeping(|n| !is_identify_entry(n))
-        .map_err(fail)?;
+    // move the complete output in: only identify's own files (its manifest)
+    // are replaced or deleted, the user's stay where they are
+    fresh.commit().map_err(fail)?;
     Ok(summary)
 }
 
@@ -540,26 +540,22 @@ fn show_stage(
     Ok(())
 }
 
-/// Whether a top-level entry of the output directory is one identify writes
-/// (`report.json`, `fitted.plant`, `with_effect*.plant`, `N-<stage>/`
-/// figure folders): those of an earlier run are dropped, others kept.
-fn is_identify_entry(name: &Path) -> bool {
-    let n = name.to_string_lossy();
-    n == "report.json"
-        || n == "fitted.plant"
-        || (n.starts_with("with_effect") && n.ends_with(".plant"))
-        || n.split_once('-').is_some_and(|(k, rest)| {
-            !k.is_empty() && k.bytes().all(|b| b.is_ascii_digit()) && !rest.is_empty()
-        })
+/// Whether `dir` holds the output of an earlier `plantc identify`: its
+/// manifest, or (written before manifests) a `report.json` with the story's
+/// keys. It may be written into without asking: only identify's own files
+/// are replaced or deleted.
+fn made_by_identify(dir: &Path) -> bool {
+    plantc_fsio::manifest(dir, "identify").is_some() || made_by_identify_before_manifests(dir)
 }
 
-/// Whether `dir` holds the output of an earlier `plantc identify` (its
-/// `report.json` has the story's keys): it may be replaced without asking.
-fn made_by_identify(dir: &Path) -> bool {
-    std::fs::read_to_string(dir.join("report.json"))
-        .ok()
-        .and_then(|t| serde_json::from_str::<serde_json::Value>(&t).ok())
-        .is_some_and(|v| v.get("stages").is_some() && v.get("verdict").is_some())
+/// An identify output from before manifests (its `report.json` has the
+/// story's keys): identify's files there are replaced, none deleted.
+fn made_by_identify_before_manifests(dir: &Path) -> bool {
+    plantc_fsio::manifest(dir, "identify").is_none()
+        && std::fs::read_to_string(dir.join("report.json"))
+            .ok()
+            .and_then(|t| serde_json::from_str::<serde_json::Value>(&t).ok())
+            .is_some_and(|v| v.get("stages").is_some() && v.get("verdict").is_some())
 }
 
 fn indent(s: &str) -> String {

@@ -109,7 +109,19 @@ pub fn run(args: &RunArgs, out: &mut dyn Write, err: &mut dyn Write) -> Result<(
     let mut log = match &args.log {
         Some(path) => {
             refuse_overwrite(path, args.force, "log")?;
-            let mut log = LogWriter::create(path).map_err(|e| fail(&e))?;
+            // O_EXCL without --force: a run started meanwhile with the same
+            // log is refused, not interleaved (the check above is only the
+            // early, friendly refusal)
+            let mut log = LogWriter::open(path, args.force).map_err(|e| match e {
+                plantc_runtime::LogError::Io {
+                    kind: std::io::ErrorKind::AlreadyExists,
+                    ..
+                } => CliError::input(format!(
+                    "error: log `{}` already exists; pass --force to overwrite it",
+                    path.display()
+                )),
+                e => fail(&e),
+            })?;
             log.set_full_precision(args.log_precision == LogPrecision::Full);
             Some(log)
         }
@@ -146,6 +158,23 @@ pub fn run(args: &RunArgs, out: &mut dyn Write, err: &mut dyn Write) -> Result<(
     plantc_runtime::stop_completed();
     let report = report.map_err(|e| fail(&e))?;
     let _ = writeln!(out, "{report}");
+    if !report.stop_errors.is_empty() {
+        // The safe stop was not clean (a failed 0 V write or close): a
+        // failure whatever the final state, each failure said on stderr.
+        for e in &report.stop_errors {
+            let _ = writeln!(err, "error: safe stop: {e}");
+        }
+        return Err(CliError::failure(format!(
+            "run ended in {} and the safe stop failed ({} error{}; see above)",
+            report.final_state,
+            report.stop_errors.len(),
+            if report.stop_errors.len() == 1 {
+                ""
+            } else {
+                "s"
+            }
+        )));
+    }
     if report.final_state == SupervisorState::Fault(FaultKind::Stopped) {
         // Exit code of a process ended by the signal, by convention
         // (128 + signal number: 130 SIGINT, 143 SIGTERM, 129 SIGHUP, 131 SIGQUIT).

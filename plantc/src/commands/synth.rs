@@ -19,6 +19,10 @@ fn synth_error(e: SynthError) -> CliError {
     }
 }
 
+/// Most samples of one synthesised experiment: 1e7, the size `compare` is
+/// measured on for a recording (issue 31: under 1 GB and a few minutes).
+const MAX_SYNTH_SAMPLES: usize = 10_000_000;
+
 pub fn run(args: &SynthArgs, out: &mut dyn Write, _err: &mut dyn Write) -> Result<(), CliError> {
     let effects = args
         .effects
@@ -32,6 +36,19 @@ pub fn run(args: &SynthArgs, out: &mut dyn Write, _err: &mut dyn Write) -> Resul
         .map(|t| parse_experiment_spec(t))
         .collect::<Result<Vec<_>, _>>()
         .map_err(synth_error)?;
+    // the sample count is checked before anything is allocated (a duration
+    // of 1e9 s asked for 12 TB at once)
+    for e in &experiments {
+        let samples = e.duration * args.rate;
+        if samples > MAX_SYNTH_SAMPLES as f64 {
+            return Err(CliError::input(format!(
+                "error: `{}`: {} s at {} Hz is {samples:.3e} samples; synth writes at most \
+                 {:.0e} per experiment (the largest recording the identification commands are \
+                 measured on): shorten the duration or lower --rate",
+                e.token, e.duration, args.rate, MAX_SYNTH_SAMPLES as f64
+            )));
+        }
+    }
     let mut parameter_set = None;
     let mut values = Vec::new();
     for item in &args.set {
@@ -97,26 +114,24 @@ pub fn run(args: &SynthArgs, out: &mut dyn Write, _err: &mut dyn Write) -> Resul
             }
         }
     }
-    // All files appear together: written into a copy of DIR swapped in at
-    // the end (other entries of DIR are kept). In the current directory,
-    // which cannot be swapped, each file is still replaced crash-safely.
-    let fresh = match plantc_fsio::FreshDir::create(&args.out) {
-        Ok(f) => Some(f),
-        Err(plantc_fsio::Error::CurrentDirectory { .. }) => None,
-        Err(e) => return Err(CliError::failure(format!("error: {e}"))),
-    };
+    // All files are written aside and moved in at the end; only synth's own
+    // files (its manifest) are replaced, the user's stay where they are, and
+    // synth's earlier files of other names are kept.
+    let fresh = plantc_fsio::FreshDir::create(&args.out, "synth")
+        .map_err(|e| CliError::failure(format!("error: {e}")))?
+        .replace_unlisted(args.force)
+        .keep_earlier_files();
     // long experiments take seconds: a progress line on a terminal
     let data = with_progress("synthesizing", |_| synthesize(&text, &spec)).map_err(synth_error)?;
-    let staging = fresh.as_ref().map_or(args.out.as_path(), |f| f.path());
+    let staging = fresh.path();
     let write = |name: &str, content: &str| write_output(&staging.join(name), content);
     for f in &data.files {
         write(&f.file_name, &f.text)?;
     }
     write("truth.json", &data.truth)?;
-    if let Some(f) = fresh {
-        f.commit_keeping(|n| !names.iter().any(|w| n == std::path::Path::new(w)))
-            .map_err(|e| CliError::failure(format!("error: {e}")))?;
-    }
+    fresh
+        .commit()
+        .map_err(|e| CliError::failure(format!("error: {e}")))?;
     for f in &data.files {
         let _ = writeln!(
             out,

@@ -7,7 +7,7 @@ use plantc_runtime::integrate::{rk4_step, Rk4Scratch};
 use plantc_runtime::RotaryPendulumReference;
 use std::f64::consts::PI;
 use std::fs::File;
-use std::io::{BufWriter, Write};
+use std::io::{LineWriter, Write};
 use std::time::Duration;
 
 /// Watchdog state.
@@ -42,14 +42,14 @@ pub struct Card {
     stuck: Option<[i32; 2]>,
     pub watchdog: Watchdog,
     pub task: Option<Task>,
-    trace: Option<BufWriter<File>>,
+    trace: Option<LineWriter<File>>,
 }
 
 impl Card {
     pub fn new(cfg: FakeConfig, trace_path: Option<&str>) -> Self {
         let trace = trace_path
             .and_then(|p| File::create(p).ok())
-            .map(BufWriter::new);
+            .map(LineWriter::new);
         let mut c = Self {
             x: [cfg.theta0, cfg.alpha0, 0.0, 0.0],
             cfg,
@@ -101,6 +101,29 @@ impl Card {
             Fault::ReadError(at) => Some(*at),
             _ => None,
         })
+    }
+
+    pub fn hang_read_active(&self) -> bool {
+        self.fault_at(|f| match f {
+            Fault::HangRead(at) => Some(*at),
+            _ => None,
+        })
+    }
+
+    pub fn hang_write_active(&self) -> bool {
+        self.fault_at(|f| match f {
+            Fault::HangWrite(at) => Some(*at),
+            _ => None,
+        })
+    }
+
+    /// Never returns (an injected hung call); traced first.
+    pub fn hang(&mut self, call: &str) -> ! {
+        self.trace_line(format_args!("hang {call}"));
+        self.flush_trace();
+        loop {
+            std::thread::sleep(Duration::from_secs(1000));
+        }
     }
 
     fn no_reload_active(&self) -> bool {
@@ -175,6 +198,14 @@ impl Card {
     }
 
     pub fn write(&mut self, channel: u32, v: f64) -> i32 {
+        let injected = self.fault_at(|f| match f {
+            Fault::WriteError(at) => Some(*at),
+            _ => None,
+        }) || (self.cfg.write_error_zero && v == 0.0);
+        if injected {
+            self.trace_line(format_args!("write ch={channel} v={v:.6} err=injected"));
+            return ERR_INJECTED;
+        }
         if self.watchdog.expired {
             self.trace_line(format_args!(
                 "write ch={channel} v={v:.6} err=watchdog_expired"
@@ -196,6 +227,13 @@ impl Card {
     pub fn reload(&mut self) -> i32 {
         if !self.watchdog.running {
             return ERR_WATCHDOG_NOT_RUNNING;
+        }
+        if self.fault_at(|f| match f {
+            Fault::ReloadError(at) => Some(*at),
+            _ => None,
+        }) {
+            self.trace_line(format_args!("watchdog_reload err=injected"));
+            return ERR_INJECTED;
         }
         self.check_watchdog();
         if self.watchdog.expired {

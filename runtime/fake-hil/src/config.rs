@@ -13,6 +13,14 @@ pub enum Fault {
     SlowCalls(f64),
     /// Watchdog reloads are ignored from T on, so it expires after its timeout.
     NoReload(f64),
+    /// Every `hil_write_analog` fails from T on (0 V writes included).
+    WriteError(f64),
+    /// `hil_watchdog_reload` fails (an error code, not an expiry) from T on.
+    ReloadError(f64),
+    /// `hil_read_encoder` / `hil_task_read_encoder` never return from T on.
+    HangRead(f64),
+    /// `hil_write_analog` never returns from T on.
+    HangWrite(f64),
 }
 
 /// Settings of the fake board.
@@ -32,6 +40,16 @@ pub struct FakeConfig {
     pub watchdog_refused: bool,
     /// The board refuses to create tasks (runtime must fall back to OS timing).
     pub no_tasks: bool,
+    /// Every write of exactly 0 V fails (the safe-stop write).
+    pub write_error_zero: bool,
+    /// `hil_watchdog_start` fails.
+    pub watchdog_start_error: bool,
+    /// `hil_watchdog_stop` fails (the watchdog keeps running).
+    pub watchdog_stop_error: bool,
+    /// `hil_close` closes the card but returns an error.
+    pub close_error: bool,
+    /// `hil_close` never returns.
+    pub hang_close: bool,
     /// Timed faults.
     pub faults: Vec<Fault>,
 }
@@ -46,6 +64,11 @@ impl Default for FakeConfig {
             substeps: 10,
             watchdog_refused: false,
             no_tasks: false,
+            write_error_zero: false,
+            watchdog_start_error: false,
+            watchdog_stop_error: false,
+            close_error: false,
+            hang_close: false,
             faults: Vec::new(),
         }
     }
@@ -107,6 +130,15 @@ impl FakeConfig {
                         "no_reload" | "watchdog_expiry" => c.faults.push(Fault::NoReload(at)),
                         "watchdog_refused" => c.watchdog_refused = true,
                         "no_tasks" => c.no_tasks = true,
+                        "write_error" => c.faults.push(Fault::WriteError(at)),
+                        "reload_error" => c.faults.push(Fault::ReloadError(at)),
+                        "hang_read" => c.faults.push(Fault::HangRead(at)),
+                        "hang_write" => c.faults.push(Fault::HangWrite(at)),
+                        "write_error_zero" => c.write_error_zero = true,
+                        "watchdog_start_error" => c.watchdog_start_error = true,
+                        "watchdog_stop_error" => c.watchdog_stop_error = true,
+                        "close_error" => c.close_error = true,
+                        "hang_close" => c.hang_close = true,
                         other => return Err(format!("unknown fault {other:?}")),
                     }
                 }
@@ -143,6 +175,10 @@ mod tests {
         assert_eq!(c.period, 0.0005);
         assert_eq!(c.faults, vec![Fault::SlowCalls(1.0)]);
         assert!(FakeConfig::parse("fault=bogus@1").is_err());
+        let c = FakeConfig::parse("fault=write_error@0.5,fault=write_error_zero,fault=hang_close")
+            .unwrap();
+        assert_eq!(c.faults, vec![Fault::WriteError(0.5)]);
+        assert!(c.write_error_zero && c.hang_close && !c.close_error);
         assert!(FakeConfig::parse("alpha0=x").is_err());
     }
 }

@@ -12,6 +12,7 @@ pub const ERR_TASKS_UNSUPPORTED: i32 = -104;
 pub const ERR_WATCHDOG_NOT_RUNNING: i32 = -105;
 pub const ERR_TASK_NOT_STARTED: i32 = -106;
 pub const ERR_NOTHING_TO_CLEAR: i32 = -107;
+pub const ERR_INJECTED: i32 = -108;
 
 /// The text for a code.
 pub fn message(code: i32) -> &'static str {
@@ -30,6 +31,7 @@ pub fn message(code: i32) -> &'static str {
         ERR_WATCHDOG_NOT_RUNNING => "fake HIL: the watchdog is not running",
         ERR_TASK_NOT_STARTED => "fake HIL: the task has not been started",
         ERR_NOTHING_TO_CLEAR => "fake HIL: the watchdog had not expired; nothing to clear",
+        ERR_INJECTED => "fake HIL: injected failure (PLANTC_FAKE_HIL fault)",
         _ => "fake HIL: unknown error code",
     }
 }

@@ -13,9 +13,17 @@
 //!   (counts/rev, default 4096), `substeps`, `no_tasks`, and `fault=` one of
 //!   `read_error@T`, `stuck_encoder@T`, `slow_calls@T` (each call sleeps 1.5
 //!   periods of wall time), `no_reload@T` (watchdog reloads ignored, so it
-//!   expires), `watchdog_refused`, `no_tasks`. T is virtual time in seconds.
+//!   expires), `watchdog_refused`, `no_tasks`, `write_error@T` (every analog
+//!   write fails), `write_error_zero` (writes of exactly 0 V fail),
+//!   `reload_error@T` (reloads return an error), `watchdog_start_error`,
+//!   `watchdog_stop_error`, `close_error` (the card closes, the call fails),
+//!   `hang_read@T`, `hang_write@T`, `hang_close` (the call never returns).
+//!   T is virtual time in seconds (default 0).
 //! - `PLANTC_FAKE_HIL_TRACE`: a file receiving every analog write, watchdog
-//!   expiry and the output at close, one `t=<virtual s> ...` line each.
+//!   start, stop, expiry and expiration state, every injected failure and the
+//!   output at close, one `t=<virtual s> ...` line each, flushed line by line
+//!   (so the file tells the board's state when the process ends, however it
+//!   ends).
 //!
 //! Encoders model a rig zeroed with the pendulum hanging: channel 1 counts 0
 //! at alpha = pi (the runtime's default pendulum map adds pi and wraps).
@@ -134,9 +142,16 @@ pub unsafe extern "C" fn hil_close(card: t_card) -> t_error {
             return ERR_INVALID_CARD;
         }
         let mut g = CARD.lock().unwrap_or_else(|e| e.into_inner());
+        if let Some(c) = g.as_mut().filter(|c| c.cfg.hang_close) {
+            c.hang("hil_close");
+        }
         match g.take() {
             Some(mut c) => {
                 c.close();
+                if c.cfg.close_error {
+                    c.trace_line(format_args!("close err=injected"));
+                    return ERR_INJECTED;
+                }
                 0
             }
             None => ERR_INVALID_CARD,
@@ -220,7 +235,11 @@ pub unsafe extern "C" fn hil_read_encoder(
         let period = c.cfg.period;
         c.maybe_slow(period);
         c.step(period);
+        if c.hang_read_active() {
+            c.hang("hil_read_encoder");
+        }
         if c.read_error_active() {
+            c.trace_line(format_args!("read err=injected"));
             return ERR_READ_FAILED;
         }
         let out = std::slice::from_raw_parts_mut(buffer, ch.len());
@@ -246,6 +265,9 @@ pub unsafe extern "C" fn hil_write_analog(
         };
         let period = c.task.as_ref().map_or(c.cfg.period, |t| t.period);
         c.maybe_slow(period);
+        if c.hang_write_active() {
+            c.hang("hil_write_analog");
+        }
         for (&ch, &v) in ch.iter().zip(v) {
             let r = c.write(ch, v);
             if r < 0 {
@@ -306,6 +328,7 @@ pub unsafe extern "C" fn hil_watchdog_set_analog_expiration_state(
             return ERR_INVALID_ARGUMENT;
         }
         c.watchdog.expiration_set = true;
+        c.trace_line(format_args!("watchdog_expiration_state v=0"));
         0
     })
 }
@@ -319,6 +342,10 @@ pub unsafe extern "C" fn hil_watchdog_start(card: t_card, timeout: f64) -> t_err
     with_card(card, |c| {
         if !(timeout.is_finite() && timeout > 0.0) {
             return ERR_INVALID_ARGUMENT;
+        }
+        if c.cfg.watchdog_start_error {
+            c.trace_line(format_args!("watchdog_start err=injected"));
+            return ERR_INJECTED;
         }
         c.watchdog.running = true;
         c.watchdog.timeout = timeout;
@@ -345,10 +372,23 @@ pub unsafe extern "C" fn hil_watchdog_reload(card: t_card) -> t_error {
 #[no_mangle]
 pub unsafe extern "C" fn hil_watchdog_stop(card: t_card) -> t_error {
     with_card(card, |c| {
+        if c.cfg.watchdog_stop_error {
+            c.trace_line(format_args!("watchdog_stop err=injected"));
+            return ERR_INJECTED;
+        }
         c.watchdog.running = false;
         c.trace_line(format_args!("watchdog_stop"));
         0
     })
+}
+
+/// `hil_watchdog_is_expired`: 1 if the watchdog has expired, else 0.
+///
+/// # Safety
+/// Any pointer value is accepted.
+#[no_mangle]
+pub unsafe extern "C" fn hil_watchdog_is_expired(card: t_card) -> t_error {
+    with_card(card, |c| t_error::from(c.watchdog.expired))
 }
 
 /// `hil_watchdog_clear`: clears an expiry (error if there was none).
@@ -453,7 +493,11 @@ pub unsafe extern "C" fn hil_task_read_encoder(
         c.maybe_slow(period);
         for s in 0..num_samples as usize {
             c.step(period);
+            if c.hang_read_active() {
+                c.hang("hil_task_read_encoder");
+            }
             if c.read_error_active() {
+                c.trace_line(format_args!("read err=injected"));
                 return ERR_READ_FAILED;
             }
             let r = fill_counts(c, &channels, &mut out[s * nch..(s + 1) * nch]);
