@@ -177,11 +177,12 @@ pub fn mechanical_chain(
     let lglf_dag = Expr::add_all((0..n).map(|i| w[i] * b[i]));
     let mut margin = f64::INFINITY;
     for p in screening_points(model, eqs, SCREEN_POINTS) {
+        let mut ev = crate::sym::Evaluator::new(&p);
         let mut scale = 0.0;
         for i in 0..n {
-            scale += (w[i].eval_map(&p) * b[i].eval_map(&p)).abs();
+            scale += (ev.eval(w[i]) * ev.eval(b[i])).abs();
         }
-        let v = lglf_dag.eval_map(&p).abs();
+        let v = ev.eval(lglf_dag).abs();
         let rel = if scale > 0.0 { v / scale } else { 0.0 };
         margin = margin.min(if rel.is_finite() { rel } else { 0.0 });
     }

@@ -7,7 +7,9 @@ mod euler_lagrange;
 mod matrix;
 mod numeric;
 mod present;
+mod quadratic;
 mod screen;
+mod separable;
 pub mod small_lu;
 mod solve;
 
@@ -23,4 +25,5 @@ pub use present::{
     EXPAND_MAX_TERMS, PRESENT_MAX_TERMS,
 };
 pub use screen::{mass_matrix_conditioning, screening_points};
+pub use separable::{separable_mass, AngleFactor, SeparableMass};
 pub use solve::{ldl_solve, lu_solve_at, SolveError};
