@@ -21,8 +21,8 @@ pub use euler_lagrange::{
 pub use matrix::{adjugate, determinant};
 pub use numeric::{flat_outputs, has_sign, smooth_signs, NumericDynamics, NumericError, Workspace};
 pub use present::{
-    det_name, present_equations, Expand, PresentedEquations, EXPAND_MAX_COORDINATES,
-    EXPAND_MAX_TERMS, PRESENT_MAX_TERMS,
+    det_name, present_equations, Expand, PresentedAngles, PresentedEquations, PresentedSeparable,
+    EXPAND_MAX_COORDINATES, EXPAND_MAX_TERMS, PRESENT_MAX_TERMS,
 };
 pub use screen::{mass_matrix_conditioning, screening_points};
 pub use separable::{separable_mass, AngleFactor, SeparableMass};
