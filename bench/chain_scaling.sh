@@ -4,6 +4,10 @@
 #
 #   bench/chain_scaling.sh              n = 2..10, 20, 30, 50 (SymPy up to 10)
 #   NS="4 10" bench/chain_scaling.sh    chosen sizes
+#   SYMPY_MAX=0 ...                     without SymPy (its derivation is slow)
+#   PLANTC_DYNAMICS_FORM=closed ...     plantc's closed-form dynamics at every
+#                                       size (or =recursive where separable):
+#                                       the measurement of the size rule
 #
 # Per n it prints, as JSON lines and then tables:
 # - plantc, each stage its own process, CPU time (user + sys), wall time and
@@ -67,7 +71,7 @@ for n in $sizes; do
     tm "$d/t_derive" "$plantc" derive "$d/chain.plant" >"$d/derive.txt"
     tm "$d/t_gen" "$plantc" gen "$d/chain.plant" -o "$d/gen" --force >/dev/null
     nosym=""
-    if [ "$n" -gt 10 ]; then nosym="--no-sympy"; fi
+    if [ "$n" -gt "${SYMPY_MAX:-10}" ]; then nosym="--no-sympy"; fi
     tm "$d/t_peers" "$py" "$here/chain_peers.py" "$d" "$n" $nosym >"$d/peers.json"
     # the plantc-generated crate behind a C ABI
     mkdir -p "$d/ffi/src"

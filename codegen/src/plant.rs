@@ -318,8 +318,16 @@ pub(crate) fn plant_items(model: &Model, eqs: &Equations) -> Result<TokenStream,
             computed.as_ref()
         }
     };
+    // `PLANTC_DYNAMICS_FORM=closed|recursive` overrides the size rule: a
+    // benchmark knob (bench/chain_scaling.sh measures the rule with it),
+    // not an option of the product
+    let recursive = match std::env::var("PLANTC_DYNAMICS_FORM").as_deref() {
+        Ok("closed") => false,
+        Ok("recursive") => true,
+        _ => n >= RECURSIVE_MIN_COORDINATES,
+    };
     let separable = match ac {
-        Some(ac) if n >= RECURSIVE_MIN_COORDINATES => separable_mass(ac).map(|sm| (ac, sm)),
+        Some(ac) if recursive => separable_mass(ac).map(|sm| (ac, sm)),
         _ => None,
     };
     let bodies = match &separable {
