@@ -5,6 +5,8 @@
 #   bench/chain_scaling.sh              n = 2..10, 20, 30, 50 (SymPy up to 10)
 #   NS="4 10" bench/chain_scaling.sh    chosen sizes
 #   SYMPY_MAX=0 ...                     without SymPy (its derivation is slow)
+#   CASADI_MAX=50 ...                   CasADi up to n = 50 (default 30: its
+#                                       C code at n = 50 takes gcc -O3 very long)
 #   PLANTC_DYNAMICS_FORM=closed ...     plantc's closed-form dynamics at every
 #                                       size (or =recursive where separable):
 #                                       the measurement of the size rule
@@ -72,7 +74,9 @@ for n in $sizes; do
     tm "$d/t_gen" "$plantc" gen "$d/chain.plant" -o "$d/gen" --force >/dev/null
     nosym=""
     if [ "$n" -gt "${SYMPY_MAX:-10}" ]; then nosym="--no-sympy"; fi
-    tm "$d/t_peers" "$py" "$here/chain_peers.py" "$d" "$n" $nosym >"$d/peers.json"
+    nocas=""
+    if [ "$n" -gt "${CASADI_MAX:-30}" ]; then nocas="--no-casadi"; fi
+    tm "$d/t_peers" "$py" "$here/chain_peers.py" "$d" "$n" $nosym $nocas >"$d/peers.json"
     # the plantc-generated crate behind a C ABI
     mkdir -p "$d/ffi/src"
     cat >"$d/ffi/Cargo.toml" <<EOF
@@ -107,8 +111,12 @@ EOF
     # a fresh target directory: the crate is compiled for real every run
     tm "$d/t_rustc" env CARGO_TARGET_DIR="$d/target" RUSTFLAGS="-C target-cpu=native" \
         cargo build --release -q --manifest-path "$d/ffi/Cargo.toml"
-    srcs=("$here/chain_harness.c" "$d/cas_chain.c" "$d/cas_wrap.c")
+    srcs=("$here/chain_harness.c")
     flags=(-DNL="$n")
+    if [ -z "$nocas" ]; then
+        srcs+=("$d/cas_chain.c" "$d/cas_wrap.c")
+        flags+=(-DHAVE_CASADI)
+    fi
     if [ -f "$d/sympy_chain.c" ] && [ -z "$nosym" ]; then
         srcs+=("$d/sympy_chain.c")
         flags+=(-DHAVE_SYMPY)
@@ -163,8 +171,9 @@ print("peers, CPU s (peak MB of the peers' process): SymPy derive (no simplify) 
 for r in rows:
     sy = r.get("sympy_derive_s")
     sy = None if sy is None else sy + r["sympy_codegen_s"]
-    ca = r["casadi_derive_s"] + r["casadi_codegen_s"]
-    print(f"{r['n']:>3} sympy {f(sy, '{:8.2f}'):>8}  casadi {ca:8.2f}  ({r['peers_peak_mb']:.0f} MB)")
+    ca = r.get("casadi_derive_s")
+    ca = None if ca is None else ca + r["casadi_codegen_s"]
+    print(f"{r['n']:>3} sympy {f(sy, '{:8.2f}'):>8}  casadi {f(ca, '{:8.2f}'):>8}  ({r['peers_peak_mb']:.0f} MB)")
 print()
 peers = ("sympy", "casadi", "mujoco", "pinocchio")
 print("forward dynamics, CPU ns per call (ratio = plantc / peer; <= 1: plantc faster), max relative difference to plantc")

@@ -237,6 +237,7 @@ fn from_angle_frame(
         })
         .collect();
     let mut mass_matrix = vec![vec![Expr::zero(); n]; n];
+    #[allow(clippy::needless_range_loop)] // the symmetric entry is written too
     for i in 0..n {
         for j in 0..=i {
             let e = Expr::add_all(
