@@ -269,10 +269,14 @@ fn state_diff(frame: &Frame, model: &Model, e: Expr, j: usize) -> Expr {
 /// separable recursion ([`crate::recursive`]) when the mass matrix has that
 /// structure, instead of the closed form (`M` formed, LDL^T unrolled, the
 /// Jacobians by symbolic derivatives, the four Runge-Kutta stages in one
-/// graph). Measured on the n-link chain (`bench/chain_scaling.sh`, CPU ns
-/// per `dynamics` call, this machine): see ARCHITECTURE.md for the table;
-/// the recursion is faster from this size on.
-pub const RECURSIVE_MIN_COORDINATES: usize = 6;
+/// graph). Measured on the n-link chain (`bench/chain_scaling.sh` with
+/// `PLANTC_DYNAMICS_FORM=closed|recursive`, CPU ns per `Plant::dynamics`
+/// call, two runs): closed 197/195 ns against recursive 228/212 at n = 8,
+/// 234 against 290 at n = 9, 376/293 against 279/281 at n = 10, 527
+/// against 367 at n = 12. The value is the smallest n at which the
+/// recursion was faster in both runs (beyond it the closed form's `n^3/6`
+/// LDL^T only loses more, and its code grows as `n^3`).
+pub const RECURSIVE_MIN_COORDINATES: usize = 10;
 
 /// The bodies of the plant functions and the coefficients they read.
 struct PlantBodies {

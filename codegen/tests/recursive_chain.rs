@@ -1,5 +1,5 @@
-//! The separable recursion of a 7-link chain (`plantc gen` writes it from
-//! `RECURSIVE_MIN_COORDINATES` = 6 coordinates on): the generated crate is
+//! The separable recursion of a 10-link chain (`plantc gen` writes it from
+//! `RECURSIVE_MIN_COORDINATES` = 10 coordinates on): the generated crate is
 //! built and run, and its `dynamics`, `jacobian_x`, `jacobian_u` and
 //! `rk4_step` are compared with numbers computed here independently of
 //! code generation: the derived equations' `M q'' = Q0 - bias + B u` solved
@@ -14,7 +14,7 @@ use plantc_derive::control::Derivation;
 use plantc_derive::mechanics::NumericDynamics;
 use plantc_derive::model::{load_model_text, n_link_chain_source, ParameterValues};
 
-const N: usize = 7;
+const N: usize = 10;
 
 fn manifest() -> PathBuf {
     PathBuf::from(env!("CARGO_MANIFEST_DIR"))
@@ -52,7 +52,7 @@ fn recursive_chain_agrees_with_the_derived_equations() {
         return;
     }
     let dir = tempfile::tempdir().unwrap();
-    let model_path = dir.path().join("chain7.plant");
+    let model_path = dir.path().join("chain10.plant");
     write(&model_path, &n_link_chain_source(N));
     let opts = plantc_codegen::CrateOptions {
         model: model_path.clone(),
@@ -63,16 +63,16 @@ fn recursive_chain_agrees_with_the_derived_equations() {
     let lib = std::fs::read_to_string(opts.dir.join("src/lib.rs")).unwrap();
     assert!(
         lib.contains("while j < N_STATES"),
-        "the 7-link chain is generated as the recursion (Jacobians in a loop)"
+        "the 10-link chain is generated as the recursion (Jacobians in a loop)"
     );
     // a probe printing every function at the test states
     let probe = dir.path().join("probe");
     write(
         &probe.join("Cargo.toml"),
         "[package]\nname = \"probe\"\nversion = \"0.1.0\"\nedition = \"2021\"\npublish = false\n\
-         [workspace]\n[dependencies]\nchain7 = { path = \"../gen\" }\n",
+         [workspace]\n[dependencies]\nchain10 = { path = \"../gen\" }\n",
     );
-    let mut main = String::from("use chain7::*;\nfn main() {\n    let p = Plant::default();\n");
+    let mut main = String::from("use chain10::*;\nfn main() {\n    let p = Plant::default();\n");
     for (x, u) in states() {
         let xs: Vec<String> = x.iter().map(|v| format!("{v:e}")).collect();
         main.push_str(&format!(
@@ -106,7 +106,7 @@ fn recursive_chain_agrees_with_the_derived_equations() {
         .collect();
 
     // the reference: LU solves of the derived equations
-    let loaded = load_model_text("chain7.plant", &n_link_chain_source(N)).unwrap();
+    let loaded = load_model_text("chain10.plant", &n_link_chain_source(N)).unwrap();
     let model = &loaded.model;
     let values = ParameterValues::new(model, None, &[]).unwrap();
     let d = Derivation::new(model).unwrap();
