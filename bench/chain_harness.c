@@ -7,6 +7,8 @@
  * is not counted, as it would be on the wall clock); then the agreement of
  * each with plantc (max over states of ||a_peer - a_plantc||_inf /
  * ||a_plantc||_inf over the accelerations).
+ * With CHAIN_DUMP=FILE it also writes the states and every implementation's
+ * accelerations to FILE (bench/chain_precision.py).
  * Built with -DNL=n and -DHAVE_SYMPY / -DHAVE_MUJOCO / -DHAVE_PINOCCHIO as
  * available. Prints one JSON line. */
 #include <math.h>
@@ -178,6 +180,30 @@ int main(int argc, char **argv) {
   }
 #endif
   for (int k = 0; k < 3; k++) check[k] = fns[k];
+  /* CHAIN_DUMP=FILE: every state and each implementation's accelerations
+   * (turned as plantc's, 17 digits) for bench/chain_precision.py */
+  const char *dump = getenv("CHAIN_DUMP");
+  if (dump) {
+    FILE *f = fopen(dump, "w");
+    if (!f) {
+      fprintf(stderr, "cannot write %s\n", dump);
+      return 2;
+    }
+    double a[2 * NL];
+    for (int s = 0; s < NS; s++) {
+      fprintf(f, "state");
+      for (int i = 0; i < 2 * NL; i++) fprintf(f, " %.17g", xs[s][i]);
+      fprintf(f, " %.17g\n", us[s]);
+      for (int k = 0; k < 5; k++) {
+        if (!fns[k]) continue;
+        check[k](xs[s], &us[s], a);
+        fprintf(f, "%s", names[k]);
+        for (int i = 0; i < NL; i++) fprintf(f, " %.17g", a[NL + i]);
+        fprintf(f, "\n");
+      }
+    }
+    fclose(f);
+  }
   double t[5][ROUNDS];
   for (int r = 0; r < ROUNDS; r++)
     for (int k = 0; k < 5; k++)
