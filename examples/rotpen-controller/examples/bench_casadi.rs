@@ -11,7 +11,9 @@
 //! generated). The `CasADi const` column is CasADi with the values compiled
 //! in (Fg1 = 0 folds the sign term away), for reference only. The `free fn`
 //! column calls `dynamics(x, u, &p)` / `rk4_step(x, u, &p, h)`, which
-//! recompute the coefficients they need on every call.
+//! recompute the coefficients they need on every call. The run exits with
+//! status 1 when plantc / CasADi (live parameters) is above [`TARGET`] for
+//! any of the three functions.
 
 use std::hint::black_box;
 use std::time::Instant;
@@ -23,6 +25,11 @@ type Law = unsafe extern "C" fn(*const f64, *mut f64);
 type SetParams = unsafe extern "C" fn(*const f64);
 
 const NS: usize = 256;
+
+/// The guarded ratio plantc / CasADi (live parameters) of each of the three
+/// functions: issue 30's acceptance (`<= 0.7x`). The run exits with 1 when a
+/// median is above it.
+const TARGET: f64 = 0.7;
 const REPS: usize = 20_000;
 
 fn states() -> Vec<[f64; 4]> {
@@ -218,8 +225,12 @@ fn main() {
         "CasADi const",
         "plantc/const"
     );
+    let mut over = Vec::new();
     for (i, name) in ["dynamics", "FL law", "RK4 step"].iter().enumerate() {
         let (c, r) = (m[2 * i], m[2 * i + 1]);
+        if r / c > TARGET {
+            over.push(format!("{name} {:.2}", r / c));
+        }
         let free = match i {
             0 => format!("{:>10.1} {:>14.2}", m[6], m[6] / c),
             2 => format!("{:>10.1} {:>14.2}", m[7], m[7] / c),
@@ -232,4 +243,12 @@ fn main() {
             r / k
         );
     }
+    if !over.is_empty() {
+        eprintln!(
+            "above the target of {TARGET}x CasADi with the same live parameters: {}",
+            over.join(", ")
+        );
+        std::process::exit(1);
+    }
+    println!("dynamics, FL law and RK4 step each within {TARGET}x CasADi (same live parameters)");
 }
