@@ -30,9 +30,9 @@ use std::collections::HashMap;
 
 use nalgebra::DMatrix;
 
-use super::lie::{lie_derivative, singular_set_text, state_factors, AnalysisError};
+use super::lie::{lie_derivative, singular_set_text, AnalysisError};
 use super::mechanical::{
-    budget_reason, is_position_output, is_principal_minor, position_output, PositionOutput,
+    budget_reason, is_position_output, position_output, split_singular_factors, PositionOutput,
     ANALYSIS_MAX_TERMS, EXPLICIT_MAX_COORDINATES, SCREEN_POINTS,
 };
 use crate::control::{output_expr, Derivation};
@@ -547,39 +547,14 @@ pub fn decoupling(
             Err(x) => det_note = Some(budget_reason("det A", x)),
         }
     }
-    let mut singular_factors = Vec::new();
-    let mut singular_note = None;
-    match det {
+    let (singular_factors, singular_note) = match det {
         Some(d) => {
             if d.is_zero() || is_zero(d) {
                 return Err(AnalysisError::SingularDecoupling {
                     reason: "everywhere (det A = 0 identically)".into(),
                 });
             }
-            let mm: Vec<Vec<Expr>> = eqs
-                .mass_matrix
-                .iter()
-                .map(|row| row.iter().map(|e| simplify(*e)).collect())
-                .collect();
-            let mut dropped = Vec::new();
-            for f in state_factors(d, &state) {
-                if is_principal_minor(f, &mm, &state) {
-                    dropped.push(f);
-                } else {
-                    singular_factors.push(f);
-                }
-            }
-            if singular_factors.is_empty() && !dropped.is_empty() {
-                singular_note = Some(format!(
-                    "none: the state-dependent factors of det A ({}) are principal minors of M, \
-                     positive because M is positive definite",
-                    dropped
-                        .iter()
-                        .map(|f| f.to_string())
-                        .collect::<Vec<_>>()
-                        .join(", ")
-                ));
-            }
+            split_singular_factors(d, eqs, &state, "det A")
         }
         None => {
             if det_margin <= SCREEN_ZERO {
@@ -591,12 +566,13 @@ pub fn decoupling(
                 });
             }
             let why = det_note.map(|r| format!(": {r}")).unwrap_or_default();
-            singular_note = Some(format!(
+            let note = format!(
                 "where det A(x) = 0 (not expanded{why}; at {SCREEN_POINTS} random states |det A| is \
                  at least {det_margin:.2e} of its Hadamard bound)"
-            ));
+            );
+            (Vec::new(), Some(note))
         }
-    }
+    };
     let mass_blocks = expanded_parts.map(|e| e.blocks).unwrap_or_default();
     Ok(Decoupling {
         outputs,

@@ -99,7 +99,7 @@ pub(crate) fn unit_direction(v: &[Expr], state: &[Symbol]) -> Option<usize> {
 
 /// True if `f` is a constant multiple of a principal minor of `m` (positive
 /// wherever `m` is positive definite).
-pub(crate) fn is_principal_minor(f: Expr, m: &[Vec<Expr>], state: &[Symbol]) -> bool {
+fn is_principal_minor(f: Expr, m: &[Vec<Expr>], state: &[Symbol]) -> bool {
     let n = m.len();
     for mask in 1u32..(1 << n) - 1 {
         let idx: Vec<usize> = (0..n).filter(|i| mask & (1 << i) != 0).collect();
@@ -115,6 +115,37 @@ pub(crate) fn is_principal_minor(f: Expr, m: &[Vec<Expr>], state: &[Symbol]) -> 
         }
     }
     false
+}
+
+/// The state-dependent factors of `e`'s numerator whose zeros make `e`
+/// vanish, leaving out principal minors of `M` (positive wherever `M` is
+/// positive definite); when only those were found, the note that says so
+/// (`what` names `e` in it).
+pub(crate) fn split_singular_factors(
+    e: Expr,
+    eqs: &Equations,
+    state: &[Symbol],
+    what: &str,
+) -> (Vec<Expr>, Option<String>) {
+    let m: Vec<Vec<Expr>> = eqs
+        .mass_matrix
+        .iter()
+        .map(|row| row.iter().map(|x| crate::sym::simplify(*x)).collect())
+        .collect();
+    let (dropped, kept): (Vec<Expr>, Vec<Expr>) = state_factors(e, state)
+        .into_iter()
+        .partition(|f| is_principal_minor(*f, &m, state));
+    let note = (kept.is_empty() && !dropped.is_empty()).then(|| {
+        let several = dropped.len() > 1;
+        format!(
+            "none: the state-dependent factor{} of {what} ({}) {} principal minor{} of M, positive because M is positive definite",
+            if several { "s" } else { "" },
+            dropped.iter().map(|f| f.to_string()).collect::<Vec<_>>().join(", "),
+            if several { "are" } else { "is a" },
+            if several { "s" } else { "" },
+        )
+    });
+    (kept, note)
 }
 
 /// A position-level output `h(q)` and the parts of its first derivatives.
@@ -273,30 +304,8 @@ pub fn mechanical_chain(
         if not_expanded.is_some() {
             singular_note = Some("where J M^-1 B = 0 (not expanded)".into());
         } else {
-            let m: Vec<Vec<Expr>> = (0..n)
-                .map(|i| {
-                    (0..n)
-                        .map(|j| crate::sym::simplify(eqs.mass_matrix[i][j]))
-                        .collect()
-                })
-                .collect();
-            let mut dropped = Vec::new();
-            for f in state_factors(lglf, &state) {
-                if is_principal_minor(f, &m, &state) {
-                    dropped.push(f);
-                } else {
-                    singular_factors.push(f);
-                }
-            }
-            if !dropped.is_empty() && singular_factors.is_empty() {
-                singular_note = Some(format!(
-                    "none: the state-dependent factor{} of L_g L_f h ({}) {} principal minor{} of M, positive because M is positive definite",
-                    if dropped.len() > 1 { "s" } else { "" },
-                    dropped.iter().map(|f| f.to_string()).collect::<Vec<_>>().join(", "),
-                    if dropped.len() > 1 { "are" } else { "is a" },
-                    if dropped.len() > 1 { "s" } else { "" },
-                ));
-            }
+            (singular_factors, singular_note) =
+                split_singular_factors(lglf, eqs, &state, "L_g L_f h");
         }
     }
     Ok(Some(LieChain {
