@@ -332,6 +332,53 @@ fn twip_yaw_decoupling_matches_sympy() {
     }
 }
 
+/// An output of the velocities goes through the expanded control-affine
+/// form: the axle speed `v = R theta'` (relative degree 1) with the yaw
+/// (2). Holding the speed at 0 holds the axle still up to a constant
+/// position, so the zero dynamics are the pitch about a fixed axle (SymPy's
+/// `(x, phi)` pair: +-8.493) and the free position (a zero eigenvalue).
+#[test]
+fn twip_yaw_speed_output() {
+    let loaded = model_with(
+        "twip_yaw.plant",
+        "output v = R*theta' \"forward speed of the axle\"",
+        &|t| t.to_string(),
+    );
+    let model = &loaded.model;
+    let (d, values, rep) = analyse(&loaded, &["v", "phi"]);
+    let dec = &rep.decoupling;
+    assert_eq!(dec.vector_relative_degree(), vec![1, 2]);
+    assert!(dec.outputs[0].curvature.is_none());
+    assert_eq!(rep.normal_form.xi.len(), 3);
+    assert_eq!(rep.normal_form.eta.len(), 3);
+    // the speed row is R (M^-1 B)[theta]: against a numeric solve
+    let eqs = &d.equations;
+    for x in &STATES {
+        let p = point(model, &values, x);
+        let mut ev = Evaluator::new(&p);
+        let m = DMatrix::from_fn(3, 3, |i, j| ev.eval(eqs.mass_matrix[i][j]));
+        let b = DMatrix::from_fn(3, 2, |i, j| ev.eval(eqs.input_matrix[i][j]));
+        let want = m.lu().solve(&b).unwrap() * values.get(model, "R").unwrap();
+        let got = dec.matrix_at(&p);
+        for j in 0..2 {
+            assert!(
+                (got[(0, j)] - want[(0, j)]).abs() <= 1e-12 * want[(0, j)].abs(),
+                "{got} vs {want}"
+            );
+        }
+    }
+    let got = sorted_eigenvalues(&rep);
+    let pitch = REFERENCES[1].eigenvalues;
+    let want = [pitch[0], (0.0, 0.0), pitch[1]];
+    assert_eq!(got.len(), 3);
+    for (g, w) in got.iter().zip(&want) {
+        assert!(
+            close(g.0, w.0) && close(g.1, w.1),
+            "zero-dynamics eigenvalue {g:?} (want {w:?})"
+        );
+    }
+}
+
 /// The normal form's `eta` have `L_g eta = 0` and `eta' = L_f eta`: checked
 /// on the expanded control-affine form at the random states.
 #[test]
