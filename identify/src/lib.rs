@@ -48,11 +48,13 @@ pub use error::{CellProblem, DataError, DataWarning};
 pub use units::Kind;
 
 pub mod closed_loop;
+pub mod decision;
 pub mod diagnose;
 pub mod effect_edit;
 pub mod equation_error;
 pub mod experiment_sim;
 pub mod fit;
+pub mod initial_state;
 pub mod metrics;
 pub mod plot;
 pub mod residual_tests;
@@ -78,8 +80,8 @@ pub use experiment_sim::{
 };
 pub use fit::{
     fit, fit_with_progress, resolve_closed_loop, signals_for, ClosedLoop, Estimate,
-    ExperimentEstimate, FitError, FitOptions, FitProgress, FitResult, Horizon, NuisanceValue,
-    Offsets, WarmStart,
+    ExperimentEstimate, FitError, FitOptions, FitProgress, FitResult, Horizon, NuisanceFlag,
+    NuisanceValue, Offsets, WarmStart,
 };
 pub use identifiability::Identifiability;
 pub use metrics::{compare, fit_percent, rmse, ChannelFit, ExperimentFit, FitReport, MetricsError};

@@ -12,14 +12,15 @@ use std::fmt;
 use plantc_derive::model::{Model, ParameterValues};
 
 use crate::data::Experiment;
+use crate::decision::EffectTest;
 use crate::diagnose::{
-    diagnose_from, diagnose_with, model_from_text, significant, DiagnoseError, DiagnoseOptions,
-    Diagnosis, Ranked, FLOOR_REACHED, NESTED, NESTED_GAIN,
+    diagnose_from, diagnose_with, model_from_text, DiagnoseError, DiagnoseOptions, Judge, Ranked,
+    NESTED,
 };
 use crate::effect_edit::EffectInstance;
 use crate::fit::{
     fit, fit_with_progress, replay_follows, values_from, with_estimates, ClosedLoop, FitError,
-    FitOptions, FitProgress, FitResult, Horizon, FAR_ABOVE_FLOOR,
+    FitOptions, FitProgress, FitResult, Horizon,
 };
 use crate::metrics::{compare, FitReport};
 use crate::stabilised_replay::StabilisedReplay;
@@ -102,13 +103,8 @@ pub struct Round {
     pub cost_before: f64,
     /// See [`Round::cost_before`].
     pub cost_after: Option<f64>,
-    /// The effect passed no test alone (far above the noise floor, its
-    /// gain below what a verdict needs): it was added on trial and kept
-    /// because the next round's effect, with it in the model, explains the
-    /// residual ([`confirms`]). Two effects that each hide the other (a
-    /// spring on the arm and dry friction in the pendulum's joint: 1.12x
-    /// and 1.45x alone) are found this way.
-    pub tentative: bool,
+    /// The decision rule's test that named the effect.
+    pub test: Option<EffectTest>,
 }
 
 /// The result of [`identify`].
@@ -157,11 +153,11 @@ impl Story {
     }
 }
 
-/// An effect found in an early round that did not pay for its parameters
-/// in its own round's fit and that, with the later rounds' effects in the
-/// model, the model does as well without: removed (a sensor offset on the
-/// pendulum credited from per-file offsets that a spring on it had made
-/// agree, fitted to 4.9e-5 rad once the spring was in).
+/// An effect found in an early round that, with the later rounds' effects
+/// in the model, no longer passes the decision rule against the model
+/// without it: removed (a sensor offset on the pendulum credited from
+/// per-file offsets that a spring on it had made agree, fitted to 4.9e-5
+/// rad once the spring was in).
 #[derive(Clone, Debug)]
 pub struct Removal {
     /// The round (from 1) that found it.
@@ -172,13 +168,17 @@ pub struct Removal {
     pub cost_with: f64,
     /// ...and without it, refitted.
     pub cost_without: f64,
+    /// The decision rule's test of the effect in the final model, which
+    /// it failed.
+    pub test: EffectTest,
     /// Its stage in [`Story::stages`].
     pub stage: usize,
 }
 
 /// An effect found in an early round that, with the later rounds' effects
-/// in the model, does no better than the simpler effect it contains
-/// (Stribeck friction with its hump gone is Coulomb friction): replaced.
+/// in the model, no longer passes the decision rule against the simpler
+/// effect it contains (Stribeck friction with its hump gone is Coulomb
+/// friction): replaced.
 #[derive(Clone, Debug)]
 pub struct Simplification {
     /// The round (from 1) that found `from`.
@@ -448,10 +448,6 @@ fn stabilised_replay(
     };
     let opts = StoryOptions {
         validate,
-        diagnose: DiagnoseOptions {
-            partial_credit: false,
-            ..opts.diagnose.clone()
-        },
         ..opts.clone()
     };
     Ok(Some(Stabilised {
@@ -477,8 +473,6 @@ fn story(
     let mut current_fit: Option<FitResult> = None;
     let mut better_start = None;
     let mut unexplained = false;
-    // the next round's diagnosis, when a trial made it already
-    let mut pending: Option<Diagnosis> = None;
     let stop;
     loop {
         let round = rounds.len() + 1;
@@ -486,10 +480,9 @@ fn story(
         let dopts = opts.diagnose_options();
         // later rounds diagnose against the last round's fit (the model as
         // it now stands, fitted under the same options)
-        let d = match (pending.take(), current_fit.clone()) {
-            (Some(d), _) => Ok(d),
-            (None, Some(f)) => diagnose_from(&current_text, experiments, f, &dopts),
-            (None, None) => diagnose_with(&current_text, experiments, &dopts),
+        let d = match current_fit.clone() {
+            Some(f) => diagnose_from(&current_text, experiments, f, &dopts),
+            None => diagnose_with(&current_text, experiments, &dopts),
         }
         .map_err(StoryError::Diagnose)?;
         let current_model = model_from_text("model", &current_text).map_err(StoryError::Model)?;
@@ -501,8 +494,7 @@ fn story(
             // screening tolerance ([`FitOptions::coarse_far_above_floor`]):
             // with no effect to follow it is the story's answer, fitted on
             // to the final one
-            let finished = (d.verdict.is_none()
-                && d.baseline.after_cost > FAR_ABOVE_FLOOR * d.floor)
+            let finished = (d.verdict.is_none() && !d.at_floor)
                 .then(|| {
                     fit_with_progress(
                         &current_model,
@@ -531,30 +523,8 @@ fn story(
         }
         let cost_before = d.baseline.after_cost;
         let top = d.verdict.as_ref().and_then(|_| d.ranking.first()).cloned();
-        // far above the floor with nothing passing, the best candidate on
-        // trial: kept when the next round's effect then explains the
-        // residual
-        let trial = if top.is_none()
-            && rounds.len() + 2 <= opts.max_effects
-            && d.unexplained()
-            && dopts.partial_credit
-        {
-            on_trial(
-                (&current_text, &current_model, current_fit.as_ref()),
-                &d,
-                experiments,
-                (opts, &dopts),
-                progress,
-            )?
-        } else {
-            None
-        };
-        let (inst, edited, m2, f, tentative) = match (trial, top) {
-            (Some(t), _) => {
-                pending = Some(t.next);
-                (t.effect, t.text, t.model, t.fit, true)
-            }
-            (None, Some(top)) => {
+        let (inst, edited, m2, f, test) = match top {
+            Some(top) => {
                 let (inst, edited, m2, f) = add_and_fit(
                     &top,
                     (&current_text, &current_model, current_fit.as_ref()),
@@ -562,25 +532,20 @@ fn story(
                     opts,
                     progress,
                 )?;
-                (inst, edited, m2, f, false)
+                (inst, edited, m2, f, top.test.clone())
             }
-            (None, None) => {
+            None => {
                 let caveat = d
                     .segments_caveat()
                     .map(|c| format!(" ({c})"))
                     .unwrap_or_default();
                 unexplained = d.unexplained();
-                stop = if unexplained {
+                stop = if unexplained || !d.nuisance_flags().is_empty() {
                     d.verdict_line()
-                } else if d.nothing_left {
-                    format!(
-                    "the residual is at the noise floor ({:.2}x): nothing left to explain{caveat}",
-                    d.above_floor()
-                )
                 } else if round == 1 {
-                    format!("adequate: no candidate effect lowers the cost clearly{caveat}")
+                    format!("adequate: no candidate effect passes the decision rule and the residual is at the noise floor{caveat}")
                 } else {
-                    format!("no further effect lowers the cost clearly{caveat}")
+                    format!("the residual is at the noise floor: nothing left for an effect to explain{caveat}")
                 };
                 // the diagnosis may have found the model as it stands a better
                 // minimum (its baseline refitted from a candidate's values: rate
@@ -588,7 +553,7 @@ fn story(
                 // from the drag candidate's values); that fit is the story's
                 let improved = current_fit
                     .as_ref()
-                    .is_some_and(|f| d.baseline.after_cost < 0.999 * f.after_cost);
+                    .is_some_and(|f| d.baseline.after_cost < f.after_cost);
                 if improved && round > 1 {
                     better_start = Some(stages.len());
                     stages.push(stage(
@@ -607,13 +572,12 @@ fn story(
                     fit: None,
                     cost_before,
                     cost_after: None,
-                    tentative: false,
+                    test: None,
                 });
                 break;
             }
         };
-        let on_trial = if tentative { " (on trial)" } else { "" };
-        let label = format!("+ {}, fitted{on_trial}", inst.label());
+        let label = format!("+ {}, fitted", inst.label());
         stages.push(stage(&label, &edited, &m2, Some(&f), experiments, opts)?);
         rounds.push(Round {
             ranking: d.ranking,
@@ -621,7 +585,7 @@ fn story(
             fit: Some(f.clone()),
             cost_before,
             cost_after: Some(f.after_cost),
-            tentative,
+            test,
         });
         current_text = edited;
         current_fit = Some(f);
@@ -704,74 +668,6 @@ fn add_and_fit(
     Ok((inst, edited, m2, f))
 }
 
-/// Smallest refit gain for a candidate to be put on trial ([`on_trial`]):
-/// the gain that earns a second start, some of the effect shown.
-const TRIAL_GAIN: f64 = 1.2;
-
-/// A candidate added on trial ([`on_trial`]) and the diagnosis that
-/// confirmed it.
-struct Trial {
-    effect: EffectInstance,
-    text: String,
-    model: Model,
-    fit: FitResult,
-    /// The diagnosis of the model with the effect (the next round's).
-    next: Diagnosis,
-}
-
-/// When a round ends far above the noise floor with no candidate passing
-/// (diagnosis `d` unexplained), two effects may each hide the other: the
-/// best refitted candidate that shows some of its effect ([`TRIAL_GAIN`],
-/// its parameters significant) is added and fitted, and the model with it
-/// diagnosed. It is kept when [`confirms`] holds for that diagnosis; None
-/// otherwise (the round then ends as before, unexplained).
-fn on_trial(
-    current: (&str, &Model, Option<&FitResult>),
-    d: &Diagnosis,
-    experiments: &[Experiment],
-    (opts, dopts): (&StoryOptions, &DiagnoseOptions),
-    progress: &mut dyn FnMut(&StoryProgress),
-) -> Result<Option<Trial>, StoryError> {
-    let Some(best) = d
-        .ranking
-        .iter()
-        .filter(|r| r.fit.is_some() && r.gain >= TRIAL_GAIN && significant(r))
-        .max_by(|a, b| a.gain.total_cmp(&b.gain))
-    else {
-        return Ok(None);
-    };
-    progress(&StoryProgress::Step(format!(
-        "nothing passes alone: {} on trial",
-        best.candidate.label()
-    )));
-    let (effect, text, model, fit) = add_and_fit(best, current, experiments, opts, progress)?;
-    let next =
-        diagnose_from(&text, experiments, fit.clone(), dopts).map_err(StoryError::Diagnose)?;
-    Ok(confirms(d, &next, dopts).then_some(Trial {
-        effect,
-        text,
-        model,
-        fit,
-        next,
-    }))
-}
-
-/// Does the diagnosis `next` of the model with an effect on trial confirm
-/// it? Its verdict's refit must take the cost of the first diagnosis' (`d`)
-/// baseline down by the verdict gain itself ([`DiagnoseOptions::min_gain`])
-/// or to the noise floor ([`FLOOR_REACHED`]): the two effects together pass
-/// where neither did alone.
-fn confirms(d: &Diagnosis, next: &Diagnosis, dopts: &DiagnoseOptions) -> bool {
-    let Some(top) = next.verdict.as_ref().and_then(|_| next.ranking.first()) else {
-        return false;
-    };
-    let Some(f) = &top.fit else {
-        return false;
-    };
-    f.after_cost * dopts.min_gain <= d.baseline.after_cost
-        || (d.floor > 0.0 && f.after_cost <= FLOOR_REACHED * d.floor)
-}
-
 /// The story's end steps, on the model its rounds built.
 struct EndSteps {
     /// The effects in the model, round by round (the rounds keep what they
@@ -786,23 +682,22 @@ struct EndSteps {
 }
 
 impl EndSteps {
-    /// 1. An effect taken in an early round over its simpler form may owe
-    ///    its extra parameters to an effect found later (Coulomb friction
+    /// 1. An earlier round's effect that, with the later effects in, no
+    ///    longer passes the decision rule against the model without it is
+    ///    removed.
+    /// 2. An earlier round's effect over its simpler form (Coulomb friction
     ///    and a quadratic drag on the pendulum: round 1 took a Stribeck
-    ///    friction, 4.21x against the Coulomb friction's 2.96x, its hump
-    ///    standing in for part of the drag; with the drag in, the hump had
-    ///    shrunk to vs = 1.2e-3 rad/s): each such effect is tried in its
-    ///    simpler form in the final model and replaced unless it beats it
-    ///    by NESTED_GAIN.
-    /// 2. A Stribeck friction fitted to no Stribeck shape (no hump, Fs <=
+    ///    friction, its hump standing in for part of the drag; with the
+    ///    drag in, the hump had shrunk to vs = 1.2e-3 rad/s) is replaced by
+    ///    the simpler form unless it passes the rule against it.
+    /// 3. A Stribeck friction fitted to no Stribeck shape (no hump, Fs <=
     ///    Fc, or vs at a bound of its box) imitates something else (Coulomb
-    ///    friction and drag on the rate survey's second rig: vs at its
-    ///    10 rad/s bound and Fc > Fs, whose expansion Fs + (Fc - Fs)
-    ///    v^2/vs^2 is a Coulomb friction plus a quadratic drag): its
-    ///    simpler form is put in its place and diagnosed once more, and that
-    ///    is kept when the diagnosis names an effect (not past
-    ///    `max_effects`) and the model with both ends no more than
-    ///    NESTED_GAIN above.
+    ///    friction and drag: vs at its bound and Fc > Fs, whose expansion
+    ///    Fs + (Fc - Fs) v^2/vs^2 is a Coulomb friction plus a quadratic
+    ///    drag): its simpler form is put in its place and diagnosed once
+    ///    more, and that is kept when the diagnosis names an effect (not
+    ///    past `max_effects`) and the model with both has the lower
+    ///    information criterion ([`prefers`]).
     fn run(
         &mut self,
         text: &str,
@@ -814,36 +709,30 @@ impl EndSteps {
         let found: Vec<usize> = (0..rounds.len())
             .filter(|&k| rounds[k].effect.is_some())
             .collect();
-        // an earlier round's effect that did not pay for its parameters in
-        // its own round's fit ([`DiagnoseOptions::per_parameter_gain`] each)
-        // is removed when the model without it, the later effects in, does
-        // as well on the same terms
-        let per = opts.diagnose.per_parameter_gain;
+        let dopts = opts.diagnose_options();
         for &k in found.iter().take(found.len().saturating_sub(1)) {
-            let (Some(inst), Some(after)) = (&rounds[k].effect, rounds[k].cost_after) else {
-                continue;
-            };
-            let margin = 1.0 + per * inst.parameters.len() as f64;
-            if after * margin < rounds[k].cost_before {
-                continue;
-            }
             let Some((text2, f2, _)) = self.rebuilt(text, k, None, experiments, opts, progress)
             else {
                 continue;
             };
-            if f2.after_cost <= margin * self.fit.after_cost {
-                self.remove(k, (text2, f2), experiments, opts)?;
+            let Some(test) = self.test(k, &f2, false, experiments, &dopts) else {
+                continue;
+            };
+            if !test.passes() {
+                self.remove(k, (text2, f2), test, experiments, opts)?;
             }
         }
         for &k in found.iter().take(found.len().saturating_sub(1)) {
             let Some((text2, f2, to)) = self.simpler(text, k, experiments, opts, progress) else {
                 continue;
             };
-            if f2.after_cost < NESTED_GAIN * self.fit.after_cost {
+            let Some(test) = self.test(k, &f2, true, experiments, &dopts) else {
+                continue;
+            };
+            if !test.passes() {
                 self.adopt(k, (to, None), (text2, f2), experiments, opts)?;
             }
         }
-        let dopts = opts.diagnose_options();
         for k in 0..self.applied.len() {
             let in_model = self.applied.iter().flatten().count();
             if in_model >= opts.max_effects || !self.no_shape_of_its_own(k) {
@@ -878,13 +767,46 @@ impl EndSteps {
             let Ok(f3) = fit(&m3, experiments, &fo) else {
                 continue;
             };
-            if f3.after_cost <= NESTED_GAIN * self.fit.after_cost {
+            let judge = Judge::new(&m3, experiments, &dopts, &d.baseline);
+            let k_now: usize = self
+                .applied
+                .iter()
+                .flatten()
+                .map(|e| e.parameters.len())
+                .sum();
+            let k_then = k_now - self.applied[k].as_ref().map_or(0, |e| e.parameters.len())
+                + to.parameters.len()
+                + then.parameters.len();
+            if prefers(
+                (judge.ssr(&f3), k_then),
+                (judge.ssr(&self.fit), k_now),
+                judge.effective_samples(),
+            ) {
                 write_fitted(&mut to, &f3);
                 write_fitted(&mut then, &f3);
                 self.adopt(k, (to, Some(then)), (text3, f3), experiments, opts)?;
             }
         }
         Ok(())
+    }
+
+    /// The decision rule's test of round `k`'s effect in the model as it
+    /// stands against `without`, a fit of the model without it (`nested`:
+    /// with its simpler form instead).
+    fn test(
+        &self,
+        k: usize,
+        without: &FitResult,
+        nested: bool,
+        experiments: &[Experiment],
+        dopts: &DiagnoseOptions,
+    ) -> Option<EffectTest> {
+        let effect = self.applied.get(k)?.as_ref()?;
+        let m = model_from_text("final", &self.text).ok()?;
+        let m0 = m.clone();
+        let judge = Judge::new(&m0, experiments, dopts, without);
+        let s0 = judge.ssr(without);
+        Some(judge.effect_test(effect, &m, &self.fit, s0, nested))
     }
 
     /// Put `to` in the place of round `k`'s effect (and add `then`): the
@@ -1012,6 +934,7 @@ impl EndSteps {
         &mut self,
         k: usize,
         (text, f): (String, FitResult),
+        test: EffectTest,
         experiments: &[Experiment],
         opts: &StoryOptions,
     ) -> Result<(), StoryError> {
@@ -1023,6 +946,7 @@ impl EndSteps {
             effect,
             cost_with: self.fit.after_cost,
             cost_without: f.after_cost,
+            test,
             stage: self.stages.len(),
         };
         let label = format!("without {}, fitted", removal.effect.label());
@@ -1054,4 +978,13 @@ impl EndSteps {
         let at_bound = bounds.is_some_and(|(lo, hi)| vs <= lo * 1.001 || vs >= hi * 0.999);
         fs <= fc || at_bound
     }
+}
+
+/// Between two models that are not nested, the decision rule's criterion:
+/// is `a` (`(sum of squares, parameter count)`) preferred to `b`, its
+/// `N_eff ln S + k ln N_eff` lower over `n_eff` effective samples?
+fn prefers(a: (f64, usize), b: (f64, usize), n_eff: f64) -> bool {
+    let n = n_eff.max(1.0);
+    let ic = |(s, k): (f64, usize)| n * s.ln() + k as f64 * n.ln();
+    ic(a) < ic(b)
 }

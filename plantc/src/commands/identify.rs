@@ -234,23 +234,22 @@ fn story(
     for (k, round) in s.rounds.iter().enumerate() {
         let _ = writeln!(out, "\n{}. round {}:", 3 + k, k + 1);
         for r in round.ranking.iter().filter(|r| r.fit.is_some()) {
+            let rule = match &r.test {
+                Some(t) if r.passes() => format!("passes: {}", t.describe()),
+                Some(t) => format!("does not pass: {}", t.describe()),
+                None => "not judged".to_string(),
+            };
             let _ = writeln!(
                 out,
-                "   candidate {:<28} refit cost {:.3e} ({:.2}x), equation-error rank {}, acts: {}",
+                "   candidate {:<28} refit RMSE {:.3e}, equation-error rank {}; {rule}",
                 r.candidate.label(),
-                r.fit.as_ref().map_or(f64::NAN, |f| f.after_cost),
-                r.gain,
+                r.fit.as_ref().map_or(f64::NAN, |f| f.after_rmse),
                 r.evidence.equation_error_rank,
-                r.evidence.acts_where
             );
         }
         match (&round.effect, &round.fit) {
             (Some(inst), Some(f)) => {
-                let what = if round.tentative {
-                    "effect on trial (it passes no test alone; kept because the next round's effect, with it in the model, explains the residual)"
-                } else {
-                    "missing effect"
-                };
+                let what = "missing effect";
                 let _ = writeln!(
                     out,
                     "   {what}: `{}` on `{}`; added to a copy of the model:\n{}",
@@ -291,7 +290,7 @@ fn story(
                     "snippet": inst.snippet(),
                     "cost_before": round.cost_before,
                     "cost_after": round.cost_after,
-                    "tentative": round.tentative,
+                    "test": round.test,
                     "fit": crate::commands::fit::fit_json(f),
                     "model": file,
                 }));
@@ -316,11 +315,12 @@ fn story(
         let ratio = removal.cost_without / removal.cost_with.max(f64::MIN_POSITIVE);
         let _ = writeln!(
             out,
-            "\n{n}. removed: `{}` (round {}) did not pay for its parameters in its own round, and with the later effects in the model does as well without it (cost {:.3e} with it, {:.3e} without: {ratio:.3}x)",
+            "\n{n}. removed: `{}` (round {}) no longer passes the decision rule with the later effects in the model (weighted RMS {:.3e} with it, {:.3e} without: ratio {ratio:.3}; {})",
             removal.effect.label(),
             removal.round,
             removal.cost_with,
             removal.cost_without,
+            removal.test.describe(),
         );
         if let Some(stage) = s.stages.get(removal.stage) {
             let m2 = model_from_text("stage", &stage.text).map_err(fail)?;
