@@ -1144,6 +1144,11 @@ impl<'a> Setup<'a> {
         Point { g, l }
     }
 
+    /// The channel weights (and noise floors) of the records.
+    pub(crate) fn weights(&self) -> &[ChannelWeight] {
+        &self.weights
+    }
+
     /// The free parameters' values in `base` (model order).
     fn free_values(&self, base: &[f64]) -> Vec<f64> {
         self.free.iter().map(|&i| base[i]).collect()
@@ -1437,12 +1442,10 @@ pub fn fit_with_progress(
                     ident = identifiability(&setup, &pb, &pt, &nrm, &frozen, unknowns);
                     ident.fixed = fixed;
                 } else {
-                    notes.push(format!(
-                        "fixing {} (flagged as not identifiable) raised the cost to {:.4e} from {:.4e}: kept free",
-                        fix.iter().map(|f| format!("`{}`", f.0)).collect::<Vec<_>>().join(", "),
-                        rms(s, count),
-                        rms(best.1, count)
-                    ));
+                    let rise = s / best.1 - 1.0;
+                    for (name, _) in &fix {
+                        ident.kept_free.push((name.clone(), rise));
+                    }
                 }
             }
         }
@@ -1881,12 +1884,37 @@ pub(crate) fn lm_nuisance(setup: &Setup<'_>, pb: &Problem<'_>, pt: &mut Point) -
         iterations: 0,
         simulations: 0,
         stage: 0,
-        stages: 1,
+        stages: NUISANCE_HORIZONS.len(),
         progress: &mut sink,
     };
-    let _ = lm_nuisance_only(setup, pb, pt, 15, true, &mut run);
+    // the model parameters held; the initial states over growing horizons
+    // from their priors (a start inside a release transient is fitted on
+    // its first quarter second before the whole record can pull it into
+    // another basin), the best point on the whole record kept
+    let p = setup.free.len();
+    let frozen: Vec<bool> = (0..pb.n_globals()).map(|j| j < p).collect();
+    let first = match pb.cost(pt, f64::INFINITY) {
+        Ok((s, _)) => s,
+        Err(_) => f64::INFINITY,
+    };
+    let ((best, _), _) = staged(
+        pb,
+        pt.clone(),
+        (pt.clone(), first),
+        &frozen,
+        &NUISANCE_HORIZONS,
+        setup.opts,
+        &mut run,
+    );
+    *pt = best;
     pb.cost(pt, f64::INFINITY).is_ok()
 }
+
+/// The growing horizons (s) of a nuisance-only fit ([`lm_nuisance`]: the
+/// held-out records of a validation, a stage's start): a quarter second
+/// holds a release transient and little else, each next horizon about
+/// four times the last, then the whole record.
+pub const NUISANCE_HORIZONS: [f64; 4] = [0.25, 1.0, 4.0, f64::INFINITY];
 
 /// The nuisance of `pt` at the edge of what the data allow: initial-state
 /// unknowns at their priors' bounds, offsets at theirs (see

@@ -65,11 +65,22 @@ pub const MIN_WINDOW_SAMPLES: usize = 6;
 /// each available side (one-sided at the ends), widened to hold at least
 /// [`MIN_WINDOW_SAMPLES`] samples.
 pub fn velocity_prior(t: &[f64], y: &[f64], k: usize, noise: f64) -> Prior {
+    smoothed_state(t, y, k, noise).1
+}
+
+/// The smoothed position at sample `k` (the local quadratic's value at
+/// `t_k`, the measurement when there is too little data) and the velocity
+/// prior ([`velocity_prior`]): the state a k-step-ahead prediction starts
+/// from.
+pub fn smoothed_state(t: &[f64], y: &[f64], k: usize, noise: f64) -> (f64, Prior) {
     let n = t.len().min(y.len());
-    let fallback = Prior {
-        mean: 0.0,
-        sigma: f64::INFINITY,
-    };
+    let fallback = (
+        y.get(k).copied().unwrap_or(f64::NAN),
+        Prior {
+            mean: 0.0,
+            sigma: f64::INFINITY,
+        },
+    );
     if n < 3 || k >= n {
         return fallback;
     }
@@ -118,10 +129,13 @@ pub fn velocity_prior(t: &[f64], y: &[f64], k: usize, noise: f64) -> Prior {
         })
         .sum();
     let s2 = (rss / (count - 3).max(1) as f64).max(noise * noise);
-    Prior {
-        mean: c[1] / scale,
-        sigma: (s2 * inv[4]).sqrt() / scale,
-    }
+    (
+        c[0],
+        Prior {
+            mean: c[1] / scale,
+            sigma: (s2 * inv[4]).sqrt() / scale,
+        },
+    )
 }
 
 /// Inverse of a symmetric 3x3 matrix (row-major), None when singular.

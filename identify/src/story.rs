@@ -79,9 +79,13 @@ pub struct Stage {
     pub text: String,
     /// Base parameter values.
     pub base: Vec<f64>,
-    /// Fit % and RMSE per experiment and channel (simulation with the
-    /// nuisance estimated).
+    /// Fit % and RMSE per experiment and channel: the whole records
+    /// simulated (with the nuisance estimated), for every stage alike.
     pub report: FitReport,
+    /// When the stage's fit was on segments (each from its own estimated
+    /// state: k-step-ahead prediction), the fit % and RMSE of those
+    /// segments, an extra view beside the whole-record `report`.
+    pub segment_report: Option<FitReport>,
     /// The simulated coordinates as experiments (for figures).
     pub simulated: Vec<Experiment>,
     /// The fit's cost (weighted RMS) where a fit made the stage.
@@ -313,7 +317,10 @@ fn stage_at(
         horizon: None,
         ..ValidateOptions::default()
     };
-    let simulated = match fitted.map(|f| &f.simulated).or(at_start) {
+    // the whole records: the fit's own simulation unless it was on
+    // segments, then a whole-record simulation with the nuisance estimated
+    let whole_fit = fitted.filter(|f| f.segments.is_none()).map(|f| &f.simulated);
+    let simulated = match whole_fit.or(at_start) {
         Some(given) => {
             let sims: Vec<Option<&Vec<Vec<f64>>>> = given.iter().map(Some).collect();
             as_experiments(model, experiments, &sims)
@@ -327,6 +334,14 @@ fn stage_at(
     };
     let report =
         compare(experiments, &simulated, &names).map_err(|e| StoryError::Compare(e.to_string()))?;
+    let segment_report = match fitted.filter(|f| f.segments.is_some()) {
+        Some(f) => {
+            let sims: Vec<Option<&Vec<Vec<f64>>>> = f.simulated.iter().map(Some).collect();
+            let seg = as_experiments(model, experiments, &sims);
+            Some(compare(experiments, &seg, &names).map_err(|e| StoryError::Compare(e.to_string()))?)
+        }
+        None => None,
+    };
     let validation = if opts.validate.is_empty() {
         None
     } else {
@@ -348,6 +363,7 @@ fn stage_at(
         text: text.to_string(),
         base: base.to_vec(),
         report,
+        segment_report,
         simulated,
         cost: fitted.map(|f| f.after_cost),
         validation,

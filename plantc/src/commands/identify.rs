@@ -30,6 +30,17 @@ struct Stage {
     report: FitReport,
 }
 
+/// One table cell: fit % and RMSE, or `diverged`.
+fn cell(f: &plantc_identify::ChannelFit) -> String {
+    if f.diverged {
+        return "diverged".to_string();
+    }
+    let fit = f
+        .fit_percent
+        .map_or("-".to_string(), |v| format!("{v:.1} %"));
+    format!("{fit}  {:.2e}", f.rmse)
+}
+
 fn fail(e: impl std::fmt::Display) -> CliError {
     CliError::failure(format!("error: {e}"))
 }
@@ -82,19 +93,14 @@ fn table(out: &mut dyn Write, stages: &[Stage], measured: &[Experiment], channel
                 .experiments
                 .get(*i)
                 .and_then(|e| e.channels.get(*c))
-                .map_or("-".to_string(), |f| {
-                    let fit = f
-                        .fit_percent
-                        .map_or("-".to_string(), |v| format!("{v:.1} %"));
-                    format!("{fit}  {:.2e}", f.rmse)
-                });
+                .map_or("-".to_string(), cell);
             line.push_str(&format!("  {cell:>cw$}"));
         }
         let _ = writeln!(out, "{line}");
     }
     let _ = writeln!(
         out,
-        "(cells: fit % as MATLAB's compare, then RMSE in SI units; fit % of a channel that barely moves is capped by encoder quantisation: judge it by RMSE)"
+        "(cells: each stage's model simulated over the whole records from its estimated initial state, fit % as MATLAB's compare, then RMSE in SI units; `diverged`: the simulation could not be finished or left the data, fit % below -100; fit % of a channel that barely moves is capped by encoder quantisation: judge it by RMSE)"
     );
 }
 
@@ -404,9 +410,18 @@ fn story(
     let stage_refs: Vec<Stage> = s
         .stages
         .iter()
-        .map(|st| Stage {
-            label: st.label.clone(),
-            report: st.report.clone(),
+        .flat_map(|st| {
+            let mut v = vec![Stage {
+                label: st.label.clone(),
+                report: st.report.clone(),
+            }];
+            if let Some(seg) = &st.segment_report {
+                v.push(Stage {
+                    label: format!("({}: segments as fitted)", st.label),
+                    report: seg.clone(),
+                });
+            }
+            v
         })
         .collect();
     let _ = writeln!(out, "\nbefore and after:");
@@ -416,7 +431,7 @@ fn story(
     let elapsed = started.elapsed().as_secs_f64();
     let _ = writeln!(
         out,
-        "RMSE {first:.3e} -> {last:.3e}: {:.1}x lower; {} ({} effect(s) added); model -> {}, figures -> {}/ ({elapsed:.1} s)",
+        "RMSE {first:.3e} -> {last:.3e} (RMSE ratio {:.1}); {} ({} effect(s) added); model -> {}, figures -> {}/ ({elapsed:.1} s)",
         first / last.max(f64::MIN_POSITIVE),
         s.stop,
         s.effects_added(),
