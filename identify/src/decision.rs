@@ -25,6 +25,13 @@
 //!    whatever a restart or a rounding pattern made the cost do (an input
 //!    offset of 0.6 mV on a +-10 V amplifier).
 //!
+//! 3. *Form*: its fitted parameters describe the effect its name claims
+//!    ([`crate::effect_edit::EffectInstance::in_own_form`]: a Stribeck
+//!    friction with a hump, `Fs > Fc`). A better fit by a curve of another
+//!    shape (a friction that falls at low speed, fitting the stick-slip
+//!    transitions of a simulation that resolves them on another step) is
+//!    not that effect, and its name would be false.
+//!
 //! Among the candidates that pass, the verdict is the one with the largest
 //! margin `N_eff ln(S0/S1) - k ln N_eff` (the same criterion, so a nested
 //! bigger effect wins over its simpler form only by paying for its extra
@@ -233,6 +240,8 @@ pub struct EffectTest {
     /// The effect's contribution, when simulated (only for an effect that
     /// passes the likelihood part: the size test needs one simulation).
     pub contribution: Option<Contribution>,
+    /// Whether its fitted parameters describe it in its own form.
+    pub in_own_form: bool,
 }
 
 impl EffectTest {
@@ -255,6 +264,7 @@ impl EffectTest {
             statistic,
             threshold: k as f64 * effective.ln(),
             contribution: None,
+            in_own_form: true,
         }
     }
 
@@ -263,9 +273,10 @@ impl EffectTest {
         self.statistic > self.threshold
     }
 
-    /// Both parts pass: the effect is named (see the module docs).
+    /// Every part passes: the effect is named (see the module docs).
     pub fn passes(&self) -> bool {
         self.likely()
+            && self.in_own_form
             && self
                 .contribution
                 .as_ref()
@@ -299,8 +310,13 @@ impl EffectTest {
             ),
             None => String::new(),
         };
+        let form = if self.in_own_form {
+            ""
+        } else {
+            "; its fitted parameters are not in the effect's own form"
+        };
         format!(
-            "weighted RMS ratio {:.3} (without / with); N_eff ln(S0/S1) = {:.1} against k ln N_eff = {:.1} (k = {}, N_eff = {:.0} of {}){size}",
+            "weighted RMS ratio {:.3} (without / with); N_eff ln(S0/S1) = {:.1} against k ln N_eff = {:.1} (k = {}, N_eff = {:.0} of {}){size}{form}",
             self.rms_ratio(),
             self.statistic,
             self.threshold,

@@ -570,13 +570,14 @@ impl<'a> Judge<'a> {
             effect.parameters.len()
         };
         let mut t = EffectTest::new(s0, self.ssr(f), self.samples, self.effective, k);
-        if t.likely() {
-            let value = |name: &str| {
-                m.parameters
-                    .iter()
-                    .position(|p| p.name == name)
-                    .map_or(f64::NAN, |i| f.base[i])
-            };
+        let value = |name: &str| {
+            m.parameters
+                .iter()
+                .position(|p| p.name == name)
+                .map_or(f64::NAN, |i| f.base[i])
+        };
+        t.in_own_form = effect.in_own_form(value);
+        if t.likely() && t.in_own_form {
             let mut base = f.base.clone();
             for (name, v) in effect.null_values(nested, value) {
                 if let Some(i) = m.parameters.iter().position(|p| p.name == name) {

@@ -470,6 +470,22 @@ impl EffectInstance {
             .collect()
     }
 
+    /// Whether fitted values (`value` by model name) describe the effect
+    /// in its own form, the one its name claims: a Stribeck friction has
+    /// its hump, a static level above the sliding one (`Fs > Fc`; with `Fs
+    /// <= Fc` the curve is a friction that falls at low speed, not
+    /// Stribeck's). The other effects' boxes already hold their forms.
+    pub fn in_own_form(&self, value: impl Fn(&str) -> f64) -> bool {
+        match (
+            self.effect.as_str(),
+            self.parameter_name("Fs"),
+            self.parameter_name("Fc"),
+        ) {
+            ("stribeck_friction", Some(fs), Some(fc)) => value(fs) > value(fc),
+            _ => true,
+        }
+    }
+
     /// The simpler effect this one contains on its target (Stribeck
     /// friction with `Fs = Fc` is Coulomb friction), if any.
     pub fn nested(&self) -> Option<&'static str> {

@@ -671,6 +671,9 @@ fn offset_coordinates(
 
 /// Counters and progress of a fit.
 struct Run<'a> {
+    /// Whether the LM keeps the locals within their priors' bounds (only
+    /// the answer is bounded: see [`bounded_polish`]).
+    bounded: bool,
     /// [`FitOptions::tolerance`].
     tolerance: f64,
     /// The weighted RMS above which the screening tolerance suffices
@@ -717,6 +720,11 @@ fn lm(
     // way (the two simulators agree to the bit).
     let mut cached: Option<crate::lm::Normal> = None;
     let mut eager = false;
+    if run.bounded {
+        for (blk, l) in pb.blocks.iter().zip(pt.l.iter_mut()) {
+            blk.clamp(l);
+        }
+    }
     for _ in 0..max_iterations {
         let nrm = match cached.take() {
             Some(n) => n,
@@ -750,10 +758,36 @@ fn lm(
         if held.iter().all(|h| *h) && pb.n_locals() == 0 {
             return Ok((nrm.ssr, nrm.count, Stop::Converged));
         }
+        // on the final stage, locals at a bound of their prior that the
+        // gradient pushes outwards are held too (the step `-J'r` direction
+        // leaves the box)
+        let held_l: Vec<Vec<bool>> = pb
+            .blocks
+            .iter()
+            .zip(&pt.l)
+            .zip(&nrm.blocks)
+            .map(|((blk, l), bn)| {
+                (0..l.len())
+                    .map(|j| {
+                        run.bounded
+                            && ((l[j] <= blk.lo[j] && bn.g_l[j] > 0.0)
+                                || (l[j] >= blk.hi[j] && bn.g_l[j] < 0.0))
+                    })
+                    .collect()
+            })
+            .collect();
+        let holding = held_l.iter().flatten().any(|h| *h);
+        let solve_nrm;
+        let nrm_step: &crate::lm::Normal = if holding {
+            solve_nrm = nrm.holding_locals(&held_l);
+            &solve_nrm
+        } else {
+            &nrm
+        };
         let mut accepted = None;
         let mut first_trial = true;
         while *lambda < 1e12 {
-            let Some(d) = Damped::solve(&nrm, *lambda, &held) else {
+            let Some(d) = Damped::solve(nrm_step, *lambda, &held) else {
                 *lambda *= 10.0;
                 continue;
             };
@@ -762,7 +796,7 @@ fn lm(
                 .collect();
             let dg: Vec<f64> = (0..ng).map(|j| g_new[j] - pt.g[j]).collect();
             let dl = d.locals(&dg);
-            let pred = predicted_reduction(&nrm, &dg, &dl);
+            let pred = predicted_reduction(nrm_step, &dg, &dl);
             let trial = Point {
                 g: g_new,
                 l: pt
@@ -772,7 +806,9 @@ fn lm(
                     .zip(&pb.blocks)
                     .map(|((l, d), blk)| {
                         let mut v: Vec<f64> = l.iter().zip(d).map(|(a, b)| a + b).collect();
-                        blk.clamp(&mut v);
+                        if run.bounded {
+                            blk.clamp(&mut v);
+                        }
                         v
                     })
                     .collect(),
@@ -866,7 +902,9 @@ fn refit_whole(
     run: &mut Run<'_>,
 ) -> Option<f64> {
     let mut lambda = 1e-3;
-    lm(
+    // (from a point within the priors' bounds, near the optimum: kept there)
+    run.bounded = true;
+    let out = lm(
         pb,
         q,
         f64::INFINITY,
@@ -875,8 +913,9 @@ fn refit_whole(
         true,
         &mut lambda,
         run,
-    )
-    .ok()?;
+    );
+    run.bounded = false;
+    out.ok()?;
     pb.cost(q, f64::INFINITY).ok().map(|(s, _)| s)
 }
 
@@ -1266,6 +1305,7 @@ pub fn fit_with_progress(
     let free = setup.free.clone();
     let floor = crate::weights::noise_cost(&setup.weights);
     let mut run = Run {
+        bounded: false,
         tolerance: opts.tolerance,
         coarse_above: if opts.coarse_far_above_floor && floor > 0.0 {
             FAR_ABOVE_FLOOR * floor
@@ -1674,12 +1714,10 @@ fn whole_before(setup: &Setup<'_>, g0: &[f64], run: &mut Run<'_>) -> (Point, (f6
     let pb = setup.nuisance_problem(None);
     let mut pt = setup.start_point(&pb, g0);
     let _ = lm_nuisance_only(setup, &pb, &mut pt, 10, false, run);
-    run.simulations += 1;
+    let frozen: Vec<bool> = (0..pb.n_globals()).map(|j| j < setup.free.len()).collect();
     let count = pb.count_all();
-    let c = pb
-        .cost(&pt, f64::INFINITY)
-        .unwrap_or((f64::INFINITY, count));
-    (pt, c)
+    let (pt, ssr) = bounded_polish(&pb, pt, &frozen, 10, run);
+    (pt, (ssr, count))
 }
 
 /// One fit on one layout: scan (optional), nuisance at the start, growing
@@ -1751,9 +1789,15 @@ fn solve(
         let _ = lm_nuisance_only(setup, &pbn, &mut pt, 10, false, run);
     }
     run.simulations += 1;
-    let before = pb
-        .cost(&pt, f64::INFINITY)
-        .unwrap_or((f64::INFINITY, count_all));
+    // the start within its priors' bounds, as the answer will be
+    let (pt, ssr0) = if has_nuisance && !warm {
+        let nf: Vec<bool> = (0..ng).map(|j| j < p).collect();
+        bounded_polish(&pb, pt, &nf, 10, run)
+    } else {
+        let c = pb.cost(&pt, f64::INFINITY).map_or(f64::INFINITY, |x| x.0);
+        (pt, c)
+    };
+    let before = (ssr0, count_all);
     let start_pt = pt.clone();
     // growing horizons, the best point on the whole objective kept
     let first = (pt.clone(), before.0);
@@ -1787,6 +1831,14 @@ fn solve(
             }
         }
     }
+    // the answer within the priors' bounds (never worse than the start,
+    // which is within them too)
+    let polished = bounded_polish(&pb, best.0, &frozen, opts.max_iterations, run);
+    let best = if polished.1 <= before.0 {
+        polished
+    } else {
+        (start_pt.clone(), before.0)
+    };
     Ok(Outcome {
         segments,
         pt: best.0,
@@ -1794,6 +1846,51 @@ fn solve(
         start_pt,
         before,
     })
+}
+
+/// `pt` within its priors' bounds: when a local lies outside them (the
+/// search may lean on the initial states; the answer may not), clamped and
+/// refitted on the whole records with them held inside (the globals where
+/// `frozen` is true held); its weighted SSR (infinite when it cannot be
+/// simulated). The bounds bind the answer, not the search: far from the
+/// optimum a fit leans on the initial states (a spring missing from the
+/// start values: held within their priors all along, the per-file offsets
+/// took up the slack and the fit stalled at 150x the floor; free, the
+/// states came back to 0.002 rad/s by the end).
+fn bounded_polish(
+    pb: &Problem<'_>,
+    pt: Point,
+    frozen: &[bool],
+    max_iterations: usize,
+    run: &mut Run<'_>,
+) -> (Point, f64) {
+    let q = pb.clamped(&pt);
+    if q == pt {
+        run.simulations += 1;
+        let c = pb.cost(&pt, f64::INFINITY).map_or(f64::INFINITY, |x| x.0);
+        return (pt, c);
+    }
+    let mut q = q;
+    let mut lambda = 1e-3;
+    run.bounded = true;
+    let out = lm(
+        pb,
+        &mut q,
+        f64::INFINITY,
+        frozen,
+        max_iterations,
+        true,
+        &mut lambda,
+        run,
+    );
+    run.bounded = false;
+    let q = pb.clamped(&q);
+    run.simulations += 1;
+    let c = match out {
+        Ok(_) => pb.cost(&q, f64::INFINITY).map_or(f64::INFINITY, |x| x.0),
+        Err(_) => f64::INFINITY,
+    };
+    (q, c)
 }
 
 /// LM over growing `horizons` from `pt` with the globals where `frozen` is
@@ -1879,6 +1976,7 @@ fn staged(
 pub(crate) fn lm_nuisance(setup: &Setup<'_>, pb: &Problem<'_>, pt: &mut Point) -> bool {
     let mut sink = |_: &FitProgress| {};
     let mut run = Run {
+        bounded: false,
         tolerance: FINAL_TOLERANCE,
         coarse_above: f64::INFINITY,
         iterations: 0,
@@ -1906,8 +2004,9 @@ pub(crate) fn lm_nuisance(setup: &Setup<'_>, pb: &Problem<'_>, pt: &mut Point) -
         setup.opts,
         &mut run,
     );
+    let (best, ssr) = bounded_polish(pb, best, &frozen, 15, &mut run);
     *pt = best;
-    pb.cost(pt, f64::INFINITY).is_ok()
+    ssr.is_finite()
 }
 
 /// The growing horizons (s) of a nuisance-only fit ([`lm_nuisance`]: the

@@ -204,7 +204,10 @@ pub fn compare(
             let (y, yhat) = channel_pair(m, s, ch)?;
             // a simulation that could not be finished is diverged, not an
             // error of the comparison (measured values must be finite)
-            if y.len() == yhat.len() && y.iter().all(|v| v.is_finite()) && yhat.iter().any(|v| !v.is_finite()) {
+            if y.len() == yhat.len()
+                && y.iter().all(|v| v.is_finite())
+                && yhat.iter().any(|v| !v.is_finite())
+            {
                 total_sse = f64::INFINITY;
                 total_n += y.len();
                 fits.insert(

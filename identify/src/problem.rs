@@ -210,6 +210,15 @@ impl Problem<'_> {
         vec![true; self.n()]
     }
 
+    /// `pt` with every block's locals within their priors' bounds.
+    pub fn clamped(&self, pt: &Point) -> Point {
+        let mut q = pt.clone();
+        for (blk, l) in self.blocks.iter().zip(q.l.iter_mut()) {
+            blk.clamp(l);
+        }
+        q
+    }
+
     /// The prior terms of every block's locals at `pt`.
     pub fn prior_ssr(&self, pt: &Point) -> f64 {
         self.blocks

@@ -319,7 +319,9 @@ fn stage_at(
     };
     // the whole records: the fit's own simulation unless it was on
     // segments, then a whole-record simulation with the nuisance estimated
-    let whole_fit = fitted.filter(|f| f.segments.is_none()).map(|f| &f.simulated);
+    let whole_fit = fitted
+        .filter(|f| f.segments.is_none())
+        .map(|f| &f.simulated);
     let simulated = match whole_fit.or(at_start) {
         Some(given) => {
             let sims: Vec<Option<&Vec<Vec<f64>>>> = given.iter().map(Some).collect();
@@ -338,7 +340,10 @@ fn stage_at(
         Some(f) => {
             let sims: Vec<Option<&Vec<Vec<f64>>>> = f.simulated.iter().map(Some).collect();
             let seg = as_experiments(model, experiments, &sims);
-            Some(compare(experiments, &seg, &names).map_err(|e| StoryError::Compare(e.to_string()))?)
+            Some(
+                compare(experiments, &seg, &names)
+                    .map_err(|e| StoryError::Compare(e.to_string()))?,
+            )
         }
         None => None,
     };

@@ -233,6 +233,12 @@ pub struct IdentifyArgs {
     pub data: DataArgs,
     #[command(flatten)]
     pub control: FitControlArgs,
+    /// The model's parameters to fit (default: those marked `estimate`),
+    /// e.g. `J1,l2`: each needs its `estimate [lo, hi]` box; the others
+    /// are held at their values. Added effects' parameters are always
+    /// fitted.
+    #[arg(long, value_name = "NAME,...")]
+    pub free: Option<String>,
     /// Fit horizon: `auto` (whole records; segments when the replay
     /// diverges), `whole`, or a segment length in s (multiple shooting: each
     /// segment starts from its own estimated state).
@@ -335,7 +341,7 @@ pub struct DataArgs {
 #[derive(Debug, Args, Clone)]
 pub struct FitControlArgs {
     /// Weight of a channel's residual per SI unit, e.g. `alpha=20`
-    /// (repeatable; default: 1 / the channel's spread in the data).
+    /// (repeatable; default: 1 / the channel's noise floor: encoder quantum or measured high-frequency noise).
     #[arg(long = "weight", value_name = "COORD=W")]
     pub weights: Vec<String>,
     /// Initial state estimated per experiment: `velocities` (default),

@@ -51,6 +51,68 @@ fn write_file(path: &Path, text: &str) -> Result<(), CliError> {
 }
 
 /// The model text with every fitted parameter written in (lossless).
+/// `--free`: the `estimate` boxes of the model's other parameters are
+/// taken out of the text the story runs on (they are held), and put back
+/// into every model file identify writes.
+struct FreeSelection {
+    /// (parameter, lo, hi) as written.
+    held: Vec<(String, String, String)>,
+}
+
+impl FreeSelection {
+    /// The selection `list` on model `text`: the text with the others'
+    /// boxes cleared, or an error naming a parameter that is unknown or has
+    /// no box.
+    fn new(text: &str, model: &Model, list: &str) -> Result<(FreeSelection, String), CliError> {
+        let names = crate::common::name_list(list);
+        let known: Vec<&str> = model.parameters.iter().map(|p| p.name.as_str()).collect();
+        for n in &names {
+            match model.parameter(n) {
+                None => {
+                    return Err(CliError::input(format!(
+                        "error: `--free {list}`: the model has no parameter `{n}`; parameters: {}",
+                        known.join(", ")
+                    )))
+                }
+                Some(p) if p.estimate.is_none() => {
+                    return Err(CliError::input(format!(
+                        "error: `--free {list}`: `{n}` has no `estimate [lo, hi]` box in the model file; add one to its `parameter` line (identify searches within it)"
+                    )))
+                }
+                Some(_) => {}
+            }
+        }
+        let checked = plantc_derive::lang::parse_and_check("model", text);
+        let file = checked
+            .model
+            .ok_or_else(|| CliError::input("error: the model does not parse".to_string()))?;
+        let mut held = Vec::new();
+        let mut out = text.to_string();
+        for p in &file.parameters {
+            if let (Some(b), false) = (&p.estimate, names.contains(&p.name.name)) {
+                held.push((
+                    p.name.name.clone(),
+                    text[b.lo.span.start..b.lo.span.end].to_string(),
+                    text[b.hi.span.start..b.hi.span.end].to_string(),
+                ));
+            }
+        }
+        for (n, _, _) in &held {
+            out = plantc_derive::lang::edit::clear_estimate(&out, n).map_err(fail)?;
+        }
+        Ok((FreeSelection { held }, out))
+    }
+
+    /// `text` with the held parameters' boxes put back.
+    fn restore(&self, text: &str) -> Result<String, CliError> {
+        let mut out = text.to_string();
+        for (n, lo, hi) in &self.held {
+            out = plantc_derive::lang::edit::set_estimate(&out, n, lo, hi).map_err(fail)?;
+        }
+        Ok(out)
+    }
+}
+
 fn with_values(text: &str, model: &Model, r: &FitResult) -> Result<String, CliError> {
     let values = r.parameters.iter().map(|e| (e.name.as_str(), e.value));
     write_parameter_values(text, model, values)
@@ -168,6 +230,19 @@ fn story(
             args.model.display()
         ))
     })?;
+    let (selection, text) = match &args.free {
+        Some(list) => {
+            let (sel, t) = FreeSelection::new(&text, model, list)?;
+            (Some(sel), t)
+        }
+        None => (None, text),
+    };
+    let restore = |t: String| -> Result<String, CliError> {
+        match &selection {
+            Some(sel) => sel.restore(&t),
+            None => Ok(t),
+        }
+    };
     let measured = read_data(model, &args.data, err)?;
     let held_out = read_held_out(model, &args.data, &args.validate, err)?;
     let opts = StoryOptions {
@@ -270,7 +345,7 @@ fn story(
                 } else {
                     format!("with_effect_{}.plant", k + 1)
                 };
-                let edited = with_values(&stage.text, &m2, f)?;
+                let edited = restore(with_values(&stage.text, &m2, f)?)?;
                 write_file(&staging.join(&file), &edited)?;
                 files.push(file.clone());
                 let _ = writeln!(
@@ -405,7 +480,7 @@ fn story(
     }
     // the result
     let final_model = model_from_text("final", &s.text).map_err(fail)?;
-    let fitted = with_values(&s.text, &final_model, &s.fit)?;
+    let fitted = restore(with_values(&s.text, &final_model, &s.fit)?)?;
     write_file(&staging.join("fitted.plant"), &fitted)?;
     let stage_refs: Vec<Stage> = s
         .stages
