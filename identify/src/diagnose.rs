@@ -909,6 +909,13 @@ impl Search<'_> {
         let mut settled = false;
         for &idx in &leaders {
             self.refit(ranking, idx);
+            // one that passes but leaves the residual above the floor may
+            // be trapped where the distorted baseline put it (a spring on
+            // the arm: 4.5x from the baseline, 400x from the nominal
+            // values): started again from there
+            if ranking[idx].passes() && !self.settles(&ranking[idx]) {
+                self.second_start(ranking, idx);
+            }
             if self.settles(&ranking[idx]) {
                 self.refit_nested(ranking, idx);
                 settled = true;
