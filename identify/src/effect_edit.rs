@@ -442,7 +442,7 @@ impl EffectInstance {
 
     /// The values of the effect's parameters (by model name) at which it
     /// vanishes from the equations: every level, gain, width or delay at
-    /// zero, a saturation level at infinity (no clipping), a spring's rest
+    /// zero, a saturation level at the largest finite value (no clipping), a spring's rest
     /// position and a cogging phase or a Stribeck velocity as they are
     /// (with the level at zero they do nothing). `base` gives a parameter's
     /// current value by model name. With `nested`, the values that make
@@ -464,7 +464,8 @@ impl EffectInstance {
             .filter_map(|p| match (self.effect.as_str(), p.base.as_str()) {
                 ("spring", "q0") | ("cogging", "N") | ("cogging", "phase") => None,
                 ("stribeck_friction", "vs") | ("speed_limit", "vmax") => None,
-                ("saturation", _) => Some((p.name.clone(), f64::INFINITY)),
+                // (the largest finite level: no input is clipped)
+                ("saturation", _) => Some((p.name.clone(), f64::MAX)),
                 _ => Some((p.name.clone(), 0.0)),
             })
             .collect()
