@@ -61,7 +61,8 @@ use serde::Serialize;
 use crate::closed_loop::LoopLaw;
 use crate::data::Experiment;
 use crate::experiment_sim::{
-    dynamics_outputs, velocity_at, InitialVelocity, Signals, SimError, SimOptions, Simulator,
+    dynamics_outputs, velocity_at, DryFriction, InitialVelocity, Signals, SimError, SimOptions,
+    Simulator,
 };
 use crate::identifiability::{analyse, to_fix, Fixed, Identifiability, ParamInfo};
 use crate::lm::{global_information, local_variances, predicted_reduction, Damped};
@@ -587,7 +588,7 @@ fn offset_coordinates(
     model: &Model,
     how: &Offsets,
     law: Option<&LoopLaw>,
-    width: Option<f64>,
+    friction: DryFriction,
 ) -> Result<Vec<usize>, FitError> {
     match how {
         Offsets::None => Ok(Vec::new()),
@@ -604,7 +605,7 @@ fn offset_coordinates(
             })
             .collect(),
         Offsets::Auto => {
-            let (_, outs) = dynamics_outputs(model, width)?;
+            let outs = dynamics_outputs(model, friction)?.outs;
             let outs: Vec<_> = outs.iter().map(|e| model.expand_derived(*e)).collect();
             Ok((0..model.coordinates.len())
                 .filter(|&i| {
@@ -895,12 +896,8 @@ impl<'a> Setup<'a> {
             .map(|i| sigs.iter().map(|s| s.q[i].as_slice()).collect())
             .collect();
         let weights = channel_weights(&names, &records, &opts.weights);
-        let offset_coords = offset_coordinates(
-            model,
-            &opts.offsets,
-            law.as_ref(),
-            opts.sim.dry_friction_width,
-        )?;
+        let offset_coords =
+            offset_coordinates(model, &opts.offsets, law.as_ref(), opts.sim.dry_friction)?;
         Ok(Setup {
             model,
             sigs,
