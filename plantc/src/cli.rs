@@ -302,6 +302,11 @@ pub struct SynthArgs {
     /// Simulation substep (s).
     #[arg(long, default_value_t = 1e-4)]
     pub substep: f64,
+    /// Dry friction of the true model: `sticking` (a joint at rest stays at
+    /// rest below its static level, as on a rig) or `smooth:WIDTH` (the
+    /// `tanh(v / WIDTH)` law of earlier versions, e.g. `smooth:1e-3`).
+    #[arg(long, value_name = "LAW", default_value = "sticking")]
+    pub friction: String,
     /// Name of the case in truth.json (default: the directory's name).
     #[arg(long)]
     pub case: Option<String>,
