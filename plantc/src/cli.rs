@@ -703,8 +703,10 @@ pub struct SimArgs {
     #[arg(long, value_name = "HZ", default_value_t = 1000.0)]
     pub output_rate: f64,
     /// Replace every `sign(v)` of the equations (dry friction) by
-    /// `tanh(v / WIDTH)`, e.g. `--smooth-sign 1e-3` (rad/s): exact dry friction
-    /// makes a sticking joint chatter and the integrator stall.
+    /// `tanh(v / WIDTH)`, e.g. `--smooth-sign 1e-3` (rad/s). Without it dry
+    /// friction sticks: a joint at rest stays at rest while the force on it
+    /// is below its static level (stick-slip switches located by the
+    /// integrator).
     #[arg(long, value_name = "WIDTH")]
     pub smooth_sign: Option<f64>,
     /// Relative integrator tolerance (default 1e-8; absolute = rtol/100).
