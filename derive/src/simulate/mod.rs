@@ -490,7 +490,10 @@ impl Plant<'_> {
         if self.stick.dry {
             self.split(t, x)?;
             let st = &mut self.stick;
-            if !st.rules.accelerations(&st.m, &st.b, &st.d, &st.mode, &mut st.a) {
+            if !st
+                .rules
+                .accelerations(&st.m, &st.b, &st.d, &st.mode, &mut st.a)
+            {
                 return Err(SimError::Singular { t });
             }
             let n = st.a.len();
@@ -561,7 +564,10 @@ impl Plant<'_> {
         if self.stick.mode.any_stuck() {
             self.split(t, x)?;
             let st = &mut self.stick;
-            if !st.rules.accelerations(&st.m, &st.b, &st.d, &st.mode, &mut st.a) {
+            if !st
+                .rules
+                .accelerations(&st.m, &st.b, &st.d, &st.mode, &mut st.a)
+            {
                 return Err(SimError::Singular { t });
             }
             st.rules
