@@ -300,3 +300,165 @@ fn smooth_law_creeps_where_sticking_holds() {
     let crept = smooth.q[0].last().copied().unwrap();
     assert!(crept > 1e-4, "the smooth law creeps: {crept}");
 }
+
+/// The rotary pendulum's arm at rest under a motor torque below its
+/// gearbox friction (0.5 V: 0.064 N m against 0.1 N m) stays at exactly its
+/// position for 5 s.
+#[test]
+fn arm_below_its_static_friction_stays_put_for_seconds() {
+    let m =
+        model(&pendulum_text().replace("parameter Fg1 = 0.01 [N*m]", "parameter Fg1 = 0.1 [N*m]"));
+    let sig = signals(2500, &[0.3, PI], |_| vec![0.5]);
+    let q = Simulator::new(&m, SimOptions::default())
+        .expect("compiles")
+        .simulate(&sig, &full(&m, &base(&m)), sig.len())
+        .expect("simulates")
+        .q;
+    assert!(q[0].iter().all(|v| *v == 0.3), "the arm crept");
+    // 2 V (0.26 N m) moves it
+    let sig = signals(250, &[0.3, PI], |_| vec![2.0]);
+    let q = Simulator::new(&m, SimOptions::default())
+        .expect("compiles")
+        .simulate(&sig, &full(&m, &base(&m)), sig.len())
+        .expect("simulates")
+        .q;
+    assert!(q[0][249] > 0.31, "{}", q[0][249]);
+}
+
+/// A pendulum with Coulomb friction swinging freely from 1 rad stops where
+/// gravity is within the static level (`|m g l sin q| <= Fc`, i.e. `|q| <=
+/// 0.034 rad` here) and stays exactly there; the smooth law instead creeps
+/// on toward the bottom.
+#[test]
+fn free_swing_stops_and_stays_stopped() {
+    let m = model(
+        "model pendulum \"a pendulum with dry friction\"\n\
+         coordinate q : angle\n\
+         input tau [N*m]\n\
+         parameter m = 0.5 [kg]\n\
+         parameter l = 0.3 [m]\n\
+         parameter g = 9.81 [m/s^2]\n\
+         parameter Fc = 0.05 [N*m]\n\
+         kinetic T = 1/2*m*l^2*q'^2\n\
+         potential V = -m*g*l*cos(q)\n\
+         force q = tau + coulomb_friction(Fc)\n",
+    );
+    let p = full(&m, &base(&m));
+    let level = 0.05f64 / (0.5 * 9.81 * 0.3);
+    let sig = signals(6000, &[1.0], |_| vec![0.0]);
+    let q = Simulator::new(&m, SimOptions::default())
+        .expect("compiles")
+        .simulate(&sig, &p, sig.len())
+        .expect("simulates")
+        .q;
+    // still from 10 s to 12 s, within the static band, not at the bottom
+    let rest = q[0][5000];
+    assert!(q[0][5000..].iter().all(|v| *v == rest), "it moved at rest");
+    assert!(rest.abs() <= level.asin() && rest != 0.0, "rest at {rest}");
+    let smooth = Simulator::new(
+        &m,
+        SimOptions {
+            dry_friction: DryFriction::Smooth { width: 1e-3 },
+            ..SimOptions::default()
+        },
+    )
+    .expect("compiles")
+    .simulate(&sig, &p, sig.len())
+    .expect("simulates")
+    .q;
+    let drift = (smooth[0][5999] - smooth[0][5000]).abs();
+    assert!(drift > 1e-5, "the smooth law creeps: {drift}");
+    eprintln!("sticking rest at {rest:.5} rad; smooth law drifts {drift:.2e} rad in 2 s");
+}
+
+/// A Stribeck joint breaks away when the torque reaches the static level
+/// `Fs` (a ramp of 0.1 N m/s against `Fs = 0.12`: at 1.2 s) and then slides
+/// at the Coulomb level: held at 0.1 N m (below `Fs`, above `Fc = 0.08`) it
+/// keeps accelerating at `(0.1 - 0.08) / J = 2 rad/s^2` once well above
+/// the Stribeck speed.
+#[test]
+fn stribeck_joint_breaks_away_at_fs_and_slides_at_fc() {
+    let m = joint("stribeck_friction(Fc, Fs, vs)");
+    let mut b = base(&m);
+    for (name, v) in [("k", 0.0), ("b", 0.0), ("Td", 0.0)] {
+        let i = m.parameters.iter().position(|p| p.name == name).unwrap();
+        b[i] = v;
+    }
+    let p = full(&m, &b);
+    let sig = signals(2000, &[0.0], |t| vec![if t < 1.3 { 0.1 * t } else { 0.1 }]);
+    let q = Simulator::new(&m, SimOptions::default())
+        .expect("compiles")
+        .simulate(&sig, &p, sig.len())
+        .expect("simulates")
+        .q;
+    // the held sample u[k] = 0.1 t_k exceeds 0.12 from t = 1.202 s on
+    let k_break = 601;
+    assert!(
+        q[0][..=k_break].iter().all(|v| *v == 0.0),
+        "moved before Fs"
+    );
+    assert!(q[0][k_break + 2] > 0.0, "did not break away at Fs");
+    // acceleration from the second difference over 2.5 .. 3.5 s
+    let (k0, k1, k2) = (1250, 1500, 1750);
+    let dt = 0.5;
+    let acc = (q[0][k2] - 2.0 * q[0][k1] + q[0][k0]) / (dt * dt);
+    assert!((acc - 2.0).abs() < 0.02, "sliding acceleration {acc}");
+}
+
+/// The DFKI double pendulum (models/double_pendulum.plant) near hanging,
+/// where gravity is within both joints' dry friction (0.146 and 0.1225
+/// N m), with small torques: both joints are held, exactly, for 3 s; a
+/// shoulder torque above its level then moves both.
+#[test]
+fn double_pendulum_with_both_joints_held() {
+    let path =
+        std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("../models/double_pendulum.plant");
+    let m = plantc_derive::model::load_model(&path)
+        .expect("model")
+        .model;
+    let p = full(&m, &base(&m));
+    let sim = Simulator::new(&m, SimOptions::default()).expect("compiles");
+    assert_eq!(sim.sticking(), &[true, true]);
+    let sig = signals(1500, &[0.03, 0.02], |_| vec![0.02, -0.01]);
+    let q = sim.simulate(&sig, &p, sig.len()).expect("simulates").q;
+    assert!(q[0].iter().all(|v| *v == 0.03) && q[1].iter().all(|v| *v == 0.02));
+    let sig = signals(500, &[0.03, 0.02], |_| vec![0.5, 0.0]);
+    let q = sim.simulate(&sig, &p, sig.len()).expect("simulates").q;
+    assert!(
+        q[0][499] > 0.05 && q[1][499] != 0.02,
+        "{} {}",
+        q[0][499],
+        q[1][499]
+    );
+}
+
+/// Sensitivities through the DFKI double pendulum's stick-slip: both
+/// joints stop, stick (the coupled holding forces of two stuck joints),
+/// break away under torque pulses and reverse.
+#[test]
+fn double_pendulum_sensitivities_through_stick_slip() {
+    let path =
+        std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("../models/double_pendulum.plant");
+    let m = plantc_derive::model::load_model(&path)
+        .expect("model")
+        .model;
+    let sig = signals(1500, &[0.02, -0.01], |t| {
+        let phase = (t / 0.6).floor() as i64 % 4;
+        let a = [0.25, 0.0, -0.25, 0.0][phase as usize];
+        vec![a, -0.6 * a]
+    });
+    let sim = Simulator::new(&m, SimOptions::default()).expect("compiles");
+    let q = sim
+        .simulate(&sig, &full(&m, &base(&m)), sig.len())
+        .expect("simulates")
+        .q;
+    assert!(held_runs(&q[0], 10) >= 2 && held_runs(&q[1], 10) >= 2);
+    let worst = check(
+        &m,
+        &sig,
+        &[0.3, -0.2],
+        &["m2", "r2", "I1", "I2", "b1", "b2", "Fc1", "Fc2"],
+        1e-6,
+    );
+    assert!(worst < TOLERANCE, "worst relative error {worst:.2e}");
+}
