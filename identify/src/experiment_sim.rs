@@ -1270,7 +1270,9 @@ impl SignalEffects {
 /// the fastest decay rate `lambda` (largest absolute row sum); RK4 is stable
 /// for real decays up to `2.78/h`, and the substep is kept below
 /// `2.5/lambda`. A gearbox holding the arm (`Fg1 = 0.1 N m` with `w = 1e-3`)
-/// needs about 0.1 ms where the default is 1 ms (notes trap 8).
+/// needs about 0.1 ms where the default is 1 ms (notes trap 8). Built only
+/// where a `sign()` is smoothed ([`DryFriction::Smooth`], or a fallback):
+/// a sticking dry friction is not stiff.
 #[derive(Clone, Debug)]
 pub(crate) struct StiffnessProbe {
     n: usize,
@@ -1490,9 +1492,9 @@ impl BlockStart {
 }
 
 /// When a simulation with the automatic substep diverges, it is tried once
-/// more with the substep divided by this: stiff dry friction (a gearbox
-/// holding the arm, notes trap 8) needs steps well below 1 ms, while most
-/// records do not.
+/// more with the substep divided by this: a smoothed dry friction (a gearbox
+/// holding the arm, notes trap 8) needs steps well below 1 ms, and so may a
+/// fit's wild trial point, while most records do not.
 pub const REFINE: f64 = 8.0;
 
 /// A compiled simulator of one model.

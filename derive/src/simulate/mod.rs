@@ -398,6 +398,8 @@ struct Stick {
     g: Vec<f64>,
     g_end: Vec<f64>,
     xt: Vec<f64>,
+    /// The state at the start of an integration stretch.
+    start: Vec<f64>,
     /// The event located in the last step: the joint and whether it was
     /// stuck.
     event: Option<(usize, bool)>,
@@ -419,6 +421,7 @@ impl Stick {
             g: vec![0.0; n],
             g_end: vec![0.0; n],
             xt: vec![0.0; 2 * n],
+            start: vec![0.0; 2 * n],
             event: None,
         }
     }
@@ -789,8 +792,6 @@ pub fn simulate(problem: &SimProblem, options: &SimOptions) -> Result<Trajectory
         _ => None,
     };
     let method = match (options.integrator, stiff) {
-        // sticking dry friction: events in the explicit method's dense output
-        (Integrator::Auto, _) if d.has_dry_friction() => Integrator::Explicit,
         (Integrator::Auto, Some(s)) if s.is_stiff() => Integrator::Implicit,
         (Integrator::Auto, _) => Integrator::Explicit,
         (m, _) => m,
@@ -929,10 +930,10 @@ pub fn simulate(problem: &SimProblem, options: &SimOptions) -> Result<Trajectory
 }
 
 /// Integrate from `t0` to `t1` with sticking dry friction: the mode is
-/// decided at `t0` and at every event, each event located in the
-/// Dormand-Prince step's dense output ([`Plant::locate`]); a sliding
-/// joint's velocity reaching zero is set to 0.0 there, a stuck joint's
-/// breakaway releases it.
+/// decided at `t0` and at every event, each event located in the step's
+/// dense output ([`Plant::locate`]: Dormand-Prince's own, the Rosenbrock
+/// method's cubic Hermite); a sliding joint's velocity reaching zero is set
+/// to 0.0 there, a stuck joint's breakaway releases it.
 fn advance_sticking(
     rk: &mut Stepper,
     plant: &mut Plant<'_>,
@@ -940,28 +941,32 @@ fn advance_sticking(
     t1: f64,
     x: &mut [f64],
 ) -> Result<(), RkError<SimError>> {
-    let Stepper::Explicit(dp) = rk else {
-        return Err(RkError::Rhs(SimError::Setup(
-            "sticking dry friction is simulated with the explicit integrator only; \
-             smooth it (`plantc sim --smooth-sign WIDTH`) to integrate implicitly"
-                .into(),
-        )));
-    };
     let n = x.len() / 2;
     let mut t = t0;
     let mut release = None;
     for _ in 0..=MAX_EVENTS {
         if plant.classify(t, x, release.take()).map_err(RkError::Rhs)? {
-            dp.restart();
+            rk.restart();
         }
+        let mut start = std::mem::take(&mut plant.stick.start);
+        start.copy_from_slice(x);
         let cell = RefCell::new(&mut *plant);
-        let reached = dp.advance_until(
-            &mut |tt: f64, xx: &[f64], dx: &mut [f64]| cell.borrow_mut().rhs(tt, xx, dx),
-            &mut |step: &Dense<'_>| cell.borrow_mut().locate(step),
-            t,
-            t1,
-            x,
-        )?;
+        let mut f = |tt: f64, xx: &[f64], dx: &mut [f64]| cell.borrow_mut().rhs(tt, xx, dx);
+        let mut stop = |step: &Dense<'_>| cell.borrow_mut().locate(step);
+        let reached = match rk {
+            Stepper::Explicit(dp) => dp.advance_until(&mut f, &mut stop, t, t1, x)?,
+            Stepper::Implicit(ro) => ro.advance_until(&mut f, &mut stop, t, t1, x)?,
+        };
+        // a stuck joint keeps its angle and zero speed exactly (the explicit
+        // method's stages keep them by arithmetic, the implicit method's
+        // solves only to rounding)
+        for j in 0..n {
+            if plant.stick.mode.stuck[j] {
+                x[j] = start[j];
+                x[n + j] = 0.0;
+            }
+        }
+        plant.stick.start = start;
         let Some(te) = reached else {
             return Ok(());
         };

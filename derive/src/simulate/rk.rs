@@ -135,15 +135,30 @@ const D6: f64 = -1453857185.0 / 822651844.0;
 const D7: f64 = 69997945.0 / 29380423.0;
 
 /// An accepted step with its continuous extension, for an event function
-/// ([`DormandPrince::advance_until`]).
+/// ([`DormandPrince::advance_until`],
+/// [`super::rosenbrock::Rosenbrock::advance_until`]).
 pub struct Dense<'a> {
     /// The step's start time.
     pub t: f64,
     /// Its length.
     pub h: f64,
-    y0: &'a [f64],
-    y1: &'a [f64],
-    k: &'a [Vec<f64>; 7],
+    pub(crate) y0: &'a [f64],
+    pub(crate) y1: &'a [f64],
+    pub(crate) kind: DenseKind<'a>,
+}
+
+/// How a [`Dense`] step interpolates.
+pub(crate) enum DenseKind<'a> {
+    /// Dormand-Prince's fourth-order extension from its seven stages.
+    Dopri(&'a [Vec<f64>; 7]),
+    /// The cubic Hermite interpolant of the end values and slopes (third
+    /// order; the Rosenbrock method's second-order steps need no more).
+    Hermite {
+        /// `f` at the start.
+        f0: &'a [f64],
+        /// `f` at the end.
+        f1: &'a [f64],
+    },
 }
 
 impl Dense<'_> {
@@ -155,8 +170,26 @@ impl Dense<'_> {
     /// The state at `t + theta h` (`0 <= theta <= 1`) by the method's
     /// fourth-order dense output (exact at both ends).
     pub fn at(&self, theta: f64, out: &mut [f64]) {
-        let (h, k) = (self.h, self.k);
+        let h = self.h;
         let s = 1.0 - theta;
+        let k = match self.kind {
+            DenseKind::Dopri(k) => k,
+            DenseKind::Hermite { f0, f1 } => {
+                let (t2, t3) = (theta * theta, theta * theta * theta);
+                let h00 = 2.0 * t3 - 3.0 * t2 + 1.0;
+                let h10 = t3 - 2.0 * t2 + theta;
+                let h01 = -2.0 * t3 + 3.0 * t2;
+                let h11 = t3 - t2;
+                for i in 0..out.len() {
+                    out[i] =
+                        h00 * self.y0[i] + h10 * h * f0[i] + h01 * self.y1[i] + h11 * h * f1[i];
+                }
+                if theta == 1.0 {
+                    out.copy_from_slice(self.y1);
+                }
+                return;
+            }
+        };
         for i in 0..out.len() {
             let ydiff = self.y1[i] - self.y0[i];
             let bspl = h * k[0][i] - ydiff;
@@ -345,7 +378,7 @@ impl DormandPrince {
                     h,
                     y0: x,
                     y1: &self.y1,
-                    k: &self.k,
+                    kind: DenseKind::Dopri(&self.k),
                 };
                 if let Some(theta) = stop(&dense).map_err(RkError::Rhs)? {
                     let theta = theta.clamp(0.0, 1.0);
