@@ -52,6 +52,7 @@ mod krate;
 mod lower;
 mod plant;
 mod rig;
+mod stick_slip;
 
 use std::fmt;
 use std::path::{Path, PathBuf};

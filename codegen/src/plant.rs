@@ -200,8 +200,24 @@ fn state_derivative(
     ps: &[V],
     shift: Option<(&[V], &[V])>,
 ) -> Result<(Vec<V>, Vec<V>), Error> {
+    state_derivative_with(g, model, frame, (xs, us, ps), shift, &[])
+}
+
+/// [`state_derivative`] with `extra` symbols bound too (the friction
+/// directions of a stick-slip mode).
+pub(crate) fn state_derivative_with(
+    g: &mut Graph,
+    model: &Model,
+    frame: &Frame,
+    (xs, us, ps): (&[V], &[V], &[V]),
+    shift: Option<(&[V], &[V])>,
+    extra: &[(Symbol, V)],
+) -> Result<(Vec<V>, Vec<V>), Error> {
     let n = frame.n();
     let mut e = env(g, model, xs, us, ps)?;
+    for (s, v) in extra {
+        e.bind(*s, *v);
+    }
     let theta = bind_angles(g, &mut e, frame, xs);
     if let Some((a0, d)) = shift {
         let (args, syms): (Vec<V>, Vec<Symbol>) = match frame {
@@ -261,6 +277,51 @@ fn state_diff(frame: &Frame, model: &Model, e: Expr, j: usize) -> Expr {
             Expr::add_all(terms)
         }
     }
+}
+
+/// One RK4 step of length `h` with `u` held, in the graph: the stages share
+/// every coefficient, and their sines and cosines come from those at `x`
+/// (`args0`, with the first stage `k1`) by the addition formulas.
+pub(crate) fn rk4_stages(
+    g: &mut Graph,
+    model: &Model,
+    frame: &Frame,
+    (xs, us, ps): (&[V], &[V], &[V]),
+    h: V,
+    (k1, args0): (&[V], &[V]),
+    extra: &[(Symbol, V)],
+) -> Result<Vec<V>, Error> {
+    let nx = xs.len();
+    let half = g.konst(0.5);
+    let hh = g.mul(half, h);
+    let six = g.konst(6.0);
+    let h6 = g.div(h, six);
+    let two = g.konst(2.0);
+    // stage increments d = w k and states x + d
+    let stage = |g: &mut Graph, k: &[V], w: V| -> (Vec<V>, Vec<V>) {
+        let d: Vec<V> = k.iter().map(|k| g.mul(w, *k)).collect();
+        let y = xs.iter().zip(&d).map(|(x, d)| g.add(*x, *d)).collect();
+        (y, d)
+    };
+    let at = |g: &mut Graph, y: &[V], d: &[V]| {
+        state_derivative_with(g, model, frame, (y, us, ps), Some((args0, d)), extra)
+    };
+    let (y2, d2) = stage(g, k1, hh);
+    let (k2, _) = at(g, &y2, &d2)?;
+    let (y3, d3) = stage(g, &k2, hh);
+    let (k3, _) = at(g, &y3, &d3)?;
+    let (y4, d4) = stage(g, &k3, h);
+    let (k4, _) = at(g, &y4, &d4)?;
+    let mut rk = Vec::with_capacity(nx);
+    for i in 0..nx {
+        let s23 = g.add(k2[i], k3[i]);
+        let s23 = g.mul(two, s23);
+        let s = g.add(k1[i], s23);
+        let s = g.add(s, k4[i]);
+        let t = g.mul(h6, s);
+        rk.push(g.add(xs[i], t));
+    }
+    Ok(rk)
 }
 
 /// The generated plant items.
@@ -374,45 +435,35 @@ pub(crate) fn plant_items(model: &Model, eqs: &Equations) -> Result<TokenStream,
 
     // RK4 with u held: the stages share every coefficient
     let h = g.input(quote!(h), Level::Call);
-    let half = g.konst(0.5);
-    let hh = g.mul(half, h);
-    let six = g.konst(6.0);
-    let h6 = g.div(h, six);
-    let two = g.konst(2.0);
-    let k1 = dyn_out.clone();
-    // stage increments d = w k and states x + d
-    let stage = |g: &mut Graph, k: &[V], w: V| -> (Vec<V>, Vec<V>) {
-        let d: Vec<V> = k.iter().map(|k| g.mul(w, *k)).collect();
-        let y = xs.iter().zip(&d).map(|(x, d)| g.add(*x, *d)).collect();
-        (y, d)
+    // with sticking dry friction, the stick-slip step instead
+    let stick =
+        crate::stick_slip::stick_roots(&mut g, model, eqs, ac.as_ref(), (&xs, &us, &ps), h)?;
+    let rk = match stick {
+        None => rk4_stages(
+            &mut g,
+            model,
+            &frame,
+            (&xs, &us, &ps),
+            h,
+            (&dyn_out, &args0),
+            &[],
+        )?,
+        Some(_) => Vec::new(),
     };
-    let (y2, d2) = stage(&mut g, &k1, hh);
-    let (k2, _) = state_derivative(&mut g, model, &frame, &y2, &us, &ps, Some((&args0, &d2)))?;
-    let (y3, d3) = stage(&mut g, &k2, hh);
-    let (k3, _) = state_derivative(&mut g, model, &frame, &y3, &us, &ps, Some((&args0, &d3)))?;
-    let (y4, d4) = stage(&mut g, &k3, h);
-    let (k4, _) = state_derivative(&mut g, model, &frame, &y4, &us, &ps, Some((&args0, &d4)))?;
-    let mut rk = Vec::new();
-    for i in 0..nx {
-        let s23 = g.add(k2[i], k3[i]);
-        let s23 = g.mul(two, s23);
-        let s = g.add(k1[i], s23);
-        let s = g.add(s, k4[i]);
-        let t = g.mul(h6, s);
-        rk.push(g.add(xs[i], t));
-    }
 
     let mut roots = dyn_out.clone();
     roots.extend(&jx);
     roots.extend(&ju);
-    roots.extend(&rk);
+    match &stick {
+        Some(st) => roots.extend(st.all()),
+        None => roots.extend(&rk),
+    }
     let plan = g.plan(&roots)?;
     let kref = quote!(k.0);
     let fd = g.function(&dyn_out, &plan, &kref)?;
     let fjx = g.function(&jx, &plan, &kref)?;
     let fju = g.function(&ju, &plan, &kref)?;
     let frk = g.function(&rk, &plan, &kref)?;
-
     let nk = idx(plan.len());
     let cstmts = &plan.stmts;
     let cvals = &plan.values;
@@ -442,6 +493,92 @@ pub(crate) fn plant_items(model: &Model, eqs: &Equations) -> Result<TokenStream,
     } else {
         quote!(let _ = x;)
     };
+    let stick_items = match &stick {
+        Some(st) => crate::stick_slip::stick_items(
+            st,
+            (
+                &g.function(&st.split, &plan, &kref)?,
+                &g.function(&st.mode, &plan, &kref)?,
+                &g.function(&st.rk, &plan, &kref)?,
+            ),
+        ),
+        None => TokenStream::new(),
+    };
+    // the bodies of the Runge-Kutta steps: the fused step, or with sticking
+    // dry friction the event-located stick-slip step
+    let (rk_method, rk_free, closed) = if stick.is_some() {
+        (
+            quote!(stick_step_k(
+                x,
+                &self.k,
+                h,
+                &mut |_: &[f64; N_STATES]| *u,
+                Some(u)
+            )),
+            quote!(stick_step_k(
+                x,
+                &PlantCoeffs::new(p),
+                h,
+                &mut |_: &[f64; N_STATES]| *u,
+                Some(u)
+            )),
+            quote! {
+                let u0 = control(x);
+                (stick_step_k(x, &self.k, h, &mut control, None), u0)
+            },
+        )
+    } else {
+        (
+            quote!(rk4_step_k(x, u, &self.k, h)),
+            quote!(rk4_step_k(x, u, &PlantCoeffs::new(p), h)),
+            quote! {
+                let u0 = control(x);
+                let k1 = dynamics_k(x, &u0, &self.k);
+                let mut y = [0.0; N_STATES];
+                let mut i = 0;
+                while i < N_STATES { y[i] = x[i] + 0.5 * h * k1[i]; i += 1; }
+                let k2 = dynamics_k(&y, &control(&y), &self.k);
+                let mut i = 0;
+                while i < N_STATES { y[i] = x[i] + 0.5 * h * k2[i]; i += 1; }
+                let k3 = dynamics_k(&y, &control(&y), &self.k);
+                let mut i = 0;
+                while i < N_STATES { y[i] = x[i] + h * k3[i]; i += 1; }
+                let k4 = dynamics_k(&y, &control(&y), &self.k);
+                let mut out = [0.0; N_STATES];
+                let mut i = 0;
+                while i < N_STATES {
+                    out[i] = x[i] + h / 6.0 * (k1[i] + 2.0 * (k2[i] + k3[i]) + k4[i]);
+                    i += 1;
+                }
+                (out, u0)
+            },
+        )
+    };
+    let stick_doc = if stick.is_some() {
+        quote! {
+            ///
+            /// Dry friction sticks: a joint at rest stays at rest (velocity
+            /// exactly 0) while the force needed to hold it is within its
+            /// static level, and breaks away above it; the switches are
+            /// located inside the step and it continues from each.
+        }
+    } else {
+        quote!()
+    };
+    let rk4_k = if stick.is_some() {
+        quote!()
+    } else {
+        quote! {
+            #[inline(always)]
+            fn rk4_step_k(x: &[f64; N_STATES], u: &[f64; N_INPUTS], k: &PlantCoeffs, h: f64) -> [f64; N_STATES] {
+                #rk_x
+                #srk
+                #(#rks)*
+                [#(#rko),*]
+            }
+        }
+    };
+
     let p_unused = if cstmts.is_empty() && cvals.is_empty() {
         quote!(let _ = p;)
     } else {
@@ -489,13 +626,9 @@ pub(crate) fn plant_items(model: &Model, eqs: &Equations) -> Result<TokenStream,
             [#(#juo),*]
         }
 
-        #[inline(always)]
-        fn rk4_step_k(x: &[f64; N_STATES], u: &[f64; N_INPUTS], k: &PlantCoeffs, h: f64) -> [f64; N_STATES] {
-            #rk_x
-            #srk
-            #(#rks)*
-            [#(#rko),*]
-        }
+        #rk4_k
+
+        #stick_items
 
         /// The plant with its parameters and their precomputed coefficients
         /// ([`PlantCoeffs`]): the fast way to call the model repeatedly.
@@ -558,9 +691,10 @@ pub(crate) fn plant_items(model: &Model, eqs: &Equations) -> Result<TokenStream,
 
             /// One classical Runge-Kutta step of length `h` [s] with `u` held
             /// (see [`rk4_step`]).
+            #stick_doc
             #[inline]
             pub fn rk4_step(&self, x: &[f64; N_STATES], u: &[f64; N_INPUTS], h: f64) -> [f64; N_STATES] {
-                rk4_step_k(x, u, &self.k, h)
+                #rk_method
             }
 
             /// One classical Runge-Kutta step of length `h` [s] of the closed
@@ -568,6 +702,7 @@ pub(crate) fn plant_items(model: &Model, eqs: &Equations) -> Result<TokenStream,
             /// every stage (a continuous-time controller, as in a
             /// continuous-time simulation), not held over the step. Returns
             /// the new state and the input at the start of the step.
+            #stick_doc
             #[inline]
             pub fn closed_loop_rk4_step(
                 &self,
@@ -575,25 +710,7 @@ pub(crate) fn plant_items(model: &Model, eqs: &Equations) -> Result<TokenStream,
                 h: f64,
                 mut control: impl FnMut(&[f64; N_STATES]) -> [f64; N_INPUTS],
             ) -> ([f64; N_STATES], [f64; N_INPUTS]) {
-                let u0 = control(x);
-                let k1 = dynamics_k(x, &u0, &self.k);
-                let mut y = [0.0; N_STATES];
-                let mut i = 0;
-                while i < N_STATES { y[i] = x[i] + 0.5 * h * k1[i]; i += 1; }
-                let k2 = dynamics_k(&y, &control(&y), &self.k);
-                let mut i = 0;
-                while i < N_STATES { y[i] = x[i] + 0.5 * h * k2[i]; i += 1; }
-                let k3 = dynamics_k(&y, &control(&y), &self.k);
-                let mut i = 0;
-                while i < N_STATES { y[i] = x[i] + h * k3[i]; i += 1; }
-                let k4 = dynamics_k(&y, &control(&y), &self.k);
-                let mut out = [0.0; N_STATES];
-                let mut i = 0;
-                while i < N_STATES {
-                    out[i] = x[i] + h / 6.0 * (k1[i] + 2.0 * (k2[i] + k3[i]) + k4[i]);
-                    i += 1;
-                }
-                (out, u0)
+                #closed
             }
         }
 
@@ -626,9 +743,10 @@ pub(crate) fn plant_items(model: &Model, eqs: &Equations) -> Result<TokenStream,
         /// coefficients computed once for the four). The sines and cosines
         /// of the coordinates at stages 2 to 4 come from those at `x` by the
         /// addition formulas with `math::sin_cos_step` of the stage increment.
+        #stick_doc
         #[inline]
         pub fn rk4_step(x: &[f64; N_STATES], u: &[f64; N_INPUTS], p: &Params, h: f64) -> [f64; N_STATES] {
-            rk4_step_k(x, u, &PlantCoeffs::new(p), h)
+            #rk_free
         }
     })
 }

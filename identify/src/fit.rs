@@ -61,7 +61,7 @@ use serde::Serialize;
 use crate::closed_loop::LoopLaw;
 use crate::data::Experiment;
 use crate::experiment_sim::{
-    dynamics_outputs, InitialVelocity, Signals, SimError, SimOptions, Simulator,
+    dynamics_outputs, DryFriction, InitialVelocity, Signals, SimError, SimOptions, Simulator,
 };
 use crate::identifiability::{analyse, to_fix, Fixed, Identifiability, ParamInfo};
 use crate::initial_state::{prior_bound, velocity_prior, Prior};
@@ -637,7 +637,7 @@ fn offset_coordinates(
     model: &Model,
     how: &Offsets,
     law: Option<&LoopLaw>,
-    width: Option<f64>,
+    friction: DryFriction,
 ) -> Result<Vec<usize>, FitError> {
     match how {
         Offsets::None => Ok(Vec::new()),
@@ -654,7 +654,7 @@ fn offset_coordinates(
             })
             .collect(),
         Offsets::Auto => {
-            let (_, outs) = dynamics_outputs(model, width)?;
+            let outs = dynamics_outputs(model, friction)?.outs;
             let outs: Vec<_> = outs.iter().map(|e| model.expand_derived(*e)).collect();
             Ok((0..model.coordinates.len())
                 .filter(|&i| {
@@ -989,12 +989,8 @@ impl<'a> Setup<'a> {
             .map(|i| sigs.iter().map(|s| s.q[i].as_slice()).collect())
             .collect();
         let weights = channel_weights(&names, &records, &opts.weights);
-        let offset_coords = offset_coordinates(
-            model,
-            &opts.offsets,
-            law.as_ref(),
-            opts.sim.dry_friction_width,
-        )?;
+        let offset_coords =
+            offset_coordinates(model, &opts.offsets, law.as_ref(), opts.sim.dry_friction)?;
         Ok(Setup {
             model,
             sigs,

@@ -76,7 +76,8 @@ pub use equation_error::{
     EquationError, EquationErrorOptions, Regressor, ScaleFixed, Score, Share,
 };
 pub use experiment_sim::{
-    velocity_at, BlockStart, InitialVelocity, Signals, SimError, SimOptions, Simulator, Trajectory,
+    velocity_at, BlockStart, DryFriction, InitialVelocity, Signals, SimError, SimOptions,
+    Simulator, Trajectory,
 };
 pub use fit::{
     fit, fit_with_progress, resolve_closed_loop, signals_for, ClosedLoop, Estimate,
@@ -97,7 +98,8 @@ pub use story::{
     StoryOptions, StoryProgress,
 };
 pub use synth::{
-    synthesize, EffectSpec, ExperimentSpec, SynthError, SynthOptions, SynthSpec, Synthesized,
+    friction_name, parse_friction, synthesize, EffectSpec, ExperimentSpec, SynthError,
+    SynthOptions, SynthSpec, Synthesized,
 };
 pub use validate::{
     as_experiments, validate, ChannelScore, ExperimentValidation, ValidateOptions, Validation,

@@ -308,6 +308,11 @@ pub struct SynthArgs {
     /// Simulation substep (s).
     #[arg(long, default_value_t = 1e-4)]
     pub substep: f64,
+    /// Dry friction of the true model: `sticking` (a joint at rest stays at
+    /// rest below its static level, as on a rig) or `smooth:WIDTH` (the
+    /// `tanh(v / WIDTH)` law of earlier versions, e.g. `smooth:1e-3`).
+    #[arg(long, value_name = "LAW", default_value = "sticking")]
+    pub friction: String,
     /// Name of the case in truth.json (default: the directory's name).
     #[arg(long)]
     pub case: Option<String>,
@@ -704,8 +709,10 @@ pub struct SimArgs {
     #[arg(long, value_name = "HZ", default_value_t = 1000.0)]
     pub output_rate: f64,
     /// Replace every `sign(v)` of the equations (dry friction) by
-    /// `tanh(v / WIDTH)`, e.g. `--smooth-sign 1e-3` (rad/s): exact dry friction
-    /// makes a sticking joint chatter and the integrator stall.
+    /// `tanh(v / WIDTH)`, e.g. `--smooth-sign 1e-3` (rad/s). Without it dry
+    /// friction sticks: a joint at rest stays at rest while the force on it
+    /// is below its static level (stick-slip switches located by the
+    /// integrator).
     #[arg(long, value_name = "WIDTH")]
     pub smooth_sign: Option<f64>,
     /// Relative integrator tolerance (default 1e-8; absolute = rtol/100).

@@ -11,7 +11,7 @@ use common::{model, plantc, s, tmp};
 /// `alpha0 = 135deg` is exactly 1536 counts of 4096 and `alpha0 = 180deg`
 /// exactly 2048, so the recorded initial state equals the true one and the
 /// only difference left between the data and a simulation of the same model
-/// is the encoder rounding (plus the 1 ms vs 0.1 ms RK4 step, far smaller).
+/// is the encoder rounding (plus the 2 ms vs 0.1 ms RK4 step, far smaller).
 fn clean_round_trip_data(dir: &Path) {
     let (code, out, err) = plantc(&[
         "synth",
@@ -401,4 +401,49 @@ fn every_effect_of_the_vocabulary_round_trips_through_its_true_model() {
     // 5 force effects on 2 coordinates at least (more once sensor and
     // actuator effects are in the table)
     assert!(cases >= 10, "{cases} cases");
+}
+
+/// `--friction` chooses the true model's dry-friction law (sticking by
+/// default) and truth.json records it; a bad law is an input error naming
+/// the token.
+#[test]
+fn friction_law_is_chosen_and_recorded() {
+    let dir = tmp("friction");
+    for (law, want) in [(None, "sticking"), (Some("smooth:1e-3"), "smooth:1e-3")] {
+        let out_dir = dir.join(want.replace(':', "_"));
+        let mut args = vec![
+            "synth".to_string(),
+            model(),
+            "--experiment".into(),
+            "free_swing:alpha0=135deg,duration=1".into(),
+            "-o".into(),
+            s(&out_dir),
+        ];
+        if let Some(l) = law {
+            args.extend(["--friction".to_string(), l.to_string()]);
+        }
+        let args: Vec<&str> = args.iter().map(String::as_str).collect();
+        let (code, out, err) = plantc(&args);
+        assert_eq!(code, 0, "{out}{err}");
+        let truth: serde_json::Value =
+            serde_json::from_str(&std::fs::read_to_string(out_dir.join("truth.json")).unwrap())
+                .unwrap();
+        assert_eq!(truth["dry_friction"], want);
+    }
+    let (code, _, err) = plantc(&[
+        "synth",
+        &model(),
+        "--experiment",
+        "free_swing:alpha0=135deg,duration=1",
+        "--friction",
+        "smooth:-1",
+        "-o",
+        &s(&dir.join("bad")),
+    ]);
+    assert_eq!(code, 2, "{err}");
+    assert!(
+        err.contains("smooth:-1") && err.contains("positive"),
+        "{err}"
+    );
+    let _ = std::fs::remove_dir_all(&dir);
 }
