@@ -554,6 +554,19 @@ impl<'a> Judge<'a> {
         Some(self.effect_test(&r.candidate, m, r.fit.as_ref()?, s0, nested))
     }
 
+    /// [`Judge::effect_test`] asking only whether the effect is needed at
+    /// all, whatever its form (the removal of an effect; its form is the
+    /// question of its simpler nested effect).
+    pub(crate) fn need_test(
+        &self,
+        effect: &Candidate,
+        m: &Model,
+        f: &FitResult,
+        s0: f64,
+    ) -> EffectTest {
+        self.effect_test_inner(effect, m, f, s0, false, false)
+    }
+
     /// The test of `effect` in model `m` fitted by `f` against a fit
     /// without it of sum of squares `s0` (see [`Judge::test`]).
     pub(crate) fn effect_test(
@@ -563,6 +576,19 @@ impl<'a> Judge<'a> {
         f: &FitResult,
         s0: f64,
         nested: bool,
+    ) -> EffectTest {
+        self.effect_test_inner(effect, m, f, s0, nested, true)
+    }
+
+    /// [`Judge::effect_test`]; without `form`, the form is not asked.
+    fn effect_test_inner(
+        &self,
+        effect: &Candidate,
+        m: &Model,
+        f: &FitResult,
+        s0: f64,
+        nested: bool,
+        form: bool,
     ) -> EffectTest {
         let k = if nested {
             effect.parameters.len().saturating_sub(1).max(1)
@@ -576,7 +602,7 @@ impl<'a> Judge<'a> {
                 .position(|p| p.name == name)
                 .map_or(f64::NAN, |i| f.base[i])
         };
-        t.in_own_form = effect.in_own_form(value);
+        t.in_own_form = !form || effect.in_own_form(value);
         if t.likely() && t.in_own_form {
             let mut base = f.base.clone();
             for (name, v) in effect.null_values(nested, value) {

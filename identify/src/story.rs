@@ -198,6 +198,10 @@ pub struct Simplification {
     pub cost_with: f64,
     /// ...and with `to` (and `then`), refitted.
     pub cost_simpler: f64,
+    /// The decision rule's test of `from` against `to`, which it failed
+    /// (None for the replacement of a Stribeck friction fitted to no shape
+    /// of its own, decided by the criterion between the two models).
+    pub test: Option<EffectTest>,
     /// Its stage in [`Story::stages`].
     pub stage: usize,
 }
@@ -736,7 +740,7 @@ impl EndSteps {
             else {
                 continue;
             };
-            let Some(test) = self.test(k, &f2, false, experiments, &dopts) else {
+            let Some(test) = self.need(k, &f2, experiments, &dopts) else {
                 continue;
             };
             if !test.passes() {
@@ -751,7 +755,7 @@ impl EndSteps {
                 continue;
             };
             if !test.passes() {
-                self.adopt(k, (to, None), (text2, f2), experiments, opts)?;
+                self.adopt(k, (to, None), (text2, f2), Some(test), experiments, opts)?;
             }
         }
         for k in 0..self.applied.len() {
@@ -805,10 +809,27 @@ impl EndSteps {
             ) {
                 write_fitted(&mut to, &f3);
                 write_fitted(&mut then, &f3);
-                self.adopt(k, (to, Some(then)), (text3, f3), experiments, opts)?;
+                self.adopt(k, (to, Some(then)), (text3, f3), None, experiments, opts)?;
             }
         }
         Ok(())
+    }
+
+    /// The decision rule's test of whether round `k`'s effect is needed at
+    /// all in the model as it stands (whatever its form: see
+    /// [`EndSteps::test`]) against `without`, a fit without it.
+    fn need(
+        &self,
+        k: usize,
+        without: &FitResult,
+        experiments: &[Experiment],
+        dopts: &DiagnoseOptions,
+    ) -> Option<EffectTest> {
+        let effect = self.applied.get(k)?.as_ref()?;
+        let m = model_from_text("final", &self.text).ok()?;
+        let judge = Judge::new(&m, experiments, dopts, without);
+        let s0 = judge.ssr(without);
+        Some(judge.need_test(effect, &m, &self.fit, s0))
     }
 
     /// The decision rule's test of round `k`'s effect in the model as it
@@ -837,6 +858,7 @@ impl EndSteps {
         k: usize,
         (to, then): (EffectInstance, Option<EffectInstance>),
         (text, f): (String, FitResult),
+        test: Option<EffectTest>,
         experiments: &[Experiment],
         opts: &StoryOptions,
     ) -> Result<(), StoryError> {
@@ -850,6 +872,7 @@ impl EndSteps {
             then: then.clone(),
             cost_with: self.fit.after_cost,
             cost_simpler: f.after_cost,
+            test,
             stage: self.stages.len(),
         };
         self.advance(&simple.stage_label(), (text, f), experiments, opts)?;
@@ -942,7 +965,28 @@ impl EndSteps {
             warm: Some(self.fit.warm.clone()),
             ..opts.fit.clone()
         };
-        let f = fit(&m2, experiments, &fo).ok()?;
+        let f = fit(&m2, experiments, &fo).ok();
+        // the values the bigger model fitted can trap the smaller one (a
+        // Stribeck friction's levels for a Coulomb friction: 4.7x the
+        // floor, where its fit from the nominal values reaches it): when
+        // it ends above the model as it stands, again from the nominal
+        // values, the better kept
+        let f = match f {
+            Some(f) if f.after_cost <= self.fit.after_cost => f,
+            first => {
+                let cold = fit(&m2, experiments, &opts.fit).ok();
+                match (first, cold) {
+                    (Some(a), Some(b)) => {
+                        if b.after_cost < a.after_cost {
+                            b
+                        } else {
+                            a
+                        }
+                    }
+                    (a, b) => a.or(b)?,
+                }
+            }
+        };
         if let Some(put) = &mut put {
             write_fitted(put, &f);
         }

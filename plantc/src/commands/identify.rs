@@ -430,19 +430,20 @@ fn story(
             None => {
                 let _ = writeln!(
                     out,
-                    "\n{n}. simplification: with the later effects in, `{}` (round {}) does no better than `{}` (cost {:.3e} with it, {:.3e} with the simpler one: {ratio:.2}x); replaced:\n{}",
+                    "\n{n}. simplification: with the later effects in, `{}` (round {}) no longer passes the decision rule against the simpler `{}` it contains (weighted RMS {:.3e} with it, {:.3e} with the simpler one: ratio {ratio:.3}; {}); replaced:\n{}",
                     simple.from.label(),
                     simple.round,
                     simple.to.label(),
                     simple.cost_with,
                     simple.cost_simpler,
+                    simple.test.as_ref().map_or_else(String::new, |t| t.describe()),
                     indent(&simple.to.snippet())
                 );
             }
             Some(then) => {
                 let _ = writeln!(
                     out,
-                    "\n{n}. simplification: `{}` (round {}) was fitted to no shape of its own (no hump, or its velocity at a bound of its box); with `{}` in its place the diagnosis names `{}`, and the model with both reaches cost {:.3e} against {:.3e} ({ratio:.2}x); replaced and added:\n{}\n{}",
+                    "\n{n}. simplification: `{}` (round {}) was fitted to no shape of its own (no hump, or its velocity at a bound of its box); with `{}` in its place the diagnosis names `{}`, and the model with both (weighted RMS {:.3e} against {:.3e}, ratio {ratio:.3}) has the lower information criterion; replaced and added:\n{}\n{}",
                     simple.from.label(),
                     simple.round,
                     simple.to.label(),
