@@ -157,7 +157,12 @@ pub fn residual_test(
         if x0 == 0.0 || k >= x.len() {
             return 0.0;
         }
-        x[..x.len() - k].iter().zip(&x[k..]).map(|(a, b)| a * b).sum::<f64>() / x0
+        x[..x.len() - k]
+            .iter()
+            .zip(&x[k..])
+            .map(|(a, b)| a * b)
+            .sum::<f64>()
+            / x0
     };
     let rho_e: Vec<f64> = (0..=reach).map(|k| rho(&e, e0, k)).collect();
     let cross = inputs
@@ -188,10 +193,7 @@ pub fn residual_test(
                 .collect();
             // Bartlett: var = (1/N) sum_j rho_e(j) rho_u(j), j = -reach..reach
             let var = (rho_e[0] * rho(&u, u0, 0)
-                + 2.0
-                    * (1..=reach)
-                        .map(|j| rho_e[j] * rho(&u, u0, j))
-                        .sum::<f64>())
+                + 2.0 * (1..=reach).map(|j| rho_e[j] * rho(&u, u0, j)).sum::<f64>())
             .max(1.0)
                 / n.max(1) as f64;
             let cband = Z99 * var.sqrt();
@@ -264,7 +266,11 @@ mod tests {
         }
         let t = residual_test("x", "a", &c, &[("u", &cu)], 25, 0.002);
         assert!(t.cross[0].independent, "{}", t.summary());
-        assert!(t.cross[0].band > 2.0 * Z99 / 5000f64.sqrt(), "{}", t.cross[0].band);
+        assert!(
+            t.cross[0].band > 2.0 * Z99 / 5000f64.sqrt(),
+            "{}",
+            t.cross[0].band
+        );
         // residual = input 3 samples earlier (plus noise): cross peak at +3
         let r: Vec<f64> = (0..5000)
             .map(|k| if k >= 3 { u[k - 3] } else { 0.0 } + 0.1 * e[k])
