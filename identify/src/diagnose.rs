@@ -615,6 +615,7 @@ impl<'a> Judge<'a> {
                     Ok(without) => Contribution::between(
                         &f.simulated,
                         &without,
+                        &self.measured,
                         &self.noise,
                         &self.records,
                         &self.channels,
@@ -623,6 +624,7 @@ impl<'a> Judge<'a> {
                     // without the effect): the effect holds it together
                     Err(_) => Contribution {
                         size: f64::INFINITY,
+                        remaining: 0.0,
                         experiment: String::new(),
                         channel: "(the model diverges without it)".to_string(),
                     },
