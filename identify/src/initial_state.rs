@@ -16,7 +16,9 @@
 //!   (which grows where the motion is not a quadratic over the window: a
 //!   release transient) and the channel's noise floor (a reading that does
 //!   not change over the window still allows any speed below about a
-//!   quantum per window);
+//!   quantum per window), and, added in quadrature, the difference between
+//!   that slope and the local line's on the same samples (the smoother's
+//!   own bias, largest where a one-sided window meets a transient);
 //! - **position** (blocks that estimate theirs: segments, or
 //!   `--estimate-initial positions`): the measured value, within the
 //!   channel's noise: the unknown is the deviation `delta` from the
@@ -129,11 +131,32 @@ pub fn smoothed_state(t: &[f64], y: &[f64], k: usize, noise: f64) -> (f64, Prior
         })
         .sum();
     let s2 = (rss / (count - 3).max(1) as f64).max(noise * noise);
+    // the local line's slope on the same samples: what changes with the
+    // smoother's order is its own bias, and it counts in the prior (at a
+    // record's start inside a fast transient the quadratic extrapolates:
+    // flat for three samples, then 250 rad/s^2, its slope at t0 -1.3 rad/s
+    // where the line's is +0.9 and the truth about 0)
+    let (mut sl, mut ss, mut st, mut sst) = (0.0, 0.0, 0.0, 0.0);
+    for i in a..=b {
+        let s = (t[i] - tk) / scale;
+        sl += y[i];
+        ss += s;
+        st += s * y[i];
+        sst += s * s;
+    }
+    let m_count = count as f64;
+    let den = m_count * sst - ss * ss;
+    let line = if den > 0.0 {
+        (m_count * st - ss * sl) / den
+    } else {
+        c[1]
+    };
+    let bias = (c[1] - line) / scale;
     (
         c[0],
         Prior {
             mean: c[1] / scale,
-            sigma: (s2 * inv[4]).sqrt() / scale,
+            sigma: ((s2 * inv[4]) / (scale * scale) + bias * bias).sqrt(),
         },
     )
 }

@@ -20,8 +20,9 @@
 //! - **k-step-ahead prediction** (`horizon` in s): from each window start
 //!   `t0` the model is simulated from the smoothed state there (a local
 //!   quadratic through the samples within 10 ms on either side: its value
-//!   minus the offsets, its slope; a recorded controller starts from its
-//!   filter state on the data),
+//!   minus the offsets, its slope; at a record's start, where a smoother
+//!   could only extrapolate, the state fitted over the first samples; a
+//!   recorded controller starts from its filter state on the data),
 //!   and the prediction at `t` is taken from the latest window that starts
 //!   at least `horizon` before `t`. Windows start every tenth of the
 //!   horizon, so predictions are between `horizon` and `1.1 horizon` ahead:
@@ -207,13 +208,23 @@ pub fn validate(
     let full = pb.full_at(&pt.g);
     let model_off = setup.sim.model_offsets(&full).map_err(FitError::Sim)?;
     let noise: Vec<f64> = setup.weights().iter().map(|w| w.noise).collect();
+    // the state at each record's start: the fitted one (the model over the
+    // first samples, with the priors), when the fit could be simulated
+    let starts: Vec<Option<Vec<f64>>> = (0..experiments.len())
+        .map(|e| {
+            let b = pb.blocks.iter().position(|b| b.exp == e)?;
+            fitted.then(|| {
+                pb.block_start(b, &pt, &model_off, pb.blocks[b].range.clone())
+                    .x0
+            })
+        })
+        .collect();
     let predictions: Vec<Option<Vec<Vec<f64>>>> = match opts.horizon {
         None => vec![None; experiments.len()],
         Some(h) => par_each(experiments.len(), |e| {
             predict_ahead(
                 &setup,
-                &pb.exp_offsets(&pt.g, e),
-                &model_off,
+                (&pb.exp_offsets(&pt.g, e), &model_off, starts[e].as_deref()),
                 &full,
                 &noise,
                 e,
@@ -298,8 +309,7 @@ pub fn validate(
 /// k-step-ahead predictions of experiment `e` (see the module docs).
 fn predict_ahead(
     setup: &Setup<'_>,
-    exp_off: &[f64],
-    model_off: &[f64],
+    (exp_off, model_off, start): (&[f64], &[f64], Option<&[f64]>),
     full: &[f64],
     noise: &[f64],
     e: usize,
@@ -317,10 +327,17 @@ fn predict_ahead(
     while k0 + hk < len {
         let end = (k0 + hk + stride).min(len);
         let mut x0 = vec![0.0; 2 * n];
-        for i in 0..n {
-            let (q, v) = smoothed_state(&sig.t, &sig.q[i], k0, noise[i]);
-            x0[i] = q - model_off[i] - exp_off[i];
-            x0[n + i] = if v.mean.is_finite() { v.mean } else { 0.0 };
+        match start.filter(|_| k0 == 0) {
+            // at the record's start a smoother only extrapolates: the
+            // state fitted over the first samples
+            Some(s) => x0.copy_from_slice(s),
+            None => {
+                for i in 0..n {
+                    let (q, v) = smoothed_state(&sig.t, &sig.q[i], k0, noise[i]);
+                    x0[i] = q - model_off[i] - exp_off[i];
+                    x0[n + i] = if v.mean.is_finite() { v.mean } else { 0.0 };
+                }
+            }
         }
         let start = BlockStart {
             range: k0..end,
