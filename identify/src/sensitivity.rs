@@ -958,7 +958,7 @@ impl Dynamics for SensDynamics<'_> {
             for i in 0..n {
                 let s = mode.dir[i];
                 if s != 0.0 {
-                    self.tmp[i] = self.tmp[i] - d[i] * s;
+                    self.tmp[i] -= d[i] * s;
                 }
             }
             Some(&mode.dir[..])

@@ -175,14 +175,14 @@ pub fn decompose(eqs: &Equations, width: f64) -> DryFriction {
             ));
         }
     };
-    for i in 0..n {
+    for (i, level) in levels.iter().enumerate() {
         let mut found = Vec::new();
         signs_in(smooth.forces[i], &mut found);
         for s in found {
             note(s, format!("the force on `{}`", name(i)), &mut map);
         }
         let mut found = Vec::new();
-        signs_in(levels[i], &mut found);
+        signs_in(*level, &mut found);
         for s in found {
             note(
                 s,

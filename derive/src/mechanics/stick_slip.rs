@@ -313,12 +313,12 @@ impl StickSlip {
     ) -> bool {
         let n = self.n;
         let mut any = false;
-        for i in 0..n {
+        for (i, (&dry, &vi)) in self.dry.iter().zip(v).enumerate() {
             mode.stuck[i] = false;
             mode.dir[i] = 0.0;
-            if self.dry[i] {
-                if v[i] != 0.0 {
-                    mode.dir[i] = v[i].signum();
+            if dry {
+                if vi != 0.0 {
+                    mode.dir[i] = vi.signum();
                 } else {
                     mode.stuck[i] = true;
                     any = true;
@@ -360,7 +360,7 @@ impl StickSlip {
                 let f = force[i].abs();
                 if f > fs {
                     let ratio = if fs > 0.0 { f / fs } else { f64::INFINITY };
-                    if best.map_or(true, |(_, r)| ratio > r) {
+                    if best.is_none_or(|(_, r)| ratio > r) {
                         best = Some((i, ratio));
                     }
                 }
