@@ -684,3 +684,98 @@ impl Rk4Events {
         )
     }
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// One joint: held while `|b| <= D`, released against the holding
+    /// force (along `b`) above it; a sliding joint keeps its velocity's
+    /// direction.
+    #[test]
+    fn one_joint_rules() {
+        let mut r = StickSlip::new(&[true]);
+        let mut mode = Mode::new(1);
+        assert!(r.classify(&[2.0], &[0.3], &[0.5], &[0.0], None, &mut mode));
+        assert!(mode.stuck[0]);
+        let mut a = [0.0];
+        r.accelerations(&[2.0], &[0.3], &[0.5], &mode, &mut a);
+        let mut f = [0.0];
+        r.holding_forces(&[2.0], &[0.3], &a, &mode, &mut f);
+        assert_eq!((a[0], f[0]), (0.0, -0.3));
+        assert!(r.classify(&[2.0], &[-0.7], &[0.5], &[0.0], None, &mut mode));
+        assert_eq!((mode.stuck[0], mode.dir[0]), (false, -1.0));
+        r.accelerations(&[2.0], &[-0.7], &[0.5], &mode, &mut a);
+        // (-0.7 + 0.5) / 2
+        assert!((a[0] + 0.1).abs() < 1e-15, "{}", a[0]);
+        assert!(r.classify(&[2.0], &[-0.7], &[0.5], &[0.2], None, &mut mode));
+        assert_eq!((mode.stuck[0], mode.dir[0]), (false, 1.0));
+        let mut g = [0.0];
+        r.guards(&[0.2], &[0.5], &[0.0], &mode, &mut g);
+        assert_eq!(g[0], 0.2);
+    }
+
+    /// Random coupled joints (symmetric positive definite `M`): the joints
+    /// released by [`StickSlip::classify`] accelerate in their direction,
+    /// the held ones (but the few held again after a release, whose force
+    /// may exceed their level) within their level; the decision is
+    /// deterministic.
+    #[test]
+    fn coupled_joints_are_decided_consistently() {
+        let mut seed = 0x2545_f491_4f6c_dd1du64;
+        let mut next = || {
+            seed ^= seed << 13;
+            seed ^= seed >> 7;
+            seed ^= seed << 17;
+            (seed >> 11) as f64 / (1u64 << 53) as f64 - 0.5
+        };
+        let (mut held, mut over) = (0, 0);
+        for n in [2usize, 3] {
+            let mut r = StickSlip::new(&vec![true; n]);
+            for _ in 0..2000 {
+                let l: Vec<f64> = (0..n * n).map(|_| next()).collect();
+                let mut m = vec![0.0; n * n];
+                for i in 0..n {
+                    for j in 0..n {
+                        m[i * n + j] = (0..n).map(|k| l[i * n + k] * l[j * n + k]).sum::<f64>()
+                            + if i == j { 0.3 } else { 0.0 };
+                    }
+                }
+                let b: Vec<f64> = (0..n).map(|_| next()).collect();
+                let d: Vec<f64> = (0..n).map(|_| 0.5 * (next() + 0.5)).collect();
+                let v = vec![0.0; n];
+                let mut mode = Mode::new(n);
+                assert!(r.classify(&m, &b, &d, &v, None, &mut mode));
+                let mut again = Mode::new(n);
+                r.classify(&m, &b, &d, &v, None, &mut again);
+                assert_eq!(mode, again);
+                let mut a = vec![0.0; n];
+                let mut f = vec![0.0; n];
+                r.accelerations(&m, &b, &d, &mode, &mut a);
+                r.holding_forces(&m, &b, &a, &mode, &mut f);
+                for i in 0..n {
+                    if mode.stuck[i] {
+                        assert_eq!(a[i], 0.0);
+                        held += 1;
+                        over += usize::from(f[i].abs() > d[i] * (1.0 + 1e-12));
+                    } else {
+                        assert!(a[i] * mode.dir[i] >= -1e-12, "{m:?} {b:?} {d:?}");
+                    }
+                }
+            }
+        }
+        assert!(
+            held > 1000 && over * 20 < held,
+            "{over} of {held} held above their level"
+        );
+    }
+
+    /// Illinois finds a root to a few ulps and ends on the crossed side.
+    #[test]
+    fn illinois_ends_past_the_root() {
+        let root = 0.3f64;
+        let t = illinois(|x| Some(root - x * x * 3.0), (0.0, root), (1.0, root - 3.0)).unwrap();
+        assert!((t - 0.1f64.sqrt()).abs() < 1e-15);
+        assert!(root - t * t * 3.0 <= 0.0);
+    }
+}
