@@ -66,7 +66,7 @@
 
 use std::fmt;
 
-use plantc_derive::mechanics::stick_slip::{first_crossing, Mode, StickSlip, MAX_EVENTS};
+use plantc_derive::mechanics::stick_slip::{first_crossing, mat_vec, Mode, StickSlip, MAX_EVENTS};
 use plantc_derive::mechanics::{
     decompose_dry_friction, derive_equations, flat_outputs, small_lu, smooth_signs,
     FALLBACK_SIGN_WIDTH,
@@ -1657,7 +1657,7 @@ impl<'s> StateDynamics<'s> {
             return false;
         }
         StickSlip::effective_forces(&self.b, &self.d, &self.mode, &mut self.beff);
-        mat_vec_n(&self.minv, n, &self.beff, &mut self.acc);
+        mat_vec(&self.minv, n, &self.beff, &mut self.acc);
         true
     }
 
@@ -1667,12 +1667,7 @@ impl<'s> StateDynamics<'s> {
             return true;
         }
         let n = self.n;
-        let dry = self.rules.dry();
-        if !(0..n).any(|i| dry[i] && x[n + i] == 0.0) {
-            for i in 0..n {
-                self.mode.stuck[i] = false;
-                self.mode.dir[i] = if dry[i] { x[n + i].signum() } else { 0.0 };
-            }
+        if self.rules.slide(&x[n..2 * n], &mut self.mode) {
             return true;
         }
         self.eval(x, u);
@@ -1715,19 +1710,6 @@ impl<'s> StateDynamics<'s> {
         self.rules
             .guards(&x[n..2 * n], &self.d, &self.force, &self.mode, g);
         true
-    }
-}
-
-/// `y = a x` for the row-major `n x n` matrix `a` (the order of the
-/// sensitivity simulator's own product, so both give the same bits).
-#[inline]
-pub(crate) fn mat_vec_n(a: &[f64], n: usize, x: &[f64], y: &mut [f64]) {
-    for (i, yi) in y.iter_mut().enumerate().take(n) {
-        *yi = a[i * n..(i + 1) * n]
-            .iter()
-            .zip(x)
-            .map(|(p, q)| p * q)
-            .sum();
     }
 }
 

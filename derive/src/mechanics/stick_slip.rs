@@ -206,6 +206,21 @@ impl StickSlip {
         self.any_dry
     }
 
+    /// The mode when no dry joint is at rest (`v_i != 0.0` for each):
+    /// every dry joint slides in its velocity's direction, nothing needs
+    /// evaluating; returns false (mode untouched) when some dry joint is at
+    /// rest, so [`StickSlip::classify`] must decide.
+    pub fn slide(&self, v: &[f64], mode: &mut Mode) -> bool {
+        if self.dry.iter().zip(v).any(|(d, vi)| *d && *vi == 0.0) {
+            return false;
+        }
+        for (i, (&d, &vi)) in self.dry.iter().zip(v).enumerate() {
+            mode.stuck[i] = false;
+            mode.dir[i] = if d { vi.signum() } else { 0.0 };
+        }
+        true
+    }
+
     /// `minv` = `M_FF^-1` embedded in an `n x n` matrix with zero rows and
     /// columns for the stuck joints (`M^-1` itself when none is stuck; by
     /// [`invert`], cofactors up to 3 free joints). False when `M_FF` is
@@ -403,9 +418,10 @@ impl StickSlip {
     }
 }
 
-/// `y = a x` for the row-major `n x n` matrix `a`.
+/// `y = a x` for the row-major `n x n` matrix `a` (one summation order,
+/// shared by every simulator that must agree to the bit).
 #[inline]
-fn mat_vec(a: &[f64], n: usize, x: &[f64], y: &mut [f64]) {
+pub fn mat_vec(a: &[f64], n: usize, x: &[f64], y: &mut [f64]) {
     for (i, yi) in y.iter_mut().enumerate().take(n) {
         *yi = a[i * n..(i + 1) * n]
             .iter()
@@ -588,13 +604,7 @@ impl Rk4Events {
         release: Option<usize>,
     ) -> bool {
         let n = self.rules.n;
-        let dry = &self.rules.dry;
-        if !(0..n).any(|i| dry[i] && x[n + i] == 0.0) {
-            // every dry joint slides: no evaluation needed
-            for i in 0..n {
-                self.mode.stuck[i] = false;
-                self.mode.dir[i] = if dry[i] { x[n + i].signum() } else { 0.0 };
-            }
+        if self.rules.slide(&x[n..2 * n], &mut self.mode) {
             return true;
         }
         if !sys.split(x, &mut self.m, &mut self.b, &mut self.d) {
