@@ -50,8 +50,8 @@
 //! (a sliding joint's velocity reaching zero, a stuck joint's holding force
 //! reaching its level) is cut at the switch, located by Illinois iterations
 //! on the step length, and the rest of the segment continues from there as
-//! a new segment (see [`integrate`]). The RK4 step is then limited by
-//! accuracy only: one substep per sample up to 2 ms ([`substep_for`]).
+//! a new segment (see `integrate`). The RK4 step is then limited by
+//! accuracy only: one substep per sample up to [`MAX_SUBSTEP`].
 //! A `sign()` that is not a dry friction of one coordinate keeps the smooth
 //! law with a note ([`Simulator::notes`]).
 //!
@@ -59,7 +59,7 @@
 //! of earlier versions): RK4 cannot integrate a discontinuous force, and the
 //! identification notes measured that a softer width (1e-2) makes a stuck
 //! arm creep (20x worse fit). The smooth law is stiff: it needs a step of
-//! about 1 ms or less, set by a stiffness probe ([`StiffnessProbe`], a
+//! about 1 ms or less, set by a stiffness probe (`StiffnessProbe`, a
 //! simulation that would need less than [`MIN_SUBSTEP`] is refused as
 //! [`SimError::TooStiff`]); that machinery serves only the smooth law (and a
 //! smoothed fallback `sign()`).
@@ -109,7 +109,7 @@ pub enum DryFriction {
 /// Options of the experiment simulation.
 #[derive(Copy, Clone, Debug, PartialEq)]
 pub struct SimOptions {
-    /// Largest RK4 substep in s; `None` chooses it ([`substep_for`]: one
+    /// Largest RK4 substep in s; `None` chooses it (`substep_for`: one
     /// substep per sample up to 2 ms with sticking friction, `min(1 ms,
     /// T/2)` with the smooth law, `T` the experiment's median sample time).
     /// Each sample interval is split into `ceil(dt/h)` equal substeps, so
