@@ -6,6 +6,10 @@
 //! Runge-Kutta stages), computed once by `PlantCoeffs::new` when the
 //! parameters are set ([`Plant::set_params`]); the free functions compute the
 //! coefficients they need on every call.
+//!
+//! A model with dry friction gets the stick-slip step of
+//! [`crate::stick_slip`] behind the same `rk4_step` and
+//! `closed_loop_rk4_step` instead of the fused step.
 
 use proc_macro2::TokenStream;
 use quote::quote;

@@ -126,7 +126,7 @@ fn silence(f: &Function, names: &[(&str, &str)]) -> TokenStream {
                 text[..i]
                     .chars()
                     .next_back()
-                    .map_or(true, |c| !(c.is_alphanumeric() || c == '_'))
+                    .is_none_or(|c| !(c.is_alphanumeric() || c == '_'))
             })
         })
     };
@@ -243,7 +243,8 @@ pub(crate) fn stick_items(
                         p = i;
                     }
                 }
-                if !(math::abs(a[p][c]) > 0.0) || !a[p][c].is_finite() {
+                let pivot = a[p][c];
+                if pivot == 0.0 || !pivot.is_finite() {
                     return None;
                 }
                 a.swap(c, p);
@@ -251,8 +252,9 @@ pub(crate) fn stick_items(
                 for i in c + 1..N_Q {
                     let l = a[i][c] / a[c][c];
                     if l != 0.0 {
-                        for j in c..N_Q {
-                            a[i][j] -= l * a[c][j];
+                        let (upper, lower) = a.split_at_mut(i);
+                        for (x, y) in lower[0][c..].iter_mut().zip(&upper[c][c..]) {
+                            *x -= l * y;
                         }
                         r[i] -= l * r[c];
                     }
@@ -420,10 +422,8 @@ pub(crate) fn stick_items(
             let (m, b, d) = stick_split(x, k, uf);
             let a = stick_accel(&m, &b, &d, mode)?;
             let mut dx = [0.0; N_STATES];
-            for i in 0..N_Q {
-                dx[i] = x[N_Q + i];
-                dx[N_Q + i] = a[i];
-            }
+            dx[..N_Q].copy_from_slice(&x[N_Q..]);
+            dx[N_Q..].copy_from_slice(&a);
             Some(dx)
         }
 
@@ -479,7 +479,7 @@ pub(crate) fn stick_items(
         /// (Illinois on the step length, ending on the crossed side);
         /// `Some(None)`: not before `hi`; None: not evaluable.
         fn stick_crossing<F: FnMut(&[f64; N_STATES]) -> [f64; N_INPUTS]>(x: &[f64; N_STATES], k: &PlantCoeffs, mode: &StickMode, i: usize, hi: f64, uf: &mut F, held: Option<&[f64; N_INPUTS]>) -> Option<Option<f64>> {
-            let mut guard = |tau: f64, uf: &mut F| -> Option<f64> {
+            let guard = |tau: f64, uf: &mut F| -> Option<f64> {
                 let y = stick_rk4(x, k, tau, mode, uf, held)?;
                 Some(stick_guards(&y, k, mode, uf)?[i])
             };
@@ -565,8 +565,8 @@ pub(crate) fn stick_items(
                 }
                 let mut tau = left;
                 let mut which = N_Q;
-                for i in 0..N_Q {
-                    if g[i] < 0.0 {
+                for (i, gi) in g.iter().enumerate() {
+                    if *gi < 0.0 {
                         match stick_crossing(&x, k, &mode, i, tau, uf, held) {
                             Some(Some(t)) => {
                                 tau = t;

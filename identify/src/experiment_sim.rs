@@ -50,8 +50,8 @@
 //! (a sliding joint's velocity reaching zero, a stuck joint's holding force
 //! reaching its level) is cut at the switch, located by Illinois iterations
 //! on the step length, and the rest of the segment continues from there as
-//! a new segment (see [`integrate`]). The RK4 step is then limited by
-//! accuracy only: one substep per sample up to 2 ms ([`substep_for`]).
+//! a new segment (see `integrate`). The RK4 step is then limited by
+//! accuracy only: one substep per sample up to [`MAX_SUBSTEP`].
 //! A `sign()` that is not a dry friction of one coordinate keeps the smooth
 //! law with a note ([`Simulator::notes`]).
 //!
@@ -59,14 +59,14 @@
 //! of earlier versions): RK4 cannot integrate a discontinuous force, and the
 //! identification notes measured that a softer width (1e-2) makes a stuck
 //! arm creep (20x worse fit). The smooth law is stiff: it needs a step of
-//! about 1 ms or less, set by a stiffness probe ([`StiffnessProbe`], a
+//! about 1 ms or less, set by a stiffness probe (`StiffnessProbe`, a
 //! simulation that would need less than [`MIN_SUBSTEP`] is refused as
 //! [`SimError::TooStiff`]); that machinery serves only the smooth law (and a
 //! smoothed fallback `sign()`).
 
 use std::fmt;
 
-use plantc_derive::mechanics::stick_slip::{first_crossing, Mode, StickSlip, MAX_EVENTS};
+use plantc_derive::mechanics::stick_slip::{first_crossing, mat_vec, Mode, StickSlip, MAX_EVENTS};
 use plantc_derive::mechanics::{
     decompose_dry_friction, derive_equations, flat_outputs, small_lu, smooth_signs,
     FALLBACK_SIGN_WIDTH,
@@ -109,7 +109,7 @@ pub enum DryFriction {
 /// Options of the experiment simulation.
 #[derive(Copy, Clone, Debug, PartialEq)]
 pub struct SimOptions {
-    /// Largest RK4 substep in s; `None` chooses it ([`substep_for`]: one
+    /// Largest RK4 substep in s; `None` chooses it (`substep_for`: one
     /// substep per sample up to 2 ms with sticking friction, `min(1 ms,
     /// T/2)` with the smooth law, `T` the experiment's median sample time).
     /// Each sample interval is split into `ceil(dt/h)` equal substeps, so
@@ -1657,7 +1657,7 @@ impl<'s> StateDynamics<'s> {
             return false;
         }
         StickSlip::effective_forces(&self.b, &self.d, &self.mode, &mut self.beff);
-        mat_vec_n(&self.minv, n, &self.beff, &mut self.acc);
+        mat_vec(&self.minv, n, &self.beff, &mut self.acc);
         true
     }
 
@@ -1667,12 +1667,7 @@ impl<'s> StateDynamics<'s> {
             return true;
         }
         let n = self.n;
-        let dry = self.rules.dry();
-        if !(0..n).any(|i| dry[i] && x[n + i] == 0.0) {
-            for i in 0..n {
-                self.mode.stuck[i] = false;
-                self.mode.dir[i] = if dry[i] { x[n + i].signum() } else { 0.0 };
-            }
+        if self.rules.slide(&x[n..2 * n], &mut self.mode) {
             return true;
         }
         self.eval(x, u);
@@ -1715,19 +1710,6 @@ impl<'s> StateDynamics<'s> {
         self.rules
             .guards(&x[n..2 * n], &self.d, &self.force, &self.mode, g);
         true
-    }
-}
-
-/// `y = a x` for the row-major `n x n` matrix `a` (the order of the
-/// sensitivity simulator's own product, so both give the same bits).
-#[inline]
-pub(crate) fn mat_vec_n(a: &[f64], n: usize, x: &[f64], y: &mut [f64]) {
-    for (i, yi) in y.iter_mut().enumerate().take(n) {
-        *yi = a[i * n..(i + 1) * n]
-            .iter()
-            .zip(x)
-            .map(|(p, q)| p * q)
-            .sum();
     }
 }
 

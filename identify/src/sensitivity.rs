@@ -55,6 +55,7 @@
 
 use std::cell::RefCell;
 
+use plantc_derive::mechanics::stick_slip::mat_vec;
 use plantc_derive::model::Model;
 use plantc_derive::sym::{diff, Expr, SplitTape, Tape};
 
@@ -65,18 +66,6 @@ use crate::experiment_sim::{
     Located, Rate, Segment, SignalEffects, Signals, SimError, SimOptions, StateDynamics,
     StiffnessProbe, REFINE,
 };
-
-/// `y = a x` for the row-major `n x n` matrix `a`.
-#[inline]
-fn mat_vec(a: &[f64], n: usize, x: &[f64], y: &mut [f64]) {
-    for (i, yi) in y.iter_mut().enumerate().take(n) {
-        *yi = a[i * n..(i + 1) * n]
-            .iter()
-            .zip(x)
-            .map(|(p, q)| p * q)
-            .sum();
-    }
-}
 
 /// The number of coordinates `n` of the per-stage kernels below: a constant
 /// for the common small models ([`Fixed`]) so that their loops over two or
@@ -958,7 +947,7 @@ impl Dynamics for SensDynamics<'_> {
             for i in 0..n {
                 let s = mode.dir[i];
                 if s != 0.0 {
-                    self.tmp[i] = self.tmp[i] - d[i] * s;
+                    self.tmp[i] -= d[i] * s;
                 }
             }
             Some(&mode.dir[..])

@@ -91,18 +91,9 @@ fn is_sign_of(f: Expr, v: Expr) -> bool {
 
 /// Whether `e` contains any `sign()`.
 fn contains_sign(e: Expr) -> bool {
-    let mut stack = vec![e];
-    let mut seen = std::collections::HashSet::new();
-    while let Some(x) = stack.pop() {
-        if !seen.insert(x) {
-            continue;
-        }
-        if let Node::Func(Func::Sign, _) = x.node() {
-            return true;
-        }
-        stack.extend(x.children());
-    }
-    false
+    let mut found = Vec::new();
+    signs_in(e, &mut found);
+    !found.is_empty()
 }
 
 /// The `sign(..)` nodes of `e`, in a deterministic order (first seen,
@@ -175,14 +166,14 @@ pub fn decompose(eqs: &Equations, width: f64) -> DryFriction {
             ));
         }
     };
-    for i in 0..n {
+    for (i, level) in levels.iter().enumerate() {
         let mut found = Vec::new();
         signs_in(smooth.forces[i], &mut found);
         for s in found {
             note(s, format!("the force on `{}`", name(i)), &mut map);
         }
         let mut found = Vec::new();
-        signs_in(levels[i], &mut found);
+        signs_in(*level, &mut found);
         for s in found {
             note(
                 s,

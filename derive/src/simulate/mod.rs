@@ -534,8 +534,8 @@ impl Plant<'_> {
         }
         let n = self.stick.a.len();
         let before = self.stick.mode.clone();
-        let any_rest = (0..n).any(|i| self.stick.rules.dry()[i] && x[n + i] == 0.0);
-        if any_rest {
+        let st = &mut self.stick;
+        if !st.rules.slide(&x[n..2 * n], &mut st.mode) {
             self.split(t, x)?;
             let st = &mut self.stick;
             if !st
@@ -543,16 +543,6 @@ impl Plant<'_> {
                 .classify(&st.m, &st.b, &st.d, &x[n..2 * n], release, &mut st.mode)
             {
                 return Err(SimError::Singular { t });
-            }
-        } else {
-            let st = &mut self.stick;
-            for i in 0..n {
-                st.mode.stuck[i] = false;
-                st.mode.dir[i] = if st.rules.dry()[i] {
-                    x[n + i].signum()
-                } else {
-                    0.0
-                };
             }
         }
         Ok(before != self.stick.mode)
