@@ -13,10 +13,11 @@
 //!   own motion: fit % below -100), is reported as diverged with the
 //!   reason, not as a number.
 //! - **Initial states** of the held-out records: fitted with their priors
-//!   from the data ([`crate::initial_state`]) over growing horizons
-//!   ([`crate::fit::NUISANCE_HORIZONS`]), so a record that starts inside a
-//!   fast transient (a controller switched on with its voltage clipped) is
-//!   fitted on its first quarter second before the whole record counts.
+//!   from the data ([`crate::initial_state`]) by an observer over the
+//!   first [`crate::fit::OBSERVER_WINDOW`] seconds (a record that starts
+//!   inside a fast transient, a controller switched on with its voltage
+//!   clipped, is started from what its first samples show), then the
+//!   sensor zeros over the whole record, the start held.
 //! - **k-step-ahead prediction** (`horizon` in s): from each window start
 //!   `t0` the model is simulated from the smoothed state there (a local
 //!   quadratic through the samples within 10 ms on either side: its value
