@@ -53,6 +53,7 @@ mod lower;
 mod plant;
 mod recursive;
 mod rig;
+mod stick_slip;
 
 use std::fmt;
 use std::path::{Path, PathBuf};

@@ -6,12 +6,17 @@
 //! Runge-Kutta stages), computed once by `PlantCoeffs::new` when the
 //! parameters are set ([`Plant::set_params`]); the free functions compute the
 //! coefficients they need on every call.
+//!
+//! A model with dry friction gets the stick-slip step of
+//! [`crate::stick_slip`] behind the same `rk4_step` and
+//! `closed_loop_rk4_step` instead of the fused step.
 
 use proc_macro2::TokenStream;
 use quote::quote;
 
 use plantc_derive::mechanics::{
-    angle_coordinates, separable_mass, AngleCoordinates, Equations, SeparableMass,
+    angle_coordinates, decompose_dry_friction, separable_mass, AngleCoordinates, Equations,
+    SeparableMass, FALLBACK_SIGN_WIDTH,
 };
 use plantc_derive::model::Model;
 use plantc_derive::sym::{diff, Expr, Rational, Symbol};
@@ -202,8 +207,24 @@ fn state_derivative(
     ps: &[V],
     shift: Option<(&[V], &[V])>,
 ) -> Result<(Vec<V>, Vec<V>), Error> {
+    state_derivative_with(g, model, frame, (xs, us, ps), shift, &[])
+}
+
+/// [`state_derivative`] with `extra` symbols bound too (the friction
+/// directions of a stick-slip mode).
+pub(crate) fn state_derivative_with(
+    g: &mut Graph,
+    model: &Model,
+    frame: &Frame,
+    (xs, us, ps): (&[V], &[V], &[V]),
+    shift: Option<(&[V], &[V])>,
+    extra: &[(Symbol, V)],
+) -> Result<(Vec<V>, Vec<V>), Error> {
     let n = frame.n();
     let mut e = env(g, model, xs, us, ps)?;
+    for (s, v) in extra {
+        e.bind(*s, *v);
+    }
     let theta = bind_angles(g, &mut e, frame, xs);
     if let Some((a0, d)) = shift {
         let (args, syms): (Vec<V>, Vec<Symbol>) = match frame {
@@ -265,6 +286,51 @@ fn state_diff(frame: &Frame, model: &Model, e: Expr, j: usize) -> Expr {
     }
 }
 
+/// One RK4 step of length `h` with `u` held, in the graph: the stages share
+/// every coefficient, and their sines and cosines come from those at `x`
+/// (`args0`, with the first stage `k1`) by the addition formulas.
+pub(crate) fn rk4_stages(
+    g: &mut Graph,
+    model: &Model,
+    frame: &Frame,
+    (xs, us, ps): (&[V], &[V], &[V]),
+    h: V,
+    (k1, args0): (&[V], &[V]),
+    extra: &[(Symbol, V)],
+) -> Result<Vec<V>, Error> {
+    let nx = xs.len();
+    let half = g.konst(0.5);
+    let hh = g.mul(half, h);
+    let six = g.konst(6.0);
+    let h6 = g.div(h, six);
+    let two = g.konst(2.0);
+    // stage increments d = w k and states x + d
+    let stage = |g: &mut Graph, k: &[V], w: V| -> (Vec<V>, Vec<V>) {
+        let d: Vec<V> = k.iter().map(|k| g.mul(w, *k)).collect();
+        let y = xs.iter().zip(&d).map(|(x, d)| g.add(*x, *d)).collect();
+        (y, d)
+    };
+    let at = |g: &mut Graph, y: &[V], d: &[V]| {
+        state_derivative_with(g, model, frame, (y, us, ps), Some((args0, d)), extra)
+    };
+    let (y2, d2) = stage(g, k1, hh);
+    let (k2, _) = at(g, &y2, &d2)?;
+    let (y3, d3) = stage(g, &k2, hh);
+    let (k3, _) = at(g, &y3, &d3)?;
+    let (y4, d4) = stage(g, &k3, h);
+    let (k4, _) = at(g, &y4, &d4)?;
+    let mut rk = Vec::with_capacity(nx);
+    for i in 0..nx {
+        let s23 = g.add(k2[i], k3[i]);
+        let s23 = g.mul(two, s23);
+        let s = g.add(k1[i], s23);
+        let s = g.add(s, k4[i]);
+        let t = g.mul(h6, s);
+        rk.push(g.add(xs[i], t));
+    }
+    Ok(rk)
+}
+
 /// Fewest coordinates for which the forward dynamics are generated as the
 /// separable recursion ([`crate::recursive`]) when the mass matrix has that
 /// structure, instead of the closed form (`M` formed, LDL^T unrolled, the
@@ -287,7 +353,17 @@ struct PlantBodies {
     dynamics: TokenStream,
     jacobian_x: TokenStream,
     jacobian_u: TokenStream,
-    rk4: TokenStream,
+    step: Step,
+}
+
+/// How the generated plant takes a Runge-Kutta step.
+enum Step {
+    /// `rk4_step_k` with this body; the closed loop calls `dynamics_k` at
+    /// each of the four stages.
+    Fused(TokenStream),
+    /// The event-located stick-slip step `stick_step_k` of these items
+    /// ([`crate::stick_slip::stick_items`]) for both.
+    StickSlip(TokenStream),
 }
 
 /// Whether a function's statements or outputs mention `name` (tokens).
@@ -330,6 +406,9 @@ pub(crate) fn plant_items(model: &Model, eqs: &Equations) -> Result<TokenStream,
         Ok("recursive") => true,
         _ => n >= RECURSIVE_MIN_COORDINATES,
     };
+    // a model with dry friction that sticks gets the closed form whatever
+    // its size (see `sticks`)
+    let recursive = recursive && !sticks(eqs);
     let separable = match ac {
         Some(ac) if recursive => separable_mass(ac).map(|sm| (ac, sm)),
         _ => None,
@@ -339,6 +418,19 @@ pub(crate) fn plant_items(model: &Model, eqs: &Equations) -> Result<TokenStream,
         None => closed_form_bodies(model, eqs, ac)?,
     };
     Ok(plant_tokens(bodies))
+}
+
+/// Whether the model has dry friction that sticks. Such a model is
+/// generated in the closed form whatever its size (and whatever
+/// `PLANTC_DYNAMICS_FORM` asks): its stick-slip step
+/// ([`crate::stick_slip`]) needs `M` and `b = Q0 - bias + B u` without the
+/// friction in the model's coordinates (`split_k`) and the dynamics of each
+/// friction mode with the directions bound as symbols, which are values of
+/// the closed form's graph; the separable recursion forms neither (it
+/// never builds `M`), so it would only add its `O(n)` `dynamics` next to an
+/// `O(n^3)` stick-slip step.
+fn sticks(eqs: &Equations) -> bool {
+    decompose_dry_friction(eqs, FALLBACK_SIGN_WIDTH).any()
 }
 
 /// The plant functions by the separable recursion: `dynamics` unrolled
@@ -427,7 +519,7 @@ fn recursive_bodies(
         },
         jacobian_x: looped(&fjx, quote!(N_STATES)),
         jacobian_u: looped(&fju, quote!(N_INPUTS)),
-        rk4: quote! {
+        step: Step::Fused(quote! {
             let k1 = dynamics_k(x, u, k);
             let mut y = [0.0; N_STATES];
             let mut i = 0;
@@ -446,13 +538,15 @@ fn recursive_bodies(
                 i += 1;
             }
             out
-        },
+        }),
     })
 }
 
 /// The plant functions in closed form: `M` and `r` formed and solved
 /// (Cramer up to three coordinates, LDL^T beyond), the Jacobians from
-/// symbolic derivatives, the four Runge-Kutta stages in one graph.
+/// symbolic derivatives, the four Runge-Kutta stages in one graph, or with
+/// sticking dry friction the stick-slip step ([`crate::stick_slip`]) on the
+/// same graph.
 fn closed_form_bodies(
     model: &Model,
     eqs: &Equations,
@@ -566,38 +660,28 @@ fn closed_form_bodies(
 
     // RK4 with u held: the stages share every coefficient
     let h = g.input(quote!(h), Level::Call);
-    let half = g.konst(0.5);
-    let hh = g.mul(half, h);
-    let six = g.konst(6.0);
-    let h6 = g.div(h, six);
-    let two = g.konst(2.0);
-    let k1 = dyn_out.clone();
-    // stage increments d = w k and states x + d
-    let stage = |g: &mut Graph, k: &[V], w: V| -> (Vec<V>, Vec<V>) {
-        let d: Vec<V> = k.iter().map(|k| g.mul(w, *k)).collect();
-        let y = xs.iter().zip(&d).map(|(x, d)| g.add(*x, *d)).collect();
-        (y, d)
+    // with sticking dry friction, the stick-slip step instead
+    let stick = crate::stick_slip::stick_roots(&mut g, model, eqs, ac, (&xs, &us, &ps), h)?;
+    let rk = match stick {
+        None => rk4_stages(
+            &mut g,
+            model,
+            &frame,
+            (&xs, &us, &ps),
+            h,
+            (&dyn_out, &args0),
+            &[],
+        )?,
+        Some(_) => Vec::new(),
     };
-    let (y2, d2) = stage(&mut g, &k1, hh);
-    let (k2, _) = state_derivative(&mut g, model, &frame, &y2, &us, &ps, Some((&args0, &d2)))?;
-    let (y3, d3) = stage(&mut g, &k2, hh);
-    let (k3, _) = state_derivative(&mut g, model, &frame, &y3, &us, &ps, Some((&args0, &d3)))?;
-    let (y4, d4) = stage(&mut g, &k3, h);
-    let (k4, _) = state_derivative(&mut g, model, &frame, &y4, &us, &ps, Some((&args0, &d4)))?;
-    let mut rk = Vec::new();
-    for i in 0..nx {
-        let s23 = g.add(k2[i], k3[i]);
-        let s23 = g.mul(two, s23);
-        let s = g.add(k1[i], s23);
-        let s = g.add(s, k4[i]);
-        let t = g.mul(h6, s);
-        rk.push(g.add(xs[i], t));
-    }
 
     let mut roots = dyn_out.clone();
     roots.extend(&jx);
     roots.extend(&ju);
-    roots.extend(&rk);
+    match &stick {
+        Some(st) => roots.extend(st.all()),
+        None => roots.extend(&rk),
+    }
     let plan = g.plan(&roots)?;
     let kref = quote!(k.0);
     let fd = g.function(&dyn_out, &plan, &kref)?;
@@ -614,6 +698,22 @@ fn closed_form_bodies(
         quote!()
     } else {
         quote!(let _ = x;)
+    };
+    let step = match &stick {
+        Some(st) => Step::StickSlip(crate::stick_slip::stick_items(
+            st,
+            (
+                &g.function(&st.split, &plan, &kref)?,
+                &g.function(&st.mode, &plan, &kref)?,
+                &g.function(&st.rk, &plan, &kref)?,
+            ),
+        )),
+        None => Step::Fused(quote! {
+            #rk_x
+            #srk
+            #(#rks)*
+            [#(#rko),*]
+        }),
     };
     Ok(PlantBodies {
         nk: idx(plan.len()),
@@ -636,12 +736,7 @@ fn closed_form_bodies(
             #(#jus)*
             [#(#juo),*]
         },
-        rk4: quote! {
-            #rk_x
-            #srk
-            #(#rks)*
-            [#(#rko),*]
-        },
+        step,
     })
 }
 
@@ -655,12 +750,83 @@ fn plant_tokens(b: PlantBodies) -> TokenStream {
         dynamics,
         jacobian_x,
         jacobian_u,
-        rk4,
+        step,
     } = b;
     let p_unused = if p_unused {
         quote!(let _ = p;)
     } else {
         quote!()
+    };
+    // the bodies of the Runge-Kutta steps: the fused step, or with sticking
+    // dry friction the event-located stick-slip step
+    let (rk_method, rk_free, closed) = if matches!(step, Step::StickSlip(_)) {
+        (
+            quote!(stick_step_k(
+                x,
+                &self.k,
+                h,
+                &mut |_: &[f64; N_STATES]| *u,
+                Some(u)
+            )),
+            quote!(stick_step_k(
+                x,
+                &PlantCoeffs::new(p),
+                h,
+                &mut |_: &[f64; N_STATES]| *u,
+                Some(u)
+            )),
+            quote! {
+                let u0 = control(x);
+                (stick_step_k(x, &self.k, h, &mut control, None), u0)
+            },
+        )
+    } else {
+        (
+            quote!(rk4_step_k(x, u, &self.k, h)),
+            quote!(rk4_step_k(x, u, &PlantCoeffs::new(p), h)),
+            quote! {
+                let u0 = control(x);
+                let k1 = dynamics_k(x, &u0, &self.k);
+                let mut y = [0.0; N_STATES];
+                let mut i = 0;
+                while i < N_STATES { y[i] = x[i] + 0.5 * h * k1[i]; i += 1; }
+                let k2 = dynamics_k(&y, &control(&y), &self.k);
+                let mut i = 0;
+                while i < N_STATES { y[i] = x[i] + 0.5 * h * k2[i]; i += 1; }
+                let k3 = dynamics_k(&y, &control(&y), &self.k);
+                let mut i = 0;
+                while i < N_STATES { y[i] = x[i] + h * k3[i]; i += 1; }
+                let k4 = dynamics_k(&y, &control(&y), &self.k);
+                let mut out = [0.0; N_STATES];
+                let mut i = 0;
+                while i < N_STATES {
+                    out[i] = x[i] + h / 6.0 * (k1[i] + 2.0 * (k2[i] + k3[i]) + k4[i]);
+                    i += 1;
+                }
+                (out, u0)
+            },
+        )
+    };
+    let stick_doc = if matches!(step, Step::StickSlip(_)) {
+        quote! {
+            ///
+            /// Dry friction sticks: a joint at rest stays at rest (velocity
+            /// exactly 0) while the force needed to hold it is within its
+            /// static level, and breaks away above it; the switches are
+            /// located inside the step and it continues from each.
+        }
+    } else {
+        quote!()
+    };
+    // `rk4_step_k`, or the stick-slip items in its place
+    let step_items = match step {
+        Step::Fused(rk4) => quote! {
+            #[inline(always)]
+            fn rk4_step_k(x: &[f64; N_STATES], u: &[f64; N_INPUTS], k: &PlantCoeffs, h: f64) -> [f64; N_STATES] {
+                #rk4
+            }
+        },
+        Step::StickSlip(items) => items,
     };
 
     quote! {
@@ -697,10 +863,7 @@ fn plant_tokens(b: PlantBodies) -> TokenStream {
             #jacobian_u
         }
 
-        #[inline(always)]
-        fn rk4_step_k(x: &[f64; N_STATES], u: &[f64; N_INPUTS], k: &PlantCoeffs, h: f64) -> [f64; N_STATES] {
-            #rk4
-        }
+        #step_items
 
         /// The plant with its parameters and their precomputed coefficients
         /// ([`PlantCoeffs`]): the fast way to call the model repeatedly.
@@ -763,9 +926,10 @@ fn plant_tokens(b: PlantBodies) -> TokenStream {
 
             /// One classical Runge-Kutta step of length `h` [s] with `u` held
             /// (see [`rk4_step`]).
+            #stick_doc
             #[inline]
             pub fn rk4_step(&self, x: &[f64; N_STATES], u: &[f64; N_INPUTS], h: f64) -> [f64; N_STATES] {
-                rk4_step_k(x, u, &self.k, h)
+                #rk_method
             }
 
             /// One classical Runge-Kutta step of length `h` [s] of the closed
@@ -773,6 +937,7 @@ fn plant_tokens(b: PlantBodies) -> TokenStream {
             /// every stage (a continuous-time controller, as in a
             /// continuous-time simulation), not held over the step. Returns
             /// the new state and the input at the start of the step.
+            #stick_doc
             #[inline]
             pub fn closed_loop_rk4_step(
                 &self,
@@ -780,25 +945,7 @@ fn plant_tokens(b: PlantBodies) -> TokenStream {
                 h: f64,
                 mut control: impl FnMut(&[f64; N_STATES]) -> [f64; N_INPUTS],
             ) -> ([f64; N_STATES], [f64; N_INPUTS]) {
-                let u0 = control(x);
-                let k1 = dynamics_k(x, &u0, &self.k);
-                let mut y = [0.0; N_STATES];
-                let mut i = 0;
-                while i < N_STATES { y[i] = x[i] + 0.5 * h * k1[i]; i += 1; }
-                let k2 = dynamics_k(&y, &control(&y), &self.k);
-                let mut i = 0;
-                while i < N_STATES { y[i] = x[i] + 0.5 * h * k2[i]; i += 1; }
-                let k3 = dynamics_k(&y, &control(&y), &self.k);
-                let mut i = 0;
-                while i < N_STATES { y[i] = x[i] + h * k3[i]; i += 1; }
-                let k4 = dynamics_k(&y, &control(&y), &self.k);
-                let mut out = [0.0; N_STATES];
-                let mut i = 0;
-                while i < N_STATES {
-                    out[i] = x[i] + h / 6.0 * (k1[i] + 2.0 * (k2[i] + k3[i]) + k4[i]);
-                    i += 1;
-                }
-                (out, u0)
+                #closed
             }
         }
 
@@ -831,9 +978,10 @@ fn plant_tokens(b: PlantBodies) -> TokenStream {
         /// coefficients computed once for the four). The sines and cosines
         /// of the coordinates at stages 2 to 4 come from those at `x` by the
         /// addition formulas with `math::sin_cos_step` of the stage increment.
+        #stick_doc
         #[inline]
         pub fn rk4_step(x: &[f64; N_STATES], u: &[f64; N_INPUTS], p: &Params, h: f64) -> [f64; N_STATES] {
-            rk4_step_k(x, u, &PlantCoeffs::new(p), h)
+            #rk_free
         }
     }
 }

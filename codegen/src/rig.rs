@@ -188,6 +188,16 @@ impl Plant for PlantAdapter {{
             _ => dx.fill(f64::NAN),
         }}
     }}
+    /// The generated plant's own step (dry friction sticks there).
+    fn step(&self, x: &mut [f64], u: &[f64], h: f64, _: &mut plantc_runtime::integrate::Rk4Scratch) {{
+        match (<&[f64; model::N_STATES]>::try_from(&*x), u.try_into()) {{
+            (Ok(xs), Ok(u)) => {{
+                let next = self.0.rk4_step(xs, u, h);
+                x.copy_from_slice(&next)
+            }}
+            _ => x.fill(f64::NAN),
+        }}
+    }}
 }}
 
 /// A generated controller behind the runtime's `Controller`.

@@ -174,3 +174,42 @@ fn recursive_chain_agrees_with_the_derived_equations() {
         }
     }
 }
+
+/// The one exception to the size rule (`plant.rs`, `sticks`): a chain of
+/// `RECURSIVE_MIN_COORDINATES` links with a dry friction that sticks on one
+/// joint is generated in the closed form with the stick-slip step, not as
+/// the recursion (which forms none of the values that step needs).
+#[test]
+fn a_chain_with_sticking_dry_friction_keeps_the_closed_form_and_its_stick_slip_step() {
+    let dir = tempfile::tempdir().unwrap();
+    let model_path = dir.path().join("chain10.plant");
+    let source = n_link_chain_source(N)
+        .replace(
+            "force q2 = viscous_friction(b2)",
+            "force q2 = viscous_friction(b2) + coulomb_friction(Fc2)",
+        )
+        .replace(
+            "parameter g = ",
+            "parameter Fc2 = 0.01 [N*m] \"joint 2 dry friction\"\nparameter g = ",
+        );
+    assert!(source.contains("coulomb_friction(Fc2)"));
+    write(&model_path, &source);
+    let opts = plantc_codegen::CrateOptions {
+        model: model_path.clone(),
+        dir: dir.path().join("gen"),
+        ..Default::default()
+    };
+    plantc_codegen::write_crate(&opts).unwrap();
+    let lib = std::fs::read_to_string(opts.dir.join("src/lib.rs")).unwrap();
+    assert!(
+        !lib.contains("while j < N_STATES"),
+        "not the recursion (its Jacobians loop over the directions)"
+    );
+    assert!(lib.contains("fn stick_step_k<"), "the stick-slip step");
+    let flat: String = lib.split_whitespace().collect();
+    assert!(
+        flat.contains("pubconstSTICKING:[bool;N_Q]=[false,true,false,"),
+        "joint 2 sticks"
+    );
+    assert!(!lib.contains("fn rk4_step_k("), "no fused step besides it");
+}

@@ -440,6 +440,62 @@ impl EffectInstance {
             .map(|p| p.name.as_str())
     }
 
+    /// The values of the effect's parameters (by model name) at which it
+    /// vanishes from the equations: every level, gain, width or delay at
+    /// zero, a saturation level at the largest finite value (no clipping), a spring's rest
+    /// position and a cogging phase or a Stribeck velocity as they are
+    /// (with the level at zero they do nothing). `base` gives a parameter's
+    /// current value by model name. With `nested`, the values that make
+    /// it its nested simpler effect instead ([`EffectInstance::nested`]):
+    /// a Stribeck friction's static level at its sliding level.
+    pub fn null_values(&self, nested: bool, base: impl Fn(&str) -> f64) -> Vec<(String, f64)> {
+        let name = |b: &str| self.parameter_name(b).map(str::to_string);
+        if nested {
+            if let ("stribeck_friction", Some(fs), Some(fc)) =
+                (self.effect.as_str(), name("Fs"), name("Fc"))
+            {
+                let v = base(&fc);
+                return vec![(fs, v)];
+            }
+            return Vec::new();
+        }
+        self.parameters
+            .iter()
+            .filter_map(|p| match (self.effect.as_str(), p.base.as_str()) {
+                ("spring", "q0") | ("cogging", "N") | ("cogging", "phase") => None,
+                ("stribeck_friction", "vs") | ("speed_limit", "vmax") => None,
+                // (the largest finite level: no input is clipped)
+                ("saturation", _) => Some((p.name.clone(), f64::MAX)),
+                _ => Some((p.name.clone(), 0.0)),
+            })
+            .collect()
+    }
+
+    /// Whether fitted values (`value` by model name) describe the effect
+    /// in its own form, the one its name claims: a Stribeck friction has
+    /// its hump, a static level above the sliding one (`Fs > Fc`; with `Fs
+    /// <= Fc` the curve is a friction that falls at low speed, not
+    /// Stribeck's). The other effects' boxes already hold their forms.
+    pub fn in_own_form(&self, value: impl Fn(&str) -> f64) -> bool {
+        match (
+            self.effect.as_str(),
+            self.parameter_name("Fs"),
+            self.parameter_name("Fc"),
+        ) {
+            ("stribeck_friction", Some(fs), Some(fc)) => value(fs) > value(fc),
+            _ => true,
+        }
+    }
+
+    /// The simpler effect this one contains on its target (Stribeck
+    /// friction with `Fs = Fc` is Coulomb friction), if any.
+    pub fn nested(&self) -> Option<&'static str> {
+        match self.effect.as_str() {
+            "stribeck_friction" => Some("coulomb_friction"),
+            _ => None,
+        }
+    }
+
     /// `effect@target`.
     pub fn label(&self) -> String {
         format!("{}@{}", self.effect, self.target)

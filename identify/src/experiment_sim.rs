@@ -40,16 +40,37 @@
 //! With `w = 0` and no saturation the held input is the commanded one, so
 //! the simulation is bit-identical to the model without them.
 //!
-//! Dry friction `sign(q')` is replaced by `tanh(q'/w)` (default `w = 1e-3`
-//! rad/s, see [`SimOptions::dry_friction_width`]): RK4 cannot integrate a
-//! discontinuous force, and the identification notes measured that a softer
-//! width (1e-2) makes a stuck arm creep (20x worse fit). The smooth law is
-//! stiff: it needs a step of about 1 ms, hence the default substep.
+//! **Dry friction sticks** ([`DryFriction::Sticking`], the default): each
+//! coordinate's force is split into a smooth part and `-D_i sign(q_i')`
+//! (`plantc_derive::mechanics::dry_friction`), and the simulation switches
+//! between sliding and sticking (`plantc_derive::mechanics::stick_slip`): a
+//! joint at `q' = 0.0` stays there while the force needed to hold it is
+//! within its static level, and breaks away above it. The mode is a function
+//! of the state, fixed over each RK4 step; a step that would cross a switch
+//! (a sliding joint's velocity reaching zero, a stuck joint's holding force
+//! reaching its level) is cut at the switch, located by Illinois iterations
+//! on the step length, and the rest of the segment continues from there as
+//! a new segment (see `integrate`). The RK4 step is then limited by
+//! accuracy only: one substep per sample up to [`MAX_SUBSTEP`].
+//! A `sign()` that is not a dry friction of one coordinate keeps the smooth
+//! law with a note ([`Simulator::notes`]).
+//!
+//! [`DryFriction::Smooth`] replaces `sign(v)` by `tanh(v/w)` instead (the law
+//! of earlier versions): RK4 cannot integrate a discontinuous force, and the
+//! identification notes measured that a softer width (1e-2) makes a stuck
+//! arm creep (20x worse fit). The smooth law is stiff: it needs a step of
+//! about 1 ms or less, set by a stiffness probe (`StiffnessProbe`, a
+//! simulation that would need less than [`MIN_SUBSTEP`] is refused as
+//! [`SimError::TooStiff`]); that machinery serves only the smooth law (and a
+//! smoothed fallback `sign()`).
 
 use std::fmt;
 
-use plantc_derive::mechanics::small_lu::invert;
-use plantc_derive::mechanics::{derive_equations, flat_outputs, small_lu, smooth_signs, Equations};
+use plantc_derive::mechanics::stick_slip::{first_crossing, mat_vec, Mode, StickSlip, MAX_EVENTS};
+use plantc_derive::mechanics::{
+    decompose_dry_friction, derive_equations, flat_outputs, small_lu, smooth_signs,
+    FALLBACK_SIGN_WIDTH,
+};
 use plantc_derive::model::Model;
 use plantc_derive::sym::{diff, Expr, SplitTape, Symbol, Tape};
 
@@ -69,16 +90,33 @@ pub enum InitialVelocity {
     },
 }
 
+/// How dry friction (`-D sign(q')` terms of the forces) is simulated.
+#[derive(Copy, Clone, Debug, PartialEq, Default)]
+pub enum DryFriction {
+    /// Stick-slip: a joint at rest stays at rest while the force needed to
+    /// hold it is within its static level, and breaks away above it; the
+    /// switches are located inside the RK4 steps (see the module docs).
+    #[default]
+    Sticking,
+    /// `sign(v)` replaced by `tanh(v / width)` (a stiff law that lets a held
+    /// joint creep at about `width * atanh(load / level)`).
+    Smooth {
+        /// The smoothing width in the coordinate's speed unit (rad/s, m/s).
+        width: f64,
+    },
+}
+
 /// Options of the experiment simulation.
 #[derive(Copy, Clone, Debug, PartialEq)]
 pub struct SimOptions {
-    /// Largest RK4 substep in s; `None` means `min(1 ms, T/2)` with `T` the
-    /// experiment's median sample time. Each sample interval is split into
-    /// `ceil(dt/h)` equal substeps, so steps are aligned with the samples.
+    /// Largest RK4 substep in s; `None` chooses it (`substep_for`: one
+    /// substep per sample up to 2 ms with sticking friction, `min(1 ms,
+    /// T/2)` with the smooth law, `T` the experiment's median sample time).
+    /// Each sample interval is split into `ceil(dt/h)` equal substeps, so
+    /// steps are aligned with the samples.
     pub substep: Option<f64>,
-    /// `sign(v)` is replaced by `tanh(v/w)` with this `w`; `None` keeps the
-    /// discontinuous `sign` (not recommended with RK4).
-    pub dry_friction_width: Option<f64>,
+    /// How dry friction is simulated.
+    pub dry_friction: DryFriction,
     /// Initial velocities.
     pub initial_velocity: InitialVelocity,
 }
@@ -87,7 +125,7 @@ impl Default for SimOptions {
     fn default() -> Self {
         SimOptions {
             substep: None,
-            dry_friction_width: Some(1e-3),
+            dry_friction: DryFriction::Sticking,
             initial_velocity: InitialVelocity::Zero,
         }
     }
@@ -165,6 +203,14 @@ pub enum SimError {
         /// Time in s where it happened.
         time: f64,
     },
+    /// The dry friction switched between sticking and sliding more than
+    /// [`MAX_EVENTS`] times within one sample interval.
+    Chattering {
+        /// Experiment name.
+        experiment: String,
+        /// Time in s where it happened.
+        time: f64,
+    },
 }
 
 impl fmt::Display for SimError {
@@ -213,6 +259,10 @@ impl fmt::Display for SimError {
             SimError::Diverged { experiment, time } => write!(
                 f,
                 "simulation of `{experiment}` diverged (non-finite state or singular mass matrix) at t = {time} s"
+            ),
+            SimError::Chattering { experiment, time } => write!(
+                f,
+                "simulation of `{experiment}`: the dry friction switched between sticking and sliding more than {MAX_EVENTS} times within one sample interval at t = {time} s"
             ),
         }
     }
@@ -349,18 +399,57 @@ pub struct Trajectory {
     pub q: Vec<Vec<f64>>,
 }
 
-/// The equations as flat vectors `[M (row-major), r0, B (row-major)]`, with
-/// dry friction smoothed.
-pub(crate) fn dynamics_outputs(
-    model: &Model,
-    width: Option<f64>,
-) -> Result<(Equations, Vec<Expr>), SimError> {
-    let mut eqs = derive_equations(model).map_err(|e| SimError::Mechanics(e.to_string()))?;
-    if let Some(w) = width {
-        eqs = smooth_signs(&eqs, w);
+/// The dynamics a simulator compiles: the flat outputs `[M (row-major), r0,
+/// B (row-major)]`, followed with sticking friction by the levels `D` (one
+/// per coordinate) when some coordinate has a dry friction.
+#[derive(Clone, Debug)]
+pub(crate) struct Compiled {
+    /// The tape outputs.
+    pub(crate) outs: Vec<Expr>,
+    /// Which coordinates stick (all false with the smooth law or without
+    /// dry friction).
+    pub(crate) dry: Vec<bool>,
+    /// Whether the outputs end with the levels `D`.
+    pub(crate) levels: bool,
+    /// Whether some `sign()` was smoothed (the smooth law, or a fallback):
+    /// only then is the dynamics stiff at zero speed and the substep probed.
+    pub(crate) smoothed: bool,
+    /// The smoothed fallback `sign()`s, one sentence each.
+    pub(crate) notes: Vec<String>,
+}
+
+/// The equations as flat vectors, dry friction as `law` says.
+pub(crate) fn dynamics_outputs(model: &Model, law: DryFriction) -> Result<Compiled, SimError> {
+    let eqs = derive_equations(model).map_err(|e| SimError::Mechanics(e.to_string()))?;
+    let n = eqs.coords.len();
+    match law {
+        DryFriction::Smooth { width } => {
+            let smoothed = plantc_derive::mechanics::has_sign(&eqs);
+            let eqs = smooth_signs(&eqs, width);
+            Ok(Compiled {
+                outs: flat_outputs(&eqs),
+                dry: vec![false; n],
+                levels: false,
+                smoothed,
+                notes: Vec::new(),
+            })
+        }
+        DryFriction::Sticking => {
+            let split = decompose_dry_friction(&eqs, FALLBACK_SIGN_WIDTH);
+            let mut outs = flat_outputs(&split.smooth);
+            let levels = split.any();
+            if levels {
+                outs.extend(split.levels.iter().copied());
+            }
+            Ok(Compiled {
+                outs,
+                dry: (0..n).map(|i| split.has(i)).collect(),
+                levels,
+                smoothed: !split.notes.is_empty(),
+                notes: split.notes,
+            })
+        }
     }
-    let outs = flat_outputs(&eqs);
-    Ok((eqs, outs))
 }
 
 /// Tape input symbols: state, inputs, full parameters.
@@ -449,24 +538,104 @@ pub fn velocity_at(t: &[f64], y: &[f64], k: usize, half_window: f64) -> f64 {
     }
 }
 
-/// Called at an input switch taken at a sample instant, with the input
-/// index `j`, the state derivative before (`f_old`) and after (`f_new`) the
-/// switch, and the state (to update sensitivities).
-pub(crate) type OnSwitch<'a> = &'a mut dyn FnMut(usize, &[f64], &[f64], &mut [f64]);
+/// What starts or ends an integration segment.
+#[derive(Copy, Clone, Debug, PartialEq)]
+pub(crate) enum Boundary {
+    /// A sample instant (does not move with the parameters).
+    Sample,
+    /// The delayed switch of this input (moves with its delay).
+    Delay(usize),
+    /// A stick-slip event located inside a step (moves with everything the
+    /// state depends on).
+    Event,
+}
 
 /// One integration segment: an interval between consecutive boundaries
-/// (sample instants and switch instants of delayed inputs) over which the
-/// input is constant.
+/// (sample instants, switch instants of delayed inputs and stick-slip
+/// events) over which the input is constant.
 #[derive(Copy, Clone, Debug, PartialEq)]
 pub(crate) struct Segment {
     /// Length in s.
     pub(crate) len: f64,
-    /// The input whose delayed switch starts the segment (None: a sample
-    /// instant, which does not move with the delays).
-    pub(crate) start: Option<usize>,
-    /// The input whose delayed switch ends the segment (None: a sample
-    /// instant).
-    pub(crate) end: Option<usize>,
+    /// What starts it.
+    pub(crate) start: Boundary,
+    /// What ends it (never an event).
+    pub(crate) end: Boundary,
+}
+
+/// What [`Dynamics::rhs`] computes.
+#[derive(Copy, Clone, Debug, PartialEq)]
+pub(crate) enum Rate {
+    /// A step of the current segment (integrated in the segment's scaled
+    /// time: the moving-end term included).
+    Segment,
+    /// The final step of length `tau` up to a located event: no moving-end
+    /// term, and the tangent `d state / d tau` (the extra entries of
+    /// [`Dynamics::tangent_len`], zero at the step's start) with rate
+    /// `f_z T + f / tau`.
+    Event(f64),
+}
+
+/// A located stick-slip event, for [`Dynamics::event`].
+#[derive(Copy, Clone, Debug, PartialEq)]
+pub(crate) struct Located {
+    /// The joint whose guard crossed zero.
+    pub(crate) joint: usize,
+    /// Whether it was stuck (it breaks away) or sliding (its velocity
+    /// reached zero).
+    pub(crate) stuck: bool,
+    /// The step length from the step's start to the event, s.
+    pub(crate) tau: f64,
+    /// The step's index in its segment and the segment's step count.
+    pub(crate) step: (usize, usize),
+}
+
+/// What [`integrate`] needs of a simulator: the rates of its integrated
+/// vector `z` (the state `x = z[..2n]` first, then anything integrated
+/// alongside, e.g. sensitivities) in the stick-slip mode of the last
+/// [`Dynamics::classify`], and the events' bookkeeping.
+pub(crate) trait Dynamics {
+    /// Number of coordinates `n`.
+    fn n(&self) -> usize;
+    /// Whether some coordinate sticks (events are looked for).
+    fn has_dry(&self) -> bool;
+    /// Entries after `z` integrated in an event's final step (the tangent
+    /// of [`Rate::Event`]); 0 without sensitivities.
+    fn tangent_len(&self) -> usize {
+        0
+    }
+    /// Decide the mode at the state `x` with input `u` (`release`: a stuck
+    /// joint breaking away here); false when the dynamics cannot be
+    /// evaluated.
+    fn classify(&mut self, x: &[f64], u: &[f64], release: Option<usize>) -> bool;
+    /// The rates `dz` of `z` (with `z.len()` entries, or more for
+    /// [`Rate::Event`]), `held[j]` the sample input `j` holds.
+    fn rhs(&mut self, z: &[f64], u: &[f64], held: &[usize], rate: Rate, dz: &mut [f64]) -> bool;
+    /// The state's rates alone (`2n` entries), for event location.
+    fn state_rhs(&mut self, x: &[f64], u: &[f64], dx: &mut [f64]) -> bool;
+    /// The guards of the mode at state `x` ([`StickSlip::guards`]).
+    fn guards(&mut self, x: &[f64], u: &[f64], g: &mut [f64]) -> bool;
+    /// Whether joint `j` is stuck in the current mode.
+    fn stuck(&self, j: usize) -> bool;
+    /// A segment starts.
+    fn begin_segment(&mut self, _seg: &Segment) {}
+    /// After a [`Dynamics::classify`] at the start of a step: anything
+    /// integrated alongside the state that a stuck joint fixes (its
+    /// velocity is exactly zero whatever the parameters: the sensitivity
+    /// row of a stuck velocity is zero).
+    fn held(&mut self, _z: &mut [f64]) {}
+    /// After the final step up to a located event (`z` with its tangent
+    /// entries): set what the event sets (a velocity reaching zero is set
+    /// to 0.0) and anything integrated alongside.
+    fn event(&mut self, z: &mut [f64], u: &[f64], held: &[usize], ev: &Located) -> bool;
+    /// Whether [`Dynamics::switch`] wants the delayed switches taken at
+    /// sample instants.
+    fn wants_switches(&self) -> bool {
+        false
+    }
+    /// A delayed switch of input `l` taken at a sample instant, with the
+    /// state's rates before (`f_old`) and after (`f_new`) it.
+    fn switch(&mut self, _l: usize, _f_old: &[f64], _f_new: &[f64], _z: &mut [f64]) {}
 }
 
 /// `r0 + B u` into `out` (`b` row-major, `r0.len() x u.len()`), summed in
@@ -541,18 +710,26 @@ impl Substep {
 /// range with the state there, before the interval that starts at `k` is
 /// integrated: it records the state and may write `u[.][k]` (a controller in
 /// the loop); it returns false when the state cannot go on (non-finite).
-/// `rhs(z, u_held, held, segment, dz)` gets the held input values and the
-/// sample each of them was taken from, and returns false when the dynamics
-/// cannot be evaluated (singular mass matrix). At the start of the block
-/// input `j` holds the latest sample `i <= k0` with `t_i + delay_j <= t_k0`
-/// (sample 0 when there is none: the rig held the first value before the
-/// record). A switch that falls on a sample instant (within `1e-9 dt`) is
-/// taken there and reported to `on_switch` (with the state derivatives
-/// before and after it) when its value changes; a switch inside a sample
-/// interval ends a segment instead. Buffers are allocated once per call,
-/// none per step.
+/// [`Dynamics::rhs`] gets the held input values and the sample each of
+/// them was taken from, and returns false when the dynamics cannot be
+/// evaluated (singular mass matrix). At the start of the block input `j`
+/// holds the latest sample `i <= k0` with `t_i + delay_j <= t_k0` (sample 0
+/// when there is none: the rig held the first value before the record). A
+/// switch that falls on a sample instant (within `1e-9 dt`) is taken there
+/// and reported to [`Dynamics::switch`] (with the state derivatives before
+/// and after it) when its value changes; a switch inside a sample interval
+/// ends a segment instead.
+///
+/// Stick-slip (when [`Dynamics::has_dry`]): the mode is decided at the start
+/// of every step; a step whose end violates a guard is not taken: the
+/// first crossing is located on the step length by the state alone
+/// ([`first_crossing`]), the step up to it is taken with [`Rate::Event`],
+/// [`Dynamics::event`] applies the event, and the rest of the segment is a
+/// new segment starting at the event ([`Boundary::Event`]) with as many
+/// equal substeps as its length needs. Buffers are allocated once per
+/// call, none per step.
 #[allow(clippy::too_many_arguments)]
-pub(crate) fn integrate(
+pub(crate) fn integrate<D: Dynamics>(
     name: &str,
     t: &[f64],
     u: &mut [Vec<f64>],
@@ -560,21 +737,26 @@ pub(crate) fn integrate(
     substep: &Substep,
     z: &mut [f64],
     delays: &[f64],
-    mut rhs: impl FnMut(&[f64], &[f64], &[usize], &Segment, &mut [f64]) -> bool,
-    mut on_switch: Option<OnSwitch<'_>>,
+    sys: &mut D,
     mut at_sample: impl FnMut(usize, &[f64], &mut [Vec<f64>]) -> bool,
 ) -> Result<(), SimError> {
     let dim = z.len();
+    let n = sys.n();
+    let nx = 2 * n;
+    let ext = dim + sys.tangent_len();
+    let dry = sys.has_dry();
+    let jumps = sys.wants_switches();
     let m = u.len();
     let k1 = range.end.min(t.len());
     let k0 = range.start.min(k1);
     let mut uh = vec![0.0; m];
     let mut u_new = vec![0.0; m];
-    let mut k1v = vec![0.0; dim];
-    let mut k2v = vec![0.0; dim];
-    let mut k3v = vec![0.0; dim];
-    let mut k4v = vec![0.0; dim];
-    let mut tmp = vec![0.0; dim];
+    let mut k = Stages::new(ext);
+    let mut zs = vec![0.0; ext];
+    let mut zt = vec![0.0; ext];
+    let mut g = vec![0.0; n];
+    let mut g_end = vec![0.0; n];
+    let mut state = Stages::new(nx);
     let delay = |j: usize| delays.get(j).copied().unwrap_or(0.0);
     // idx[j]: the sample whose value input j currently holds
     let mut idx = vec![0usize; m];
@@ -589,113 +771,282 @@ pub(crate) fn integrate(
                 .saturating_sub(1);
         }
     }
-    for k in k0..k1 {
-        if !at_sample(k, z, u) {
+    for kk in k0..k1 {
+        if !at_sample(kk, z, u) {
             return Err(SimError::Diverged {
                 experiment: name.to_string(),
-                time: t[k],
+                time: t[kk],
             });
         }
-        if k + 1 == k1 {
+        if kk + 1 == k1 {
             break;
         }
         for (j, uj) in uh.iter_mut().enumerate() {
             *uj = u[j][idx[j]];
         }
-        let (t_end, dt) = (t[k + 1], t[k + 1] - t[k]);
+        let (t_end, dt) = (t[kk + 1], t[kk + 1] - t[kk]);
         let tol = 1e-9 * dt;
-        let mut a = t[k];
-        let mut a_input: Option<usize> = None;
+        let mut a = t[kk];
+        let mut a_bound = Boundary::Sample;
+        let mut release: Option<usize> = None;
+        let mut events = 0usize;
         loop {
-            let diverged = || SimError::Diverged {
+            let diverged = |time: f64| SimError::Diverged {
                 experiment: name.to_string(),
-                time: a,
+                time,
             };
             // switches due at `a`; the one that ends the previous segment is
-            // a segment boundary, the others are taken as jumps
-            let mut seg = Segment {
-                len: 0.0,
-                start: a_input,
-                end: None,
-            };
-            for j in 0..m {
-                let mut boundary = a_input == Some(j);
-                while idx[j] + 1 < k1 && t[idx[j] + 1] + delay(j) <= a + tol {
-                    held_old.copy_from_slice(&idx);
-                    idx[j] += 1;
-                    let new = u[j][idx[j]];
-                    if boundary {
-                        boundary = false;
-                    } else if let Some(cb) = on_switch.as_mut() {
-                        if new != uh[j] {
+            // a segment boundary, the others are taken as jumps (an event
+            // lies strictly inside a segment: none are due there)
+            if a_bound != Boundary::Event {
+                for j in 0..m {
+                    let mut boundary = a_bound == Boundary::Delay(j);
+                    while idx[j] + 1 < k1 && t[idx[j] + 1] + delay(j) <= a + tol {
+                        held_old.copy_from_slice(&idx);
+                        idx[j] += 1;
+                        let new = u[j][idx[j]];
+                        if boundary {
+                            boundary = false;
+                        } else if jumps && new != uh[j] {
                             u_new.copy_from_slice(&uh);
                             u_new[j] = new;
-                            if !rhs(z, &uh, &held_old, &seg, &mut k1v)
-                                || !rhs(z, &u_new, &idx, &seg, &mut k2v)
+                            let (f_old, f_new) = (&mut k.k1[..dim], &mut k.k2[..dim]);
+                            if !sys.classify(&z[..nx], &uh, None)
+                                || !sys.rhs(z, &uh, &held_old, Rate::Segment, f_old)
+                                || !sys.classify(&z[..nx], &u_new, None)
+                                || !sys.rhs(z, &u_new, &idx, Rate::Segment, f_new)
                             {
-                                return Err(diverged());
+                                return Err(diverged(a));
                             }
-                            cb(j, &k1v, &k2v, z);
+                            sys.switch(j, f_old, f_new, z);
                         }
+                        uh[j] = new;
                     }
-                    uh[j] = new;
                 }
             }
             // the next switch inside the interval ends the segment
+            let mut seg = Segment {
+                len: 0.0,
+                start: a_bound,
+                end: Boundary::Sample,
+            };
             let mut b = t_end;
             for (j, &held) in idx.iter().enumerate() {
                 if held + 1 < k1 {
                     let s = t[held + 1] + delay(j);
                     if s < b - tol {
                         b = s;
-                        seg.end = Some(j);
+                        seg.end = Boundary::Delay(j);
                     }
                 }
             }
             seg.len = b - a;
-            // the first stage's derivative, which also decides the count
-            if !rhs(z, &uh, &idx, &seg, &mut k1v) {
-                return Err(diverged());
+            let mut cut = false;
+            // (an event at the very end of a segment leaves nothing)
+            if seg.len > 0.0 {
+                sys.begin_segment(&seg);
+                // the first stage's derivative, which also decides the count
+                if !sys.classify(&z[..nx], &uh, release.take()) {
+                    return Err(diverged(a));
+                }
+                sys.held(z);
+                if !sys.rhs(z, &uh, &idx, Rate::Segment, &mut k.k1[..dim]) {
+                    return Err(diverged(a));
+                }
+                let steps = substep.count(seg.len, z, &k.k1[..dim]);
+                let h = seg.len / steps as f64;
+                let mut s = 0;
+                while s < steps {
+                    if s > 0 {
+                        if !sys.classify(&z[..nx], &uh, None) {
+                            return Err(diverged(a));
+                        }
+                        sys.held(z);
+                        if !sys.rhs(z, &uh, &idx, Rate::Segment, &mut k.k1[..dim]) {
+                            return Err(diverged(a));
+                        }
+                    }
+                    if !k.finish(sys, z, &uh, &idx, Rate::Segment, h, &mut zt[..dim]) {
+                        return Err(diverged(a));
+                    }
+                    if dry {
+                        if !sys.guards(&zt[..nx], &uh, &mut g) {
+                            return Err(diverged(a));
+                        }
+                        if g.iter().any(|v| *v < 0.0) {
+                            events += 1;
+                            if events > MAX_EVENTS {
+                                return Err(SimError::Chattering {
+                                    experiment: name.to_string(),
+                                    time: a + s as f64 * h,
+                                });
+                            }
+                            // the first crossing among the violated guards
+                            g_end.copy_from_slice(&g);
+                            let x0 = &z[..nx];
+                            let (mut tau, mut which) = (h, None);
+                            for i in 0..n {
+                                if g_end[i] >= 0.0 {
+                                    continue;
+                                }
+                                let mut guard = |len: f64| {
+                                    (state.step(sys, x0, &uh, len)
+                                        && sys.guards(&state.out, &uh, &mut g))
+                                    .then(|| g[i])
+                                };
+                                match first_crossing(&mut guard, tau) {
+                                    Ok(Some(tt)) => (tau, which) = (tt, Some(i)),
+                                    Ok(None) => {}
+                                    Err(_) => return Err(diverged(a)),
+                                }
+                            }
+                            let Some(j) = which else {
+                                return Err(diverged(a));
+                            };
+                            let stuck = sys.stuck(j);
+                            // the step up to it, with the tangent d x / d tau
+                            zs[..dim].copy_from_slice(z);
+                            zs[dim..].iter_mut().for_each(|v| *v = 0.0);
+                            if !sys.rhs(&zs, &uh, &idx, Rate::Event(tau), &mut k.k1)
+                                || !k.finish(sys, &zs, &uh, &idx, Rate::Event(tau), tau, &mut zt)
+                            {
+                                return Err(diverged(a));
+                            }
+                            let ev = Located {
+                                joint: j,
+                                stuck,
+                                tau,
+                                step: (s, steps),
+                            };
+                            if !sys.event(&mut zt, &uh, &idx, &ev) {
+                                return Err(diverged(a));
+                            }
+                            z.copy_from_slice(&zt[..dim]);
+                            a += s as f64 * h + tau;
+                            a_bound = Boundary::Event;
+                            release = stuck.then_some(j);
+                            cut = true;
+                            break;
+                        }
+                    }
+                    z.copy_from_slice(&zt[..dim]);
+                    s += 1;
+                }
+                if z.iter().any(|v| !v.is_finite()) {
+                    return Err(diverged(a));
+                }
             }
-            let steps = substep.count(seg.len, z, &k1v);
-            let h = seg.len / steps as f64;
-            for s in 0..steps {
-                if s > 0 && !rhs(z, &uh, &idx, &seg, &mut k1v) {
-                    return Err(diverged());
-                }
-                for i in 0..dim {
-                    tmp[i] = z[i] + 0.5 * h * k1v[i];
-                }
-                if !rhs(&tmp, &uh, &idx, &seg, &mut k2v) {
-                    return Err(diverged());
-                }
-                for i in 0..dim {
-                    tmp[i] = z[i] + 0.5 * h * k2v[i];
-                }
-                if !rhs(&tmp, &uh, &idx, &seg, &mut k3v) {
-                    return Err(diverged());
-                }
-                for i in 0..dim {
-                    tmp[i] = z[i] + h * k3v[i];
-                }
-                if !rhs(&tmp, &uh, &idx, &seg, &mut k4v) {
-                    return Err(diverged());
-                }
-                for i in 0..dim {
-                    z[i] += h / 6.0 * (k1v[i] + 2.0 * k2v[i] + 2.0 * k3v[i] + k4v[i]);
-                }
+            if cut {
+                continue;
             }
-            if z.iter().any(|v| !v.is_finite()) {
-                return Err(diverged());
-            }
-            if seg.end.is_none() {
+            if seg.end == Boundary::Sample {
                 break;
             }
             a = b;
-            a_input = seg.end;
+            a_bound = seg.end;
         }
     }
     Ok(())
+}
+
+/// The stage buffers of one RK4 step over vectors of a given length.
+struct Stages {
+    k1: Vec<f64>,
+    k2: Vec<f64>,
+    k3: Vec<f64>,
+    k4: Vec<f64>,
+    tmp: Vec<f64>,
+    out: Vec<f64>,
+}
+
+impl Stages {
+    fn new(len: usize) -> Stages {
+        Stages {
+            k1: vec![0.0; len],
+            k2: vec![0.0; len],
+            k3: vec![0.0; len],
+            k4: vec![0.0; len],
+            tmp: vec![0.0; len],
+            out: vec![0.0; len],
+        }
+    }
+
+    /// Stages 2 to 4 and the update of an RK4 step of length `h` from `z`
+    /// (its first stage in `k1`), into `out` (`z.len()` entries).
+    #[allow(clippy::too_many_arguments)]
+    fn finish<D: Dynamics>(
+        &mut self,
+        sys: &mut D,
+        z: &[f64],
+        u: &[f64],
+        held: &[usize],
+        rate: Rate,
+        h: f64,
+        out: &mut [f64],
+    ) -> bool {
+        let dim = z.len();
+        let (k1, k2, k3, k4, tmp) = (
+            &self.k1[..dim],
+            &mut self.k2[..dim],
+            &mut self.k3[..dim],
+            &mut self.k4[..dim],
+            &mut self.tmp[..dim],
+        );
+        for i in 0..dim {
+            tmp[i] = z[i] + 0.5 * h * k1[i];
+        }
+        if !sys.rhs(tmp, u, held, rate, k2) {
+            return false;
+        }
+        for i in 0..dim {
+            tmp[i] = z[i] + 0.5 * h * k2[i];
+        }
+        if !sys.rhs(tmp, u, held, rate, k3) {
+            return false;
+        }
+        for i in 0..dim {
+            tmp[i] = z[i] + h * k3[i];
+        }
+        if !sys.rhs(tmp, u, held, rate, k4) {
+            return false;
+        }
+        for i in 0..dim {
+            out[i] = z[i] + h / 6.0 * (k1[i] + 2.0 * k2[i] + 2.0 * k3[i] + k4[i]);
+        }
+        true
+    }
+
+    /// An RK4 step of the state alone ([`Dynamics::state_rhs`]) of length
+    /// `h` from `x`, into `self.out`.
+    fn step<D: Dynamics>(&mut self, sys: &mut D, x: &[f64], u: &[f64], h: f64) -> bool {
+        let dim = x.len();
+        if !sys.state_rhs(x, u, &mut self.k1) {
+            return false;
+        }
+        for i in 0..dim {
+            self.tmp[i] = x[i] + 0.5 * h * self.k1[i];
+        }
+        if !sys.state_rhs(&self.tmp, u, &mut self.k2) {
+            return false;
+        }
+        for i in 0..dim {
+            self.tmp[i] = x[i] + 0.5 * h * self.k2[i];
+        }
+        if !sys.state_rhs(&self.tmp, u, &mut self.k3) {
+            return false;
+        }
+        for i in 0..dim {
+            self.tmp[i] = x[i] + h * self.k3[i];
+        }
+        if !sys.state_rhs(&self.tmp, u, &mut self.k4) {
+            return false;
+        }
+        for i in 0..dim {
+            self.out[i] =
+                x[i] + h / 6.0 * (self.k1[i] + 2.0 * self.k2[i] + 2.0 * self.k3[i] + self.k4[i]);
+        }
+        true
+    }
 }
 
 /// `dz(u) = sign(u) * max(|u| - w, 0)` for `w >= 0`, computed as `u - w`
@@ -919,7 +1270,9 @@ impl SignalEffects {
 /// the fastest decay rate `lambda` (largest absolute row sum); RK4 is stable
 /// for real decays up to `2.78/h`, and the substep is kept below
 /// `2.5/lambda`. A gearbox holding the arm (`Fg1 = 0.1 N m` with `w = 1e-3`)
-/// needs about 0.1 ms where the default is 1 ms (notes trap 8).
+/// needs about 0.1 ms where the default is 1 ms (notes trap 8). Built only
+/// where a `sign()` is smoothed ([`DryFriction::Smooth`], or a fallback):
+/// a sticking dry friction is not stiff.
 #[derive(Clone, Debug)]
 pub(crate) struct StiffnessProbe {
     n: usize,
@@ -1024,15 +1377,16 @@ fn largest_row_sum(a: &[f64], n: usize) -> f64 {
 
 /// What both simulators do before integrating: check the parameter vector
 /// and the signals against the model's sizes `(n, m, n_params)`, choose the
-/// substep, evaluate the signal effects at `params` and make the working
-/// copy of the held inputs with the deadzones and saturations applied.
+/// substep (probed for stiffness only where a `sign()` is smoothed),
+/// evaluate the signal effects at `params` and make the working copy of
+/// the held inputs with the deadzones and saturations applied.
 pub(crate) fn prepare_run(
     sig: &Signals,
     params: &[f64],
     (n, m, n_params): (usize, usize, usize),
     opts: &SimOptions,
     signals: &SignalEffects,
-    probe: &StiffnessProbe,
+    probe: Option<&StiffnessProbe>,
     x0: &[f64],
 ) -> Result<(Substep, SignalValues, Vec<Vec<f64>>), SimError> {
     if params.len() != n_params {
@@ -1051,7 +1405,7 @@ pub(crate) fn prepare_run(
     let effects = signals.eval(params)?;
     let u = held_inputs(sig, &effects.widths, &effects.levels);
     let mut step = Substep::fixed(h);
-    if opts.substep.is_none() && x0.len() >= n {
+    if let (None, Some(probe), true) = (opts.substep, probe, x0.len() >= n) {
         let u0: Vec<f64> = u
             .iter()
             .map(|v| v.first().copied().unwrap_or(0.0))
@@ -1067,7 +1421,11 @@ pub(crate) fn prepare_run(
         // per sample up to 2 ms (RK4's error at the pendulum's 10 rad/s is
         // then ~3e-11 per step)
         let long = sig.sample_time().min(2e-3);
-        if let (Some(w), true) = (opts.dry_friction_width, long > step.h) {
+        let w = match opts.dry_friction {
+            DryFriction::Smooth { width } => width,
+            DryFriction::Sticking => FALLBACK_SIGN_WIDTH,
+        };
+        if long > step.h {
             if let Some(stiff) = probe.stiff_velocities(x0, &u0, params, (long, w)) {
                 step.relaxed = Some((long, stiff, w));
             }
@@ -1076,22 +1434,32 @@ pub(crate) fn prepare_run(
     Ok((step, effects, u))
 }
 
-/// The shortest automatic RK4 substep, in s. Below it a simulation is
-/// refused ([`SimError::TooStiff`]) rather than run at thousands of
-/// substeps per sample: a fit that wandered to a dry friction of 0.084 N m
-/// on the QUBE's arm (substep about 6 us) spent 285 s in 143 simulations.
-/// Ten times below what a gearbox holding the pendulum's arm needs
-/// (`Fg1 = 0.1 N m`, `w = 1e-3`: about 0.1 ms).
+/// The shortest automatic RK4 substep with a smoothed dry friction, in s.
+/// Below it a simulation is refused ([`SimError::TooStiff`]) rather than
+/// run at thousands of substeps per sample: a fit that wandered to a dry
+/// friction of 0.084 N m on the QUBE's arm (substep about 6 us) spent 285 s
+/// in 143 simulations. Ten times below what a gearbox holding the
+/// pendulum's arm needs (`Fg1 = 0.1 N m`, `w = 1e-3`: about 0.1 ms). A
+/// sticking dry friction is not stiff and never needs it.
 pub const MIN_SUBSTEP: f64 = 1e-5;
 
-/// The substep for an experiment under `opts`.
+/// The longest automatic RK4 substep, in s: 2 ms keeps RK4's local error at
+/// the pendulum's 10 rad/s near 3e-11 rad per step, far below an encoder's
+/// quantum (1.5e-3 rad at 4096 counts/rev).
+pub const MAX_SUBSTEP: f64 = 2e-3;
+
+/// The substep for an experiment under `opts`: the given one, or, with
+/// sticking friction (nothing stiff at zero speed), one substep per sample
+/// up to [`MAX_SUBSTEP`]; with the smooth law `min(1 ms, T/2)`, which its
+/// stiffness at zero speed needs (notes trap 8).
 pub(crate) fn substep_for(sig: &Signals, opts: &SimOptions) -> Result<f64, SimError> {
-    match opts.substep {
-        Some(h) if h > 0.0 && h.is_finite() => Ok(h),
-        Some(h) => Err(SimError::BadOption(format!(
+    match (opts.substep, opts.dry_friction) {
+        (Some(h), _) if h > 0.0 && h.is_finite() => Ok(h),
+        (Some(h), _) => Err(SimError::BadOption(format!(
             "substep must be positive, got {h}"
         ))),
-        None => Ok((sig.sample_time() / 2.0).min(1e-3)),
+        (None, DryFriction::Sticking) => Ok(sig.sample_time().min(MAX_SUBSTEP)),
+        (None, DryFriction::Smooth { .. }) => Ok((sig.sample_time() / 2.0).min(1e-3)),
     }
 }
 
@@ -1124,9 +1492,9 @@ impl BlockStart {
 }
 
 /// When a simulation with the automatic substep diverges, it is tried once
-/// more with the substep divided by this: stiff dry friction (a gearbox
-/// holding the arm, notes trap 8) needs steps well below 1 ms, while most
-/// records do not.
+/// more with the substep divided by this: a smoothed dry friction (a gearbox
+/// holding the arm, notes trap 8) needs steps well below 1 ms, and so may a
+/// fit's wild trial point, while most records do not.
 pub const REFINE: f64 = 8.0;
 
 /// A compiled simulator of one model.
@@ -1139,21 +1507,239 @@ pub struct Simulator {
     tape: Tape,
     /// `tape` split with the parameters as slow inputs.
     split: SplitTape,
+    /// Which coordinates stick.
+    dry: Vec<bool>,
+    /// Whether the tape's outputs end with the dry-friction levels.
+    levels: bool,
+    notes: Vec<String>,
     signals: SignalEffects,
     opts: SimOptions,
     /// A recorded controller in the loop.
     law: Option<LoopLaw>,
-    probe: StiffnessProbe,
+    /// Only where a `sign()` is smoothed.
+    probe: Option<StiffnessProbe>,
 }
 
 /// Check the options both simulators compile with: a dry friction width
 /// must be positive.
-pub(crate) fn check_width(opts: &SimOptions) -> Result<(), SimError> {
-    match opts.dry_friction_width {
-        Some(w) if !(w > 0.0 && w.is_finite()) => Err(SimError::BadOption(format!(
-            "dry friction width must be positive, got {w}"
-        ))),
+pub(crate) fn check_options(opts: &SimOptions) -> Result<(), SimError> {
+    match opts.dry_friction {
+        DryFriction::Smooth { width: w } if !(w > 0.0 && w.is_finite()) => Err(
+            SimError::BadOption(format!("dry friction width must be positive, got {w}")),
+        ),
         _ => Ok(()),
+    }
+}
+
+/// The plain dynamics of one run over the split tape `[M, r0, B, D]`: the
+/// state's rates in the current stick-slip mode, the mode's decisions and
+/// its guards, buffers allocated once. Both simulators decide everything
+/// that depends on the state alone (modes, events) through it, so their
+/// trajectories agree to the bit.
+pub(crate) struct StateDynamics<'s> {
+    tape: &'s Tape,
+    split: &'s SplitTape,
+    unsplit: bool,
+    n: usize,
+    m: usize,
+    /// Whether the tape's outputs end with the levels.
+    levels: bool,
+    dry: bool,
+    tin: Vec<f64>,
+    out: Vec<f64>,
+    scratch: Vec<f64>,
+    /// The stick-slip rules (and their solve buffers).
+    pub(crate) rules: StickSlip,
+    /// The current mode.
+    pub(crate) mode: Mode,
+    minv: Vec<f64>,
+    b: Vec<f64>,
+    d: Vec<f64>,
+    beff: Vec<f64>,
+    acc: Vec<f64>,
+    force: Vec<f64>,
+    /// `(x, u)` of the outputs in `out`, when `cached`.
+    last: Vec<f64>,
+    cached: bool,
+}
+
+impl<'s> StateDynamics<'s> {
+    /// For a tape (and its split) over `(state, inputs, params)` with `n`
+    /// coordinates and `m` inputs, `dry` the sticking coordinates, `levels`
+    /// whether the outputs end with `D`; the tape's parameter part is
+    /// evaluated here, once.
+    #[allow(clippy::too_many_arguments)]
+    pub(crate) fn new(
+        (tape, split): (&'s Tape, &'s SplitTape),
+        (n, m): (usize, usize),
+        params: &[f64],
+        dry: &[bool],
+        levels: bool,
+        unsplit: bool,
+    ) -> StateDynamics<'s> {
+        let mut tin = vec![0.0; 2 * n + m + params.len()];
+        tin[2 * n + m..].copy_from_slice(params);
+        let mut out = vec![0.0; tape.n_outputs()];
+        let mut scratch = vec![0.0; tape.scratch_len().max(split.scratch_len())];
+        if !unsplit {
+            split.eval_slow_outputs(&tin, &mut out, &mut scratch);
+        }
+        StateDynamics {
+            tape,
+            split,
+            unsplit,
+            n,
+            m,
+            levels,
+            dry: dry.iter().any(|d| *d),
+            tin,
+            out,
+            scratch,
+            rules: StickSlip::new(dry),
+            mode: Mode::new(n),
+            minv: vec![0.0; n * n],
+            b: vec![0.0; n],
+            d: vec![0.0; n],
+            beff: vec![0.0; n],
+            acc: vec![0.0; n],
+            force: vec![0.0; n],
+            last: vec![0.0; 2 * n + m],
+            cached: false,
+        }
+    }
+
+    /// `M`, `b = r0 + B u` and the levels at `(x, u)` (the tape's outputs,
+    /// `self.b`, `self.d`); the last evaluation is reused at the same point.
+    fn eval(&mut self, x: &[f64], u: &[f64]) {
+        let (n, m) = (self.n, self.m);
+        let same = self.cached
+            && self.last[..2 * n]
+                .iter()
+                .zip(&x[..2 * n])
+                .chain(self.last[2 * n..].iter().zip(u))
+                .all(|(a, b)| a.to_bits() == b.to_bits());
+        if same {
+            return;
+        }
+        self.tin[..2 * n].copy_from_slice(&x[..2 * n]);
+        self.tin[2 * n..2 * n + m].copy_from_slice(u);
+        if self.unsplit {
+            self.tape.eval(&self.tin, &mut self.out, &mut self.scratch);
+        } else {
+            self.split
+                .eval_fast_changed(&self.tin, &mut self.out, &mut self.scratch);
+        }
+        let nn = n * n;
+        forces(
+            &self.out[nn..nn + n],
+            &self.out[nn + n..nn + n + n * m],
+            u,
+            &mut self.b,
+        );
+        if self.levels {
+            let off = nn + n + n * m;
+            self.d.copy_from_slice(&self.out[off..off + n]);
+        }
+        self.last[..2 * n].copy_from_slice(&x[..2 * n]);
+        self.last[2 * n..].copy_from_slice(u);
+        self.cached = true;
+    }
+
+    /// The accelerations of the current mode at `(x, u)` into `self.acc`;
+    /// false when the (free part of the) mass matrix is singular.
+    fn accelerations(&mut self, x: &[f64], u: &[f64]) -> bool {
+        self.eval(x, u);
+        let n = self.n;
+        if !self
+            .rules
+            .free_inverse(&self.out[..n * n], &self.mode.stuck, &mut self.minv)
+        {
+            return false;
+        }
+        StickSlip::effective_forces(&self.b, &self.d, &self.mode, &mut self.beff);
+        mat_vec(&self.minv, n, &self.beff, &mut self.acc);
+        true
+    }
+
+    /// Decide the mode at `(x, u)`; `release` breaks a stuck joint away.
+    pub(crate) fn classify(&mut self, x: &[f64], u: &[f64], release: Option<usize>) -> bool {
+        if !self.dry {
+            return true;
+        }
+        let n = self.n;
+        if self.rules.slide(&x[n..2 * n], &mut self.mode) {
+            return true;
+        }
+        self.eval(x, u);
+        self.rules.classify(
+            &self.out[..n * n],
+            &self.b,
+            &self.d,
+            &x[n..2 * n],
+            release,
+            &mut self.mode,
+        )
+    }
+
+    /// `dx = (v, a)` of the current mode.
+    pub(crate) fn rates(&mut self, x: &[f64], u: &[f64], dx: &mut [f64]) -> bool {
+        if !self.accelerations(x, u) {
+            return false;
+        }
+        let n = self.n;
+        dx[..n].copy_from_slice(&x[n..2 * n]);
+        dx[n..2 * n].copy_from_slice(&self.acc);
+        true
+    }
+
+    /// The guards of the current mode at `(x, u)`.
+    pub(crate) fn guards(&mut self, x: &[f64], u: &[f64], g: &mut [f64]) -> bool {
+        let n = self.n;
+        if self.mode.any_stuck() {
+            if !self.accelerations(x, u) {
+                return false;
+            }
+            self.rules.holding_forces(
+                &self.out[..n * n],
+                &self.b,
+                &self.acc,
+                &self.mode,
+                &mut self.force,
+            );
+        }
+        self.rules
+            .guards(&x[n..2 * n], &self.d, &self.force, &self.mode, g);
+        true
+    }
+}
+
+impl Dynamics for StateDynamics<'_> {
+    fn n(&self) -> usize {
+        self.n
+    }
+    fn has_dry(&self) -> bool {
+        self.dry
+    }
+    fn classify(&mut self, x: &[f64], u: &[f64], release: Option<usize>) -> bool {
+        StateDynamics::classify(self, x, u, release)
+    }
+    fn rhs(&mut self, z: &[f64], u: &[f64], _: &[usize], _: Rate, dz: &mut [f64]) -> bool {
+        self.rates(z, u, dz)
+    }
+    fn state_rhs(&mut self, x: &[f64], u: &[f64], dx: &mut [f64]) -> bool {
+        self.rates(x, u, dx)
+    }
+    fn guards(&mut self, x: &[f64], u: &[f64], g: &mut [f64]) -> bool {
+        StateDynamics::guards(self, x, u, g)
+    }
+    fn stuck(&self, j: usize) -> bool {
+        self.mode.stuck[j]
+    }
+    fn event(&mut self, z: &mut [f64], _: &[f64], _: &[usize], ev: &Located) -> bool {
+        if !ev.stuck {
+            z[self.n + ev.joint] = 0.0;
+        }
+        true
     }
 }
 
@@ -1224,24 +1810,44 @@ pub(crate) fn control_at(
 impl Simulator {
     /// Derive and compile the dynamics of `model`.
     pub fn new(model: &Model, opts: SimOptions) -> Result<Simulator, SimError> {
-        check_width(&opts)?;
-        let (_, outs) = dynamics_outputs(model, opts.dry_friction_width)?;
-        let tape =
-            Tape::compile(&outs, &tape_inputs(model)).map_err(|e| SimError::Tape(e.to_string()))?;
+        check_options(&opts)?;
+        let c = dynamics_outputs(model, opts.dry_friction)?;
+        let tape = Tape::compile(&c.outs, &tape_inputs(model))
+            .map_err(|e| SimError::Tape(e.to_string()))?;
         let (n, m) = (model.coordinates.len(), model.inputs.len());
         let n_params = model.parameter_symbols().len();
         let split = tape.split_by_inputs(&parameters_slow(2 * n + m, n_params));
+        let probe = if c.smoothed {
+            Some(StiffnessProbe::new(model, &c.outs)?)
+        } else {
+            None
+        };
         Ok(Simulator {
             n,
             m,
             n_params,
             tape,
             split,
+            dry: c.dry,
+            levels: c.levels,
+            notes: c.notes,
             signals: SignalEffects::new(model, &[])?,
             opts,
             law: None,
-            probe: StiffnessProbe::new(model, &outs)?,
+            probe,
         })
+    }
+
+    /// The `sign()` terms that are not a dry friction of one coordinate and
+    /// keep the smooth law, one sentence each (empty with the smooth law).
+    pub fn notes(&self) -> &[String] {
+        &self.notes
+    }
+
+    /// Which coordinates have a sticking dry friction (all false with the
+    /// smooth law).
+    pub fn sticking(&self) -> &[bool] {
+        &self.dry
     }
 
     /// The same simulator with a recorded controller in the loop: every
@@ -1330,54 +1936,21 @@ impl Simulator {
             (self.n, self.m, self.n_params),
             &self.opts,
             &self.signals,
-            &self.probe,
+            self.probe.as_ref(),
             &start.x0,
         )?;
         let h = h.refined(refine);
         let (n, m) = (self.n, self.m);
         check_start(sig, start, n)?;
         let (k0, k1) = (start.range.start, start.range.end);
-        let mut tin = vec![0.0; 2 * n + m + self.n_params];
-        tin[2 * n + m..].copy_from_slice(params);
-        let mut out = vec![0.0; self.tape.n_outputs()];
-        let mut scratch = vec![0.0; self.tape.scratch_len().max(self.split.scratch_len())];
-        if !unsplit {
-            self.split.eval_slow_outputs(&tin, &mut out, &mut scratch);
-        }
-        let mut piv = vec![0; n];
-        let mut acc = vec![0.0; n];
-        let mut tmp = vec![0.0; n];
-        let mut col = vec![0.0; n];
-        let mut lu = vec![0.0; n * n];
-        let mut minv = vec![0.0; n * n];
-        let rhs = |x: &[f64], u: &[f64], _: &[usize], _: &Segment, dx: &mut [f64]| {
-            tin[..2 * n].copy_from_slice(x);
-            tin[2 * n..2 * n + m].copy_from_slice(u);
-            if unsplit {
-                self.tape.eval(&tin, &mut out, &mut scratch);
-            } else {
-                self.split.eval_fast_changed(&tin, &mut out, &mut scratch);
-            }
-            let (mm, rest) = out.split_at(n * n);
-            let (r0, b) = rest.split_at(n);
-            forces(r0, b, u, &mut acc);
-            // M^-1 as the sensitivity simulator forms it (cofactors for
-            // n <= 3), so both simulators give the same trajectory
-            if !invert(
-                mm,
-                n,
-                &mut minv,
-                (&mut lu, &mut piv, &mut tmp, &mut col),
-                f64::MIN_POSITIVE,
-            ) {
-                return false;
-            }
-            dx[..n].copy_from_slice(&x[n..2 * n]);
-            for i in 0..n {
-                dx[n + i] = (0..n).map(|j| minv[i * n + j] * acc[j]).sum();
-            }
-            true
-        };
+        let mut sys = StateDynamics::new(
+            (&self.tape, &self.split),
+            (n, m),
+            params,
+            &self.dry,
+            self.levels,
+            unsplit,
+        );
         let meas_off: Vec<f64> = effects
             .offsets
             .iter()
@@ -1407,8 +1980,7 @@ impl Simulator {
             &h,
             &mut z,
             &effects.delays,
-            rhs,
-            None,
+            &mut sys,
             at_sample,
         )?;
         Ok(Trajectory { q })
@@ -1516,14 +2088,20 @@ pub(crate) mod tests {
         ParameterValues::from_base(model, base).full
     }
 
-    /// A gearbox friction that holds the arm (0.1 N m: a substep of about
-    /// 0.2 ms) simulates; one fifty times stronger would need about 4 us,
-    /// below [`MIN_SUBSTEP`], and is refused with its reason instead of
-    /// running thousands of substeps per sample.
+    /// With the smooth law, a gearbox friction that holds the arm (0.1 N m:
+    /// a substep of about 0.2 ms) simulates; one fifty times stronger would
+    /// need about 4 us, below [`MIN_SUBSTEP`], and is refused with its
+    /// reason instead of running thousands of substeps per sample. With
+    /// sticking friction (the default) neither is stiff: both simulate.
     #[test]
     fn a_dry_friction_too_stiff_to_simulate_is_refused() {
         let model = pendulum(false);
-        let sim = Simulator::new(&model, SimOptions::default()).expect("compiles");
+        let smooth = SimOptions {
+            dry_friction: DryFriction::Smooth { width: 1e-3 },
+            ..SimOptions::default()
+        };
+        let sim = Simulator::new(&model, smooth).expect("compiles");
+        let sticking = Simulator::new(&model, SimOptions::default()).expect("compiles");
         let sig = signals(&model);
         let fg1 = model
             .parameters
@@ -1555,6 +2133,11 @@ pub(crate) mod tests {
                 );
             }
             other => panic!("expected TooStiff, got {:?}", other.map(|_| ())),
+        }
+        for v in [0.1, 5.0] {
+            sticking
+                .simulate(&sig, &with(v), 200)
+                .expect("sticking friction is not stiff");
         }
     }
 

@@ -61,9 +61,10 @@ use serde::Serialize;
 use crate::closed_loop::LoopLaw;
 use crate::data::Experiment;
 use crate::experiment_sim::{
-    dynamics_outputs, velocity_at, InitialVelocity, Signals, SimError, SimOptions, Simulator,
+    dynamics_outputs, DryFriction, InitialVelocity, Signals, SimError, SimOptions, Simulator,
 };
 use crate::identifiability::{analyse, to_fix, Fixed, Identifiability, ParamInfo};
+use crate::initial_state::{prior_bound, velocity_prior, Prior};
 use crate::lm::{global_information, local_variances, predicted_reduction, Damped};
 use crate::problem::{BlockLayout, Point, Problem};
 use crate::sensitivity::{estimated_parameters, SensitivitySimulator};
@@ -233,12 +234,16 @@ impl Default for FitOptions {
 /// start diverges.
 pub const AUTO_SEGMENTS: [f64; 4] = [2.0, 1.0, 0.5, 0.25];
 
-/// A replay whose weighted RMS exceeds this (residuals twice the channels'
-/// spread: a fit % below -100) counts as diverged.
+/// A replay whose residuals, each channel divided by its spread (how much
+/// it moves), have an RMS above this counts as diverged: residuals twice
+/// the channels' own motion, a fit % below -100 (the prediction is worse
+/// than the mean of the data by more than the data's own variation).
 pub const DIVERGED_COST: f64 = 2.0;
 
-/// A segment length is accepted when the weighted RMS with the segments'
-/// states fitted is below this (fit % above about 50).
+/// A segment length is accepted when the residuals with the segments'
+/// states fitted, each channel divided by its spread, have an RMS below
+/// this: a fit % above 50, the segments follow the data better than they
+/// miss it.
 pub const SEGMENT_COST: f64 = 0.5;
 
 /// An intermediate horizon stage is skipped when the cost over the whole
@@ -250,13 +255,14 @@ pub const SKIP_RATIO: f64 = 1.5;
 /// less than this fraction.
 pub const FINAL_TOLERANCE: f64 = 5e-5;
 
-/// See [`FitOptions::coarse_far_above_floor`]: the diagnosis' "well above
-/// the floor" ([`crate::diagnose::FLOOR_BASELINE`]). A misspecified
-/// model creeps down a long valley there at a few 1e-4 of its SSR per
-/// iteration (a spring missing on the arm: the last 13 of 35 iterations
-/// took 0.15 % off the RMSE; 28 iterations at the screening tolerance),
-/// which no decision of the diagnosis reads.
-pub const FAR_ABOVE_FLOOR: f64 = crate::diagnose::FLOOR_BASELINE;
+/// See [`FitOptions::coarse_far_above_floor`]: above the floor there is
+/// something for an effect to explain ([`crate::decision::at_floor`]: a
+/// weighted RMS of `sqrt(2)` times the noise's). A misspecified model
+/// creeps down a long valley there at a few 1e-4 of its SSR per iteration
+/// (a spring missing on the arm: the last 13 of 35 iterations took 0.15 %
+/// off the RMSE; 28 iterations at the screening tolerance), which moves no
+/// decision (see [`crate::diagnose::SCREENING_TOLERANCE`]).
+pub const FAR_ABOVE_FLOOR: f64 = std::f64::consts::SQRT_2;
 
 /// The identifiability-reduced fit is kept when its cost is at most this
 /// factor above the full one.
@@ -430,6 +436,49 @@ pub struct FitResult {
     /// on segments (each from its own estimated state), the delay and
     /// offset scan moved the start, or the start could not be simulated.
     pub simulated_start: Option<Vec<Vec<Vec<f64>>>>,
+    /// Nuisance estimates at the edge of what the data allow (an initial
+    /// state at its prior's bound, an offset at its bound): the model
+    /// needed a start or a zero the data do not show, so it is not
+    /// adequate however low its cost.
+    pub nuisance_flags: Vec<NuisanceFlag>,
+}
+
+/// A nuisance estimate at the edge of what the data allow (see
+/// [`FitResult::nuisance_flags`]).
+#[derive(Clone, Debug, PartialEq, Serialize)]
+pub struct NuisanceFlag {
+    /// Experiment name.
+    pub experiment: String,
+    /// What: `theta'(0)`, `alpha(2.000 s)` (a segment's start), `offset
+    /// alpha`.
+    pub name: String,
+    /// The estimate (SI).
+    pub value: f64,
+    /// For an initial state, its prior from the data: `(mean, sigma)`.
+    pub prior: Option<(f64, f64)>,
+    /// The bound it sits at (SI).
+    pub bound: f64,
+}
+
+impl NuisanceFlag {
+    /// One line naming the estimate, its value and what the data allow.
+    pub fn message(&self) -> String {
+        match self.prior {
+            Some((m, s)) => format!(
+                "{} of {} = {:.4e}, at the edge of its prior from the data {:.4e} +- {:.2e} ({:.1} standard deviations)",
+                self.name,
+                self.experiment,
+                self.value,
+                m,
+                s,
+                (self.value - m) / s
+            ),
+            None => format!(
+                "{} of {} = {:.4e}, at its bound {:.4e}",
+                self.name, self.experiment, self.value, self.bound
+            ),
+        }
+    }
 }
 
 impl fmt::Debug for FitResult {
@@ -497,6 +546,7 @@ impl FitResult {
             "segments": self.segments,
             "closed_loop": self.closed_loop,
             "notes": self.notes,
+            "nuisance_flags": self.nuisance_flags,
             "iterations": self.iterations,
             "simulations": self.simulations,
         })
@@ -587,7 +637,7 @@ fn offset_coordinates(
     model: &Model,
     how: &Offsets,
     law: Option<&LoopLaw>,
-    width: Option<f64>,
+    friction: DryFriction,
 ) -> Result<Vec<usize>, FitError> {
     match how {
         Offsets::None => Ok(Vec::new()),
@@ -604,7 +654,7 @@ fn offset_coordinates(
             })
             .collect(),
         Offsets::Auto => {
-            let (_, outs) = dynamics_outputs(model, width)?;
+            let outs = dynamics_outputs(model, friction)?.outs;
             let outs: Vec<_> = outs.iter().map(|e| model.expand_derived(*e)).collect();
             Ok((0..model.coordinates.len())
                 .filter(|&i| {
@@ -621,6 +671,11 @@ fn offset_coordinates(
 
 /// Counters and progress of a fit.
 struct Run<'a> {
+    /// Whether the LM keeps the locals within their priors' bounds (only
+    /// the answer is bounded: see [`bounded_polish`]).
+    bounded: bool,
+    /// Whether the LM holds every local (initial state) where it is.
+    hold_locals: bool,
     /// [`FitOptions::tolerance`].
     tolerance: f64,
     /// The weighted RMS above which the screening tolerance suffices
@@ -667,6 +722,11 @@ fn lm(
     // way (the two simulators agree to the bit).
     let mut cached: Option<crate::lm::Normal> = None;
     let mut eager = false;
+    if run.bounded {
+        for (blk, l) in pb.blocks.iter().zip(pt.l.iter_mut()) {
+            blk.clamp(l);
+        }
+    }
     for _ in 0..max_iterations {
         let nrm = match cached.take() {
             Some(n) => n,
@@ -700,10 +760,37 @@ fn lm(
         if held.iter().all(|h| *h) && pb.n_locals() == 0 {
             return Ok((nrm.ssr, nrm.count, Stop::Converged));
         }
+        // on the final stage, locals at a bound of their prior that the
+        // gradient pushes outwards are held too (the step `-J'r` direction
+        // leaves the box)
+        let held_l: Vec<Vec<bool>> = pb
+            .blocks
+            .iter()
+            .zip(&pt.l)
+            .zip(&nrm.blocks)
+            .map(|((blk, l), bn)| {
+                (0..l.len())
+                    .map(|j| {
+                        run.hold_locals
+                            || run.bounded
+                                && ((l[j] <= blk.lo[j] && bn.g_l[j] > 0.0)
+                                    || (l[j] >= blk.hi[j] && bn.g_l[j] < 0.0))
+                    })
+                    .collect()
+            })
+            .collect();
+        let holding = held_l.iter().flatten().any(|h| *h);
+        let solve_nrm;
+        let nrm_step: &crate::lm::Normal = if holding {
+            solve_nrm = nrm.holding_locals(&held_l);
+            &solve_nrm
+        } else {
+            &nrm
+        };
         let mut accepted = None;
         let mut first_trial = true;
         while *lambda < 1e12 {
-            let Some(d) = Damped::solve(&nrm, *lambda, &held) else {
+            let Some(d) = Damped::solve(nrm_step, *lambda, &held) else {
                 *lambda *= 10.0;
                 continue;
             };
@@ -712,14 +799,21 @@ fn lm(
                 .collect();
             let dg: Vec<f64> = (0..ng).map(|j| g_new[j] - pt.g[j]).collect();
             let dl = d.locals(&dg);
-            let pred = predicted_reduction(&nrm, &dg, &dl);
+            let pred = predicted_reduction(nrm_step, &dg, &dl);
             let trial = Point {
                 g: g_new,
                 l: pt
                     .l
                     .iter()
                     .zip(&dl)
-                    .map(|(l, d)| l.iter().zip(d).map(|(a, b)| a + b).collect())
+                    .zip(&pb.blocks)
+                    .map(|((l, d), blk)| {
+                        let mut v: Vec<f64> = l.iter().zip(d).map(|(a, b)| a + b).collect();
+                        if run.bounded {
+                            blk.clamp(&mut v);
+                        }
+                        v
+                    })
                     .collect(),
             };
             run.simulations += 1;
@@ -811,7 +905,9 @@ fn refit_whole(
     run: &mut Run<'_>,
 ) -> Option<f64> {
     let mut lambda = 1e-3;
-    lm(
+    // (from a point within the priors' bounds, near the optimum: kept there)
+    run.bounded = true;
+    let out = lm(
         pb,
         q,
         f64::INFINITY,
@@ -820,8 +916,9 @@ fn refit_whole(
         true,
         &mut lambda,
         run,
-    )
-    .ok()?;
+    );
+    run.bounded = false;
+    out.ok()?;
     pb.cost(q, f64::INFINITY).ok().map(|(s, _)| s)
 }
 
@@ -895,12 +992,8 @@ impl<'a> Setup<'a> {
             .map(|i| sigs.iter().map(|s| s.q[i].as_slice()).collect())
             .collect();
         let weights = channel_weights(&names, &records, &opts.weights);
-        let offset_coords = offset_coordinates(
-            model,
-            &opts.offsets,
-            law.as_ref(),
-            opts.sim.dry_friction_width,
-        )?;
+        let offset_coords =
+            offset_coordinates(model, &opts.offsets, law.as_ref(), opts.sim.dry_friction)?;
         Ok(Setup {
             model,
             sigs,
@@ -973,27 +1066,70 @@ impl<'a> Setup<'a> {
                     );
                     fixed[n..].copy_from_slice(&x[n..]);
                 }
+                let priors: Vec<Prior> = free_state
+                    .iter()
+                    .map(|&c| {
+                        let noise = self.weights[c % n].noise;
+                        if c < n {
+                            Prior {
+                                mean: 0.0,
+                                sigma: noise,
+                            }
+                        } else {
+                            velocity_prior(&sig.t, &sig.q[c - n], w[0], noise)
+                        }
+                    })
+                    .collect();
                 blocks.push(BlockLayout {
                     exp: e,
                     range: w[0]..w[1],
                     free_state,
                     fixed,
+                    priors,
+                    lo: Vec::new(),
+                    hi: Vec::new(),
                 });
             }
+        }
+        // every prior bounds its unknown at the Bonferroni 99 % point over
+        // all of them
+        let count: usize = blocks
+            .iter()
+            .map(|b| b.priors.iter().filter(|p| p.sigma.is_finite()).count())
+            .sum();
+        let z = prior_bound(count);
+        for b in &mut blocks {
+            let (lo, hi): (Vec<f64>, Vec<f64>) = b
+                .priors
+                .iter()
+                .map(|p| {
+                    if p.sigma.is_finite() {
+                        p.interval(z)
+                    } else {
+                        (f64::NEG_INFINITY, f64::INFINITY)
+                    }
+                })
+                .unzip();
+            b.lo = lo;
+            b.hi = hi;
         }
         let offsets: Vec<(usize, usize)> = (0..self.sigs.len())
             .flat_map(|e| self.offset_coords.iter().map(move |&i| (e, i)))
             .collect();
         let mut lo: Vec<f64> = self.bounds.iter().map(|b| b.0).collect();
         let mut hi: Vec<f64> = self.bounds.iter().map(|b| b.1).collect();
-        lo.extend(std::iter::repeat_n(f64::NEG_INFINITY, offsets.len()));
-        hi.extend(std::iter::repeat_n(f64::INFINITY, offsets.len()));
+        for &(_, i) in &offsets {
+            let d = self.offset_bound(i);
+            lo.push(-d);
+            hi.push(d);
+        }
         Problem {
             model: self.model,
             sim: &self.sim,
             sens: &self.sens,
             sigs: &self.sigs,
             weights: self.weights.iter().map(|w| w.weight).collect(),
+            spreads: self.weights.iter().map(|w| w.spread).collect(),
             free: self.free.clone(),
             base: self.base.clone(),
             offsets,
@@ -1003,36 +1139,52 @@ impl<'a> Setup<'a> {
         }
     }
 
+    /// How far a per-experiment offset on coordinate `i` may go: half a
+    /// turn on an angle (an encoder zero beyond it is the same zero on the
+    /// other side), on a length the largest magnitude the records measure
+    /// (a zero cannot lie beyond every position the rig visited).
+    fn offset_bound(&self, i: usize) -> f64 {
+        match self.model.coordinates[i].kind {
+            plantc_derive::model::CoordinateKind::Angle => std::f64::consts::PI,
+            _ => self
+                .sigs
+                .iter()
+                .flat_map(|s| s.q[i].iter())
+                .fold(0.0f64, |m, v| m.max(v.abs()))
+                .max(f64::MIN_POSITIVE),
+        }
+    }
+
     /// The start point of `pb` at model parameters `g_model`: offsets zero,
-    /// estimated initial states from the data (measured positions, local
-    /// slopes of the measurements for velocities).
+    /// estimated initial states at their priors' means (measured
+    /// positions, smoothed velocities).
     pub(crate) fn start_point(&self, pb: &Problem<'_>, g_model: &[f64]) -> Point {
         let n = self.model.coordinates.len();
         let mut g = g_model.to_vec();
         g.extend(std::iter::repeat_n(0.0, pb.offsets.len()));
-        let full = pb.full_at(&g);
-        let model_off = self
-            .sim
-            .model_offsets(&full)
-            .unwrap_or_else(|_| vec![0.0; n]);
         let l = pb
             .blocks
             .iter()
             .map(|b| {
-                let sig = &self.sigs[b.exp];
                 b.free_state
                     .iter()
-                    .map(|&c| {
-                        if c < n {
-                            sig.q[c][b.range.start] - model_off[c]
+                    .zip(&b.priors)
+                    .map(|(&c, p)| {
+                        if c < n || !p.mean.is_finite() {
+                            0.0
                         } else {
-                            velocity_at(&sig.t, &sig.q[c - n], b.range.start, 0.01)
+                            p.mean
                         }
                     })
                     .collect()
             })
             .collect();
         Point { g, l }
+    }
+
+    /// The channel weights (and noise floors) of the records.
+    pub(crate) fn weights(&self) -> &[ChannelWeight] {
+        &self.weights
     }
 
     /// The free parameters' values in `base` (model order).
@@ -1090,6 +1242,12 @@ impl<'a> Setup<'a> {
                 pt.g[p + k] = v;
             }
         }
+        let n = self.model.coordinates.len();
+        let full = pb.full_at(&pt.g);
+        let model_off = self
+            .sim
+            .model_offsets(&full)
+            .unwrap_or_else(|_| vec![0.0; n]);
         let mut all = true;
         for (b, blk) in pb.blocks.iter().enumerate() {
             let Some((_, _, x0)) = w
@@ -1100,11 +1258,20 @@ impl<'a> Setup<'a> {
                 all = false;
                 continue;
             };
+            // (a position's local is its deviation from the measurement
+            // minus the offsets)
+            let exp_off = pb.exp_offsets(&pt.g, blk.exp);
+            let sig = &self.sigs[blk.exp];
             for (j, &c) in blk.free_state.iter().enumerate() {
                 if let Some(v) = x0.get(c) {
-                    pt.l[b][j] = *v;
+                    pt.l[b][j] = if c < n {
+                        v - (sig.q[c][blk.range.start] - model_off[c] - exp_off[c])
+                    } else {
+                        *v
+                    };
                 }
             }
+            blk.clamp(&mut pt.l[b]);
         }
         all || pb.blocks.len() == self.sigs.len()
     }
@@ -1137,6 +1304,8 @@ pub fn fit_with_progress(
     let free = setup.free.clone();
     let floor = crate::weights::noise_cost(&setup.weights);
     let mut run = Run {
+        bounded: false,
+        hold_locals: false,
         tolerance: opts.tolerance,
         coarse_above: if opts.coarse_far_above_floor && floor > 0.0 {
             FAR_ABOVE_FLOOR * floor
@@ -1313,12 +1482,10 @@ pub fn fit_with_progress(
                     ident = identifiability(&setup, &pb, &pt, &nrm, &frozen, unknowns);
                     ident.fixed = fixed;
                 } else {
-                    notes.push(format!(
-                        "fixing {} (flagged as not identifiable) raised the cost to {:.4e} from {:.4e}: kept free",
-                        fix.iter().map(|f| format!("`{}`", f.0)).collect::<Vec<_>>().join(", "),
-                        rms(s, count),
-                        rms(best.1, count)
-                    ));
+                    let rise = s / best.1 - 1.0;
+                    for (name, _) in &fix {
+                        ident.kept_free.push((name.clone(), rise));
+                    }
                 }
             }
         }
@@ -1415,6 +1582,7 @@ pub fn fit_with_progress(
         simulated,
         warm,
         simulated_start,
+        nuisance_flags: nuisance_flags(&setup, &pb, &pt),
     })
 }
 
@@ -1436,7 +1604,7 @@ pub fn replay_follows(
 /// Does the simulation of `pb` at `pt` over everything follow the data
 /// (simulates, weighted RMS within [`DIVERGED_COST`])?
 fn follows(pb: &Problem<'_>, pt: &Point) -> bool {
-    pb.cost(pt, f64::INFINITY)
+    pb.relative_cost(pt, f64::INFINITY)
         .is_ok_and(|(s, c)| rms(s, c) <= DIVERGED_COST)
 }
 
@@ -1518,7 +1686,7 @@ fn choose_segments(setup: &Setup<'_>, g0: &[f64], run: &mut Run<'_>) -> f64 {
         let mut pt = setup.start_point(&pb, g0);
         let frozen: Vec<bool> = (0..pb.n_globals()).map(|_| true).collect();
         let mut lambda = 1e-3;
-        if let Ok((s, c, _)) = lm(
+        if lm(
             &pb,
             &mut pt,
             f64::INFINITY,
@@ -1527,10 +1695,13 @@ fn choose_segments(setup: &Setup<'_>, g0: &[f64], run: &mut Run<'_>) -> f64 {
             false,
             &mut lambda,
             run,
-        ) {
-            if rms(s, c) <= SEGMENT_COST {
-                return h;
-            }
+        )
+        .is_ok()
+            && pb
+                .relative_cost(&pt, f64::INFINITY)
+                .is_ok_and(|(s, c)| rms(s, c) <= SEGMENT_COST)
+        {
+            return h;
         }
     }
     *AUTO_SEGMENTS.last().unwrap_or(&0.25)
@@ -1543,12 +1714,10 @@ fn whole_before(setup: &Setup<'_>, g0: &[f64], run: &mut Run<'_>) -> (Point, (f6
     let pb = setup.nuisance_problem(None);
     let mut pt = setup.start_point(&pb, g0);
     let _ = lm_nuisance_only(setup, &pb, &mut pt, 10, false, run);
-    run.simulations += 1;
+    let frozen: Vec<bool> = (0..pb.n_globals()).map(|j| j < setup.free.len()).collect();
     let count = pb.count_all();
-    let c = pb
-        .cost(&pt, f64::INFINITY)
-        .unwrap_or((f64::INFINITY, count));
-    (pt, c)
+    let (pt, ssr) = bounded_polish(&pb, pt, &frozen, 10, run);
+    (pt, (ssr, count))
 }
 
 /// One fit on one layout: scan (optional), nuisance at the start, growing
@@ -1620,9 +1789,15 @@ fn solve(
         let _ = lm_nuisance_only(setup, &pbn, &mut pt, 10, false, run);
     }
     run.simulations += 1;
-    let before = pb
-        .cost(&pt, f64::INFINITY)
-        .unwrap_or((f64::INFINITY, count_all));
+    // the start within its priors' bounds, as the answer will be
+    let (pt, ssr0) = if has_nuisance && !warm {
+        let nf: Vec<bool> = (0..ng).map(|j| j < p).collect();
+        bounded_polish(&pb, pt, &nf, 10, run)
+    } else {
+        let c = pb.cost(&pt, f64::INFINITY).map_or(f64::INFINITY, |x| x.0);
+        (pt, c)
+    };
+    let before = (ssr0, count_all);
     let start_pt = pt.clone();
     // growing horizons, the best point on the whole objective kept
     let first = (pt.clone(), before.0);
@@ -1656,6 +1831,14 @@ fn solve(
             }
         }
     }
+    // the answer within the priors' bounds (never worse than the start,
+    // which is within them too)
+    let polished = bounded_polish(&pb, best.0, &frozen, opts.max_iterations, run);
+    let best = if polished.1 <= before.0 {
+        polished
+    } else {
+        (start_pt.clone(), before.0)
+    };
     Ok(Outcome {
         segments,
         pt: best.0,
@@ -1663,6 +1846,51 @@ fn solve(
         start_pt,
         before,
     })
+}
+
+/// `pt` within its priors' bounds: when a local lies outside them (the
+/// search may lean on the initial states; the answer may not), clamped and
+/// refitted on the whole records with them held inside (the globals where
+/// `frozen` is true held); its weighted SSR (infinite when it cannot be
+/// simulated). The bounds bind the answer, not the search: far from the
+/// optimum a fit leans on the initial states (a spring missing from the
+/// start values: held within their priors all along, the per-file offsets
+/// took up the slack and the fit stalled at 150x the floor; free, the
+/// states came back to 0.002 rad/s by the end).
+fn bounded_polish(
+    pb: &Problem<'_>,
+    pt: Point,
+    frozen: &[bool],
+    max_iterations: usize,
+    run: &mut Run<'_>,
+) -> (Point, f64) {
+    let q = pb.clamped(&pt);
+    if q == pt {
+        run.simulations += 1;
+        let c = pb.cost(&pt, f64::INFINITY).map_or(f64::INFINITY, |x| x.0);
+        return (pt, c);
+    }
+    let mut q = q;
+    let mut lambda = 1e-3;
+    run.bounded = true;
+    let out = lm(
+        pb,
+        &mut q,
+        f64::INFINITY,
+        frozen,
+        max_iterations,
+        true,
+        &mut lambda,
+        run,
+    );
+    run.bounded = false;
+    let q = pb.clamped(&q);
+    run.simulations += 1;
+    let c = match out {
+        Ok(_) => pb.cost(&q, f64::INFINITY).map_or(f64::INFINITY, |x| x.0),
+        Err(_) => f64::INFINITY,
+    };
+    (q, c)
 }
 
 /// LM over growing `horizons` from `pt` with the globals where `frozen` is
@@ -1745,19 +1973,203 @@ fn staged(
 
 /// Fit only the nuisance unknowns of `pb` (model parameters held) from
 /// `pt`; true when the result can be simulated.
+///
+/// Two steps, each unknown from the data that determine it:
+/// 1. **the initial state, an observer over the first samples**: the
+///    states fitted on the first [`OBSERVER_WINDOW`] with everything else
+///    held, within their priors' bounds, over the growing horizons
+///    [`OBSERVER_HORIZONS`], each step kept when it lowers the window's
+///    cost. A start is a property of the first samples: judged on the whole
+///    record instead, a record that starts inside a transient the model
+///    does not reproduce (a QUBE episode switched on 5 degrees off upright,
+///    clipped at -10 V for 7 samples) was given the start at its prior's
+///    edge (4.7 rad/s on a pendulum that had not moved for three samples)
+///    that made the rest of the simulation land best, and every window
+///    of its prediction diverged.
+/// 2. **the sensor zeros, over the whole record** (a zero is the same
+///    through the record and only the record determines it), the observed
+///    states held.
+///
+/// Two starts for the observer, the one that follows the window better
+/// kept: the data's own smoothed states, and rest (every velocity zero,
+/// within its bounds: a clipped release, where the smoother can only
+/// extrapolate).
 pub(crate) fn lm_nuisance(setup: &Setup<'_>, pb: &Problem<'_>, pt: &mut Point) -> bool {
     let mut sink = |_: &FitProgress| {};
     let mut run = Run {
+        bounded: true,
+        hold_locals: false,
         tolerance: FINAL_TOLERANCE,
         coarse_above: f64::INFINITY,
         iterations: 0,
         simulations: 0,
         stage: 0,
-        stages: 1,
+        stages: OBSERVER_HORIZONS.len() + 1,
         progress: &mut sink,
     };
-    let _ = lm_nuisance_only(setup, pb, pt, 15, true, &mut run);
-    pb.cost(pt, f64::INFINITY).is_ok()
+    let cost_over = |q: &Point, h: f64| match pb.cost(q, h) {
+        Ok((s, _)) => s,
+        Err(_) => f64::INFINITY,
+    };
+    let n = setup.model.coordinates.len();
+    let mut rest = pt.clone();
+    for (blk, l) in pb.blocks.iter().zip(rest.l.iter_mut()) {
+        for (j, &c) in blk.free_state.iter().enumerate() {
+            if c >= n {
+                l[j] = 0.0;
+            }
+        }
+        blk.clamp(l);
+    }
+    let smoothed = pb.clamped(pt);
+    let mut best = {
+        let (a, b) = (
+            cost_over(&smoothed, OBSERVER_WINDOW),
+            cost_over(&rest, OBSERVER_WINDOW),
+        );
+        if b < a {
+            (rest, b)
+        } else {
+            (smoothed, a)
+        }
+    };
+    // 1. the observer: every global held
+    let ng = pb.n_globals();
+    let held_all = vec![true; ng];
+    let mut lambda: f64 = 1e-3;
+    for (s, &h) in OBSERVER_HORIZONS.iter().enumerate() {
+        run.stage = s + 1;
+        let last = s + 1 == OBSERVER_HORIZONS.len();
+        let mut q = best.0.clone();
+        lambda = lambda.max(1e-3);
+        if lm(
+            pb,
+            &mut q,
+            h,
+            &held_all,
+            setup.opts.max_iterations,
+            last,
+            &mut lambda,
+            &mut run,
+        )
+        .is_ok()
+        {
+            let q = pb.clamped(&q);
+            let c = cost_over(&q, OBSERVER_WINDOW);
+            if c < best.1 {
+                best = (q, c);
+            }
+        }
+    }
+    let mut out = best.0;
+    // 2. the sensor zeros over the whole record, the observed states held
+    let p = setup.free.len();
+    if ng > p {
+        run.stage = OBSERVER_HORIZONS.len() + 1;
+        run.hold_locals = true;
+        let frozen: Vec<bool> = (0..ng).map(|j| j < p).collect();
+        let before = cost_over(&out, f64::INFINITY);
+        let mut q = out.clone();
+        lambda = 1e-3;
+        if lm(
+            pb,
+            &mut q,
+            f64::INFINITY,
+            &frozen,
+            setup.opts.max_iterations,
+            true,
+            &mut lambda,
+            &mut run,
+        )
+        .is_ok()
+        {
+            let q = pb.clamped(&q);
+            if cost_over(&q, f64::INFINITY) < before {
+                out = q;
+            }
+        }
+    }
+    *pt = out;
+    cost_over(pt, f64::INFINITY).is_finite()
+}
+
+/// The window (s) over which a record's initial state is observed
+/// ([`lm_nuisance`]): a quarter second holds a release transient and
+/// little else (a pendulum's swing, the slowest motion these models are
+/// fitted on, is near 1 Hz, so the state's effect over the window is still
+/// about its first-order one and the window decides the start alone).
+pub const OBSERVER_WINDOW: f64 = 0.25;
+
+/// The observer's horizons (s): first 50 ms, five times the velocity
+/// smoother's window (where the effect of the state on the samples is
+/// nearly linear, so a start at the prior's mean converges), then the
+/// whole window.
+pub const OBSERVER_HORIZONS: [f64; 2] = [0.05, OBSERVER_WINDOW];
+
+/// The nuisance of `pt` at the edge of what the data allow: initial-state
+/// unknowns at their priors' bounds, offsets at theirs (see
+/// [`FitResult::nuisance_flags`]). "At" within 1e-6 of the bound's
+/// distance from the centre: the projection puts an unknown that wants to
+/// go further exactly on its bound.
+pub(crate) fn nuisance_flags(setup: &Setup<'_>, pb: &Problem<'_>, pt: &Point) -> Vec<NuisanceFlag> {
+    let model = setup.model;
+    let n = model.coordinates.len();
+    let full = pb.full_at(&pt.g);
+    let model_off = setup
+        .sim
+        .model_offsets(&full)
+        .unwrap_or_else(|_| vec![0.0; n]);
+    let near = |v: f64, b: f64, centre: f64| (v - b).abs() <= 1e-6 * (b - centre).abs();
+    let mut out = Vec::new();
+    for (b, blk) in pb.blocks.iter().enumerate() {
+        let sig = &setup.sigs[blk.exp];
+        let start = pb.block_start(b, pt, &model_off, blk.range.clone());
+        for (j, &c) in blk.free_state.iter().enumerate() {
+            let p = blk.priors[j];
+            if !p.sigma.is_finite() {
+                continue;
+            }
+            let v = pt.l[b][j];
+            let (lo, hi) = (blk.lo[j], blk.hi[j]);
+            if !(near(v, lo, p.mean) || near(v, hi, p.mean)) {
+                continue;
+            }
+            let coord = &model.coordinates[c % n].name;
+            let when = if blk.range.start == 0 {
+                "0".to_string()
+            } else {
+                format!("{:.3} s", sig.t[blk.range.start] - sig.t[0])
+            };
+            // (a position's local is its deviation from the measurement)
+            let shift = if c < n { start.x0[c] - v } else { 0.0 };
+            out.push(NuisanceFlag {
+                experiment: sig.name.clone(),
+                name: if c < n {
+                    format!("{coord}({when})")
+                } else {
+                    format!("{coord}'({when})")
+                },
+                value: v + shift,
+                prior: Some((p.mean + shift, p.sigma)),
+                bound: if near(v, lo, p.mean) { lo } else { hi } + shift,
+            });
+        }
+    }
+    let p = setup.free.len();
+    for (k, &(e, i)) in pb.offsets.iter().enumerate() {
+        let v = pt.g[p + k];
+        let (lo, hi) = (pb.lo[p + k], pb.hi[p + k]);
+        if near(v, lo, 0.0) || near(v, hi, 0.0) {
+            out.push(NuisanceFlag {
+                experiment: setup.sigs[e].name.clone(),
+                name: format!("offset {}", model.coordinates[i].name),
+                value: v,
+                prior: None,
+                bound: if near(v, lo, 0.0) { lo } else { hi },
+            });
+        }
+    }
+    out
 }
 
 /// Per-experiment nuisance estimates at `pt` (statistics from the normal
@@ -2181,4 +2593,54 @@ pub(crate) fn with_estimates(m: &Model, start: Vec<f64>, estimates: &[Estimate])
 /// Base parameter values as a full vector (base then derived).
 pub fn full_parameters(model: &Model, base: Vec<f64>) -> Vec<f64> {
     ParameterValues::from_base(model, base).full
+}
+
+/// The simulated measurements (`[experiment][coordinate][sample]`) of
+/// `model` at base values `base`, with the nuisance where fit `at` of the
+/// same records left it (its initial states and offsets, its segments):
+/// what a fitted model predicts with some of its parameters changed (an
+/// effect's contribution, [`crate::decision::Contribution`]).
+pub fn simulate_as(
+    model: &Model,
+    experiments: &[Experiment],
+    opts: &FitOptions,
+    at: &FitResult,
+    base: &[f64],
+) -> Result<Vec<Vec<Vec<f64>>>, FitError> {
+    let o = FitOptions {
+        free: Some(Vec::new()),
+        start: Some(base.to_vec()),
+        warm: Some(at.warm.clone()),
+        ..opts.clone()
+    };
+    let setup = Setup::new(model, experiments, &o, &[])?;
+    let pb = setup.problem(at.segments);
+    let mut pt = setup.start_point(&pb, &[]);
+    setup.apply_warm(&pb, &mut pt);
+    Ok(pb.predict(&pt)?)
+}
+
+/// The measured coordinates of `experiments` in `model`'s order
+/// (`[experiment][coordinate][sample]`; NaN for a missing channel).
+pub fn measured_of(model: &Model, experiments: &[Experiment]) -> Vec<Vec<Vec<f64>>> {
+    experiments
+        .iter()
+        .map(|e| {
+            model
+                .coordinates
+                .iter()
+                .map(|c| {
+                    e.values(&c.name)
+                        .map_or_else(|| vec![f64::NAN; e.len()], <[f64]>::to_vec)
+                })
+                .collect()
+        })
+        .collect()
+}
+
+/// The residual count of a fit of `model` to `experiments` (coordinates
+/// times samples): the `N` of its cost, `after_cost^2 * N` its weighted sum
+/// of squares.
+pub fn residual_count(model: &Model, experiments: &[Experiment]) -> usize {
+    model.coordinates.len() * experiments.iter().map(Experiment::len).sum::<usize>()
 }

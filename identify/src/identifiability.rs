@@ -63,6 +63,10 @@ pub struct Identifiability {
     pub at_bound: Vec<String>,
     /// Parameters fixed at their start by the fit (acted on).
     pub fixed: Vec<Fixed>,
+    /// Parameters the analysis flagged that the fit tried fixing and kept
+    /// free, with the cost rise fixing them caused (fraction): the data do
+    /// determine them, jointly with the others, away from their start.
+    pub kept_free: Vec<(String, f64)>,
 }
 
 impl Identifiability {
@@ -92,11 +96,26 @@ impl Identifiability {
                 .iter()
                 .map(|(n, c)| format!("{c:+.2}*{n}"))
                 .collect();
-            v.push(format!(
-                "not identifiable: the combination {} is undetermined (information ratio {:.1e}); fix one of them or add an experiment that separates them",
-                names.join(" "),
-                f.ratio
-            ));
+            let kept: Vec<String> = self
+                .kept_free
+                .iter()
+                .filter(|(n, _)| f.parameters.iter().any(|(m, _)| m == n))
+                .map(|(n, rise)| format!("`{n}` raised the cost by {:.0} %", 100.0 * rise))
+                .collect();
+            if kept.is_empty() {
+                v.push(format!(
+                    "not identifiable: the combination {} is undetermined (information ratio {:.1e}); fix one of them or add an experiment that separates them",
+                    names.join(" "),
+                    f.ratio
+                ));
+            } else {
+                v.push(format!(
+                    "the combination {} is poorly determined at the optimum (information ratio {:.1e}), but fixing {} at its start: the data place them away from their starts jointly, so they were kept free; their standard errors are not to be trusted",
+                    names.join(" "),
+                    f.ratio,
+                    kept.join(", ")
+                ));
+            }
         }
         for w in &self.wide {
             v.push(format!(

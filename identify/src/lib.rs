@@ -48,11 +48,13 @@ pub use error::{CellProblem, DataError, DataWarning};
 pub use units::Kind;
 
 pub mod closed_loop;
+pub mod decision;
 pub mod diagnose;
 pub mod effect_edit;
 pub mod equation_error;
 pub mod experiment_sim;
 pub mod fit;
+pub mod initial_state;
 pub mod metrics;
 pub mod plot;
 pub mod residual_tests;
@@ -74,12 +76,13 @@ pub use equation_error::{
     EquationError, EquationErrorOptions, Regressor, ScaleFixed, Score, Share,
 };
 pub use experiment_sim::{
-    velocity_at, BlockStart, InitialVelocity, Signals, SimError, SimOptions, Simulator, Trajectory,
+    velocity_at, BlockStart, DryFriction, InitialVelocity, Signals, SimError, SimOptions,
+    Simulator, Trajectory,
 };
 pub use fit::{
     fit, fit_with_progress, resolve_closed_loop, signals_for, ClosedLoop, Estimate,
-    ExperimentEstimate, FitError, FitOptions, FitProgress, FitResult, Horizon, NuisanceValue,
-    Offsets, WarmStart,
+    ExperimentEstimate, FitError, FitOptions, FitProgress, FitResult, Horizon, NuisanceFlag,
+    NuisanceValue, Offsets, WarmStart,
 };
 pub use identifiability::Identifiability;
 pub use metrics::{compare, fit_percent, rmse, ChannelFit, ExperimentFit, FitReport, MetricsError};
@@ -95,7 +98,8 @@ pub use story::{
     StoryOptions, StoryProgress,
 };
 pub use synth::{
-    synthesize, EffectSpec, ExperimentSpec, SynthError, SynthOptions, SynthSpec, Synthesized,
+    friction_name, parse_friction, synthesize, EffectSpec, ExperimentSpec, SynthError,
+    SynthOptions, SynthSpec, Synthesized,
 };
 pub use validate::{
     as_experiments, validate, ChannelScore, ExperimentValidation, ValidateOptions, Validation,

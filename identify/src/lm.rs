@@ -73,6 +73,32 @@ impl Normal {
     }
 }
 
+impl Normal {
+    /// The equations with the locals where `held[b][j]` is true held at
+    /// their values (their rows and columns replaced by the identity and a
+    /// zero gradient: their step is zero, the others solved as if they
+    /// were constants), for a local at an active bound.
+    pub fn holding_locals(&self, held: &[Vec<bool>]) -> Normal {
+        let mut out = self.clone();
+        let ng = self.ng;
+        for (bn, h) in out.blocks.iter_mut().zip(held) {
+            let l = bn.l;
+            for j in (0..l).filter(|&j| h.get(j).copied().unwrap_or(false)) {
+                for k in 0..l {
+                    bn.a_ll[j * l + k] = 0.0;
+                    bn.a_ll[k * l + j] = 0.0;
+                }
+                bn.a_ll[j * l + j] = 1.0;
+                for g in 0..ng {
+                    bn.a_gl[g * l + j] = 0.0;
+                }
+                bn.g_l[j] = 0.0;
+            }
+        }
+        out
+    }
+}
+
 /// Cholesky factor (lower, row-major) of the SPD `a` (`n x n`); None if not
 /// positive definite.
 pub(crate) fn cholesky(a: &[f64], n: usize) -> Option<Vec<f64>> {

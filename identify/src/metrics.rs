@@ -96,8 +96,15 @@ pub struct ChannelFit {
     /// 100 (1 - ||y - yhat|| / ||y - mean(y)||); `None` (JSON null) when the
     /// measured channel is constant, where the ratio is undefined.
     pub fit_percent: Option<f64>,
-    /// sqrt(mean((y - yhat)^2)), in the channel's SI unit.
+    /// sqrt(mean((y - yhat)^2)), in the channel's SI unit (infinite when
+    /// the simulation could not be finished).
     pub rmse: f64,
+    /// The simulation diverged: it could not be finished (non-finite
+    /// values), or it left the data (fit % below -100: its error more than
+    /// twice the channel's own motion about its mean). A number then means
+    /// nothing about the model's accuracy, only that it failed.
+    #[serde(default)]
+    pub diverged: bool,
 }
 
 /// Fits of one experiment's channels.
@@ -195,15 +202,35 @@ pub fn compare(
         let mut fits = BTreeMap::new();
         for &ch in channels {
             let (y, yhat) = channel_pair(m, s, ch)?;
+            // a simulation that could not be finished is diverged, not an
+            // error of the comparison (measured values must be finite)
+            if y.len() == yhat.len()
+                && y.iter().all(|v| v.is_finite())
+                && yhat.iter().any(|v| !v.is_finite())
+            {
+                total_sse = f64::INFINITY;
+                total_n += y.len();
+                fits.insert(
+                    ch.to_string(),
+                    ChannelFit {
+                        fit_percent: None,
+                        rmse: f64::INFINITY,
+                        diverged: true,
+                    },
+                );
+                continue;
+            }
             check(y, yhat, &m.name, ch)?;
             let e = sse(y, yhat);
             total_sse += e;
             total_n += y.len();
+            let fit = fit_percent(y, yhat)?;
             fits.insert(
                 ch.to_string(),
                 ChannelFit {
-                    fit_percent: fit_percent(y, yhat)?,
+                    fit_percent: fit,
                     rmse: (e / y.len() as f64).sqrt(),
+                    diverged: fit.is_some_and(|f| f < -100.0),
                 },
             );
         }

@@ -279,10 +279,8 @@ pub fn render_residual_tests(tests: &[crate::ResidualTest]) -> Result<String, Pl
                 .map(|(k, v)| (k as f64, *v))
                 .collect();
             let title = format!(
-                "{}: {} autocorrelation ({})",
-                t.experiment,
-                t.channel,
-                if t.white { "white" } else { "not white" }
+                "{}: {} autocorrelation (correlation time {:.1} samples)",
+                t.experiment, t.channel, t.correlation_time
             );
             stems(&areas[r * cols], &title, &auto, t.band, 0.0, t.lags as f64)?;
             for (c, x) in t.cross.iter().enumerate() {
@@ -304,7 +302,7 @@ pub fn render_residual_tests(tests: &[crate::ResidualTest]) -> Result<String, Pl
                         "correlated"
                     }
                 );
-                stems(&areas[r * cols + 1 + c], &title, &pts, t.band, -l, l)?;
+                stems(&areas[r * cols + 1 + c], &title, &pts, x.band, -l, l)?;
             }
         }
         root.present().map_err(draw_err)?;

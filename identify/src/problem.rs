@@ -16,7 +16,14 @@
 //! local unknown when estimated; else, for a position, the measurement at
 //! the block's first sample minus the model's and the experiment's offsets
 //! ("tied"); else, for a velocity, a fixed value (zero, or a data
-//! estimate).
+//! estimate). An estimated position is the measurement (minus the
+//! offsets) plus a deviation `delta`: the local unknown is `delta`.
+//!
+//! Every local unknown carries a Gaussian prior from the data
+//! ([`crate::initial_state`]): its term `((l - mean) / sigma)^2` is part of
+//! the cost (in the same noise units as the weighted residuals, so the
+//! fit is a maximum a posteriori estimate), and the unknown is held within
+//! [`crate::initial_state::prior_bound`] standard deviations of its mean.
 //!
 //! Blocks are simulated in parallel (one worker per core, blocks handed out
 //! in turn).
@@ -28,6 +35,7 @@ use std::sync::Mutex;
 use plantc_derive::model::{Model, ParameterValues};
 
 use crate::experiment_sim::{BlockStart, Signals, SimError, Simulator};
+use crate::initial_state::Prior;
 use crate::lm::{BlockNormal, Normal};
 use crate::sensitivity::{ExtraColumn, SensitivitySimulator};
 
@@ -44,6 +52,32 @@ pub(crate) struct BlockLayout {
     /// Values of the velocity components that are not estimated (`2n`
     /// long; positions are ignored).
     pub fixed: Vec<f64>,
+    /// The prior of each local unknown (in local order): a position's
+    /// deviation from its measurement, a velocity.
+    pub priors: Vec<Prior>,
+    /// Bounds of each local unknown (in local order).
+    pub lo: Vec<f64>,
+    /// See [`BlockLayout::lo`].
+    pub hi: Vec<f64>,
+}
+
+impl BlockLayout {
+    /// The prior terms `sum ((l - mean) / sigma)^2` of locals `l`.
+    pub fn prior_ssr(&self, l: &[f64]) -> f64 {
+        self.priors
+            .iter()
+            .zip(l)
+            .filter(|(p, _)| p.sigma.is_finite())
+            .map(|(p, v)| p.z(*v).powi(2))
+            .sum()
+    }
+
+    /// `l` held within the locals' bounds.
+    pub fn clamp(&self, l: &mut [f64]) {
+        for ((v, lo), hi) in l.iter_mut().zip(&self.lo).zip(&self.hi) {
+            *v = v.clamp(*lo, *hi);
+        }
+    }
 }
 
 /// A point of the problem: globals and each block's locals.
@@ -61,8 +95,11 @@ pub(crate) struct Problem<'a> {
     pub sim: &'a Simulator,
     pub sens: &'a SensitivitySimulator,
     pub sigs: &'a [Signals],
-    /// Weight per coordinate.
+    /// Weight per coordinate (`1 / noise`, [`crate::weights`]).
     pub weights: Vec<f64>,
+    /// How much each coordinate moves (its pooled spread, SI): the scale
+    /// of [`Problem::relative_cost`].
+    pub spreads: Vec<f64>,
     /// Indices of the free model parameters in the base vector.
     pub free: Vec<usize>,
     /// Base parameter values (the free ones are overwritten by the globals).
@@ -166,12 +203,29 @@ impl Problem<'_> {
         d
     }
 
-    /// Whether the initial position of coordinate `i` in block `b` is tied
-    /// to its measurement.
-    fn tied(&self, b: usize) -> Vec<bool> {
-        (0..self.n())
-            .map(|i| !self.blocks[b].free_state.contains(&i))
-            .collect()
+    /// Whether the initial position of each coordinate is tied to its
+    /// measurement (minus the offsets): always, an estimated position
+    /// being the measurement plus a deviation.
+    fn tied(&self) -> Vec<bool> {
+        vec![true; self.n()]
+    }
+
+    /// `pt` with every block's locals within their priors' bounds.
+    pub fn clamped(&self, pt: &Point) -> Point {
+        let mut q = pt.clone();
+        for (blk, l) in self.blocks.iter().zip(q.l.iter_mut()) {
+            blk.clamp(l);
+        }
+        q
+    }
+
+    /// The prior terms of every block's locals at `pt`.
+    pub fn prior_ssr(&self, pt: &Point) -> f64 {
+        self.blocks
+            .iter()
+            .zip(&pt.l)
+            .map(|(b, l)| b.prior_ssr(l))
+            .sum()
     }
 
     /// The start of block `b` at point `pt`, its range clipped to `range`.
@@ -189,12 +243,15 @@ impl Problem<'_> {
         let k0 = blk.range.start;
         let mut x0 = vec![0.0; 2 * n];
         for (c, x) in x0.iter_mut().enumerate() {
-            *x = if let Some(j) = blk.free_state.iter().position(|&s| s == c) {
-                pt.l[b][j]
-            } else if c < n {
-                sig.q[c][k0] - model_offsets[c] - exp_off[c]
+            let local = blk
+                .free_state
+                .iter()
+                .position(|&s| s == c)
+                .map(|j| pt.l[b][j]);
+            *x = if c < n {
+                sig.q[c][k0] - model_offsets[c] - exp_off[c] + local.unwrap_or(0.0)
             } else {
-                blk.fixed[c]
+                local.unwrap_or(blk.fixed[c])
             };
         }
         BlockStart {
@@ -219,6 +276,30 @@ impl Problem<'_> {
     /// Weighted residuals' sum of squares and count over every block
     /// within `horizon` of its start.
     pub fn cost(&self, pt: &Point, horizon: f64) -> Result<(f64, usize), SimError> {
+        self.cost_with(pt, horizon, &self.weights)
+    }
+
+    /// The residuals' sum of squares with each channel divided by its
+    /// spread (how much it moves), and the count: `rms <= 1` means the
+    /// simulation stays within the channels' own motion of the data (fit %
+    /// above 0), whatever their noise.
+    pub fn relative_cost(&self, pt: &Point, horizon: f64) -> Result<(f64, usize), SimError> {
+        let w: Vec<f64> = self
+            .spreads
+            .iter()
+            .zip(&self.weights)
+            .map(|(s, w)| if *s > 0.0 { 1.0 / s } else { *w })
+            .collect();
+        self.cost_with(pt, horizon, &w)
+    }
+
+    /// [`Problem::cost`] with other channel weights.
+    fn cost_with(
+        &self,
+        pt: &Point,
+        horizon: f64,
+        weights: &[f64],
+    ) -> Result<(f64, usize), SimError> {
         let full = self.full_at(&pt.g);
         let model_off = self.sim.model_offsets(&full)?;
         let parts = par_each(self.blocks.len(), |b| {
@@ -229,7 +310,7 @@ impl Problem<'_> {
             let tr = self.sim.simulate_block(sig, &full, &start)?;
             let mut ssr = 0.0;
             for (i, qs) in tr.q.iter().enumerate() {
-                let w = self.weights[i];
+                let w = weights[i];
                 for (k, v) in qs.iter().enumerate() {
                     let r = w * (v - sig.q[i][k0 + k]);
                     ssr += r * r;
@@ -237,7 +318,7 @@ impl Problem<'_> {
             }
             Ok((ssr, tr.q.len() * tr.q.first().map_or(0, Vec::len)))
         });
-        let mut ssr = 0.0;
+        let mut ssr = self.prior_ssr(pt);
         let mut count = 0;
         for p in parts {
             let (s, c) = p?;
@@ -296,7 +377,7 @@ impl Problem<'_> {
             let start = self.block_start(b, pt, &model_off, self.block_range(b, horizon));
             let k0 = start.range.start;
             // extra columns: this experiment's offsets, then free state
-            let tied = self.tied(b);
+            let tied = self.tied();
             let mut extra = Vec::new();
             let mut map: Vec<Col> = (0..p).map(Col::Global).collect();
             for (o, &(e, i)) in self.offsets.iter().enumerate() {
@@ -359,6 +440,18 @@ impl Problem<'_> {
             Ok((map, jtj, jtr, ssr, count, tr.refined))
         });
         let mut nrm = Normal::new(ng, self.blocks.iter().map(|b| b.free_state.len()));
+        // the priors: residual (l - mean)/sigma, Jacobian 1/sigma
+        for (b, blk) in self.blocks.iter().enumerate() {
+            let bn: &mut BlockNormal = &mut nrm.blocks[b];
+            for (j, p) in blk.priors.iter().enumerate() {
+                if p.sigma.is_finite() {
+                    let w = 1.0 / p.sigma;
+                    bn.a_ll[j * bn.l + j] += w * w;
+                    bn.g_l[j] += w * p.z(pt.l[b][j]);
+                    nrm.ssr += p.z(pt.l[b][j]).powi(2);
+                }
+            }
+        }
         for (b, part) in parts.into_iter().enumerate() {
             let (map, jtj, jtr, ssr, count, refined) = part?;
             nrm.ssr += ssr;

@@ -53,28 +53,19 @@
 //! every state component and free parameter) goes into one compiled tape,
 //! split so that its parameter-only part runs once per simulation.
 
-use plantc_derive::mechanics::small_lu::invert;
+use std::cell::RefCell;
+
+use plantc_derive::mechanics::stick_slip::mat_vec;
 use plantc_derive::model::Model;
 use plantc_derive::sym::{diff, Expr, SplitTape, Tape};
 
 use crate::closed_loop::{LoopEval, LoopLaw, LoopSens, Replay};
 use crate::experiment_sim::{
-    check_start, check_width, dynamics_outputs, forces, integrate, loop_start, parameters_slow,
-    prepare_run, received, received_derivatives, tape_inputs, BlockStart, OnSwitch, Segment,
-    SignalEffects, Signals, SimError, SimOptions, StiffnessProbe, REFINE,
+    check_options, check_start, dynamics_outputs, forces, integrate, loop_start, parameters_slow,
+    prepare_run, received, received_derivatives, tape_inputs, BlockStart, Boundary, Dynamics,
+    Located, Rate, Segment, SignalEffects, Signals, SimError, SimOptions, StateDynamics,
+    StiffnessProbe, REFINE,
 };
-
-/// `y = a x` for the row-major `n x n` matrix `a`.
-#[inline]
-fn mat_vec(a: &[f64], n: usize, x: &[f64], y: &mut [f64]) {
-    for (i, yi) in y.iter_mut().enumerate().take(n) {
-        *yi = a[i * n..(i + 1) * n]
-            .iter()
-            .zip(x)
-            .map(|(p, q)| p * q)
-            .sum();
-    }
-}
 
 /// The number of coordinates `n` of the per-stage kernels below: a constant
 /// for the common small models ([`Fixed`]) so that their loops over two or
@@ -109,15 +100,19 @@ impl Dim for Any {
 }
 
 /// `jd[d * n + i] = d a_i / d z_d` for every `d` (the state, then the free
-/// parameters), `a = M^-1 (r0 + B u)` the acceleration: from the tape's
-/// derivative blocks (each `bs = n n + n + n m` long: `dM`, `dr0`, `dB`
-/// row-major), `M^-1 (dr0 + dB u - dM a)`. `w` is a buffer of `n`.
+/// parameters), `a = M_FF^-1 (r0 + B u - D sigma)` the acceleration of the
+/// stick-slip mode (`minv` is `M_FF^-1` embedded with zero rows and
+/// columns for the stuck joints, which makes their rows zero): from the
+/// tape's derivative blocks (each `bs = n n + n + n m (+ n)` long: `dM`,
+/// `dr0`, `dB` row-major, then `dD` when `dir` is given), `M_FF^-1 (dr0 +
+/// dB u - dD sigma - dM a)`. `w` is a buffer of `n`.
 #[allow(clippy::too_many_arguments)]
 #[inline(always)]
 fn acceleration_jacobian<D: Dim, E: Dim>(
     (dim, inputs): (D, E),
     blocks: &[f64],
     u: &[f64],
+    dir: Option<&[f64]>,
     acc: &[f64],
     minv: &[f64],
     w: &mut [f64],
@@ -127,13 +122,22 @@ fn acceleration_jacobian<D: Dim, E: Dim>(
     if n == 0 {
         return;
     }
-    let bs = n * n + n + n * m;
+    let bs = n * n + n + n * m + if dir.is_some() { n } else { 0 };
     let (acc, minv, w, u) = (&acc[..n], &minv[..n * n], &mut w[..n], &u[..m]);
     for (blk, jd_d) in blocks.chunks_exact(bs).zip(jd.chunks_exact_mut(n)) {
         let (dm, rest) = blk.split_at(n * n);
-        let (dr, db) = rest.split_at(n);
-        // dr0 + dB u as the acceleration's r0 + B u, then - dM a
+        let (dr, rest) = rest.split_at(n);
+        let (db, dd) = rest.split_at(n * m);
+        // dr0 + dB u as the acceleration's r0 + B u, then - dD sigma, - dM a
         forces(dr, &db[..n * m], u, w);
+        if let Some(dir) = dir {
+            for (i, wi) in w.iter_mut().enumerate() {
+                let s = dir[i];
+                if s != 0.0 {
+                    *wi -= dd[i] * s;
+                }
+            }
+        }
         for (i, wi) in w.iter_mut().enumerate() {
             for (k, a) in dm[i * n..(i + 1) * n].iter().zip(acc.iter()) {
                 *wi -= k * a;
@@ -247,10 +251,20 @@ pub struct SensitivitySimulator {
     tape: Tape,
     /// `tape` split with the parameters as slow inputs.
     split: SplitTape,
+    /// The dynamics alone (the plain simulator's tape), for what is decided
+    /// on the state: stick-slip modes and events.
+    plain: Tape,
+    /// `plain` split with the parameters as slow inputs.
+    plain_split: SplitTape,
+    /// Which coordinates stick.
+    dry: Vec<bool>,
+    /// Whether the outputs end with the dry-friction levels.
+    levels: bool,
     signals: SignalEffects,
     opts: SimOptions,
     law: Option<LoopLaw>,
-    probe: StiffnessProbe,
+    /// Only where a `sign()` is smoothed.
+    probe: Option<StiffnessProbe>,
 }
 
 /// The parameters a model marks `estimate`, in declaration order.
@@ -271,7 +285,7 @@ impl SensitivitySimulator {
         free: &[String],
         opts: SimOptions,
     ) -> Result<SensitivitySimulator, SimError> {
-        check_width(&opts)?;
+        check_options(&opts)?;
         let mut idx = Vec::with_capacity(free.len());
         for name in free {
             let Some(i) = model.parameters.iter().position(|p| &p.name == name) else {
@@ -284,7 +298,8 @@ impl SensitivitySimulator {
             }
             idx.push(i);
         }
-        let (_, base) = dynamics_outputs(model, opts.dry_friction_width)?;
+        let c = dynamics_outputs(model, opts.dry_friction)?;
+        let base = c.outs.clone();
         let expanded: Vec<Expr> = base.iter().map(|e| model.expand_derived(*e)).collect();
         let mut outs = base.clone();
         for x in model.state_symbols() {
@@ -297,10 +312,18 @@ impl SensitivitySimulator {
         let tape =
             Tape::compile(&outs, &tape_inputs(model)).map_err(|e| SimError::Tape(e.to_string()))?;
         let signals = SignalEffects::new(model, &idx)?;
-        let probe = StiffnessProbe::new(model, &base)?;
+        let probe = if c.smoothed {
+            Some(StiffnessProbe::new(model, &base)?)
+        } else {
+            None
+        };
         let (n, m) = (model.coordinates.len(), model.inputs.len());
         let n_params = model.parameter_symbols().len();
-        let split = tape.split_by_inputs(&parameters_slow(2 * n + m, n_params));
+        let slow = parameters_slow(2 * n + m, n_params);
+        let split = tape.split_by_inputs(&slow);
+        let plain =
+            Tape::compile(&base, &tape_inputs(model)).map_err(|e| SimError::Tape(e.to_string()))?;
+        let plain_split = plain.split_by_inputs(&slow);
         Ok(SensitivitySimulator {
             n,
             m,
@@ -309,6 +332,10 @@ impl SensitivitySimulator {
             names: free.to_vec(),
             tape,
             split,
+            plain,
+            plain_split,
+            dry: c.dry,
+            levels: c.levels,
             signals,
             opts,
             law: None,
@@ -426,7 +453,7 @@ impl SensitivitySimulator {
             (self.n, self.m, self.n_params),
             &self.opts,
             &self.signals,
-            &self.probe,
+            self.probe.as_ref(),
             &start.x0,
         )?;
         let h = h.refined(refine);
@@ -444,142 +471,24 @@ impl SensitivitySimulator {
         let (k0, k1) = (start.range.start, start.range.end);
         let (d_width, d_level) = (&effects.d_widths, &effects.d_levels);
         let (widths, levels) = (&effects.widths, &effects.levels);
-        let deadzone_forcing = self.signals.deadzone_depends_on_free;
         let driven: Vec<usize> = self
             .law
             .as_ref()
             .map_or(Vec::new(), |l| l.driven().to_vec());
         let nd = driven.len();
-        let bs = n * n + n + n * m;
-        let mut tin = vec![0.0; nx + m + self.n_params];
-        tin[nx + m..].copy_from_slice(params);
-        let mut out = vec![0.0; self.tape.n_outputs()];
-        let mut scratch = vec![0.0; self.tape.scratch_len().max(self.split.scratch_len())];
-        if !unsplit {
-            self.split.eval_slow_outputs(&tin, &mut out, &mut scratch);
-        }
-        let mut lu = vec![0.0; n * n];
-        let mut piv = vec![0; n];
-        let mut acc = vec![0.0; n];
-        let mut w = vec![0.0; n];
-        let mut tmp = vec![0.0; n];
-        // jd[d * n + i] = d a_i / d z_d, z = (state, free parameters)
-        let mut jd = vec![0.0; (nx + p) * n];
-        let mut minv = vec![0.0; n * n];
-        let mut du = vec![0.0; m];
-        // d held / d(width, level) of each input at the held value
-        let mut dheld = vec![(0.0, 0.0); m];
         // closed loop: du_hist[(k - k0) * nd * nc + d * nc + c], the
         // sensitivity of driven input d held from sample k
-        let du_hist = std::cell::RefCell::new(vec![0.0; (k1 - k0) * nd * nc]);
-        let d_delay = &effects.d_delays;
-        let rhs = |z: &[f64], u: &[f64], held: &[usize], seg: &Segment, dz: &mut [f64]| {
-            tin[..nx].copy_from_slice(&z[..nx]);
-            tin[nx..nx + m].copy_from_slice(u);
-            if unsplit {
-                self.tape.eval(&tin, &mut out, &mut scratch);
-            } else {
-                self.split.eval_fast_changed(&tin, &mut out, &mut scratch);
-            }
-            let r0 = &out[n * n..n * n + n];
-            let b = &out[n * n + n..bs];
-            // M^-1 once; every right-hand side is then a product
-            if !invert(
-                &out[..n * n],
-                n,
-                &mut minv,
-                (&mut lu, &mut piv, &mut tmp, &mut w),
-                f64::MIN_POSITIVE,
-            ) {
-                return false;
-            }
-            forces(r0, b, u, &mut tmp);
-            mat_vec(&minv, n, &tmp, &mut acc);
-            dz[..n].copy_from_slice(&z[n..nx]);
-            dz[n..nx].copy_from_slice(&acc);
-            let s = &z[nx..];
-            let ds = &mut dz[nx..];
-            let blocks = &out[bs..bs * (nx + p + 1)];
-            macro_rules! kernels {
-                ($dim:expr, $inputs:expr) => {{
-                    acceleration_jacobian(($dim, $inputs), blocks, u, &acc, &minv, &mut w, &mut jd);
-                    sensitivity_rates($dim, &jd, s, ds, (p, nc));
-                }};
-            }
-            // (one input, the common case, known when compiling too)
-            match (n, m) {
-                (1, 1) => kernels!(Fixed::<1>, Fixed::<1>),
-                (2, 1) => kernels!(Fixed::<2>, Fixed::<1>),
-                (3, 1) => kernels!(Fixed::<3>, Fixed::<1>),
-                (1, _) => kernels!(Fixed::<1>, Any(m)),
-                (2, _) => kernels!(Fixed::<2>, Any(m)),
-                (3, _) => kernels!(Fixed::<3>, Any(m)),
-                _ => kernels!(Any(n), Any(m)),
-            }
-            // deadzone widths and saturation levels of inputs from the data:
-            // M^-1 B d held/dtheta, with d held/d(w, L) from the held value
-            if deadzone_forcing {
-                for l in 0..m {
-                    dheld[l] = received_derivatives(u[l], levels[l]);
-                }
-                for j in 0..p {
-                    let mut any = false;
-                    for l in 0..m {
-                        let (gw, gl) = dheld[l];
-                        let g = gw * d_width[j * m + l] + gl * d_level[j * m + l];
-                        du[l] = if g != 0.0 && !driven.contains(&l) {
-                            any = true;
-                            g
-                        } else {
-                            0.0
-                        };
-                    }
-                    if !any {
-                        continue;
-                    }
-                    add_input_forcing(&minv, b, &du, (&mut tmp, &mut w), ds, (nc, j));
-                }
-            }
-            // inputs computed in the loop: M^-1 B du/dcolumn of the held sample
-            if nd > 0 {
-                let hist = du_hist.borrow();
-                for j in 0..nc {
-                    let mut any = false;
-                    for l in 0..m {
-                        du[l] = 0.0;
-                    }
-                    for (d, &l) in driven.iter().enumerate() {
-                        let k = held[l];
-                        if k >= k0 {
-                            let v = hist[(k - k0) * nd * nc + d * nc + j];
-                            if v != 0.0 {
-                                du[l] = v;
-                                any = true;
-                            }
-                        }
-                    }
-                    if !any {
-                        continue;
-                    }
-                    add_input_forcing(&minv, b, &du, (&mut tmp, &mut w), ds, (nc, j));
-                }
-            }
-            // moving segment boundaries (delayed switches): f (b' - a') / L
-            if seg.start.is_some() || seg.end.is_some() {
-                for j in 0..p {
-                    let rate = (seg.end.map_or(0.0, |l| d_delay[j * m + l])
-                        - seg.start.map_or(0.0, |l| d_delay[j * m + l]))
-                        / seg.len;
-                    if rate != 0.0 {
-                        for i in 0..n {
-                            ds[i * nc + j] += z[n + i] * rate;
-                            ds[(n + i) * nc + j] += acc[i] * rate;
-                        }
-                    }
-                }
-            }
-            true
-        };
+        let du_hist = RefCell::new(vec![0.0; (k1 - k0) * nd * nc]);
+        let mut sys = SensDynamics::new(
+            self,
+            params,
+            (p, nc),
+            unsplit,
+            &effects,
+            &driven,
+            &du_hist,
+            k0,
+        );
         let (off, d_off) = (&effects.offsets, &effects.d_offsets);
         let meas_off: Vec<f64> = off.iter().zip(&start.offsets).map(|(a, b)| a + b).collect();
         let mut z = start.x0.clone();
@@ -646,22 +555,6 @@ impl SensitivitySimulator {
             }
             z.iter().all(|v| v.is_finite())
         };
-        // jump of S at a switch of input `l`: (f_old - f_new) dTd_l/dtheta
-        let mut jump = |l: usize, f_old: &[f64], f_new: &[f64], z: &mut [f64]| {
-            for i in 0..nx {
-                let df = f_old[i] - f_new[i];
-                if df != 0.0 {
-                    for j in 0..p {
-                        z[nx + i * nc + j] += df * d_delay[j * m + l];
-                    }
-                }
-            }
-        };
-        let on_switch: Option<OnSwitch<'_>> = if self.signals.delay_depends_on_free {
-            Some(&mut jump)
-        } else {
-            None
-        };
         integrate(
             &sig.name,
             &sig.t,
@@ -670,8 +563,7 @@ impl SensitivitySimulator {
             &h,
             &mut z,
             &effects.delays,
-            rhs,
-            on_switch,
+            &mut sys,
             at_sample,
         )?;
         Ok(SensitivityTrajectory {
@@ -705,6 +597,535 @@ impl SensitivitySimulator {
                 (law, rep, ev, fstate, u_law, LoopSens::new(law, nc))
             }),
         )
+    }
+}
+
+/// The sensitivity simulator's dynamics over one run: `z = [x (2n), S (2n
+/// rows of nc columns, row-major)]`, the plain dynamics (`plain`) deciding
+/// the stick-slip modes and events on the state alone, the full tape giving
+/// the state's and the sensitivities' rates (see the module docs).
+struct SensDynamics<'s> {
+    plain: StateDynamics<'s>,
+    tape: &'s Tape,
+    split: &'s SplitTape,
+    unsplit: bool,
+    n: usize,
+    m: usize,
+    p: usize,
+    nc: usize,
+    /// Whether the outputs (and each derivative block) end with the levels.
+    levels: bool,
+    tin: Vec<f64>,
+    out: Vec<f64>,
+    scratch: Vec<f64>,
+    minv: Vec<f64>,
+    acc: Vec<f64>,
+    w: Vec<f64>,
+    tmp: Vec<f64>,
+    /// `jd[d * n + i] = d a_i / d z_d`, `z = (state, free parameters)`.
+    jd: Vec<f64>,
+    du: Vec<f64>,
+    /// d held / d(width, level) of each input at the held value.
+    dheld: Vec<(f64, f64)>,
+    d_width: &'s [f64],
+    d_level: &'s [f64],
+    d_delay: &'s [f64],
+    sat_levels: &'s [f64],
+    deadzone_forcing: bool,
+    jumps: bool,
+    driven: &'s [usize],
+    du_hist: &'s RefCell<Vec<f64>>,
+    k0: usize,
+    /// `d t / d column` of the current segment's start and end, and the
+    /// moving-end rate `(d b - d a) / L` of each column.
+    da: Vec<f64>,
+    db: Vec<f64>,
+    rate: Vec<f64>,
+    moving: bool,
+    /// `d t / d column` of the last event (the start of the segment after it).
+    event_start: Vec<f64>,
+    /// Event bookkeeping: the guard's gradient along the state and its
+    /// derivative along each column, and `d tau / d column`.
+    gz: Vec<f64>,
+    gcol: Vec<f64>,
+    dtau: Vec<f64>,
+    scratch_dz: Vec<f64>,
+}
+
+impl<'s> SensDynamics<'s> {
+    #[allow(clippy::too_many_arguments)]
+    fn new(
+        sim: &'s SensitivitySimulator,
+        params: &[f64],
+        (p, nc): (usize, usize),
+        unsplit: bool,
+        effects: &'s crate::experiment_sim::SignalValues,
+        driven: &'s [usize],
+        du_hist: &'s RefCell<Vec<f64>>,
+        k0: usize,
+    ) -> SensDynamics<'s> {
+        let (n, m) = (sim.n, sim.m);
+        let nx = 2 * n;
+        let plain = StateDynamics::new(
+            (&sim.plain, &sim.plain_split),
+            (n, m),
+            params,
+            &sim.dry,
+            sim.levels,
+            unsplit,
+        );
+        let mut tin = vec![0.0; nx + m + sim.n_params];
+        tin[nx + m..].copy_from_slice(params);
+        let mut out = vec![0.0; sim.tape.n_outputs()];
+        let mut scratch = vec![0.0; sim.tape.scratch_len().max(sim.split.scratch_len())];
+        if !unsplit {
+            sim.split.eval_slow_outputs(&tin, &mut out, &mut scratch);
+        }
+        SensDynamics {
+            plain,
+            tape: &sim.tape,
+            split: &sim.split,
+            unsplit,
+            n,
+            m,
+            p,
+            nc,
+            levels: sim.levels,
+            tin,
+            out,
+            scratch,
+            minv: vec![0.0; n * n],
+            acc: vec![0.0; n],
+            w: vec![0.0; n],
+            tmp: vec![0.0; n],
+            jd: vec![0.0; (nx + p) * n],
+            du: vec![0.0; m],
+            dheld: vec![(0.0, 0.0); m],
+            d_width: &effects.d_widths,
+            d_level: &effects.d_levels,
+            d_delay: &effects.d_delays,
+            sat_levels: &effects.levels,
+            deadzone_forcing: sim.signals.deadzone_depends_on_free,
+            jumps: sim.signals.delay_depends_on_free,
+            driven,
+            du_hist,
+            k0,
+            da: vec![0.0; nc],
+            db: vec![0.0; nc],
+            rate: vec![0.0; nc],
+            moving: false,
+            event_start: vec![0.0; nc],
+            gz: vec![0.0; nx],
+            gcol: vec![0.0; nc],
+            dtau: vec![0.0; nc],
+            scratch_dz: vec![0.0; nx + nx * nc],
+        }
+    }
+
+    /// `d t / d column c` of a segment boundary.
+    fn boundary_derivative(&self, b: Boundary, c: usize) -> f64 {
+        match b {
+            Boundary::Sample => 0.0,
+            Boundary::Delay(l) if c < self.p => self.d_delay[c * self.m + l],
+            Boundary::Delay(_) => 0.0,
+            Boundary::Event => self.event_start[c],
+        }
+    }
+
+    /// `d held input / d column c` into `self.du` (deadzone widths and
+    /// saturation levels of inputs from the data, the law's inputs in closed
+    /// loop); false when all zero.
+    fn input_derivative(&mut self, u: &[f64], held: &[usize], c: usize) -> bool {
+        let (m, p) = (self.m, self.p);
+        let mut any = false;
+        self.du.iter_mut().for_each(|v| *v = 0.0);
+        if self.deadzone_forcing && c < p {
+            for l in 0..m {
+                if self.driven.contains(&l) {
+                    continue;
+                }
+                let (gw, gl) = received_derivatives(u[l], self.sat_levels[l]);
+                let g = gw * self.d_width[c * m + l] + gl * self.d_level[c * m + l];
+                if g != 0.0 {
+                    self.du[l] = g;
+                    any = true;
+                }
+            }
+        }
+        let nd = self.driven.len();
+        if nd > 0 {
+            let hist = self.du_hist.borrow();
+            for (d, &l) in self.driven.iter().enumerate() {
+                let k = held[l];
+                if k >= self.k0 {
+                    let v = hist[(k - self.k0) * nd * self.nc + d * self.nc + c];
+                    if v != 0.0 {
+                        self.du[l] = v;
+                        any = true;
+                    }
+                }
+            }
+        }
+        any
+    }
+
+    /// The breakaway guard `Fs_j - |f_j|` of stuck joint `j` at state `x`:
+    /// its gradient along the state into `self.gz`, and `g_theta + g_u
+    /// du/dcolumn` of each column into `self.gcol` (the full tape at `x`,
+    /// the mode's constrained accelerations and their Jacobian).
+    fn breakaway_gradient(&mut self, z: &[f64], u: &[f64], held: &[usize], j: usize) -> bool {
+        let (n, m, p, nc) = (self.n, self.m, self.p, self.nc);
+        let nx = 2 * n;
+        let dim = nx + nx * nc;
+        let mut dz = std::mem::take(&mut self.scratch_dz);
+        let ok = self.rhs(&z[..dim], u, held, Rate::Event(1.0), &mut dz[..dim]);
+        self.scratch_dz = dz;
+        if !ok {
+            return false;
+        }
+        let nn = n * n;
+        let bs = nn + n + n * m + if self.levels { n } else { 0 };
+        let out_buf = std::mem::take(&mut self.out);
+        let out = &out_buf;
+        let mm = &out[..nn];
+        let (r0, bmat) = (&out[nn..nn + n], &out[nn + n..nn + n + n * m]);
+        let level = if self.levels {
+            out[nn + n + n * m + j]
+        } else {
+            0.0
+        };
+        let mut b_j = r0[j];
+        for l in 0..m {
+            b_j += bmat[j * m + l] * u[l];
+        }
+        let f_j: f64 = (0..n).map(|k| mm[j * n + k] * self.acc[k]).sum::<f64>() - b_j;
+        let sgn = f_j.signum();
+        let grad = |d: usize| -> f64 {
+            let blk = &out[bs * (d + 1)..bs * (d + 2)];
+            let (dm, dr, db) = (&blk[..nn], &blk[nn..nn + n], &blk[nn + n..nn + n + n * m]);
+            let mut df = -dr[j];
+            for k in 0..n {
+                df += dm[j * n + k] * self.acc[k] + mm[j * n + k] * self.jd[d * n + k];
+            }
+            for l in 0..m {
+                df -= db[j * m + l] * u[l];
+            }
+            let dl = if self.levels && level > 0.0 {
+                blk[nn + n + n * m + j]
+            } else {
+                0.0
+            };
+            dl - sgn * df
+        };
+        for d in 0..nx {
+            self.gz[d] = grad(d);
+        }
+        for c in 0..nc {
+            self.gcol[c] = if c < p { grad(nx + c) } else { 0.0 };
+        }
+        for c in 0..nc {
+            if !self.input_derivative(u, held, c) {
+                continue;
+            }
+            // the input's force B du, through the mode's accelerations
+            for i in 0..n {
+                self.w[i] = (0..m).map(|l| bmat[i * m + l] * self.du[l]).sum::<f64>();
+            }
+            mat_vec(&self.minv, n, &self.w, &mut self.tmp);
+            let df_u: f64 = (0..n).map(|k| mm[j * n + k] * self.tmp[k]).sum::<f64>() - self.w[j];
+            self.gcol[c] -= sgn * df_u;
+        }
+        self.out = out_buf;
+        true
+    }
+}
+
+impl Dynamics for SensDynamics<'_> {
+    fn n(&self) -> usize {
+        self.n
+    }
+
+    fn has_dry(&self) -> bool {
+        self.plain.has_dry()
+    }
+
+    fn tangent_len(&self) -> usize {
+        2 * self.n
+    }
+
+    fn classify(&mut self, x: &[f64], u: &[f64], release: Option<usize>) -> bool {
+        self.plain.classify(x, u, release)
+    }
+
+    fn state_rhs(&mut self, x: &[f64], u: &[f64], dx: &mut [f64]) -> bool {
+        self.plain.rates(x, u, dx)
+    }
+
+    fn guards(&mut self, x: &[f64], u: &[f64], g: &mut [f64]) -> bool {
+        self.plain.guards(x, u, g)
+    }
+
+    fn stuck(&self, j: usize) -> bool {
+        self.plain.mode.stuck[j]
+    }
+
+    fn begin_segment(&mut self, seg: &Segment) {
+        let mut moving = false;
+        for c in 0..self.nc {
+            let a = self.boundary_derivative(seg.start, c);
+            let b = self.boundary_derivative(seg.end, c);
+            self.da[c] = a;
+            self.db[c] = b;
+            self.rate[c] = (b - a) / seg.len;
+            moving |= self.rate[c] != 0.0;
+        }
+        self.moving = moving;
+    }
+
+    fn wants_switches(&self) -> bool {
+        self.jumps
+    }
+
+    fn held(&mut self, z: &mut [f64]) {
+        let mode = &self.plain.mode;
+        if !mode.any_stuck() {
+            return;
+        }
+        let (n, nc) = (self.n, self.nc);
+        let nx = 2 * n;
+        for j in 0..n {
+            if mode.stuck[j] {
+                z[nx + (n + j) * nc..nx + (n + j + 1) * nc]
+                    .iter_mut()
+                    .for_each(|v| *v = 0.0);
+            }
+        }
+    }
+
+    /// Jump of `S` at a switch of input `l`: `(f_old - f_new) dTd_l/dtheta`.
+    fn switch(&mut self, l: usize, f_old: &[f64], f_new: &[f64], z: &mut [f64]) {
+        let (nx, nc, m) = (2 * self.n, self.nc, self.m);
+        for i in 0..nx {
+            let df = f_old[i] - f_new[i];
+            if df != 0.0 {
+                for j in 0..self.p {
+                    z[nx + i * nc + j] += df * self.d_delay[j * m + l];
+                }
+            }
+        }
+    }
+
+    fn rhs(&mut self, z: &[f64], u: &[f64], held: &[usize], rate: Rate, dz: &mut [f64]) -> bool {
+        let (n, m, p, nc) = (self.n, self.m, self.p, self.nc);
+        let nx = 2 * n;
+        let dim = nx + nx * nc;
+        self.tin[..nx].copy_from_slice(&z[..nx]);
+        self.tin[nx..nx + m].copy_from_slice(u);
+        if self.unsplit {
+            self.tape.eval(&self.tin, &mut self.out, &mut self.scratch);
+        } else {
+            self.split
+                .eval_fast_changed(&self.tin, &mut self.out, &mut self.scratch);
+        }
+        let nn = n * n;
+        let bs = nn + n + n * m + if self.levels { n } else { 0 };
+        let mode = &self.plain.mode;
+        // M_FF^-1 once (M^-1 with no joint stuck); every right-hand side is
+        // then a product
+        if !self
+            .plain
+            .rules
+            .free_inverse(&self.out[..nn], &mode.stuck, &mut self.minv)
+        {
+            return false;
+        }
+        let r0 = &self.out[nn..nn + n];
+        let b = &self.out[nn + n..nn + n + n * m];
+        forces(r0, b, u, &mut self.tmp);
+        let dir = if self.levels {
+            let d = &self.out[nn + n + n * m..bs];
+            for i in 0..n {
+                let s = mode.dir[i];
+                if s != 0.0 {
+                    self.tmp[i] -= d[i] * s;
+                }
+            }
+            Some(&mode.dir[..])
+        } else {
+            None
+        };
+        mat_vec(&self.minv, n, &self.tmp, &mut self.acc);
+        dz[..n].copy_from_slice(&z[n..nx]);
+        dz[n..nx].copy_from_slice(&self.acc);
+        let s = &z[nx..dim];
+        let (ds, tangent) = dz[nx..].split_at_mut(nx * nc);
+        let blocks = &self.out[bs..bs * (nx + p + 1)];
+        let (acc, minv, w, jd) = (&self.acc, &self.minv, &mut self.w, &mut self.jd);
+        macro_rules! kernels {
+            ($dim:expr, $inputs:expr) => {{
+                acceleration_jacobian(($dim, $inputs), blocks, u, dir, acc, minv, w, jd);
+                sensitivity_rates($dim, jd, s, ds, (p, nc));
+            }};
+        }
+        // (one input, the common case, known when compiling too)
+        match (n, m) {
+            (1, 1) => kernels!(Fixed::<1>, Fixed::<1>),
+            (2, 1) => kernels!(Fixed::<2>, Fixed::<1>),
+            (3, 1) => kernels!(Fixed::<3>, Fixed::<1>),
+            (1, _) => kernels!(Fixed::<1>, Any(m)),
+            (2, _) => kernels!(Fixed::<2>, Any(m)),
+            (3, _) => kernels!(Fixed::<3>, Any(m)),
+            _ => kernels!(Any(n), Any(m)),
+        }
+        // deadzone widths and saturation levels of inputs from the data:
+        // M^-1 B d held/dtheta, with d held/d(w, L) from the held value
+        if self.deadzone_forcing {
+            for l in 0..m {
+                self.dheld[l] = received_derivatives(u[l], self.sat_levels[l]);
+            }
+            for j in 0..p {
+                let mut any = false;
+                for l in 0..m {
+                    let (gw, gl) = self.dheld[l];
+                    let g = gw * self.d_width[j * m + l] + gl * self.d_level[j * m + l];
+                    self.du[l] = if g != 0.0 && !self.driven.contains(&l) {
+                        any = true;
+                        g
+                    } else {
+                        0.0
+                    };
+                }
+                if !any {
+                    continue;
+                }
+                add_input_forcing(
+                    &self.minv,
+                    b,
+                    &self.du,
+                    (&mut self.tmp, &mut self.w),
+                    ds,
+                    (nc, j),
+                );
+            }
+        }
+        // inputs computed in the loop: M^-1 B du/dcolumn of the held sample
+        let nd = self.driven.len();
+        if nd > 0 {
+            let hist = self.du_hist.borrow();
+            for j in 0..nc {
+                let mut any = false;
+                for l in 0..m {
+                    self.du[l] = 0.0;
+                }
+                for (d, &l) in self.driven.iter().enumerate() {
+                    let k = held[l];
+                    if k >= self.k0 {
+                        let v = hist[(k - self.k0) * nd * nc + d * nc + j];
+                        if v != 0.0 {
+                            self.du[l] = v;
+                            any = true;
+                        }
+                    }
+                }
+                if !any {
+                    continue;
+                }
+                add_input_forcing(
+                    &self.minv,
+                    b,
+                    &self.du,
+                    (&mut self.tmp, &mut self.w),
+                    ds,
+                    (nc, j),
+                );
+            }
+        }
+        match rate {
+            // moving segment boundaries (delayed switches, events): f (b' - a') / L
+            Rate::Segment => {
+                if self.moving {
+                    for (j, &r) in self.rate.iter().enumerate() {
+                        if r != 0.0 {
+                            for i in 0..n {
+                                ds[i * nc + j] += z[n + i] * r;
+                                ds[(n + i) * nc + j] += self.acc[i] * r;
+                            }
+                        }
+                    }
+                }
+            }
+            // the step up to an event: the tangent d x / d tau, f_z T + f / tau
+            Rate::Event(len) => {
+                if tangent.len() >= nx && z.len() >= dim + nx {
+                    let t = &z[dim..dim + nx];
+                    for i in 0..n {
+                        tangent[i] = t[n + i] + z[n + i] / len;
+                        let mut v = self.acc[i] / len;
+                        for (k, tk) in t.iter().enumerate() {
+                            v += self.jd[k * n + i] * tk;
+                        }
+                        tangent[n + i] = v;
+                    }
+                }
+            }
+        }
+        true
+    }
+
+    /// `S(tau) = S0 + F dtau/dtheta` with `dtau/dtheta = -(g_z S0 +
+    /// g_theta) / (g_z F)`, `F` the tangent (see the module docs); a
+    /// velocity reaching zero is set to 0.0 with its sensitivity row.
+    fn event(&mut self, z: &mut [f64], u: &[f64], held: &[usize], ev: &Located) -> bool {
+        let (n, nc) = (self.n, self.nc);
+        let nx = 2 * n;
+        let dim = nx + nx * nc;
+        let j = ev.joint;
+        let gf = if ev.stuck {
+            if !self.breakaway_gradient(z, u, held, j) {
+                return false;
+            }
+            for c in 0..nc {
+                let mut g = self.gcol[c];
+                for d in 0..nx {
+                    g += self.gz[d] * z[nx + d * nc + c];
+                }
+                self.gcol[c] = g;
+            }
+            (0..nx).map(|d| self.gz[d] * z[dim + d]).sum::<f64>()
+        } else {
+            // g = sigma v_j: sigma cancels
+            for c in 0..nc {
+                self.gcol[c] = z[nx + (n + j) * nc + c];
+            }
+            z[dim + n + j]
+        };
+        for c in 0..nc {
+            self.dtau[c] = if gf != 0.0 && gf.is_finite() {
+                -self.gcol[c] / gf
+            } else {
+                0.0
+            };
+        }
+        for i in 0..nx {
+            let f = z[dim + i];
+            if f != 0.0 {
+                for c in 0..nc {
+                    z[nx + i * nc + c] += f * self.dtau[c];
+                }
+            }
+        }
+        if !ev.stuck {
+            z[n + j] = 0.0;
+            z[nx + (n + j) * nc..nx + (n + j + 1) * nc]
+                .iter_mut()
+                .for_each(|v| *v = 0.0);
+        }
+        let (s, steps) = ev.step;
+        let frac = s as f64 / steps as f64;
+        for c in 0..nc {
+            self.event_start[c] = self.da[c] + frac * (self.db[c] - self.da[c]) + self.dtau[c];
+        }
+        true
     }
 }
 

@@ -12,14 +12,15 @@ use std::fmt;
 use plantc_derive::model::{Model, ParameterValues};
 
 use crate::data::Experiment;
+use crate::decision::EffectTest;
 use crate::diagnose::{
-    diagnose_from, diagnose_with, model_from_text, significant, DiagnoseError, DiagnoseOptions,
-    Diagnosis, Ranked, FLOOR_REACHED, NESTED, NESTED_GAIN,
+    diagnose_from, diagnose_with, model_from_text, DiagnoseError, DiagnoseOptions, Judge, Ranked,
+    NESTED,
 };
 use crate::effect_edit::EffectInstance;
 use crate::fit::{
     fit, fit_with_progress, replay_follows, values_from, with_estimates, ClosedLoop, FitError,
-    FitOptions, FitProgress, FitResult, Horizon, FAR_ABOVE_FLOOR,
+    FitOptions, FitProgress, FitResult, Horizon,
 };
 use crate::metrics::{compare, FitReport};
 use crate::stabilised_replay::StabilisedReplay;
@@ -78,9 +79,13 @@ pub struct Stage {
     pub text: String,
     /// Base parameter values.
     pub base: Vec<f64>,
-    /// Fit % and RMSE per experiment and channel (simulation with the
-    /// nuisance estimated).
+    /// Fit % and RMSE per experiment and channel: the whole records
+    /// simulated (with the nuisance estimated), for every stage alike.
     pub report: FitReport,
+    /// When the stage's fit was on segments (each from its own estimated
+    /// state: k-step-ahead prediction), the fit % and RMSE of those
+    /// segments, an extra view beside the whole-record `report`.
+    pub segment_report: Option<FitReport>,
     /// The simulated coordinates as experiments (for figures).
     pub simulated: Vec<Experiment>,
     /// The fit's cost (weighted RMS) where a fit made the stage.
@@ -102,13 +107,8 @@ pub struct Round {
     pub cost_before: f64,
     /// See [`Round::cost_before`].
     pub cost_after: Option<f64>,
-    /// The effect passed no test alone (far above the noise floor, its
-    /// gain below what a verdict needs): it was added on trial and kept
-    /// because the next round's effect, with it in the model, explains the
-    /// residual ([`confirms`]). Two effects that each hide the other (a
-    /// spring on the arm and dry friction in the pendulum's joint: 1.12x
-    /// and 1.45x alone) are found this way.
-    pub tentative: bool,
+    /// The decision rule's test that named the effect.
+    pub test: Option<EffectTest>,
 }
 
 /// The result of [`identify`].
@@ -157,11 +157,11 @@ impl Story {
     }
 }
 
-/// An effect found in an early round that did not pay for its parameters
-/// in its own round's fit and that, with the later rounds' effects in the
-/// model, the model does as well without: removed (a sensor offset on the
-/// pendulum credited from per-file offsets that a spring on it had made
-/// agree, fitted to 4.9e-5 rad once the spring was in).
+/// An effect found in an early round that, with the later rounds' effects
+/// in the model, no longer passes the decision rule against the model
+/// without it: removed (a sensor offset on the pendulum credited from
+/// per-file offsets that a spring on it had made agree, fitted to 4.9e-5
+/// rad once the spring was in).
 #[derive(Clone, Debug)]
 pub struct Removal {
     /// The round (from 1) that found it.
@@ -172,13 +172,17 @@ pub struct Removal {
     pub cost_with: f64,
     /// ...and without it, refitted.
     pub cost_without: f64,
+    /// The decision rule's test of the effect in the final model, which
+    /// it failed.
+    pub test: EffectTest,
     /// Its stage in [`Story::stages`].
     pub stage: usize,
 }
 
 /// An effect found in an early round that, with the later rounds' effects
-/// in the model, does no better than the simpler effect it contains
-/// (Stribeck friction with its hump gone is Coulomb friction): replaced.
+/// in the model, no longer passes the decision rule against the simpler
+/// effect it contains (Stribeck friction with its hump gone is Coulomb
+/// friction): replaced.
 #[derive(Clone, Debug)]
 pub struct Simplification {
     /// The round (from 1) that found `from`.
@@ -194,6 +198,10 @@ pub struct Simplification {
     pub cost_with: f64,
     /// ...and with `to` (and `then`), refitted.
     pub cost_simpler: f64,
+    /// The decision rule's test of `from` against `to`, which it failed
+    /// (None for the replacement of a Stribeck friction fitted to no shape
+    /// of its own, decided by the criterion between the two models).
+    pub test: Option<EffectTest>,
     /// Its stage in [`Story::stages`].
     pub stage: usize,
 }
@@ -313,7 +321,12 @@ fn stage_at(
         horizon: None,
         ..ValidateOptions::default()
     };
-    let simulated = match fitted.map(|f| &f.simulated).or(at_start) {
+    // the whole records: the fit's own simulation unless it was on
+    // segments, then a whole-record simulation with the nuisance estimated
+    let whole_fit = fitted
+        .filter(|f| f.segments.is_none())
+        .map(|f| &f.simulated);
+    let simulated = match whole_fit.or(at_start) {
         Some(given) => {
             let sims: Vec<Option<&Vec<Vec<f64>>>> = given.iter().map(Some).collect();
             as_experiments(model, experiments, &sims)
@@ -327,6 +340,17 @@ fn stage_at(
     };
     let report =
         compare(experiments, &simulated, &names).map_err(|e| StoryError::Compare(e.to_string()))?;
+    let segment_report = match fitted.filter(|f| f.segments.is_some()) {
+        Some(f) => {
+            let sims: Vec<Option<&Vec<Vec<f64>>>> = f.simulated.iter().map(Some).collect();
+            let seg = as_experiments(model, experiments, &sims);
+            Some(
+                compare(experiments, &seg, &names)
+                    .map_err(|e| StoryError::Compare(e.to_string()))?,
+            )
+        }
+        None => None,
+    };
     let validation = if opts.validate.is_empty() {
         None
     } else {
@@ -348,6 +372,7 @@ fn stage_at(
         text: text.to_string(),
         base: base.to_vec(),
         report,
+        segment_report,
         simulated,
         cost: fitted.map(|f| f.after_cost),
         validation,
@@ -448,10 +473,6 @@ fn stabilised_replay(
     };
     let opts = StoryOptions {
         validate,
-        diagnose: DiagnoseOptions {
-            partial_credit: false,
-            ..opts.diagnose.clone()
-        },
         ..opts.clone()
     };
     Ok(Some(Stabilised {
@@ -477,8 +498,6 @@ fn story(
     let mut current_fit: Option<FitResult> = None;
     let mut better_start = None;
     let mut unexplained = false;
-    // the next round's diagnosis, when a trial made it already
-    let mut pending: Option<Diagnosis> = None;
     let stop;
     loop {
         let round = rounds.len() + 1;
@@ -486,10 +505,9 @@ fn story(
         let dopts = opts.diagnose_options();
         // later rounds diagnose against the last round's fit (the model as
         // it now stands, fitted under the same options)
-        let d = match (pending.take(), current_fit.clone()) {
-            (Some(d), _) => Ok(d),
-            (None, Some(f)) => diagnose_from(&current_text, experiments, f, &dopts),
-            (None, None) => diagnose_with(&current_text, experiments, &dopts),
+        let d = match current_fit.clone() {
+            Some(f) => diagnose_from(&current_text, experiments, f, &dopts),
+            None => diagnose_with(&current_text, experiments, &dopts),
         }
         .map_err(StoryError::Diagnose)?;
         let current_model = model_from_text("model", &current_text).map_err(StoryError::Model)?;
@@ -501,8 +519,7 @@ fn story(
             // screening tolerance ([`FitOptions::coarse_far_above_floor`]):
             // with no effect to follow it is the story's answer, fitted on
             // to the final one
-            let finished = (d.verdict.is_none()
-                && d.baseline.after_cost > FAR_ABOVE_FLOOR * d.floor)
+            let finished = (d.verdict.is_none() && !d.at_floor)
                 .then(|| {
                     fit_with_progress(
                         &current_model,
@@ -531,30 +548,8 @@ fn story(
         }
         let cost_before = d.baseline.after_cost;
         let top = d.verdict.as_ref().and_then(|_| d.ranking.first()).cloned();
-        // far above the floor with nothing passing, the best candidate on
-        // trial: kept when the next round's effect then explains the
-        // residual
-        let trial = if top.is_none()
-            && rounds.len() + 2 <= opts.max_effects
-            && d.unexplained()
-            && dopts.partial_credit
-        {
-            on_trial(
-                (&current_text, &current_model, current_fit.as_ref()),
-                &d,
-                experiments,
-                (opts, &dopts),
-                progress,
-            )?
-        } else {
-            None
-        };
-        let (inst, edited, m2, f, tentative) = match (trial, top) {
-            (Some(t), _) => {
-                pending = Some(t.next);
-                (t.effect, t.text, t.model, t.fit, true)
-            }
-            (None, Some(top)) => {
+        let (inst, edited, m2, f, test) = match top {
+            Some(top) => {
                 let (inst, edited, m2, f) = add_and_fit(
                     &top,
                     (&current_text, &current_model, current_fit.as_ref()),
@@ -562,25 +557,20 @@ fn story(
                     opts,
                     progress,
                 )?;
-                (inst, edited, m2, f, false)
+                (inst, edited, m2, f, top.test.clone())
             }
-            (None, None) => {
+            None => {
                 let caveat = d
                     .segments_caveat()
                     .map(|c| format!(" ({c})"))
                     .unwrap_or_default();
                 unexplained = d.unexplained();
-                stop = if unexplained {
+                stop = if unexplained || !d.nuisance_flags().is_empty() {
                     d.verdict_line()
-                } else if d.nothing_left {
-                    format!(
-                    "the residual is at the noise floor ({:.2}x): nothing left to explain{caveat}",
-                    d.above_floor()
-                )
                 } else if round == 1 {
-                    format!("adequate: no candidate effect lowers the cost clearly{caveat}")
+                    format!("adequate: no candidate effect passes the decision rule and the residual is at the noise floor{caveat}")
                 } else {
-                    format!("no further effect lowers the cost clearly{caveat}")
+                    format!("the residual is at the noise floor: nothing left for an effect to explain{caveat}")
                 };
                 // the diagnosis may have found the model as it stands a better
                 // minimum (its baseline refitted from a candidate's values: rate
@@ -588,7 +578,7 @@ fn story(
                 // from the drag candidate's values); that fit is the story's
                 let improved = current_fit
                     .as_ref()
-                    .is_some_and(|f| d.baseline.after_cost < 0.999 * f.after_cost);
+                    .is_some_and(|f| d.baseline.after_cost < f.after_cost);
                 if improved && round > 1 {
                     better_start = Some(stages.len());
                     stages.push(stage(
@@ -607,13 +597,12 @@ fn story(
                     fit: None,
                     cost_before,
                     cost_after: None,
-                    tentative: false,
+                    test: None,
                 });
                 break;
             }
         };
-        let on_trial = if tentative { " (on trial)" } else { "" };
-        let label = format!("+ {}, fitted{on_trial}", inst.label());
+        let label = format!("+ {}, fitted", inst.label());
         stages.push(stage(&label, &edited, &m2, Some(&f), experiments, opts)?);
         rounds.push(Round {
             ranking: d.ranking,
@@ -621,7 +610,7 @@ fn story(
             fit: Some(f.clone()),
             cost_before,
             cost_after: Some(f.after_cost),
-            tentative,
+            test,
         });
         current_text = edited;
         current_fit = Some(f);
@@ -704,74 +693,6 @@ fn add_and_fit(
     Ok((inst, edited, m2, f))
 }
 
-/// Smallest refit gain for a candidate to be put on trial ([`on_trial`]):
-/// the gain that earns a second start, some of the effect shown.
-const TRIAL_GAIN: f64 = 1.2;
-
-/// A candidate added on trial ([`on_trial`]) and the diagnosis that
-/// confirmed it.
-struct Trial {
-    effect: EffectInstance,
-    text: String,
-    model: Model,
-    fit: FitResult,
-    /// The diagnosis of the model with the effect (the next round's).
-    next: Diagnosis,
-}
-
-/// When a round ends far above the noise floor with no candidate passing
-/// (diagnosis `d` unexplained), two effects may each hide the other: the
-/// best refitted candidate that shows some of its effect ([`TRIAL_GAIN`],
-/// its parameters significant) is added and fitted, and the model with it
-/// diagnosed. It is kept when [`confirms`] holds for that diagnosis; None
-/// otherwise (the round then ends as before, unexplained).
-fn on_trial(
-    current: (&str, &Model, Option<&FitResult>),
-    d: &Diagnosis,
-    experiments: &[Experiment],
-    (opts, dopts): (&StoryOptions, &DiagnoseOptions),
-    progress: &mut dyn FnMut(&StoryProgress),
-) -> Result<Option<Trial>, StoryError> {
-    let Some(best) = d
-        .ranking
-        .iter()
-        .filter(|r| r.fit.is_some() && r.gain >= TRIAL_GAIN && significant(r))
-        .max_by(|a, b| a.gain.total_cmp(&b.gain))
-    else {
-        return Ok(None);
-    };
-    progress(&StoryProgress::Step(format!(
-        "nothing passes alone: {} on trial",
-        best.candidate.label()
-    )));
-    let (effect, text, model, fit) = add_and_fit(best, current, experiments, opts, progress)?;
-    let next =
-        diagnose_from(&text, experiments, fit.clone(), dopts).map_err(StoryError::Diagnose)?;
-    Ok(confirms(d, &next, dopts).then_some(Trial {
-        effect,
-        text,
-        model,
-        fit,
-        next,
-    }))
-}
-
-/// Does the diagnosis `next` of the model with an effect on trial confirm
-/// it? Its verdict's refit must take the cost of the first diagnosis' (`d`)
-/// baseline down by the verdict gain itself ([`DiagnoseOptions::min_gain`])
-/// or to the noise floor ([`FLOOR_REACHED`]): the two effects together pass
-/// where neither did alone.
-fn confirms(d: &Diagnosis, next: &Diagnosis, dopts: &DiagnoseOptions) -> bool {
-    let Some(top) = next.verdict.as_ref().and_then(|_| next.ranking.first()) else {
-        return false;
-    };
-    let Some(f) = &top.fit else {
-        return false;
-    };
-    f.after_cost * dopts.min_gain <= d.baseline.after_cost
-        || (d.floor > 0.0 && f.after_cost <= FLOOR_REACHED * d.floor)
-}
-
 /// The story's end steps, on the model its rounds built.
 struct EndSteps {
     /// The effects in the model, round by round (the rounds keep what they
@@ -786,23 +707,22 @@ struct EndSteps {
 }
 
 impl EndSteps {
-    /// 1. An effect taken in an early round over its simpler form may owe
-    ///    its extra parameters to an effect found later (Coulomb friction
+    /// 1. An earlier round's effect that, with the later effects in, no
+    ///    longer passes the decision rule against the model without it is
+    ///    removed.
+    /// 2. An earlier round's effect over its simpler form (Coulomb friction
     ///    and a quadratic drag on the pendulum: round 1 took a Stribeck
-    ///    friction, 4.21x against the Coulomb friction's 2.96x, its hump
-    ///    standing in for part of the drag; with the drag in, the hump had
-    ///    shrunk to vs = 1.2e-3 rad/s): each such effect is tried in its
-    ///    simpler form in the final model and replaced unless it beats it
-    ///    by NESTED_GAIN.
-    /// 2. A Stribeck friction fitted to no Stribeck shape (no hump, Fs <=
+    ///    friction, its hump standing in for part of the drag; with the
+    ///    drag in, the hump had shrunk to vs = 1.2e-3 rad/s) is replaced by
+    ///    the simpler form unless it passes the rule against it.
+    /// 3. A Stribeck friction fitted to no Stribeck shape (no hump, Fs <=
     ///    Fc, or vs at a bound of its box) imitates something else (Coulomb
-    ///    friction and drag on the rate survey's second rig: vs at its
-    ///    10 rad/s bound and Fc > Fs, whose expansion Fs + (Fc - Fs)
-    ///    v^2/vs^2 is a Coulomb friction plus a quadratic drag): its
-    ///    simpler form is put in its place and diagnosed once more, and that
-    ///    is kept when the diagnosis names an effect (not past
-    ///    `max_effects`) and the model with both ends no more than
-    ///    NESTED_GAIN above.
+    ///    friction and drag: vs at its bound and Fc > Fs, whose expansion
+    ///    Fs + (Fc - Fs) v^2/vs^2 is a Coulomb friction plus a quadratic
+    ///    drag): its simpler form is put in its place and diagnosed once
+    ///    more, and that is kept when the diagnosis names an effect (not
+    ///    past `max_effects`) and the model with both has the lower
+    ///    information criterion ([`prefers`]).
     fn run(
         &mut self,
         text: &str,
@@ -814,36 +734,30 @@ impl EndSteps {
         let found: Vec<usize> = (0..rounds.len())
             .filter(|&k| rounds[k].effect.is_some())
             .collect();
-        // an earlier round's effect that did not pay for its parameters in
-        // its own round's fit ([`DiagnoseOptions::per_parameter_gain`] each)
-        // is removed when the model without it, the later effects in, does
-        // as well on the same terms
-        let per = opts.diagnose.per_parameter_gain;
+        let dopts = opts.diagnose_options();
         for &k in found.iter().take(found.len().saturating_sub(1)) {
-            let (Some(inst), Some(after)) = (&rounds[k].effect, rounds[k].cost_after) else {
-                continue;
-            };
-            let margin = 1.0 + per * inst.parameters.len() as f64;
-            if after * margin < rounds[k].cost_before {
-                continue;
-            }
             let Some((text2, f2, _)) = self.rebuilt(text, k, None, experiments, opts, progress)
             else {
                 continue;
             };
-            if f2.after_cost <= margin * self.fit.after_cost {
-                self.remove(k, (text2, f2), experiments, opts)?;
+            let Some(test) = self.need(k, &f2, experiments, &dopts) else {
+                continue;
+            };
+            if !test.passes() {
+                self.remove(k, (text2, f2), test, experiments, opts)?;
             }
         }
         for &k in found.iter().take(found.len().saturating_sub(1)) {
             let Some((text2, f2, to)) = self.simpler(text, k, experiments, opts, progress) else {
                 continue;
             };
-            if f2.after_cost < NESTED_GAIN * self.fit.after_cost {
-                self.adopt(k, (to, None), (text2, f2), experiments, opts)?;
+            let Some(test) = self.test(k, &f2, true, experiments, &dopts) else {
+                continue;
+            };
+            if !test.passes() {
+                self.adopt(k, (to, None), (text2, f2), Some(test), experiments, opts)?;
             }
         }
-        let dopts = opts.diagnose_options();
         for k in 0..self.applied.len() {
             let in_model = self.applied.iter().flatten().count();
             if in_model >= opts.max_effects || !self.no_shape_of_its_own(k) {
@@ -878,13 +792,63 @@ impl EndSteps {
             let Ok(f3) = fit(&m3, experiments, &fo) else {
                 continue;
             };
-            if f3.after_cost <= NESTED_GAIN * self.fit.after_cost {
+            let judge = Judge::new(&m3, experiments, &dopts, &d.baseline);
+            let k_now: usize = self
+                .applied
+                .iter()
+                .flatten()
+                .map(|e| e.parameters.len())
+                .sum();
+            let k_then = k_now - self.applied[k].as_ref().map_or(0, |e| e.parameters.len())
+                + to.parameters.len()
+                + then.parameters.len();
+            if prefers(
+                (judge.ssr(&f3), k_then),
+                (judge.ssr(&self.fit), k_now),
+                judge.effective_samples(),
+            ) {
                 write_fitted(&mut to, &f3);
                 write_fitted(&mut then, &f3);
-                self.adopt(k, (to, Some(then)), (text3, f3), experiments, opts)?;
+                self.adopt(k, (to, Some(then)), (text3, f3), None, experiments, opts)?;
             }
         }
         Ok(())
+    }
+
+    /// The decision rule's test of whether round `k`'s effect is needed at
+    /// all in the model as it stands (whatever its form: see
+    /// [`EndSteps::test`]) against `without`, a fit without it.
+    fn need(
+        &self,
+        k: usize,
+        without: &FitResult,
+        experiments: &[Experiment],
+        dopts: &DiagnoseOptions,
+    ) -> Option<EffectTest> {
+        let effect = self.applied.get(k)?.as_ref()?;
+        let m = model_from_text("final", &self.text).ok()?;
+        let judge = Judge::new(&m, experiments, dopts, without);
+        let s0 = judge.ssr(without);
+        Some(judge.need_test(effect, &m, &self.fit, s0))
+    }
+
+    /// The decision rule's test of round `k`'s effect in the model as it
+    /// stands against `without`, a fit of the model without it (`nested`:
+    /// with its simpler form instead).
+    fn test(
+        &self,
+        k: usize,
+        without: &FitResult,
+        nested: bool,
+        experiments: &[Experiment],
+        dopts: &DiagnoseOptions,
+    ) -> Option<EffectTest> {
+        let effect = self.applied.get(k)?.as_ref()?;
+        let m = model_from_text("final", &self.text).ok()?;
+        let m0 = m.clone();
+        let judge = Judge::new(&m0, experiments, dopts, without);
+        let s0 = judge.ssr(without);
+        Some(judge.effect_test(effect, &m, &self.fit, s0, nested))
     }
 
     /// Put `to` in the place of round `k`'s effect (and add `then`): the
@@ -894,6 +858,7 @@ impl EndSteps {
         k: usize,
         (to, then): (EffectInstance, Option<EffectInstance>),
         (text, f): (String, FitResult),
+        test: Option<EffectTest>,
         experiments: &[Experiment],
         opts: &StoryOptions,
     ) -> Result<(), StoryError> {
@@ -907,6 +872,7 @@ impl EndSteps {
             then: then.clone(),
             cost_with: self.fit.after_cost,
             cost_simpler: f.after_cost,
+            test,
             stage: self.stages.len(),
         };
         self.advance(&simple.stage_label(), (text, f), experiments, opts)?;
@@ -999,7 +965,28 @@ impl EndSteps {
             warm: Some(self.fit.warm.clone()),
             ..opts.fit.clone()
         };
-        let f = fit(&m2, experiments, &fo).ok()?;
+        let f = fit(&m2, experiments, &fo).ok();
+        // the values the bigger model fitted can trap the smaller one (a
+        // Stribeck friction's levels for a Coulomb friction: 4.7x the
+        // floor, where its fit from the nominal values reaches it): when
+        // it ends above the model as it stands, again from the nominal
+        // values, the better kept
+        let f = match f {
+            Some(f) if f.after_cost <= self.fit.after_cost => f,
+            first => {
+                let cold = fit(&m2, experiments, &opts.fit).ok();
+                match (first, cold) {
+                    (Some(a), Some(b)) => {
+                        if b.after_cost < a.after_cost {
+                            b
+                        } else {
+                            a
+                        }
+                    }
+                    (a, b) => a.or(b)?,
+                }
+            }
+        };
         if let Some(put) = &mut put {
             write_fitted(put, &f);
         }
@@ -1012,6 +999,7 @@ impl EndSteps {
         &mut self,
         k: usize,
         (text, f): (String, FitResult),
+        test: EffectTest,
         experiments: &[Experiment],
         opts: &StoryOptions,
     ) -> Result<(), StoryError> {
@@ -1023,6 +1011,7 @@ impl EndSteps {
             effect,
             cost_with: self.fit.after_cost,
             cost_without: f.after_cost,
+            test,
             stage: self.stages.len(),
         };
         let label = format!("without {}, fitted", removal.effect.label());
@@ -1054,4 +1043,13 @@ impl EndSteps {
         let at_bound = bounds.is_some_and(|(lo, hi)| vs <= lo * 1.001 || vs >= hi * 0.999);
         fs <= fc || at_bound
     }
+}
+
+/// Between two models that are not nested, the decision rule's criterion:
+/// is `a` (`(sum of squares, parameter count)`) preferred to `b`, its
+/// `N_eff ln S + k ln N_eff` lower over `n_eff` effective samples?
+fn prefers(a: (f64, usize), b: (f64, usize), n_eff: f64) -> bool {
+    let n = n_eff.max(1.0);
+    let ic = |(s, k): (f64, usize)| n * s.ln() + k as f64 * n.ln();
+    ic(a) < ic(b)
 }

@@ -10,9 +10,12 @@
 //!
 //! Each experiment is then simulated with the identification [`Simulator`]
 //! (fixed-step RK4, zero-order-hold input) on a finer substep
-//! ([`SynthOptions::substep`], 0.1 ms by default, against the 1 ms the fits
+//! ([`SynthOptions::substep`], 0.1 ms by default, against the 2 ms the fits
 //! use), sampled at [`SynthOptions::rate`], optionally disturbed by seeded
-//! Gaussian noise and quantised like an encoder.
+//! Gaussian noise and quantised like an encoder. Dry friction sticks
+//! ([`SynthOptions::friction`]: a joint at rest stays at rest under a force
+//! below its static level, as on a real rig); `smooth:WIDTH` makes data with
+//! the smooth `tanh(v / WIDTH)` law of earlier versions instead.
 //!
 //! **Quantisation** rounds each angle to the *nearest* count,
 //! `q * round(x / q)` with `q = 2 pi / counts`: the error of a correct model is
@@ -41,8 +44,9 @@
 //! `nominal_parameters` (the model's own parameters, SI), `sample_rate_hz`,
 //! `encoder_counts_per_rev` (`null` without quantisation) and `experiments`
 //! (file stems); then `effects` (each with its target and parameters),
-//! `noise_std`, `seed`, `substep_s`, `model` and `experiment_specs`, enough to
-//! make the data again.
+//! `noise_std`, `seed`, `substep_s`, `dry_friction` (`sticking` or
+//! `smooth:WIDTH`), `model` and `experiment_specs`, enough to make the data
+//! again.
 //!
 //! **Determinism.** Noise and multisine phases come from a SplitMix64
 //! generator seeded from [`SynthOptions::seed`] and the experiment's index;
@@ -58,7 +62,9 @@ use plantc_derive::model::{load_model_text, CoordinateKind, Model, ParameterValu
 use serde::ser::{Serialize, SerializeMap, Serializer};
 
 use crate::effect_edit::{templates, EffectEditError, EffectInstance, TEMPLATES};
-use crate::experiment_sim::{InitialVelocity, Signals, SimError, SimOptions, Simulator};
+use crate::experiment_sim::{
+    DryFriction, InitialVelocity, Signals, SimError, SimOptions, Simulator,
+};
 
 /// Why synthetic data cannot be made.
 #[derive(Clone, Debug, PartialEq)]
@@ -513,6 +519,8 @@ pub struct SynthOptions {
     pub seed: u64,
     /// RK4 substep of the simulation, s.
     pub substep: f64,
+    /// How the true model's dry friction acts (sticking by default).
+    pub friction: DryFriction,
 }
 
 impl Default for SynthOptions {
@@ -523,7 +531,38 @@ impl Default for SynthOptions {
             noise: 0.0,
             seed: 1,
             substep: 1e-4,
+            friction: DryFriction::Sticking,
         }
+    }
+}
+
+/// The dry-friction law of `plantc synth --friction`: `sticking` (stick-slip,
+/// the default) or `smooth:WIDTH` (`sign(v)` as `tanh(v / WIDTH)`, WIDTH a
+/// positive speed in the coordinate's SI unit, e.g. `smooth:1e-3`).
+pub fn parse_friction(token: &str) -> Result<DryFriction, SynthError> {
+    let bad = |message: &str| SynthError::BadSpec {
+        token: token.to_string(),
+        message: message.to_string(),
+        help: "write `sticking` or `smooth:WIDTH` with WIDTH a positive speed, e.g. `smooth:1e-3`"
+            .to_string(),
+    };
+    match token.trim() {
+        "sticking" => Ok(DryFriction::Sticking),
+        t => match t.strip_prefix("smooth:") {
+            Some(w) => match w.trim().parse::<f64>() {
+                Ok(width) if width > 0.0 && width.is_finite() => Ok(DryFriction::Smooth { width }),
+                _ => Err(bad("the smoothing width must be a positive number")),
+            },
+            None => Err(bad("unknown dry-friction law")),
+        },
+    }
+}
+
+/// How truth.json writes a dry-friction law: `sticking` or `smooth:WIDTH`.
+pub fn friction_name(law: DryFriction) -> String {
+    match law {
+        DryFriction::Sticking => "sticking".to_string(),
+        DryFriction::Smooth { width } => format!("smooth:{width:e}"),
     }
 }
 
@@ -601,6 +640,7 @@ struct Truth<'a> {
     noise_std: f64,
     seed: u64,
     substep_s: f64,
+    dry_friction: String,
     model: &'a str,
     experiment_specs: Vec<&'a str>,
 }
@@ -890,7 +930,7 @@ pub fn synthesize(model_text: &str, spec: &SynthSpec) -> Result<Synthesized, Syn
         &model,
         SimOptions {
             substep: Some(opts.substep),
-            dry_friction_width: SimOptions::default().dry_friction_width,
+            dry_friction: opts.friction,
             initial_velocity: InitialVelocity::Zero,
         },
     )?;
@@ -1135,6 +1175,7 @@ pub fn synthesize(model_text: &str, spec: &SynthSpec) -> Result<Synthesized, Syn
         noise_std: opts.noise,
         seed: opts.seed,
         substep_s: opts.substep,
+        dry_friction: friction_name(opts.friction),
         model: &spec.model_name,
         experiment_specs: spec.experiments.iter().map(|e| e.token.as_str()).collect(),
     };

@@ -8,12 +8,22 @@
 //!
 //! - **Simulation**: every experiment simulated whole (in closed loop when a
 //!   recorded controller is in the loop) against its measurements: fit %
-//!   and RMSE per channel. An unstable plant replayed open loop diverges:
-//!   then the simulation fit is reported as missing, with the reason.
+//!   and RMSE per channel. A simulation that cannot be run, or leaves the
+//!   data (its residuals on some channel more than twice that channel's
+//!   own motion: fit % below -100), is reported as diverged with the
+//!   reason, not as a number.
+//! - **Initial states** of the held-out records: fitted with their priors
+//!   from the data ([`crate::initial_state`]) by an observer over the
+//!   first [`crate::fit::OBSERVER_WINDOW`] seconds (a record that starts
+//!   inside a fast transient, a controller switched on with its voltage
+//!   clipped, is started from what its first samples show), then the
+//!   sensor zeros over the whole record, the start held.
 //! - **k-step-ahead prediction** (`horizon` in s): from each window start
-//!   `t0` the model is simulated from the measured state (positions as
-//!   measured minus offsets, velocities from a causal local fit of the past
-//!   20 ms; a recorded controller starts from its filter state on the data),
+//!   `t0` the model is simulated from the smoothed state there (a local
+//!   quadratic through the samples within 10 ms on either side: its value
+//!   minus the offsets, its slope; at a record's start, where a smoother
+//!   could only extrapolate, the state fitted over the first samples; a
+//!   recorded controller starts from its filter state on the data),
 //!   and the prediction at `t` is taken from the latest window that starts
 //!   at least `horizon` before `t`. Windows start every tenth of the
 //!   horizon, so predictions are between `horizon` and `1.1 horizon` ahead:
@@ -30,6 +40,7 @@ use crate::data::Experiment;
 use crate::experiment_sim::BlockStart;
 use crate::fit::{lm_nuisance, nuisance_estimates, FitError, FitOptions, Offsets, Setup};
 use crate::fit::{ExperimentEstimate, Horizon};
+use crate::initial_state::smoothed_state;
 use crate::metrics::fit_percent;
 use crate::problem::par_each;
 use crate::residual_tests::{residual_test, ResidualTest, DEFAULT_LAGS};
@@ -197,16 +208,46 @@ pub fn validate(
     let estimates = nuisance_estimates(&setup, &pb, &pt);
     let full = pb.full_at(&pt.g);
     let model_off = setup.sim.model_offsets(&full).map_err(FitError::Sim)?;
+    let noise: Vec<f64> = setup.weights().iter().map(|w| w.noise).collect();
+    // the state at each record's start: the fitted one (the model over the
+    // first samples, with the priors), when the fit could be simulated
+    let starts: Vec<Option<Vec<f64>>> = (0..experiments.len())
+        .map(|e| {
+            let b = pb.blocks.iter().position(|b| b.exp == e)?;
+            fitted.then(|| {
+                pb.block_start(b, &pt, &model_off, pb.blocks[b].range.clone())
+                    .x0
+            })
+        })
+        .collect();
     let predictions: Vec<Option<Vec<Vec<f64>>>> = match opts.horizon {
         None => vec![None; experiments.len()],
         Some(h) => par_each(experiments.len(), |e| {
-            predict_ahead(&setup, &pb.exp_offsets(&pt.g, e), &model_off, &full, e, h)
+            predict_ahead(
+                &setup,
+                (&pb.exp_offsets(&pt.g, e), &model_off, starts[e].as_deref()),
+                &full,
+                &noise,
+                e,
+                h,
+            )
         }),
     };
     let mut out = Vec::new();
     for (e, exp) in experiments.iter().enumerate() {
         let sig = &setup.sigs[e];
-        let sim_e = simulated.as_ref().map(|s| s[e].clone());
+        // a simulation that left the data is called diverged
+        let left = simulated.as_ref().and_then(|s| {
+            (0..n).find(|&i| {
+                let spread = setup.weights()[i].spread;
+                let r = crate::metrics::rmse(&sig.q[i], &s[e][i]).unwrap_or(f64::INFINITY);
+                !(r <= crate::fit::DIVERGED_COST * spread)
+            })
+        });
+        let sim_e = simulated
+            .as_ref()
+            .map(|s| s[e].clone())
+            .filter(|_| left.is_none());
         let simulation: Vec<ChannelScore> = match &sim_e {
             Some(s) => (0..n).map(|i| score(names[i], &sig.q[i], &s[i])).collect(),
             None => Vec::new(),
@@ -241,9 +282,16 @@ pub fn validate(
         };
         out.push(ExperimentValidation {
             name: exp.name.clone(),
-            simulation_error: sim_e.is_none().then(|| {
-                "the simulation of the whole record diverged (an unstable plant replayed open loop: use a prediction horizon, or a recorded controller in the loop)".to_string()
-            }),
+            simulation_error: match (left, simulated.is_some()) {
+                (Some(i), _) => Some(format!(
+                    "the simulation of the whole record diverged: it left the data on {} (residual RMS above twice the channel's own motion, fit % below -100)",
+                    names[i]
+                )),
+                (None, false) => Some(
+                    "the simulation of the whole record diverged (an unstable plant replayed open loop: use a prediction horizon, or a recorded controller in the loop)".to_string(),
+                ),
+                _ => None,
+            },
             simulated: sim_e,
             simulation,
             predicted: pred,
@@ -262,9 +310,9 @@ pub fn validate(
 /// k-step-ahead predictions of experiment `e` (see the module docs).
 fn predict_ahead(
     setup: &Setup<'_>,
-    exp_off: &[f64],
-    model_off: &[f64],
+    (exp_off, model_off, start): (&[f64], &[f64], Option<&[f64]>),
     full: &[f64],
+    noise: &[f64],
     e: usize,
     horizon: f64,
 ) -> Option<Vec<Vec<f64>>> {
@@ -280,9 +328,17 @@ fn predict_ahead(
     while k0 + hk < len {
         let end = (k0 + hk + stride).min(len);
         let mut x0 = vec![0.0; 2 * n];
-        for i in 0..n {
-            x0[i] = sig.q[i][k0] - model_off[i] - exp_off[i];
-            x0[n + i] = causal_velocity(&sig.t, &sig.q[i], k0, 0.02);
+        match start.filter(|_| k0 == 0) {
+            // at the record's start a smoother only extrapolates: the
+            // state fitted over the first samples
+            Some(s) => x0.copy_from_slice(s),
+            None => {
+                for i in 0..n {
+                    let (q, v) = smoothed_state(&sig.t, &sig.q[i], k0, noise[i]);
+                    x0[i] = q - model_off[i] - exp_off[i];
+                    x0[n + i] = if v.mean.is_finite() { v.mean } else { 0.0 };
+                }
+            }
         }
         let start = BlockStart {
             range: k0..end,
@@ -299,17 +355,6 @@ fn predict_ahead(
         k0 += stride;
     }
     Some(out)
-}
-
-/// Velocity at sample `k` from the samples of the past `window` s only (a
-/// local quadratic's slope at `t_k`); from the first samples forward when
-/// there is no past.
-fn causal_velocity(t: &[f64], y: &[f64], k: usize, window: f64) -> f64 {
-    let a = t[..=k].partition_point(|&x| x < t[k] - window);
-    if k - a < 2 {
-        return crate::experiment_sim::velocity_at(t, y, k, window / 2.0);
-    }
-    crate::experiment_sim::velocity_at(&t[a..=k], &y[a..=k], k - a, window)
 }
 
 /// Simulated (or predicted) coordinates as experiments with the measured

@@ -1,18 +1,24 @@
-//! How much each measured channel counts in a fit: its noise floor and its
-//! scale, estimated from the data.
+//! How much each measured channel counts in a fit: its noise floor,
+//! estimated from the data.
 //!
-//! Simulation residuals in SI units let the channel with the largest motion
-//! decide a fit alone (an arm that spins 77 rad in a step against a
-//! pendulum that swings 0.2 rad). Each channel's residual is therefore
-//! divided by its *scale*: the pooled standard deviation of the channel
-//! about each experiment's mean (how much it moves), never less than ten
-//! times its noise floor (a channel that barely moves is not blown up to
-//! fit its quantisation). The weighted cost is then a sum of `(1 - fit)^2`
-//! like terms, comparable across channels, and dimensionless.
+//! Each channel's residual is divided by its *noise floor* `sigma` (the RMS
+//! the sensor's own noise leaves): the weighted residual is then in units
+//! of that noise, a weighted cost of 1 is the noise floor itself, and a
+//! sum of squared weighted residuals is, up to the residual's correlation
+//! in time, a Gaussian negative log-likelihood. That is what lets the
+//! diagnosis decide by a likelihood ratio ([`crate::decision`]) and the
+//! nuisance carry Gaussian priors in the same units ([`crate::problem`]).
+//! A channel's *spread* (how much it moves) never sets its weight: a
+//! channel that barely moves (an arm held by friction, 0.011 rad) would
+//! otherwise be blown up to outweigh one that swings (1/spread = 285 per
+//! rad against 1.1); the spread is kept only to tell whether a replay
+//! follows the data at all ([`crate::fit::follows_data`]).
 //!
 //! The *noise floor* of a channel is the larger of two estimates:
-//! - quantisation: when every sample lies on a grid `q` (an encoder), the
-//!   rounding noise `q / sqrt(12)`;
+//! - quantisation: when the samples lie on a grid `q` (an encoder), the
+//!   rounding noise `q / sqrt(12)`; a channel with too few distinct steps
+//!   to show its grid (it barely moves) takes its smallest step as `q`,
+//!   and a constant channel the resolution its numbers are written with;
 //! - high-frequency content: the RMS residual of a 5-point local quadratic
 //!   fit, scaled to white noise (the residual of white noise of variance
 //!   `s^2` through that smoother has variance `18/35 s^2`). On smooth
@@ -33,10 +39,15 @@ pub struct ChannelWeight {
     pub noise: f64,
     /// Quantisation step when the samples lie on a grid.
     pub quantum: Option<f64>,
-    /// Pooled standard deviation about each experiment's mean (SI).
+    /// Pooled standard deviation about each experiment's mean (SI): how
+    /// much the channel moves (not its weight).
     pub spread: f64,
-    /// Weight applied to the residual (1 / SI unit).
+    /// Weight applied to the residual (1 / SI unit): `1 / noise` unless
+    /// the user set it.
     pub weight: f64,
+    /// Where the noise floor comes from, in words (`encoder quantum
+    /// 1.53e-3 rad / sqrt(12)`, `high-frequency noise`).
+    pub basis: String,
     /// True when the user set the weight.
     pub overridden: bool,
 }
@@ -95,8 +106,33 @@ pub fn high_frequency_noise(values: &[f64]) -> f64 {
 
 /// Noise floor of one channel over several records: the larger of the
 /// quantisation noise and the high-frequency estimate (the median over the
-/// records, so one bad file does not decide).
+/// records, so one bad file does not decide), with the quantum when the
+/// samples lie on a grid.
 pub fn noise_floor(records: &[&[f64]]) -> (f64, Option<f64>) {
+    let (noise, quantum, _) = noise_floor_with_basis(records);
+    (noise, quantum)
+}
+
+/// The smallest step a record's numbers can resolve when it shows no
+/// grid: its smallest nonzero step between samples (an upper bound on its
+/// resolution), or, for a record that never changes, the resolution of
+/// the numbers themselves (1e-7 of their magnitude, about single
+/// precision, plus 1e-12).
+fn resolution(values: &[f64]) -> f64 {
+    let mag = values.iter().fold(0.0f64, |m, v| m.max(v.abs()));
+    let written = 1e-7 * mag + 1e-12;
+    values
+        .windows(2)
+        .map(|w| (w[1] - w[0]).abs())
+        .filter(|d| *d > written)
+        .fold(None, |acc: Option<f64>, d| {
+            Some(acc.map_or(d, |a| a.min(d)))
+        })
+        .unwrap_or(written)
+}
+
+/// [`noise_floor`] and, in words, where the floor comes from.
+pub fn noise_floor_with_basis(records: &[&[f64]]) -> (f64, Option<f64>, String) {
     let q = records
         .iter()
         .filter_map(|r| quantum(r))
@@ -110,8 +146,26 @@ pub fn noise_floor(records: &[&[f64]]) -> (f64, Option<f64>) {
         .collect();
     hf.sort_by(f64::total_cmp);
     let hf = hf.get(hf.len() / 2).copied().unwrap_or(0.0);
-    let qn = q.map_or(0.0, |q| q / 12f64.sqrt());
-    (qn.max(hf), q)
+    // no grid to read (a channel that barely moves): its smallest step
+    let step = q.unwrap_or_else(|| {
+        records
+            .iter()
+            .filter(|r| !r.is_empty())
+            .map(|r| resolution(r))
+            .fold(f64::INFINITY, f64::min)
+    });
+    let step = if step.is_finite() { step } else { 1e-12 };
+    let qn = step / 12f64.sqrt();
+    if hf > qn {
+        (hf, q, "high-frequency noise".to_string())
+    } else {
+        let what = if q.is_some() {
+            "quantum"
+        } else {
+            "smallest step"
+        };
+        (qn, q, format!("{what} {step:.3e} / sqrt(12)"))
+    }
 }
 
 /// Pooled standard deviation of a channel about each record's mean.
@@ -134,7 +188,7 @@ pub fn pooled_spread(records: &[&[f64]]) -> f64 {
 }
 
 /// Weights of the channels `names`, each given as its records (one slice
-/// per experiment), with user overrides `(name, weight)`.
+/// per experiment), with user overrides `(name, weight)`: `1 / noise`.
 pub fn channel_weights(
     names: &[String],
     records: &[Vec<&[f64]>],
@@ -144,9 +198,9 @@ pub fn channel_weights(
         .iter()
         .zip(records)
         .map(|(name, recs)| {
-            let (noise, quantum) = noise_floor(recs);
+            let (noise, quantum, basis) = noise_floor_with_basis(recs);
             let spread = pooled_spread(recs);
-            let auto = 1.0 / spread.max(10.0 * noise).max(f64::MIN_POSITIVE.sqrt());
+            let auto = 1.0 / noise.max(f64::MIN_POSITIVE.sqrt());
             let over = overrides.iter().find(|(n, _)| n == name).map(|o| o.1);
             ChannelWeight {
                 name: name.clone(),
@@ -155,9 +209,25 @@ pub fn channel_weights(
                 spread,
                 weight: over.unwrap_or(auto),
                 overridden: over.is_some(),
+                basis,
             }
         })
         .collect()
+}
+
+/// One line per channel saying what weighs it (for reports).
+pub fn describe(weights: &[ChannelWeight]) -> String {
+    weights
+        .iter()
+        .map(|w| {
+            if w.overridden {
+                format!("{}: {:.4e} per SI unit (set by the user)", w.name, w.weight)
+            } else {
+                format!("{}: 1/noise, noise {:.3e} ({})", w.name, w.noise, w.basis)
+            }
+        })
+        .collect::<Vec<_>>()
+        .join("; ")
 }
 
 /// The weighted RMS that measurement noise alone would leave: the noise
@@ -219,22 +289,51 @@ mod tests {
         assert_eq!(quantum(&v), None);
     }
 
-    /// A channel that barely moves gets 1/(10 noise), not 1/spread.
+    /// Weights come from the noise, never from the spread: a channel that
+    /// barely moves (an arm held still, a few encoder counts) weighs per
+    /// SI unit what a swinging one on the same encoder does.
     #[test]
-    fn weights_floor_and_override() {
-        let q = 0.01;
-        let still: Vec<f64> = (0..100).map(|k| if k % 7 == 0 { q } else { 0.0 }).collect();
-        let moving: Vec<f64> = (0..100).map(|k| (k as f64 * 0.1).sin()).collect();
-        let names = vec!["a".to_string(), "b".to_string()];
-        let w = channel_weights(&names, &[vec![&still[..]], vec![&moving[..]]], &[]);
-        assert!(w[0].weight <= 1.0 / (10.0 * w[0].noise) * 1.000001);
-        assert!((w[1].weight - 1.0 / w[1].spread).abs() < 1e-12);
+    fn weights_from_noise_and_override() {
+        let q = 2.0 * std::f64::consts::PI / 4096.0;
+        // held: wanders over four counts; swinging: 0.5 rad
+        let held: Vec<f64> = (0..5000)
+            .map(|k| ((2.0 * (k as f64 * 0.001).sin()).round()) * q)
+            .collect();
+        let swing: Vec<f64> = (0..5000)
+            .map(|k| ((0.5 * (k as f64 * 0.01).sin()) / q).round() * q)
+            .collect();
+        let names = vec!["arm".to_string(), "pendulum".to_string()];
+        let w = channel_weights(&names, &[vec![&held[..]], vec![&swing[..]]], &[]);
+        // held has only a handful of steps: its smallest step is the quantum
+        for x in &w {
+            assert!(
+                (x.noise - q / 12f64.sqrt()).abs() < 0.3 * q,
+                "{}: {} vs {}",
+                x.name,
+                x.noise,
+                q / 12f64.sqrt()
+            );
+            assert!((x.weight - 1.0 / x.noise).abs() < 1e-9 * x.weight);
+        }
+        assert!(w[0].spread < 0.01 * w[1].spread);
+        let ratio = w[0].weight / w[1].weight;
+        assert!((0.5..2.0).contains(&ratio), "{ratio}");
         let w = channel_weights(
             &names,
-            &[vec![&still[..]], vec![&moving[..]]],
-            &[("b".into(), 3.0)],
+            &[vec![&held[..]], vec![&swing[..]]],
+            &[("pendulum".into(), 3.0)],
         );
         assert_eq!(w[1].weight, 3.0);
         assert!(w[1].overridden);
+        assert!((noise_cost(&w[..1]) - 1.0).abs() < 1e-9);
+    }
+
+    /// A constant channel still gets a finite weight.
+    #[test]
+    fn constant_channel_has_a_finite_floor() {
+        let c = vec![0.25; 100];
+        let (noise, q) = noise_floor(&[&c]);
+        assert_eq!(q, None);
+        assert!(noise > 0.0 && noise < 1e-6, "{noise}");
     }
 }

@@ -169,6 +169,10 @@ pub enum FindingKind {
     Bias,
     /// The residual is at the quantisation floor: nothing left to explain.
     AtFloor,
+    /// The simulation left the data (its error more than twice the
+    /// channel's own motion, fit % below -100): the patterns of its error
+    /// say nothing about a missing effect.
+    Diverged,
 }
 
 /// One statement about where the model fails.
@@ -229,6 +233,42 @@ pub fn where_it_fails(
     let mut out = Vec::new();
     for &ch in channels {
         let (y, yhat) = channel_pair(measured, simulated, ch)?;
+        // a simulation that could not be finished: diverged, and nothing more
+        if y.len() == yhat.len()
+            && y.iter().all(|v| v.is_finite())
+            && yhat.iter().any(|v| !v.is_finite())
+        {
+            let at = yhat.iter().position(|v| !v.is_finite()).unwrap_or(0);
+            out.push(ChannelDiagnosis {
+                experiment: measured.name.clone(),
+                channel: ch.to_string(),
+                summary: ResidualSummary {
+                    n: y.len(),
+                    mean: f64::NAN,
+                    std: f64::NAN,
+                    rmse: f64::INFINITY,
+                    max_abs: f64::INFINITY,
+                    lag1_autocorrelation: None,
+                },
+                quantisation_floor: crate::weights::quantum(y).map(|q| q / 12f64.sqrt()),
+                segments: Vec::new(),
+                amplitude: Vec::new(),
+                speed: Vec::new(),
+                turnarounds: Vec::new(),
+                findings: vec![Finding {
+                    kind: FindingKind::Diverged,
+                    experiment: measured.name.clone(),
+                    channel: ch.to_string(),
+                    ratio: f64::INFINITY,
+                    sentence: format!(
+                        "the simulation diverged: it could not be continued past t = {:.3} s",
+                        measured.t.get(at).copied().unwrap_or(f64::NAN)
+                            - measured.t.first().copied().unwrap_or(0.0)
+                    ),
+                }],
+            });
+            continue;
+        }
         let summary = residual_summary(y, yhat).map_err(|e| match e {
             MetricsError::LengthMismatch {
                 measured: m,
@@ -347,7 +387,9 @@ fn diagnose(
     } else {
         format!(" {unit}")
     };
-    let at_floor = floor.is_some_and(|f| summary.rmse < 2.0 * f);
+    // (the decision rule's floor: noise plus a missing effect of one noise
+    // RMS is at least sqrt(2) noise RMS, `crate::decision::at_floor`)
+    let at_floor = floor.is_some_and(|f| summary.rmse < std::f64::consts::SQRT_2 * f);
     if let (Some(f), true) = (floor, at_floor) {
         push(
             FindingKind::AtFloor,
@@ -488,6 +530,23 @@ fn diagnose(
         );
     }
     findings.sort_by(|a, b| b.ratio.total_cmp(&a.ratio));
+    // a simulation that left the data: only that is said
+    let mean_y = y.iter().sum::<f64>() / n.max(1) as f64;
+    let motion = (y.iter().map(|v| (v - mean_y).powi(2)).sum::<f64>() / n.max(1) as f64).sqrt();
+    if summary.rmse > crate::fit::DIVERGED_COST * motion {
+        findings = vec![Finding {
+            kind: FindingKind::Diverged,
+            experiment: experiment.to_string(),
+            channel: channel.to_string(),
+            ratio: summary.rmse / motion.max(f64::MIN_POSITIVE),
+            sentence: format!(
+                "the simulation diverged: its error RMS {}{u} is {:.0}x the channel's own motion ({}{u}); the pattern of its error says nothing about a missing effect",
+                sci(summary.rmse),
+                summary.rmse / motion.max(f64::MIN_POSITIVE),
+                sci(motion)
+            ),
+        }];
+    }
 
     ChannelDiagnosis {
         experiment: experiment.to_string(),

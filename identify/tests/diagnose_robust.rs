@@ -556,31 +556,28 @@ fn final_at_floor(story: &plantc_identify::Story) -> impl Fn(&str) -> Option<f64
 /// Two effects that each hide the other: a spring on the arm (2.5e-3 N m
 /// per rad) and dry friction in the pendulum's joint (5e-4 N m). Alone, the
 /// Coulomb friction's refit gains 1.45x and the spring's 1.12x, 17.5x above
-/// the noise floor: no candidate passed and the story stopped with an
-/// unexplained residual. The story now puts the best candidate on trial,
-/// and the spring, with the friction in, reaches the floor (14.6x): both
-/// are kept, the first marked as on trial, each within 5 % of the synth
-/// truth, the final cost at the floor.
+/// the noise floor: under the old fixed-gain thresholds no candidate passed
+/// and the story stopped with an unexplained residual. Each alone takes a
+/// real, effective-sample-significant part of the residual above the
+/// noise, so the decision rule names one, and the next round the other:
+/// both are found, each within 5 % of the synth truth, the final cost at
+/// the floor.
 #[test]
-fn two_effects_that_hide_each_other_are_found_on_trial() {
+fn two_effects_that_hide_each_other_are_found() {
     let story = story_on_held_out_rig(
         "spring_arm_coulomb_pendulum",
         &["spring:theta=2.5e-3", "coulomb_friction:alpha=5e-4"],
     );
-    let found: Vec<(String, bool)> = story
+    let found: Vec<String> = story
         .rounds
         .iter()
-        .filter_map(|r| r.effect.as_ref().map(|e| (e.label(), r.tentative)))
+        .filter_map(|r| r.effect.as_ref().map(|e| e.label()))
         .collect();
     assert!(
-        found.iter().any(|(l, _)| l == "spring@theta")
-            && found.iter().any(|(l, _)| l == "coulomb_friction@alpha"),
+        found.iter().any(|l| l == "spring@theta")
+            && found.iter().any(|l| l == "coulomb_friction@alpha"),
         "{found:?}; {}",
         story.stop
-    );
-    assert!(
-        found.iter().any(|(_, t)| *t),
-        "no round on trial: {found:?}"
     );
     let value = final_at_floor(&story);
     let (k, fc) = (value("k_theta").expect("k"), value("Fc_alpha").expect("Fc"));

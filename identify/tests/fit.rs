@@ -8,7 +8,8 @@ use std::time::Instant;
 
 use plantc_derive::model::{load_model, Model};
 use plantc_identify::{
-    fit, fit_with_progress, read_experiments, FitError, FitOptions, FitProgress, ReadOptions,
+    fit, fit_with_progress, read_experiments, DryFriction, FitError, FitOptions, FitProgress,
+    ReadOptions, SimOptions,
 };
 
 fn repo() -> PathBuf {
@@ -88,8 +89,25 @@ fn clean_case_recovers_j1_and_l2() {
         }
     }
     assert!(r.after_rmse < r.before_rmse / 10.0);
-    // quantisation floor q/sqrt(12) = 4.35e-4 rad (identification notes, trap 10)
-    assert!(r.after_rmse < 6e-4, "{}", r.after_rmse);
+    // The shared data's simulator smoothed the gearbox friction
+    // (tanh(v / 1e-3), identification notes trap 8): its arm creeps where a
+    // sticking one is held, which leaves the sticking fit above the floor
+    // (7.2e-4 rad, J1 and l2 within 0.6 %); with the data's own law the fit
+    // reaches the quantisation floor q/sqrt(12) = 4.35e-4 rad (trap 10).
+    assert!(r.after_rmse < 1e-3, "{}", r.after_rmse);
+    let smooth = FitOptions {
+        sim: SimOptions {
+            dry_friction: DryFriction::Smooth { width: 1e-3 },
+            ..SimOptions::default()
+        },
+        ..opts.clone()
+    };
+    let rs = fit(&model, &exps, &smooth).expect("fits");
+    eprintln!(
+        "sticking rmse {:.3e}, smooth law {:.3e}",
+        r.after_rmse, rs.after_rmse
+    );
+    assert!(rs.after_rmse < 6e-4, "{}", rs.after_rmse);
     let json = r.to_json();
     assert!(json["parameters"]["l2"]["value"].is_f64());
     assert!(json["before"]["rmse"].is_f64() && json["after"]["rmse"].is_f64());

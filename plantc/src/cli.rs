@@ -235,6 +235,12 @@ pub struct IdentifyArgs {
     pub data: DataArgs,
     #[command(flatten)]
     pub control: FitControlArgs,
+    /// The model's parameters to fit (default: those marked `estimate`),
+    /// e.g. `J1,l2`: each needs its `estimate [lo, hi]` box; the others
+    /// are held at their values. Added effects' parameters are always
+    /// fitted.
+    #[arg(long, value_name = "NAME,...")]
+    pub free: Option<String>,
     /// Fit horizon: `auto` (whole records; segments when the replay
     /// diverges), `whole`, or a segment length in s (multiple shooting: each
     /// segment starts from its own estimated state).
@@ -304,6 +310,11 @@ pub struct SynthArgs {
     /// Simulation substep (s).
     #[arg(long, default_value_t = 1e-4)]
     pub substep: f64,
+    /// Dry friction of the true model: `sticking` (a joint at rest stays at
+    /// rest below its static level, as on a rig) or `smooth:WIDTH` (the
+    /// `tanh(v / WIDTH)` law of earlier versions, e.g. `smooth:1e-3`).
+    #[arg(long, value_name = "LAW", default_value = "sticking")]
+    pub friction: String,
     /// Name of the case in truth.json (default: the directory's name).
     #[arg(long)]
     pub case: Option<String>,
@@ -337,7 +348,7 @@ pub struct DataArgs {
 #[derive(Debug, Args, Clone)]
 pub struct FitControlArgs {
     /// Weight of a channel's residual per SI unit, e.g. `alpha=20`
-    /// (repeatable; default: 1 / the channel's spread in the data).
+    /// (repeatable; default: 1 / the channel's noise floor: encoder quantum or measured high-frequency noise).
     #[arg(long = "weight", value_name = "COORD=W")]
     pub weights: Vec<String>,
     /// Initial state estimated per experiment: `velocities` (default),
@@ -700,8 +711,10 @@ pub struct SimArgs {
     #[arg(long, value_name = "HZ", default_value_t = 1000.0)]
     pub output_rate: f64,
     /// Replace every `sign(v)` of the equations (dry friction) by
-    /// `tanh(v / WIDTH)`, e.g. `--smooth-sign 1e-3` (rad/s): exact dry friction
-    /// makes a sticking joint chatter and the integrator stall.
+    /// `tanh(v / WIDTH)`, e.g. `--smooth-sign 1e-3` (rad/s). Without it dry
+    /// friction sticks: a joint at rest stays at rest while the force on it
+    /// is below its static level (stick-slip switches located by the
+    /// integrator).
     #[arg(long, value_name = "WIDTH")]
     pub smooth_sign: Option<f64>,
     /// Relative integrator tolerance (default 1e-8; absolute = rtol/100).

@@ -189,3 +189,46 @@ fn gains_override_and_errors() {
     assert_eq!(code, 0, "{out}{err}");
     let _ = std::fs::remove_dir_all(&dir);
 }
+
+/// Dry friction sticks by default: the DFKI double pendulum under its LQR
+/// law from an offset stops its shoulder within the joint's friction and
+/// holds it there exactly (speed 0 and the same angle to the bit over the
+/// last second); `--smooth-sign` keeps the smooth law, whose joints never
+/// come to rest exactly.
+#[test]
+fn dry_friction_sticks_unless_smoothed() {
+    let dir = tmp("stick");
+    let model = common::repo().join("models/double_pendulum.plant");
+    let run = |extra: &[&str], name: &str| -> Vec<Vec<f64>> {
+        let csv = dir.join(name);
+        let mut args = vec![
+            "sim",
+            model.to_str().unwrap(),
+            "--controller",
+            "lqr_hanging",
+            "--x0",
+            "q1=0.3,q2=-0.2",
+            "--duration",
+            "5",
+            "-o",
+            csv.to_str().unwrap(),
+        ];
+        args.extend_from_slice(extra);
+        let (code, out, err) = plantc(&args);
+        assert_eq!(code, 0, "{out}{err}");
+        let text = std::fs::read_to_string(&csv).unwrap();
+        text.lines()
+            .skip(1)
+            .map(|l| l.split(',').map(|c| c.parse().unwrap()).collect())
+            .collect()
+    };
+    let rows = run(&[], "stick.csv");
+    let last = &rows[rows.len() - 1000..];
+    assert!(
+        last.iter().all(|r| r[3] == 0.0 && r[1] == last[0][1]),
+        "the shoulder should be held"
+    );
+    let rows = run(&["--smooth-sign", "1e-3"], "smooth.csv");
+    assert!(rows[rows.len() - 1000..].iter().all(|r| r[3] != 0.0));
+    let _ = std::fs::remove_dir_all(&dir);
+}

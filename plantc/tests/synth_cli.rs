@@ -11,7 +11,7 @@ use common::{model, plantc, s, tmp};
 /// `alpha0 = 135deg` is exactly 1536 counts of 4096 and `alpha0 = 180deg`
 /// exactly 2048, so the recorded initial state equals the true one and the
 /// only difference left between the data and a simulation of the same model
-/// is the encoder rounding (plus the 1 ms vs 0.1 ms RK4 step, far smaller).
+/// is the encoder rounding (plus the 2 ms vs 0.1 ms RK4 step, far smaller).
 fn clean_round_trip_data(dir: &Path) {
     let (code, out, err) = plantc(&[
         "synth",
@@ -267,9 +267,11 @@ fn bad_specs_exit_2_naming_the_token() {
 #[test]
 fn reproduces_the_shared_clean_free_swings() {
     // ../shared/data/clean was made by an independent simulator (fine-step
-    // RK4, ZOH, 500 Hz, 4096 counts/rev) from the true values in its
-    // truth.json; synth with those values and the same releases (60 and 12
-    // deg from hanging) must record the same counts.
+    // RK4, ZOH, 500 Hz, 4096 counts/rev, dry friction as tanh(v / 1e-3))
+    // from the true values in its truth.json; synth with those values, that
+    // law and the same releases (60 and 12 deg from hanging) must record the
+    // same counts. (With sticking friction the held arm parts from the
+    // creeping one by 2 counts at 6.5 s.)
     let shared = PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../../shared/data/clean");
     if !shared.join("free_swing_large.csv").is_file() {
         eprintln!("skipped: {} is absent", shared.display());
@@ -293,6 +295,8 @@ fn reproduces_the_shared_clean_free_swings() {
         "free_swing:alpha0=120deg,duration=20,name=free_swing_large",
         "--experiment",
         "free_swing:alpha0=168deg,duration=20,name=free_swing_small",
+        "--friction",
+        "smooth:1e-3",
         "-o",
         &s(&dir),
     ]);
@@ -406,4 +410,49 @@ fn every_effect_of_the_vocabulary_round_trips_through_its_true_model() {
     // 5 force effects on 2 coordinates at least (more once sensor and
     // actuator effects are in the table)
     assert!(cases >= 10, "{cases} cases");
+}
+
+/// `--friction` chooses the true model's dry-friction law (sticking by
+/// default) and truth.json records it; a bad law is an input error naming
+/// the token.
+#[test]
+fn friction_law_is_chosen_and_recorded() {
+    let dir = tmp("friction");
+    for (law, want) in [(None, "sticking"), (Some("smooth:1e-3"), "smooth:1e-3")] {
+        let out_dir = dir.join(want.replace(':', "_"));
+        let mut args = vec![
+            "synth".to_string(),
+            model(),
+            "--experiment".into(),
+            "free_swing:alpha0=135deg,duration=1".into(),
+            "-o".into(),
+            s(&out_dir),
+        ];
+        if let Some(l) = law {
+            args.extend(["--friction".to_string(), l.to_string()]);
+        }
+        let args: Vec<&str> = args.iter().map(String::as_str).collect();
+        let (code, out, err) = plantc(&args);
+        assert_eq!(code, 0, "{out}{err}");
+        let truth: serde_json::Value =
+            serde_json::from_str(&std::fs::read_to_string(out_dir.join("truth.json")).unwrap())
+                .unwrap();
+        assert_eq!(truth["dry_friction"], want);
+    }
+    let (code, _, err) = plantc(&[
+        "synth",
+        &model(),
+        "--experiment",
+        "free_swing:alpha0=135deg,duration=1",
+        "--friction",
+        "smooth:-1",
+        "-o",
+        &s(&dir.join("bad")),
+    ]);
+    assert_eq!(code, 2, "{err}");
+    assert!(
+        err.contains("smooth:-1") && err.contains("positive"),
+        "{err}"
+    );
+    let _ = std::fs::remove_dir_all(&dir);
 }

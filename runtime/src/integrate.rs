@@ -28,7 +28,13 @@ impl Rk4Scratch {
 /// Advances `x` by one classical Runge-Kutta step of length `h` with input `u`
 /// held constant (zero-order hold). If the scratch is too small for `x`, `x`
 /// is filled with NaN instead of panicking.
-pub fn rk4_step(plant: &dyn Plant, x: &mut [f64], u: &[f64], h: f64, s: &mut Rk4Scratch) {
+pub fn rk4_step<P: Plant + ?Sized>(
+    plant: &P,
+    x: &mut [f64],
+    u: &[f64],
+    h: f64,
+    s: &mut Rk4Scratch,
+) {
     let n = x.len();
     if s.k1.len() != n {
         x.fill(f64::NAN);

@@ -10,6 +10,7 @@ use plantc_derive::model::{Model, ParameterValues};
 use plantc_derive::simulate::{ControllerEval, ControllerWorkspace};
 
 use crate::controller::{Controller, Mode};
+use crate::integrate::Rk4Scratch;
 use crate::plant::Plant;
 
 fn leak_names(names: Vec<String>) -> Vec<&'static str> {
@@ -21,7 +22,11 @@ fn leak_names(names: Vec<String>) -> Vec<&'static str> {
 }
 
 /// A model's dynamics evaluated through its compiled tape (`M a = r + B u`
-/// solved numerically each call; no allocation).
+/// solved numerically each call; no allocation). Dry friction sticks: a
+/// joint at rest stays at rest (velocity exactly 0.0) while the force on
+/// it is below its static level, and breaks away above it; [`Plant::step`]
+/// locates the switches inside each substep
+/// ([`NumericDynamics::rk4_step`]).
 pub struct ModelPlant {
     dynamics: NumericDynamics,
     params: Vec<f64>,
@@ -76,6 +81,23 @@ impl Plant for ModelPlant {
 
     fn input_limits(&self) -> &[(f64, f64)] {
         &self.limits
+    }
+
+    fn step(&self, x: &mut [f64], u: &[f64], h: f64, scratch: &mut Rk4Scratch) {
+        if !self.dynamics.has_dry_friction() {
+            crate::integrate::rk4_step(self, x, u, h, scratch);
+            return;
+        }
+        let ok = x.len() == self.dynamics.n_states() && u.len() == self.dynamics.n_inputs();
+        let mut ws = self.workspace.borrow_mut();
+        if !ok
+            || self
+                .dynamics
+                .rk4_step(x, u, &self.params, h, &mut ws)
+                .is_err()
+        {
+            x.fill(f64::NAN);
+        }
     }
 }
 

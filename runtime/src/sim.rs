@@ -1,7 +1,7 @@
 //! Simulator backend: a [`Plant`] integrated by fixed-step RK4 between samples.
 
 use crate::backend::{Backend, BackendError, EncoderMap, Tick};
-use crate::integrate::{rk4_step, Rk4Scratch};
+use crate::integrate::Rk4Scratch;
 use crate::pacer::Pacer;
 use crate::plant::Plant;
 use crate::prng::SplitMix64;
@@ -140,7 +140,7 @@ impl SimBackend {
         self.u[0] = v.clamp(lo, hi);
         let h = self.period / f64::from(self.config.substeps);
         for _ in 0..self.config.substeps {
-            rk4_step(&*self.plant, &mut self.x, &self.u, h, &mut self.scratch);
+            self.plant.step(&mut self.x, &self.u, h, &mut self.scratch);
         }
     }
 }

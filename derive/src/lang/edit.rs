@@ -242,6 +242,27 @@ pub fn set_estimate(text: &str, name: &str, lo: &str, hi: &str) -> Result<String
     apply(text, &before, edits)
 }
 
+/// Removes the ` estimate [lo, hi]` clause of parameter `name` (the
+/// parameter is then fixed at its value); a parameter without one is left
+/// as it is.
+pub fn clear_estimate(text: &str, name: &str) -> Result<String, EditError> {
+    let (m, before) = parse_ok(text)?;
+    let p = find_param(&m, name)?;
+    let Some(b) = &p.estimate else {
+        return Ok(text.to_string());
+    };
+    let head = text[..b.span.start].trim_end();
+    let Some(kw) = head.strip_suffix("estimate") else {
+        return Ok(text.to_string());
+    };
+    let start = kw.trim_end().len();
+    apply(
+        text,
+        &before,
+        vec![(Span::new(start, b.span.end), String::new())],
+    )
+}
+
 /// Adds a term such as `+ coulomb_friction(Fc_alpha)` to the force on
 /// `coordinate` (a term without a leading sign gets `+ `). If the coordinate
 /// has no `force` line, `force q = term` is added after the last force line

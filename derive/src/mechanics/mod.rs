@@ -3,6 +3,7 @@
 //! `x' = f(x) + g(x) u` with `x = (q, q')`.
 
 mod angle_coordinates;
+pub mod dry_friction;
 mod euler_lagrange;
 mod matrix;
 mod numeric;
@@ -12,14 +13,19 @@ mod screen;
 mod separable;
 pub mod small_lu;
 mod solve;
+pub mod stick_slip;
 
 pub use angle_coordinates::{angle_coordinates, AngleCoordinates};
+pub use dry_friction::{decompose as decompose_dry_friction, DryFriction};
 pub use euler_lagrange::{
     control_affine, control_affine_within, derive_equations, derive_equations_from, ControlAffine,
     Equations, MechanicsError,
 };
 pub use matrix::{adjugate, determinant};
-pub use numeric::{flat_outputs, has_sign, smooth_signs, NumericDynamics, NumericError, Workspace};
+pub use numeric::{
+    flat_outputs, has_sign, smooth_signs, NumericDynamics, NumericError, Workspace,
+    FALLBACK_SIGN_WIDTH,
+};
 pub use present::{
     det_name, present_equations, Expand, PresentedAngles, PresentedEquations, PresentedSeparable,
     EXPAND_MAX_COORDINATES, EXPAND_MAX_TERMS, PRESENT_MAX_TERMS,

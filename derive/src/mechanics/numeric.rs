@@ -6,10 +6,21 @@
 //! accelerations follow from `M a = r0 + B u`, solved by an in-place LU
 //! factorisation with partial pivoting. Nothing allocates per call: the
 //! buffers live in a [`Workspace`].
+//!
+//! Dry friction sticks: the equations are split by
+//! [`super::dry_friction::decompose`], `r0` is the smooth part and the tape
+//! adds the levels `D` (`n`) after `B`; the accelerations are those of the
+//! stick-slip mode the state is in ([`super::stick_slip`]: a joint with
+//! `v = 0.0` exactly and a holding force within its static level is held),
+//! and [`NumericDynamics::rk4_step`] integrates with the switches located.
+//! Equations without `sign()` (or smoothed by [`smooth_signs`]) evaluate as
+//! before.
 
 use std::fmt;
 
+use super::dry_friction::decompose;
 use super::small_lu::{lu_factor, lu_solve};
+use super::stick_slip::{Mode, Rk4Events, SplitDynamics, StepError, StickSlip};
 use super::Equations;
 use crate::model::Model;
 use std::collections::HashMap;
@@ -26,6 +37,9 @@ pub enum NumericError {
     Shape(String),
     /// The mass matrix is numerically singular at this state.
     SingularMass,
+    /// More stick-slip switches within one step than
+    /// [`super::stick_slip::MAX_EVENTS`].
+    Chattering,
 }
 
 impl fmt::Display for NumericError {
@@ -39,13 +53,19 @@ impl fmt::Display for NumericError {
             }
             NumericError::Shape(s) => write!(f, "equations and model disagree: {s}"),
             NumericError::SingularMass => write!(f, "the mass matrix is singular at this state"),
+            NumericError::Chattering => write!(
+                f,
+                "the dry friction switched between sticking and sliding more than {} times within one step",
+                super::stick_slip::MAX_EVENTS
+            ),
         }
     }
 }
 
 impl std::error::Error for NumericError {}
 
-/// Compiled `M(q)`, `r0(q, q') = Q0 - bias`, `B(q, q')` over
+/// Compiled `M(q)`, `r0(q, q') = Q0 - bias`, `B(q, q')` (and the dry
+/// friction levels `D` when the model has dry friction) over
 /// `[state symbols, parameter symbols]`.
 #[derive(Clone)]
 pub struct NumericDynamics {
@@ -53,6 +73,9 @@ pub struct NumericDynamics {
     m: usize,
     n_params: usize,
     tape: Tape,
+    /// Which coordinates have a dry friction (empty: none has).
+    dry: Vec<bool>,
+    notes: Vec<String>,
 }
 
 impl fmt::Debug for NumericDynamics {
@@ -76,7 +99,16 @@ pub struct Workspace {
     rhs: Vec<f64>,
     piv: Vec<usize>,
     tmp: Vec<f64>,
+    rules: StickSlip,
+    mode: Mode,
+    acc: Vec<f64>,
+    stepper: Rk4Events,
 }
+
+/// Fallback width (rad/s or m/s) of a `sign()` that is not a dry friction
+/// of one coordinate: the smooth law `tanh(v / 1e-3)` identification used
+/// before friction stuck (a softer 1e-2 lets a held arm creep, notes trap 8).
+pub const FALLBACK_SIGN_WIDTH: f64 = 1e-3;
 
 impl NumericDynamics {
     /// Compile the tape for `eqs` (as derived from `model`). Tape inputs are
@@ -101,7 +133,14 @@ impl NumericDynamics {
         {
             return Err(NumericError::Shape("matrix sizes".into()));
         }
-        let outputs = flat_outputs(eqs);
+        let split = decompose(eqs, FALLBACK_SIGN_WIDTH);
+        let mut outputs = flat_outputs(&split.smooth);
+        let dry: Vec<bool> = if split.any() {
+            outputs.extend(split.levels.iter().copied());
+            (0..n).map(|i| split.has(i)).collect()
+        } else {
+            Vec::new()
+        };
         let mut inputs: Vec<Symbol> = model.state_symbols();
         let params = model.parameter_symbols();
         inputs.extend(params.iter().copied());
@@ -113,7 +152,29 @@ impl NumericDynamics {
             m,
             n_params: params.len(),
             tape,
+            dry,
+            notes: split.notes,
         })
+    }
+
+    /// Whether some coordinate has a dry friction that sticks.
+    pub fn has_dry_friction(&self) -> bool {
+        !self.dry.is_empty()
+    }
+
+    /// Which coordinates have a dry friction (all false without).
+    pub fn dry_coordinates(&self) -> Vec<bool> {
+        if self.dry.is_empty() {
+            vec![false; self.n]
+        } else {
+            self.dry.clone()
+        }
+    }
+
+    /// The `sign()` terms that are not a dry friction of one coordinate and
+    /// were smoothed ([`super::dry_friction::DryFriction::notes`]).
+    pub fn notes(&self) -> &[String] {
+        &self.notes
     }
 
     /// Number of coordinates `n` (the state has `2n` entries).
@@ -136,22 +197,97 @@ impl NumericDynamics {
         self.n_params
     }
 
-    /// The compiled tape (outputs `[M row-major, r0, B row-major]`).
+    /// The compiled tape (outputs `[M row-major, r0, B row-major]`, then the
+    /// dry-friction levels `D` when [`NumericDynamics::has_dry_friction`]).
     pub fn tape(&self) -> &Tape {
         &self.tape
     }
 
     /// Scratch buffers sized for this system.
     pub fn workspace(&self) -> Workspace {
+        let dry = self.dry_coordinates();
         Workspace {
             tape_in: vec![0.0; 2 * self.n + self.n_params],
-            tape_out: vec![0.0; self.n * self.n + self.n + self.n * self.m],
+            tape_out: vec![0.0; self.tape.n_outputs()],
             scratch: vec![0.0; self.tape.scratch_len()],
             lu: vec![0.0; self.n * self.n],
             rhs: vec![0.0; self.n],
             piv: vec![0; self.n],
             tmp: vec![0.0; self.n],
+            rules: StickSlip::new(&dry),
+            mode: Mode::new(self.n),
+            acc: vec![0.0; self.n],
+            stepper: Rk4Events::new(&dry),
         }
+    }
+
+    /// `M`, `b = r0 + B u` (without dry friction) and the levels `D` (zero
+    /// without dry friction) at `x`; false when not finite.
+    pub fn split(
+        &self,
+        x: &[f64],
+        u: &[f64],
+        params_full: &[f64],
+        (mm, b, d): (&mut [f64], &mut [f64], &mut [f64]),
+        ws: &mut Workspace,
+    ) -> bool {
+        let n = self.n;
+        ws.tape_in[..2 * n].copy_from_slice(&x[..2 * n]);
+        ws.tape_in[2 * n..].copy_from_slice(params_full);
+        self.tape
+            .eval(&ws.tape_in, &mut ws.tape_out, &mut ws.scratch);
+        let out = &ws.tape_out;
+        mm[..n * n].copy_from_slice(&out[..n * n]);
+        let bm = &out[n * n + n..n * n + n + n * self.m];
+        for i in 0..n {
+            let mut acc = out[n * n + i];
+            for (j, uj) in u.iter().enumerate() {
+                acc += bm[i * self.m + j] * uj;
+            }
+            b[i] = acc;
+        }
+        let off = n * n + n + n * self.m;
+        for i in 0..n {
+            d[i] = if self.dry.is_empty() {
+                0.0
+            } else {
+                out[off + i]
+            };
+        }
+        mm[..n * n]
+            .iter()
+            .chain(&b[..n])
+            .chain(&d[..n])
+            .all(|v| v.is_finite())
+    }
+
+    /// One RK4 step of length `h` with `u` held, dry friction sticking and
+    /// its switches located inside the step ([`Rk4Events`]); without dry
+    /// friction the classical RK4 step. Does not allocate.
+    pub fn rk4_step(
+        &self,
+        x: &mut [f64],
+        u: &[f64],
+        params_full: &[f64],
+        h: f64,
+        ws: &mut Workspace,
+    ) -> Result<(), NumericError> {
+        let mut stepper = std::mem::replace(&mut ws.stepper, Rk4Events::new(&[]));
+        let r = stepper.step(
+            &mut At {
+                dynamics: self,
+                u,
+                params: params_full,
+                ws,
+            },
+            x,
+            h,
+        );
+        ws.stepper = stepper;
+        r.map_err(|e| match e {
+            StepError::Singular => NumericError::SingularMass,
+            StepError::TooManyEvents => NumericError::Chattering,
+        })
     }
 
     /// `dx = (q', M^-1 (r0 + B u))` for `x = (q, q')`. Does not allocate.
@@ -169,6 +305,9 @@ impl NumericDynamics {
         assert_eq!(u.len(), self.m, "input length");
         assert_eq!(params_full.len(), self.n_params, "parameter length");
         assert_eq!(dx.len(), 2 * n, "derivative length");
+        if !self.dry.is_empty() {
+            return self.derivatives_sticking(x, u, params_full, dx, ws);
+        }
         ws.tape_in[..2 * n].copy_from_slice(x);
         ws.tape_in[2 * n..].copy_from_slice(params_full);
         self.tape
@@ -187,6 +326,57 @@ impl NumericDynamics {
         dx[..n].copy_from_slice(&x[n..]);
         dx[n..].copy_from_slice(&ws.rhs);
         Ok(())
+    }
+}
+
+impl NumericDynamics {
+    /// [`NumericDynamics::derivatives`] with dry friction: the mode of the
+    /// state (a joint at `v = 0.0` held while its static level allows).
+    fn derivatives_sticking(
+        &self,
+        x: &[f64],
+        u: &[f64],
+        params_full: &[f64],
+        dx: &mut [f64],
+        ws: &mut Workspace,
+    ) -> Result<(), NumericError> {
+        let n = self.n;
+        let (mut mm, mut b, mut d) = (
+            std::mem::take(&mut ws.lu),
+            std::mem::take(&mut ws.rhs),
+            std::mem::take(&mut ws.tmp),
+        );
+        let mut rules = std::mem::replace(&mut ws.rules, StickSlip::new(&[]));
+        let mut mode = std::mem::replace(&mut ws.mode, Mode::new(0));
+        let mut acc = std::mem::take(&mut ws.acc);
+        let ok = self.split(x, u, params_full, (&mut mm, &mut b, &mut d), ws)
+            && rules.classify(&mm, &b, &d, &x[n..2 * n], None, &mut mode)
+            && rules.accelerations(&mm, &b, &d, &mode, &mut acc);
+        if ok {
+            dx[..n].copy_from_slice(&x[n..]);
+            dx[n..].copy_from_slice(&acc);
+        }
+        (ws.lu, ws.rhs, ws.tmp, ws.rules, ws.mode, ws.acc) = (mm, b, d, rules, mode, acc);
+        if ok {
+            Ok(())
+        } else {
+            Err(NumericError::SingularMass)
+        }
+    }
+}
+
+/// The dynamics with the input and parameters bound, for [`Rk4Events`].
+struct At<'a> {
+    dynamics: &'a NumericDynamics,
+    u: &'a [f64],
+    params: &'a [f64],
+    ws: &'a mut Workspace,
+}
+
+impl SplitDynamics for At<'_> {
+    fn split(&mut self, x: &[f64], m: &mut [f64], b: &mut [f64], d: &mut [f64]) -> bool {
+        self.dynamics
+            .split(x, self.u, self.params, (m, b, d), self.ws)
     }
 }
 

@@ -36,10 +36,13 @@ use std::fmt;
 pub use controller::{
     gain_names, set_gains, wrap_angle, ControllerEval, ControllerWorkspace, InputSignal, ModeInfo,
 };
-use rk::{DormandPrince, RkError, RkOptions, RkStats};
+use std::cell::RefCell;
+
+use rk::{Dense, DormandPrince, RkError, RkOptions, RkStats};
 use rosenbrock::Rosenbrock;
 
-use crate::mechanics::{has_sign, Equations, NumericDynamics, NumericError, Workspace};
+use crate::mechanics::stick_slip::{first_crossing, Mode, StickSlip, MAX_EVENTS};
+use crate::mechanics::{Equations, NumericDynamics, NumericError, Workspace};
 use crate::model::{Model, ParameterValues};
 use crate::sym::{Expr, Symbol, Tape};
 
@@ -135,6 +138,8 @@ pub struct SimProblem {
     /// the plant's.
     pub controller_params: Option<Vec<f64>>,
     output_tape: Tape,
+    /// Some `sign()` is not a dry friction of one coordinate and was
+    /// smoothed (stiff).
     has_sign: bool,
 }
 
@@ -149,6 +154,7 @@ impl SimProblem {
         duration: f64,
     ) -> Result<SimProblem, SimError> {
         let dynamics = NumericDynamics::new(model, equations).map_err(SimError::Dynamics)?;
+        let has_sign = !dynamics.notes().is_empty();
         let mut inputs: Vec<Symbol> = model.state_symbols();
         inputs.extend(model.input_symbols());
         inputs.extend(model.parameter_symbols());
@@ -167,7 +173,7 @@ impl SimProblem {
             output_names: model.outputs.iter().map(|o| o.name.clone()).collect(),
             controller_params: None,
             output_tape,
-            has_sign: has_sign(equations),
+            has_sign,
         };
         p.check()?;
         Ok(p)
@@ -374,6 +380,51 @@ struct Plant<'a> {
     u_raw: Vec<f64>,
     u: Vec<f64>,
     held: bool,
+    stick: Stick,
+}
+
+/// The stick-slip state of a simulation with sticking dry friction: the
+/// mode of the current integration stretch (fixed between events) and the
+/// rules' buffers.
+struct Stick {
+    dry: bool,
+    rules: StickSlip,
+    mode: Mode,
+    m: Vec<f64>,
+    b: Vec<f64>,
+    d: Vec<f64>,
+    a: Vec<f64>,
+    f: Vec<f64>,
+    g: Vec<f64>,
+    g_end: Vec<f64>,
+    xt: Vec<f64>,
+    /// The state at the start of an integration stretch.
+    start: Vec<f64>,
+    /// The event located in the last step: the joint and whether it was
+    /// stuck.
+    event: Option<(usize, bool)>,
+}
+
+impl Stick {
+    fn new(d: &NumericDynamics) -> Stick {
+        let n = d.n_coordinates();
+        let dry = d.dry_coordinates();
+        Stick {
+            dry: d.has_dry_friction(),
+            rules: StickSlip::new(&dry),
+            mode: Mode::new(n),
+            m: vec![0.0; n * n],
+            b: vec![0.0; n],
+            d: vec![0.0; n],
+            a: vec![0.0; n],
+            f: vec![0.0; n],
+            g: vec![0.0; n],
+            g_end: vec![0.0; n],
+            xt: vec![0.0; 2 * n],
+            start: vec![0.0; 2 * n],
+            event: None,
+        }
+    }
 }
 
 impl Plant<'_> {
@@ -439,10 +490,131 @@ impl Plant<'_> {
         if !self.held {
             self.demand(t, x)?;
         }
+        if self.stick.dry {
+            self.split(t, x)?;
+            let st = &mut self.stick;
+            if !st
+                .rules
+                .accelerations(&st.m, &st.b, &st.d, &st.mode, &mut st.a)
+            {
+                return Err(SimError::Singular { t });
+            }
+            let n = st.a.len();
+            dx[..n].copy_from_slice(&x[n..2 * n]);
+            dx[n..2 * n].copy_from_slice(&st.a);
+            return Ok(());
+        }
         self.p
             .dynamics
             .derivatives(x, &self.u, &self.p.params, dx, &mut self.ws)
             .map_err(|_| SimError::Singular { t })
+    }
+
+    /// `M`, `b` and the levels at `(t, x)` with the current input.
+    fn split(&mut self, t: f64, x: &[f64]) -> Result<(), SimError> {
+        let st = &mut self.stick;
+        if self.p.dynamics.split(
+            x,
+            &self.u,
+            &self.p.params,
+            (&mut st.m, &mut st.b, &mut st.d),
+            &mut self.ws,
+        ) {
+            Ok(())
+        } else {
+            Err(SimError::Singular { t })
+        }
+    }
+
+    /// Decide the stick-slip mode at `(t, x)` (`release`: a stuck joint
+    /// breaking away there); true when it changed.
+    fn classify(&mut self, t: f64, x: &[f64], release: Option<usize>) -> Result<bool, SimError> {
+        if !self.held {
+            self.demand(t, x)?;
+        }
+        let n = self.stick.a.len();
+        let before = self.stick.mode.clone();
+        let st = &mut self.stick;
+        if !st.rules.slide(&x[n..2 * n], &mut st.mode) {
+            self.split(t, x)?;
+            let st = &mut self.stick;
+            if !st
+                .rules
+                .classify(&st.m, &st.b, &st.d, &x[n..2 * n], release, &mut st.mode)
+            {
+                return Err(SimError::Singular { t });
+            }
+        }
+        Ok(before != self.stick.mode)
+    }
+
+    /// The guards of the current mode at `(t, x)` into `stick.g`.
+    fn guards(&mut self, t: f64, x: &[f64]) -> Result<(), SimError> {
+        if !self.held {
+            self.demand(t, x)?;
+        }
+        let n = self.stick.a.len();
+        if self.stick.mode.any_stuck() {
+            self.split(t, x)?;
+            let st = &mut self.stick;
+            if !st
+                .rules
+                .accelerations(&st.m, &st.b, &st.d, &st.mode, &mut st.a)
+            {
+                return Err(SimError::Singular { t });
+            }
+            st.rules
+                .holding_forces(&st.m, &st.b, &st.a, &st.mode, &mut st.f);
+        }
+        let st = &mut self.stick;
+        st.rules
+            .guards(&x[n..2 * n], &st.d, &st.f, &st.mode, &mut st.g);
+        Ok(())
+    }
+
+    /// After an accepted step: where in it (fraction of the step) the
+    /// first guard crosses zero, by [`first_crossing`] on the dense output;
+    /// the joint is kept in `stick.event`.
+    fn locate(&mut self, step: &Dense<'_>) -> Result<Option<f64>, SimError> {
+        let t1 = step.t + step.h;
+        self.guards(t1, step.end())?;
+        if self.stick.g.iter().all(|g| *g >= 0.0) {
+            return Ok(None);
+        }
+        let g_end = std::mem::take(&mut self.stick.g_end);
+        let mut g_end = g_end;
+        g_end.copy_from_slice(&self.stick.g);
+        let mut xt = std::mem::take(&mut self.stick.xt);
+        let (mut hi, mut which) = (1.0, None);
+        let mut failed = None;
+        for (i, &ge) in g_end.iter().enumerate() {
+            if ge >= 0.0 {
+                continue;
+            }
+            let mut guard = |theta: f64| -> Option<f64> {
+                step.at(theta, &mut xt);
+                match self.guards(step.t + theta * step.h, &xt) {
+                    Ok(()) => Some(self.stick.g[i]),
+                    Err(e) => {
+                        failed = Some(e);
+                        None
+                    }
+                }
+            };
+            match first_crossing(&mut guard, hi) {
+                Ok(Some(theta)) => (hi, which) = (theta, Some(i)),
+                Ok(None) => {}
+                Err(_) => {
+                    return Err(failed.take().unwrap_or(SimError::Singular { t: step.t }));
+                }
+            }
+        }
+        self.stick.g_end = g_end;
+        self.stick.xt = xt;
+        Ok(which.map(|j| {
+            self.stick.event = Some((j, self.stick.mode.stuck[j]));
+            hi
+        }))
     }
 }
 
@@ -518,6 +690,7 @@ pub fn stiffness(problem: &SimProblem, options: &SimOptions) -> Result<Stiffness
         u_raw: vec![0.0; m],
         u: vec![0.0; m],
         held: !matches!(problem.control, Control::Feedback(_)) || options.sample_rate.is_some(),
+        stick: Stick::new(d),
     };
     match &problem.control {
         Control::OpenLoop(sig) => {
@@ -533,6 +706,9 @@ pub fn stiffness(problem: &SimProblem, options: &SimOptions) -> Result<Stiffness
         }
     }
     let x0 = &x0;
+    if plant.stick.dry {
+        plant.classify(0.0, x0, None)?;
+    }
     let mut f0 = vec![0.0; n];
     plant.rhs(0.0, x0, &mut f0)?;
     let mut jac = nalgebra::DMatrix::<f64>::zeros(n, n);
@@ -592,6 +768,7 @@ pub fn simulate(problem: &SimProblem, options: &SimOptions) -> Result<Trajectory
         u_raw: vec![0.0; m],
         u: vec![0.0; m],
         held: !matches!(problem.control, Control::Feedback(_)) || samples.is_some(),
+        stick: Stick::new(d),
     };
     let rk_opts = RkOptions {
         rtol: options.rtol,
@@ -710,18 +887,22 @@ pub fn simulate(problem: &SimProblem, options: &SimOptions) -> Result<Trajectory
             next = next.min(breakpoints[next_bp]);
         }
         let t0 = t;
-        rk.advance(
-            &mut |tt: f64, xx: &[f64], dx: &mut [f64]| plant.rhs(tt, xx, dx),
-            t0,
-            next,
-            &mut x,
-        )
-        .map_err(|e| match e {
+        let advanced = if plant.stick.dry {
+            advance_sticking(&mut rk, &mut plant, t0, next, &mut x)
+        } else {
+            rk.advance(
+                &mut |tt: f64, xx: &[f64], dx: &mut [f64]| plant.rhs(tt, xx, dx),
+                t0,
+                next,
+                &mut x,
+            )
+        };
+        advanced.map_err(|e| match e {
             RkError::Rhs(e) => e,
             other if problem.has_sign => SimError::Integrator(format!(
-                "{other}; the equations contain sign() (dry friction), whose switching at a \
-                 sticking joint collapses the step: simulate with regularised friction \
-                 (`mechanics::smooth_signs`, `plantc sim --smooth-sign WIDTH`)"
+                "{other}; the equations contain a sign() that is not a dry friction of one \
+                 coordinate, smoothed as tanh(v/1e-3), which is stiff: smooth every dry \
+                 friction wider (`mechanics::smooth_signs`, `plantc sim --smooth-sign WIDTH`)"
             )),
             other if method == Integrator::Explicit && stiff.is_none() => {
                 SimError::Integrator(format!(
@@ -736,4 +917,58 @@ pub fn simulate(problem: &SimProblem, options: &SimOptions) -> Result<Trajectory
     traj.stats = rk.stats();
     traj.switches = switches;
     Ok(traj)
+}
+
+/// Integrate from `t0` to `t1` with sticking dry friction: the mode is
+/// decided at `t0` and at every event, each event located in the step's
+/// dense output ([`Plant::locate`]: Dormand-Prince's own, the Rosenbrock
+/// method's cubic Hermite); a sliding joint's velocity reaching zero is set
+/// to 0.0 there, a stuck joint's breakaway releases it.
+fn advance_sticking(
+    rk: &mut Stepper,
+    plant: &mut Plant<'_>,
+    t0: f64,
+    t1: f64,
+    x: &mut [f64],
+) -> Result<(), RkError<SimError>> {
+    let n = x.len() / 2;
+    let mut t = t0;
+    let mut release = None;
+    for _ in 0..=MAX_EVENTS {
+        if plant.classify(t, x, release.take()).map_err(RkError::Rhs)? {
+            rk.restart();
+        }
+        let mut start = std::mem::take(&mut plant.stick.start);
+        start.copy_from_slice(x);
+        let cell = RefCell::new(&mut *plant);
+        let mut f = |tt: f64, xx: &[f64], dx: &mut [f64]| cell.borrow_mut().rhs(tt, xx, dx);
+        let mut stop = |step: &Dense<'_>| cell.borrow_mut().locate(step);
+        let reached = match rk {
+            Stepper::Explicit(dp) => dp.advance_until(&mut f, &mut stop, t, t1, x)?,
+            Stepper::Implicit(ro) => ro.advance_until(&mut f, &mut stop, t, t1, x)?,
+        };
+        // a stuck joint keeps its angle and zero speed exactly (the explicit
+        // method's stages keep them by arithmetic, the implicit method's
+        // solves only to rounding)
+        for j in 0..n {
+            if plant.stick.mode.stuck[j] {
+                x[j] = start[j];
+                x[n + j] = 0.0;
+            }
+        }
+        plant.stick.start = start;
+        let Some(te) = reached else {
+            return Ok(());
+        };
+        match plant.stick.event.take() {
+            Some((j, true)) => release = Some(j),
+            Some((j, false)) => x[n + j] = 0.0,
+            None => {}
+        }
+        t = te;
+    }
+    Err(RkError::Rhs(SimError::Integrator(format!(
+        "the dry friction switched between sticking and sliding more than {MAX_EVENTS} times \
+         between t = {t0:.6} s and {t1:.6} s"
+    ))))
 }

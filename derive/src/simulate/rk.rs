@@ -125,6 +125,90 @@ const FAC_MAX: f64 = 10.0;
 const BETA: f64 = 0.04;
 const ALPHA: f64 = 0.2 - 0.75 * BETA;
 
+// Dense output of Dormand & Prince (Hairer, Norsett & Wanner, DOPRI5's
+// CONTD5): the fourth-order continuous extension of an accepted step.
+const D1: f64 = -12715105075.0 / 11282082432.0;
+const D3: f64 = 87487479700.0 / 32700410799.0;
+const D4: f64 = -10690763975.0 / 1880347072.0;
+const D5: f64 = 701980252875.0 / 199316789632.0;
+const D6: f64 = -1453857185.0 / 822651844.0;
+const D7: f64 = 69997945.0 / 29380423.0;
+
+/// An accepted step with its continuous extension, for an event function
+/// ([`DormandPrince::advance_until`],
+/// [`super::rosenbrock::Rosenbrock::advance_until`]).
+pub struct Dense<'a> {
+    /// The step's start time.
+    pub t: f64,
+    /// Its length.
+    pub h: f64,
+    pub(crate) y0: &'a [f64],
+    pub(crate) y1: &'a [f64],
+    pub(crate) kind: DenseKind<'a>,
+}
+
+/// How a [`Dense`] step interpolates.
+pub(crate) enum DenseKind<'a> {
+    /// Dormand-Prince's fourth-order extension from its seven stages.
+    Dopri(&'a [Vec<f64>; 7]),
+    /// The cubic Hermite interpolant of the end values and slopes (third
+    /// order; the Rosenbrock method's second-order steps need no more).
+    Hermite {
+        /// `f` at the start.
+        f0: &'a [f64],
+        /// `f` at the end.
+        f1: &'a [f64],
+    },
+}
+
+impl Dense<'_> {
+    /// The state at the end of the step.
+    pub fn end(&self) -> &[f64] {
+        self.y1
+    }
+
+    /// The state at `t + theta h` (`0 <= theta <= 1`) by the method's
+    /// fourth-order dense output (exact at both ends).
+    pub fn at(&self, theta: f64, out: &mut [f64]) {
+        let h = self.h;
+        let s = 1.0 - theta;
+        let k = match self.kind {
+            DenseKind::Dopri(k) => k,
+            DenseKind::Hermite { f0, f1 } => {
+                let (t2, t3) = (theta * theta, theta * theta * theta);
+                let h00 = 2.0 * t3 - 3.0 * t2 + 1.0;
+                let h10 = t3 - 2.0 * t2 + theta;
+                let h01 = -2.0 * t3 + 3.0 * t2;
+                let h11 = t3 - t2;
+                for i in 0..out.len() {
+                    out[i] =
+                        h00 * self.y0[i] + h10 * h * f0[i] + h01 * self.y1[i] + h11 * h * f1[i];
+                }
+                if theta == 1.0 {
+                    out.copy_from_slice(self.y1);
+                }
+                return;
+            }
+        };
+        for i in 0..out.len() {
+            let ydiff = self.y1[i] - self.y0[i];
+            let bspl = h * k[0][i] - ydiff;
+            let r5 = h
+                * (D1 * k[0][i]
+                    + D3 * k[2][i]
+                    + D4 * k[3][i]
+                    + D5 * k[4][i]
+                    + D6 * k[5][i]
+                    + D7 * k[6][i]);
+            let r4 = ydiff - h * k[6][i] - bspl;
+            out[i] = self.y0[i] + theta * (ydiff + s * (bspl + theta * (r4 + s * r5)));
+        }
+        if theta == 1.0 {
+            out.copy_from_slice(self.y1);
+        }
+    }
+}
+
 /// The integrator state: stage buffers, the current step proposal and the
 /// first-same-as-last stage. Allocates only in [`DormandPrince::new`].
 #[derive(Clone, Debug)]
@@ -178,7 +262,6 @@ impl DormandPrince {
     }
 
     /// Integrate `x' = f(t, x)` from `t0` to exactly `t1` (`x` updated in place).
-    #[allow(clippy::needless_range_loop)] // stage sums read clearer indexed
     pub fn advance<E, F>(
         &mut self,
         f: &mut F,
@@ -189,8 +272,31 @@ impl DormandPrince {
     where
         F: FnMut(f64, &[f64], &mut [f64]) -> Result<(), E>,
     {
+        self.advance_until(f, &mut |_: &Dense<'_>| Ok(None), t0, t1, x)
+            .map(|_| ())
+    }
+
+    /// [`DormandPrince::advance`], stopping at an event: after every
+    /// accepted step `stop` gets the step with its dense output and returns
+    /// `Some(theta)` (`0 < theta <= 1`) where an event falls inside it; the
+    /// integration then ends at `t + theta h` with `x` the dense output
+    /// there, returns that time, and forgets its first stage (the caller
+    /// changes the right-hand side there). `Ok(None)`: `t1` reached.
+    #[allow(clippy::needless_range_loop)] // stage sums read clearer indexed
+    pub fn advance_until<E, F, S>(
+        &mut self,
+        f: &mut F,
+        stop: &mut S,
+        t0: f64,
+        t1: f64,
+        x: &mut [f64],
+    ) -> Result<Option<f64>, RkError<E>>
+    where
+        F: FnMut(f64, &[f64], &mut [f64]) -> Result<(), E>,
+        S: FnMut(&Dense<'_>) -> Result<Option<f64>, E>,
+    {
         if t1 <= t0 {
-            return Ok(());
+            return Ok(None);
         }
         let n = x.len();
         if !self.fsal {
@@ -267,10 +373,25 @@ impl DormandPrince {
                 } else {
                     self.h = proposal;
                 }
+                let dense = Dense {
+                    t,
+                    h,
+                    y0: x,
+                    y1: &self.y1,
+                    kind: DenseKind::Dopri(&self.k),
+                };
+                if let Some(theta) = stop(&dense).map_err(RkError::Rhs)? {
+                    let theta = theta.clamp(0.0, 1.0);
+                    dense.at(theta, &mut self.yt);
+                    x.copy_from_slice(&self.yt);
+                    self.fsal = false;
+                    self.err_prev = 1e-4;
+                    return Ok(Some(if theta == 1.0 { t + h } else { t + theta * h }));
+                }
                 x.copy_from_slice(&self.y1);
                 self.k.swap(0, 6);
                 if last {
-                    return Ok(());
+                    return Ok(None);
                 }
                 t += h;
                 rejected_last = false;

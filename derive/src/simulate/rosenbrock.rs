@@ -22,7 +22,7 @@
 //! costs an explicit method `|lambda| / 3.3` steps per second; this one takes
 //! steps set by accuracy alone.
 
-use super::rk::{RkError, RkOptions, RkStats};
+use super::rk::{Dense, DenseKind, RkError, RkOptions, RkStats};
 
 /// `d = 1 / (2 + sqrt 2)`.
 const D: f64 = 0.292_893_218_813_452_5;
@@ -44,6 +44,7 @@ pub struct Rosenbrock {
     k2: Vec<f64>,
     k3: Vec<f64>,
     f1: Vec<f64>,
+    f2: Vec<f64>,
     x1: Vec<f64>,
     /// `W = I - d h J`, row-major, factorised in place.
     m: Vec<f64>,
@@ -67,6 +68,7 @@ impl Rosenbrock {
             k2: vec![0.0; n],
             k3: vec![0.0; n],
             f1: vec![0.0; n],
+            f2: vec![0.0; n],
             x1: vec![0.0; n],
             m: vec![0.0; n * n],
             jac: vec![0.0; n * n],
@@ -177,8 +179,27 @@ impl Rosenbrock {
     where
         F: FnMut(f64, &[f64], &mut [f64]) -> Result<(), E>,
     {
+        self.advance_until(f, &mut |_: &Dense<'_>| Ok(None), t0, t1, x)
+            .map(|_| ())
+    }
+
+    /// [`Rosenbrock::advance`], stopping at an event as
+    /// [`super::rk::DormandPrince::advance_until`] does; the step's dense
+    /// output is the cubic Hermite interpolant of its ends.
+    pub fn advance_until<E, F, S>(
+        &mut self,
+        f: &mut F,
+        stop: &mut S,
+        t0: f64,
+        t1: f64,
+        x: &mut [f64],
+    ) -> Result<Option<f64>, RkError<E>>
+    where
+        F: FnMut(f64, &[f64], &mut [f64]) -> Result<(), E>,
+        S: FnMut(&Dense<'_>) -> Result<Option<f64>, E>,
+    {
         if t1 <= t0 {
-            return Ok(());
+            return Ok(None);
         }
         let n = self.n;
         if self.h <= 0.0 {
@@ -229,6 +250,7 @@ impl Rosenbrock {
                 }
                 // F2 = f(x+); k3 = W^-1 (F2 - e32 (k2 - F1) - 2 (k1 - F0))
                 f(t + h, &self.x1, &mut self.k3).map_err(RkError::Rhs)?;
+                self.f2.copy_from_slice(&self.k3);
                 self.stats.evaluations += 2;
                 for i in 0..n {
                     self.k3[i] -= E32 * (self.k2[i] - self.f1[i]) + 2.0 * (self.k1[i] - self.f0[i]);
@@ -251,10 +273,26 @@ impl Rosenbrock {
                 if !(last && h < self.h && fac >= 1.0) {
                     self.h = proposal;
                 }
+                let dense = Dense {
+                    t,
+                    h,
+                    y0: x,
+                    y1: &self.x1,
+                    kind: DenseKind::Hermite {
+                        f0: &self.f0,
+                        f1: &self.f2,
+                    },
+                };
+                if let Some(theta) = stop(&dense).map_err(RkError::Rhs)? {
+                    let theta = theta.clamp(0.0, 1.0);
+                    dense.at(theta, &mut self.xt);
+                    x.copy_from_slice(&self.xt);
+                    return Ok(Some(if theta == 1.0 { t + h } else { t + theta * h }));
+                }
                 x.copy_from_slice(&self.x1);
                 fresh = false;
                 if last {
-                    return Ok(());
+                    return Ok(None);
                 }
                 t += h;
             } else {

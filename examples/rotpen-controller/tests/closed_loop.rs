@@ -154,7 +154,13 @@ fn rk4_step_equals_plain_rk4_at_10000_states() {
     // rk4_step forms the stage sines and cosines by the addition formulas
     // (math::sin_cos_step of the increment); it must agree with the plain
     // scheme to 1e-12 relative, for increments on both sides of the 1/16
-    // polynomial threshold (h = 1e-3 and h = 0.05 with rates up to 10 rad/s)
+    // polynomial threshold (h = 1e-3 and h = 0.05 with rates up to 10 rad/s).
+    // The arm has a dry friction (zero in the thesis set): a step over which
+    // its speed changes sign is cut where it reaches zero (a stick-slip
+    // event), which plain RK4 does not do; those states are skipped (and
+    // counted: the rest must be most of them). The cut step is the more
+    // accurate one (a reversal from -4.2 rad/s at 8.5 V over 50 ms: 4.28
+    // rad/s cut, 4.10 plain, 4.38 with 10,000 substeps).
     let plant = Plant::default();
     let p = *plant.params();
     let mut s = 0x9e37_79b9_7f4a_7c15u64;
@@ -164,12 +170,17 @@ fn rk4_step_equals_plain_rk4_at_10000_states() {
         s ^= s << 17;
         (s >> 11) as f64 / (1u64 << 53) as f64 * 2.0 - 1.0
     };
+    let mut crossed = 0;
     for k in 0..10_000 {
         let x = [3.0 * r(), 1.4 * r(), 10.0 * r(), 10.0 * r()];
         let u = [10.0 * r()];
         let h = if k % 2 == 0 { 1e-3 } else { 0.05 };
         let a = plant.rk4_step(&x, &u, h);
         let b = rk4_reference(&x, &u, &p, h);
+        if x[2].signum() != b[2].signum() || x[2].signum() != a[2].signum() {
+            crossed += 1;
+            continue;
+        }
         let scale = b.iter().fold(1.0f64, |m, v| m.max(v.abs()));
         for i in 0..4 {
             assert!(
@@ -178,6 +189,8 @@ fn rk4_step_equals_plain_rk4_at_10000_states() {
             );
         }
     }
+    // 1408 with this draw (accelerations up to ~1e3 rad/s^2 over 50 ms steps)
+    assert!(crossed < 2000, "{crossed} of 10,000 steps reversed the arm");
 }
 
 #[test]

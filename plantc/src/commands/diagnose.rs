@@ -46,7 +46,8 @@ fn finding_json(r: &Ranked) -> serde_json::Value {
         "evidence": {
             "rmse_before": ev.rmse_before,
             "rmse_after": ev.rmse_after,
-            "gain": ev.gain,
+            "weighted_rms_ratio": r.gain,
+            "test": r.test,
             "residual_share": ev.residual_share,
             "bic_gain": ev.bic_gain,
             "equation_error_rank": ev.equation_error_rank,
@@ -59,7 +60,8 @@ fn finding_json(r: &Ranked) -> serde_json::Value {
 }
 
 /// The findings, best first: the accepted candidate, then any other refitted
-/// candidate that clears the same bar (an alternative explanation).
+/// candidate that passes the same decision rule (an alternative
+/// explanation).
 fn findings(d: &Diagnosis) -> Vec<&Ranked> {
     let Some(v) = &d.verdict else {
         return Vec::new();
@@ -70,11 +72,11 @@ fn findings(d: &Diagnosis) -> Vec<&Ranked> {
         .filter(|r| r.candidate.label() == v.label())
         .take(1)
         .collect();
-    f.extend(d.ranking.iter().filter(|r| {
-        r.candidate.label() != v.label()
-            && r.fit.is_some()
-            && r.gain >= plantc_identify::diagnose::MIN_GAIN
-    }));
+    f.extend(
+        d.ranking
+            .iter()
+            .filter(|r| r.candidate.label() != v.label() && r.passes()),
+    );
     f
 }
 
@@ -137,6 +139,9 @@ pub fn run(args: &DiagnoseArgs, out: &mut dyn Write, err: &mut dyn Write) -> Res
             "verdict_line": d.verdict_line(),
             "noise_floor_cost": d.floor,
             "baseline_cost": d.baseline.after_cost,
+            "at_floor": d.at_floor,
+            "effective_samples": d.effective_samples,
+            "nuisance_flags": d.nuisance_flags(),
             "notes": d.notes,
             "findings": findings.iter().map(|r| finding_json(r)).collect::<Vec<_>>(),
             "baseline": {"rmse": d.baseline.after_rmse},
@@ -144,7 +149,9 @@ pub fn run(args: &DiagnoseArgs, out: &mut dyn Write, err: &mut dyn Write) -> Res
                 "effect": r.candidate.effect,
                 "target": r.candidate.target,
                 "rmse": r.fit.as_ref().map(|f| f.after_rmse),
-                "gain": r.gain,
+                "weighted_rms_ratio": r.gain,
+                "test": r.test,
+                "passes": r.passes(),
                 "bic_gain": r.evidence.bic_gain,
                 "equation_error_rank": r.evidence.equation_error_rank,
                 "refitted": r.fit.is_some(),
@@ -161,26 +168,37 @@ pub fn run(args: &DiagnoseArgs, out: &mut dyn Write, err: &mut dyn Write) -> Res
     );
     let _ = writeln!(
         out,
-        "{:<20} {:<8} {:>9} {:>12} {:>8}  where",
-        "effect", "target", "eq.err BIC", "refit RMSE", "gain"
+        "{:<20} {:<8} {:>10} {:>12} {:>10} {:>6}  where",
+        "effect", "target", "eq.err BIC", "refit RMSE", "wRMS ratio", "rule"
     );
     for r in &d.ranking {
         let (rmse, gain) = match (&r.fit, &r.error) {
-            (Some(f), _) => (format!("{:.3e}", f.after_rmse), format!("{:.2}x", r.gain)),
+            (Some(f), _) => (format!("{:.3e}", f.after_rmse), format!("{:.3}", r.gain)),
             (None, Some(_)) => ("failed".to_string(), "-".to_string()),
             (None, None) => ("not refit".to_string(), "-".to_string()),
         };
+        let rule = match &r.test {
+            Some(_) if r.passes() => "passes",
+            Some(t) if t.likely() => "small",
+            Some(_) => "fails",
+            None => "-",
+        };
         let _ = writeln!(
             out,
-            "{:<20} {:<8} {:>9.1} {:>12} {:>8}  {}",
+            "{:<20} {:<8} {:>10.1} {:>12} {:>10} {:>6}  {}",
             r.candidate.effect,
             r.candidate.target,
             r.evidence.bic_gain,
             rmse,
             gain,
+            rule,
             r.evidence.acts_where
         );
     }
+    let _ = writeln!(
+        out,
+        "(wRMS ratio: the baseline's weighted RMS over the refit's, in noise units; rule: the decision rule against the baseline, `small` = likely but its contribution stays below the noise)"
+    );
     for n in &d.notes {
         let _ = writeln!(out, "note: {n}");
     }
@@ -189,10 +207,8 @@ pub fn run(args: &DiagnoseArgs, out: &mut dyn Write, err: &mut dyn Write) -> Res
             let inst = fitted_instance(top);
             let _ = writeln!(
                 out,
-                "\nverdict: missing effect `{}` on `{}` (RMSE {:.2}x lower with it). Add to the model:\n{}",
-                inst.effect,
-                inst.target,
-                top.gain,
+                "\nverdict: {}. Add to the model:\n{}",
+                d.verdict_line(),
                 inst.snippet()
             );
         }

@@ -132,7 +132,7 @@ pub(crate) fn write_fit(out: &mut dyn Write, r: &FitResult) {
     }
     let ratio = if r.before_cost.is_finite() {
         format!(
-            " ({:.2}x lower)",
+            " (cost ratio before/after {:.2})",
             r.before_cost / r.after_cost.max(f64::MIN_POSITIVE)
         )
     } else {

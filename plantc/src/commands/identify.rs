@@ -30,6 +30,17 @@ struct Stage {
     report: FitReport,
 }
 
+/// One table cell: fit % and RMSE, or `diverged`.
+fn cell(f: &plantc_identify::ChannelFit) -> String {
+    if f.diverged {
+        return "diverged".to_string();
+    }
+    let fit = f
+        .fit_percent
+        .map_or("-".to_string(), |v| format!("{v:.1} %"));
+    format!("{fit}  {:.2e}", f.rmse)
+}
+
 fn fail(e: impl std::fmt::Display) -> CliError {
     CliError::failure(format!("error: {e}"))
 }
@@ -45,6 +56,68 @@ fn write_file(path: &Path, text: &str) -> Result<(), CliError> {
 }
 
 /// The model text with every fitted parameter written in (lossless).
+/// `--free`: the `estimate` boxes of the model's other parameters are
+/// taken out of the text the story runs on (they are held), and put back
+/// into every model file identify writes.
+struct FreeSelection {
+    /// (parameter, lo, hi) as written.
+    held: Vec<(String, String, String)>,
+}
+
+impl FreeSelection {
+    /// The selection `list` on model `text`: the text with the others'
+    /// boxes cleared, or an error naming a parameter that is unknown or has
+    /// no box.
+    fn new(text: &str, model: &Model, list: &str) -> Result<(FreeSelection, String), CliError> {
+        let names = crate::common::name_list(list);
+        let known: Vec<&str> = model.parameters.iter().map(|p| p.name.as_str()).collect();
+        for n in &names {
+            match model.parameter(n) {
+                None => {
+                    return Err(CliError::input(format!(
+                        "error: `--free {list}`: the model has no parameter `{n}`; parameters: {}",
+                        known.join(", ")
+                    )))
+                }
+                Some(p) if p.estimate.is_none() => {
+                    return Err(CliError::input(format!(
+                        "error: `--free {list}`: `{n}` has no `estimate [lo, hi]` box in the model file; add one to its `parameter` line (identify searches within it)"
+                    )))
+                }
+                Some(_) => {}
+            }
+        }
+        let checked = plantc_derive::lang::parse_and_check("model", text);
+        let file = checked
+            .model
+            .ok_or_else(|| CliError::input("error: the model does not parse".to_string()))?;
+        let mut held = Vec::new();
+        let mut out = text.to_string();
+        for p in &file.parameters {
+            if let (Some(b), false) = (&p.estimate, names.contains(&p.name.name)) {
+                held.push((
+                    p.name.name.clone(),
+                    text[b.lo.span.start..b.lo.span.end].to_string(),
+                    text[b.hi.span.start..b.hi.span.end].to_string(),
+                ));
+            }
+        }
+        for (n, _, _) in &held {
+            out = plantc_derive::lang::edit::clear_estimate(&out, n).map_err(fail)?;
+        }
+        Ok((FreeSelection { held }, out))
+    }
+
+    /// `text` with the held parameters' boxes put back.
+    fn restore(&self, text: &str) -> Result<String, CliError> {
+        let mut out = text.to_string();
+        for (n, lo, hi) in &self.held {
+            out = plantc_derive::lang::edit::set_estimate(&out, n, lo, hi).map_err(fail)?;
+        }
+        Ok(out)
+    }
+}
+
 fn with_values(text: &str, model: &Model, r: &FitResult) -> Result<String, CliError> {
     let values = r.parameters.iter().map(|e| (e.name.as_str(), e.value));
     write_parameter_values(text, model, values)
@@ -87,19 +160,14 @@ fn table(out: &mut dyn Write, stages: &[Stage], measured: &[Experiment], channel
                 .experiments
                 .get(*i)
                 .and_then(|e| e.channels.get(*c))
-                .map_or("-".to_string(), |f| {
-                    let fit = f
-                        .fit_percent
-                        .map_or("-".to_string(), |v| format!("{v:.1} %"));
-                    format!("{fit}  {:.2e}", f.rmse)
-                });
+                .map_or("-".to_string(), cell);
             line.push_str(&format!("  {cell:>cw$}"));
         }
         let _ = writeln!(out, "{line}");
     }
     let _ = writeln!(
         out,
-        "(cells: fit % as MATLAB's compare, then RMSE in SI units; fit % of a channel that barely moves is capped by encoder quantisation: judge it by RMSE)"
+        "(cells: each stage's model simulated over the whole records from its estimated initial state, fit % as MATLAB's compare, then RMSE in SI units; `diverged`: the simulation could not be finished or left the data, fit % below -100; fit % of a channel that barely moves is capped by encoder quantisation: judge it by RMSE)"
     );
 }
 
@@ -170,6 +238,19 @@ fn story(
             args.model.display()
         ))
     })?;
+    let (selection, text) = match &args.free {
+        Some(list) => {
+            let (sel, t) = FreeSelection::new(&text, model, list)?;
+            (Some(sel), t)
+        }
+        None => (None, text),
+    };
+    let restore = |t: String| -> Result<String, CliError> {
+        match &selection {
+            Some(sel) => sel.restore(&t),
+            None => Ok(t),
+        }
+    };
     let measured = read_data(model, &args.data, err)?;
     let held_out = read_held_out(model, &args.data, &args.validate, err)?;
     let opts = StoryOptions {
@@ -244,23 +325,22 @@ fn story(
     for (k, round) in s.rounds.iter().enumerate() {
         let _ = writeln!(out, "\n{}. round {}:", 3 + k, k + 1);
         for r in round.ranking.iter().filter(|r| r.fit.is_some()) {
+            let rule = match &r.test {
+                Some(t) if r.passes() => format!("passes: {}", t.describe()),
+                Some(t) => format!("does not pass: {}", t.describe()),
+                None => "not judged".to_string(),
+            };
             let _ = writeln!(
                 out,
-                "   candidate {:<28} refit cost {:.3e} ({:.2}x), equation-error rank {}, acts: {}",
+                "   candidate {:<28} refit RMSE {:.3e}, equation-error rank {}; {rule}",
                 r.candidate.label(),
-                r.fit.as_ref().map_or(f64::NAN, |f| f.after_cost),
-                r.gain,
+                r.fit.as_ref().map_or(f64::NAN, |f| f.after_rmse),
                 r.evidence.equation_error_rank,
-                r.evidence.acts_where
             );
         }
         match (&round.effect, &round.fit) {
             (Some(inst), Some(f)) => {
-                let what = if round.tentative {
-                    "effect on trial (it passes no test alone; kept because the next round's effect, with it in the model, explains the residual)"
-                } else {
-                    "missing effect"
-                };
+                let what = "missing effect";
                 let _ = writeln!(
                     out,
                     "   {what}: `{}` on `{}`; added to a copy of the model:\n{}",
@@ -275,7 +355,7 @@ fn story(
                 } else {
                     format!("with_effect_{}.plant", k + 1)
                 };
-                let edited = with_values(&stage.text, &m2, f)?;
+                let edited = restore(with_values(&stage.text, &m2, f)?)?;
                 write_file(&staging.join(&file), &edited)?;
                 files.push(file.clone());
                 let _ = writeln!(
@@ -301,7 +381,7 @@ fn story(
                     "snippet": inst.snippet(),
                     "cost_before": round.cost_before,
                     "cost_after": round.cost_after,
-                    "tentative": round.tentative,
+                    "test": round.test,
                     "fit": crate::commands::fit::fit_json(f),
                     "model": file,
                 }));
@@ -326,11 +406,12 @@ fn story(
         let ratio = removal.cost_without / removal.cost_with.max(f64::MIN_POSITIVE);
         let _ = writeln!(
             out,
-            "\n{n}. removed: `{}` (round {}) did not pay for its parameters in its own round, and with the later effects in the model does as well without it (cost {:.3e} with it, {:.3e} without: {ratio:.3}x)",
+            "\n{n}. removed: `{}` (round {}) no longer passes the decision rule with the later effects in the model (weighted RMS {:.3e} with it, {:.3e} without: ratio {ratio:.3}; {})",
             removal.effect.label(),
             removal.round,
             removal.cost_with,
             removal.cost_without,
+            removal.test.describe(),
         );
         if let Some(stage) = s.stages.get(removal.stage) {
             let m2 = model_from_text("stage", &stage.text).map_err(fail)?;
@@ -359,19 +440,20 @@ fn story(
             None => {
                 let _ = writeln!(
                     out,
-                    "\n{n}. simplification: with the later effects in, `{}` (round {}) does no better than `{}` (cost {:.3e} with it, {:.3e} with the simpler one: {ratio:.2}x); replaced:\n{}",
+                    "\n{n}. simplification: with the later effects in, `{}` (round {}) no longer passes the decision rule against the simpler `{}` it contains (weighted RMS {:.3e} with it, {:.3e} with the simpler one: ratio {ratio:.3}; {}); replaced:\n{}",
                     simple.from.label(),
                     simple.round,
                     simple.to.label(),
                     simple.cost_with,
                     simple.cost_simpler,
+                    simple.test.as_ref().map_or_else(String::new, |t| t.describe()),
                     indent(&simple.to.snippet())
                 );
             }
             Some(then) => {
                 let _ = writeln!(
                     out,
-                    "\n{n}. simplification: `{}` (round {}) was fitted to no shape of its own (no hump, or its velocity at a bound of its box); with `{}` in its place the diagnosis names `{}`, and the model with both reaches cost {:.3e} against {:.3e} ({ratio:.2}x); replaced and added:\n{}\n{}",
+                    "\n{n}. simplification: `{}` (round {}) was fitted to no shape of its own (no hump, or its velocity at a bound of its box); with `{}` in its place the diagnosis names `{}`, and the model with both (weighted RMS {:.3e} against {:.3e}, ratio {ratio:.3}) has the lower information criterion; replaced and added:\n{}\n{}",
                     simple.from.label(),
                     simple.round,
                     simple.to.label(),
@@ -409,14 +491,23 @@ fn story(
     }
     // the result
     let final_model = model_from_text("final", &s.text).map_err(fail)?;
-    let fitted = with_values(&s.text, &final_model, &s.fit)?;
+    let fitted = restore(with_values(&s.text, &final_model, &s.fit)?)?;
     write_file(&staging.join("fitted.plant"), &fitted)?;
     let stage_refs: Vec<Stage> = s
         .stages
         .iter()
-        .map(|st| Stage {
-            label: st.label.clone(),
-            report: st.report.clone(),
+        .flat_map(|st| {
+            let mut v = vec![Stage {
+                label: st.label.clone(),
+                report: st.report.clone(),
+            }];
+            if let Some(seg) = &st.segment_report {
+                v.push(Stage {
+                    label: format!("({}: segments as fitted)", st.label),
+                    report: seg.clone(),
+                });
+            }
+            v
         })
         .collect();
     let _ = writeln!(out, "\nbefore and after:");
@@ -426,7 +517,7 @@ fn story(
     let elapsed = started.elapsed().as_secs_f64();
     let _ = writeln!(
         out,
-        "RMSE {first:.3e} -> {last:.3e}: {:.1}x lower; {} ({} effect(s) added); model -> {}, figures -> {}/ ({elapsed:.1} s)",
+        "RMSE {first:.3e} -> {last:.3e} (RMSE ratio {:.1}); {} ({} effect(s) added); model -> {}, figures -> {}/ ({elapsed:.1} s)",
         first / last.max(f64::MIN_POSITIVE),
         s.stop,
         s.effects_added(),

@@ -237,6 +237,9 @@ pub fn run(args: &SimArgs, out: &mut dyn Write, err: &mut dyn Write) -> Result<(
     };
     let problem =
         SimProblem::new(model, &equations, &vals, control, x0, args.duration).map_err(sim_error)?;
+    for note in problem.dynamics.notes() {
+        let _ = writeln!(err, "note: {note}");
+    }
     let mut options = SimOptions {
         output_rate: args.output_rate,
         sample_rate: args.sample_rate,

@@ -4,8 +4,8 @@
 use std::io::Write;
 
 use plantc_identify::synth::{
-    file_names, parse_effect_spec, parse_experiment_spec, synthesize, SynthError, SynthOptions,
-    SynthSpec,
+    file_names, friction_name, parse_effect_spec, parse_experiment_spec, parse_friction,
+    synthesize, SynthError, SynthOptions, SynthSpec,
 };
 
 use crate::cli::SynthArgs;
@@ -49,6 +49,7 @@ pub fn run(args: &SynthArgs, out: &mut dyn Write, _err: &mut dyn Write) -> Resul
             )));
         }
     }
+    let friction = parse_friction(&args.friction).map_err(synth_error)?;
     let mut parameter_set = None;
     let mut values = Vec::new();
     for item in &args.set {
@@ -94,6 +95,7 @@ pub fn run(args: &SynthArgs, out: &mut dyn Write, _err: &mut dyn Write) -> Resul
             noise: args.noise,
             seed: args.seed,
             substep: args.substep,
+            friction,
         },
     };
     // Refuse before simulating: nothing the user had is lost.
@@ -150,7 +152,7 @@ pub fn run(args: &SynthArgs, out: &mut dyn Write, _err: &mut dyn Write) -> Resul
         .collect();
     let _ = writeln!(
         out,
-        "{}: hidden effect(s): {}; {} Hz, {}, noise {}",
+        "{}: hidden effect(s): {}; {} Hz, {}, noise {}, dry friction {}",
         args.out.join("truth.json").display(),
         if effects.is_empty() {
             "none".to_string()
@@ -162,7 +164,8 @@ pub fn run(args: &SynthArgs, out: &mut dyn Write, _err: &mut dyn Write) -> Resul
             Some(c) => format!("{c} counts/rev"),
             None => "no quantisation".into(),
         },
-        num(spec.options.noise)
+        num(spec.options.noise),
+        friction_name(spec.options.friction)
     );
     Ok(())
 }

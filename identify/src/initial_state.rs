@@ -1,0 +1,337 @@
+//! What the data say about a block's initial state: the prior of the
+//! nuisance unknowns.
+//!
+//! Per-file initial states are unknowns of every fit, but they are not free:
+//! the data show them. A record that starts at rest starts at rest; one
+//! that starts in a fast transient (a controller switched on with its
+//! voltage clipped at the rails) shows a fast, uncertain velocity. Each
+//! estimated component gets a Gaussian prior from a local smoother, in the
+//! units the fit's residuals are in (the channels' noise, see
+//! [`crate::weights`]), so a fit is a maximum a posteriori estimate:
+//!
+//! - **velocity** at sample `k`: the slope at `t_k` of a least-squares
+//!   quadratic through the samples within a window around it (one-sided
+//!   at the ends of a record), with its standard error
+//!   `s * sqrt((X'X)^-1_bb)`, `s` the larger of the fit's own residual RMS
+//!   (which grows where the motion is not a quadratic over the window: a
+//!   release transient) and the channel's noise floor (a reading that does
+//!   not change over the window still allows any speed below about a
+//!   quantum per window), and, added in quadrature, the difference between
+//!   that slope and the local line's on the same samples (the smoother's
+//!   own bias, largest where a one-sided window meets a transient);
+//! - **position** (blocks that estimate theirs: segments, or
+//!   `--estimate-initial positions`): the measured value, within the
+//!   channel's noise: the unknown is the deviation `delta` from the
+//!   measurement (minus the offsets), prior `N(0, noise)`.
+//!
+//! Each prior also bounds its unknown at [`prior_bound`] standard
+//! deviations: a fit can never move an initial state beyond what the data
+//! allow, and one that ends at such a bound is reported by name
+//! ([`crate::fit::NuisanceFlag`]): the model needed a start the data do not
+//! show.
+
+/// A Gaussian prior `N(mean, sigma^2)` on one nuisance unknown, bounded at
+/// `mean +- bound * sigma`.
+#[derive(Copy, Clone, Debug, PartialEq)]
+pub struct Prior {
+    /// Prior mean (SI).
+    pub mean: f64,
+    /// Prior standard deviation (SI, > 0).
+    pub sigma: f64,
+}
+
+impl Prior {
+    /// The prior's interval at `z` standard deviations.
+    pub fn interval(&self, z: f64) -> (f64, f64) {
+        (self.mean - z * self.sigma, self.mean + z * self.sigma)
+    }
+
+    /// `(value - mean) / sigma`.
+    pub fn z(&self, value: f64) -> f64 {
+        (value - self.mean) / self.sigma
+    }
+}
+
+/// Smallest window the velocity smoother spans, s: 10 ms, the window
+/// Quanser's and our own filtered derivatives settle in (50 rad/s), and at
+/// least [`MIN_WINDOW_SAMPLES`] samples so that a quadratic keeps degrees
+/// of freedom for its residual.
+pub const MIN_WINDOW: f64 = 0.01;
+
+/// Fewest samples a velocity window holds: a quadratic (3 coefficients)
+/// plus 3 degrees of freedom for the residual that measures its own error.
+pub const MIN_WINDOW_SAMPLES: usize = 6;
+
+/// The velocity prior at sample `k` of a record `(t, y)` whose noise floor
+/// is `noise` (see the module docs). The window spans [`MIN_WINDOW`] s on
+/// each available side (one-sided at the ends), widened to hold at least
+/// [`MIN_WINDOW_SAMPLES`] samples.
+pub fn velocity_prior(t: &[f64], y: &[f64], k: usize, noise: f64) -> Prior {
+    smoothed_state(t, y, k, noise).1
+}
+
+/// The smoothed position at sample `k` (the local quadratic's value at
+/// `t_k`, the measurement when there is too little data) and the velocity
+/// prior ([`velocity_prior`]): the state a k-step-ahead prediction starts
+/// from.
+pub fn smoothed_state(t: &[f64], y: &[f64], k: usize, noise: f64) -> (f64, Prior) {
+    let n = t.len().min(y.len());
+    let fallback = (
+        y.get(k).copied().unwrap_or(f64::NAN),
+        Prior {
+            mean: 0.0,
+            sigma: f64::INFINITY,
+        },
+    );
+    if n < 3 || k >= n {
+        return fallback;
+    }
+    let tk = t[k];
+    let (mut a, mut b) = (k, k);
+    while a > 0 && tk - t[a - 1] <= MIN_WINDOW {
+        a -= 1;
+    }
+    while b + 1 < n && t[b + 1] - tk <= MIN_WINDOW {
+        b += 1;
+    }
+    // widen, alternating sides, to the fewest samples
+    while b + 1 - a < MIN_WINDOW_SAMPLES.min(n) {
+        if b + 1 < n {
+            b += 1;
+        }
+        if b + 1 - a < MIN_WINDOW_SAMPLES.min(n) && a > 0 {
+            a -= 1;
+        }
+    }
+    // least squares y = c0 + c1 s + c2 s^2, s = (t - t_k)/scale
+    let scale = (t[b] - t[a]).max(f64::MIN_POSITIVE);
+    let mut m = [0.0f64; 9];
+    let mut r = [0.0f64; 3];
+    for i in a..=b {
+        let s = (t[i] - tk) / scale;
+        let pw = [1.0, s, s * s];
+        for u in 0..3 {
+            r[u] += pw[u] * y[i];
+            for v in 0..3 {
+                m[u * 3 + v] += pw[u] * pw[v];
+            }
+        }
+    }
+    let Some(inv) = invert3(&m) else {
+        return fallback;
+    };
+    let c: Vec<f64> = (0..3)
+        .map(|u| (0..3).map(|v| inv[u * 3 + v] * r[v]).sum())
+        .collect();
+    let count = b + 1 - a;
+    let rss: f64 = (a..=b)
+        .map(|i| {
+            let s = (t[i] - tk) / scale;
+            (y[i] - (c[0] + c[1] * s + c[2] * s * s)).powi(2)
+        })
+        .sum();
+    let s2 = (rss / (count - 3).max(1) as f64).max(noise * noise);
+    // the local line's slope on the same samples: what changes with the
+    // smoother's order is its own bias, and it counts in the prior (at a
+    // record's start inside a fast transient the quadratic extrapolates:
+    // flat for three samples, then 250 rad/s^2, its slope at t0 -1.3 rad/s
+    // where the line's is +0.9 and the truth about 0)
+    let (mut sl, mut ss, mut st, mut sst) = (0.0, 0.0, 0.0, 0.0);
+    for i in a..=b {
+        let s = (t[i] - tk) / scale;
+        sl += y[i];
+        ss += s;
+        st += s * y[i];
+        sst += s * s;
+    }
+    let m_count = count as f64;
+    let den = m_count * sst - ss * ss;
+    let line = if den > 0.0 {
+        (m_count * st - ss * sl) / den
+    } else {
+        c[1]
+    };
+    let bias = (c[1] - line) / scale;
+    (
+        c[0],
+        Prior {
+            mean: c[1] / scale,
+            sigma: ((s2 * inv[4]) / (scale * scale) + bias * bias).sqrt(),
+        },
+    )
+}
+
+/// Inverse of a symmetric 3x3 matrix (row-major), None when singular.
+fn invert3(m: &[f64; 9]) -> Option<[f64; 9]> {
+    let c00 = m[4] * m[8] - m[5] * m[7];
+    let c01 = m[5] * m[6] - m[3] * m[8];
+    let c02 = m[3] * m[7] - m[4] * m[6];
+    let det = m[0] * c00 + m[1] * c01 + m[2] * c02;
+    if !(det.abs() > 0.0) || !det.is_finite() {
+        return None;
+    }
+    let inv = [
+        c00 / det,
+        (m[2] * m[7] - m[1] * m[8]) / det,
+        (m[1] * m[5] - m[2] * m[4]) / det,
+        c01 / det,
+        (m[0] * m[8] - m[2] * m[6]) / det,
+        (m[2] * m[3] - m[0] * m[5]) / det,
+        c02 / det,
+        (m[1] * m[6] - m[0] * m[7]) / det,
+        (m[0] * m[4] - m[1] * m[3]) / det,
+    ];
+    Some(inv)
+}
+
+/// Where a prior bounds its unknown, in standard deviations, for `count`
+/// priors in one problem: the two-sided 99 % point with a Bonferroni
+/// correction over them, `z = Phi^-1(1 - 0.01 / (2 count))` (2.58 for one,
+/// 3.29 for ten, 3.89 for a hundred). Under the priors, the chance that
+/// any of the true values lies outside its bound is then at most 1 %; an
+/// estimate that needs to go there is reported, not accepted silently.
+pub fn prior_bound(count: usize) -> f64 {
+    normal_quantile(1.0 - 0.01 / (2.0 * count.max(1) as f64))
+}
+
+/// The standard normal quantile `Phi^-1(p)` for `0 < p < 1` (Acklam's
+/// rational approximation, relative error below 1.2e-9, refined by one
+/// Halley step on `erfc`).
+pub fn normal_quantile(p: f64) -> f64 {
+    if !(p > 0.0 && p < 1.0) {
+        return if p <= 0.0 {
+            f64::NEG_INFINITY
+        } else {
+            f64::INFINITY
+        };
+    }
+    const A: [f64; 6] = [
+        -3.969683028665376e1,
+        2.209460984245205e2,
+        -2.759285104469687e2,
+        1.383_577_518_672_69e2,
+        -3.066479806614716e1,
+        2.506628277459239,
+    ];
+    const B: [f64; 5] = [
+        -5.447609879822406e1,
+        1.615858368580409e2,
+        -1.556989798598866e2,
+        6.680131188771972e1,
+        -1.328068155288572e1,
+    ];
+    const C: [f64; 6] = [
+        -7.784894002430293e-3,
+        -3.223964580411365e-1,
+        -2.400758277161838,
+        -2.549732539343734,
+        4.374664141464968,
+        2.938163982698783,
+    ];
+    const D: [f64; 4] = [
+        7.784695709041462e-3,
+        3.224671290700398e-1,
+        2.445134137142996,
+        3.754408661907416,
+    ];
+    let p_low = 0.02425;
+    let x = if p < p_low {
+        let q = (-2.0 * p.ln()).sqrt();
+        (((((C[0] * q + C[1]) * q + C[2]) * q + C[3]) * q + C[4]) * q + C[5])
+            / ((((D[0] * q + D[1]) * q + D[2]) * q + D[3]) * q + 1.0)
+    } else if p <= 1.0 - p_low {
+        let q = p - 0.5;
+        let r = q * q;
+        (((((A[0] * r + A[1]) * r + A[2]) * r + A[3]) * r + A[4]) * r + A[5]) * q
+            / (((((B[0] * r + B[1]) * r + B[2]) * r + B[3]) * r + B[4]) * r + 1.0)
+    } else {
+        let q = (-2.0 * (1.0 - p).ln()).sqrt();
+        -(((((C[0] * q + C[1]) * q + C[2]) * q + C[3]) * q + C[4]) * q + C[5])
+            / ((((D[0] * q + D[1]) * q + D[2]) * q + D[3]) * q + 1.0)
+    };
+    // one Halley step: e = Phi(x) - p
+    let e = 0.5 * erfc(-x / std::f64::consts::SQRT_2) - p;
+    let u = e * (2.0 * std::f64::consts::PI).sqrt() * (x * x / 2.0).exp();
+    x - u / (1.0 + x * u / 2.0)
+}
+
+/// The complementary error function (Numerical Recipes' Chebyshev fit,
+/// relative error below 1.2e-7; the Halley step above needs no more).
+fn erfc(x: f64) -> f64 {
+    let z = x.abs();
+    let t = 1.0 / (1.0 + 0.5 * z);
+    let r = t
+        * (-z * z - 1.26551223
+            + t * (1.00002368
+                + t * (0.37409196
+                    + t * (0.09678418
+                        + t * (-0.18628806
+                            + t * (0.27886807
+                                + t * (-1.13520398
+                                    + t * (1.48851587 + t * (-0.82215223 + t * 0.17087277)))))))))
+            .exp();
+    if x >= 0.0 {
+        r
+    } else {
+        2.0 - r
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// Quantiles against tabulated values (Abramowitz & Stegun, Table 26.1).
+    #[test]
+    fn normal_quantiles() {
+        for (p, z) in [
+            (0.5, 0.0),
+            (0.975, 1.959963985),
+            (0.995, 2.575829304),
+            (0.9995, 3.290526731),
+            (0.025, -1.959963985),
+            (1e-6, -4.753424309),
+        ] {
+            let q = normal_quantile(p);
+            assert!((q - z).abs() < 2e-6, "{p}: {q} vs {z}");
+        }
+        assert!((prior_bound(1) - 2.575829304).abs() < 2e-6);
+        assert!((prior_bound(10) - 3.290526731).abs() < 2e-6);
+    }
+
+    /// At rest on an encoder, the prior is zero within about a quantum per
+    /// window; on a known ramp plus rounding it holds the true slope.
+    #[test]
+    fn velocity_priors() {
+        let q = 2.0 * std::f64::consts::PI / 4096.0;
+        let noise = q / 12f64.sqrt();
+        let t: Vec<f64> = (0..200).map(|k| k as f64 * 0.002).collect();
+        let rest = vec![0.5 * q; 200];
+        let p = velocity_prior(&t, &rest, 0, noise);
+        assert!(p.mean.abs() < 1e-12, "{p:?}");
+        assert!(p.sigma > 0.0 && p.sigma < 3.0 * q / MIN_WINDOW, "{p:?}");
+        let v = 3.0;
+        let ramp: Vec<f64> = t.iter().map(|t| ((0.1 + v * t) / q).round() * q).collect();
+        for k in [0, 50, 199] {
+            let p = velocity_prior(&t, &ramp, k, noise);
+            assert!((p.mean - v).abs() < 3.0 * p.sigma, "{k}: {p:?}");
+            assert!(p.sigma < 0.2, "{k}: {p:?}");
+        }
+    }
+
+    /// A fast transient the quadratic cannot follow widens the prior.
+    #[test]
+    fn transients_widen_the_prior() {
+        let t: Vec<f64> = (0..200).map(|k| k as f64 * 0.002).collect();
+        let noise = 1e-4;
+        let smooth: Vec<f64> = t.iter().map(|t| 0.2 * t).collect();
+        // a 40 Hz oscillation: half a period in the window, no quadratic
+        let jerky: Vec<f64> = t
+            .iter()
+            .map(|t| 0.2 * t + 0.01 * (2.0 * std::f64::consts::PI * 40.0 * t).sin())
+            .collect();
+        let a = velocity_prior(&t, &smooth, 0, noise);
+        let b = velocity_prior(&t, &jerky, 0, noise);
+        assert!(b.sigma > 2.0 * a.sigma, "{a:?} {b:?}");
+    }
+}
