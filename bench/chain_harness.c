@@ -1,11 +1,16 @@
 /* ns per forward-dynamics call of the n-link chain (bench/chain_scaling.sh):
  * the plantc-generated Rust (through a small staticlib, `Plant::dynamics`),
- * SymPy's M, F + Cholesky and CasADi's solve (bench/chain_peers.py), and
- * MuJoCo's mj_forward, interleaved over the same random states; then the
- * agreement of each peer with plantc (max over states of
- * ||a_peer - a_plantc||_inf / ||a_plantc||_inf over the accelerations).
- * Built with -DNL=n and -DHAVE_SYMPY / -DHAVE_MUJOCO as available.
- * Prints one JSON line. */
+ * SymPy's M, F + Cholesky and CasADi's solve (bench/chain_peers.py),
+ * MuJoCo's mj_forward and Pinocchio's ABA (bench/chain_pinocchio.cpp),
+ * interleaved over the same random states and timed on this thread's CPU
+ * time (CLOCK_THREAD_CPUTIME_ID: time another process takes from this one
+ * is not counted, as it would be on the wall clock); then the agreement of
+ * each with plantc (max over states of ||a_peer - a_plantc||_inf /
+ * ||a_plantc||_inf over the accelerations).
+ * With CHAIN_DUMP=FILE it also writes the states and every implementation's
+ * accelerations to FILE (bench/chain_precision.py).
+ * Built with -DNL=n and -DHAVE_SYMPY / -DHAVE_MUJOCO / -DHAVE_PINOCCHIO as
+ * available. Prints one JSON line. */
 #include <math.h>
 #include <stdio.h>
 #include <stdlib.h>
@@ -18,7 +23,13 @@
 
 void *plantc_chain_new(void);
 void plantc_chain_dyn(const void *plant, const double *x, const double *u, double *out);
+#ifdef HAVE_CASADI
 void cas_chain(const double *x, const double *u, double *out);
+#endif
+#ifdef HAVE_PINOCCHIO
+void pin_chain_new(int n, double m, double L, double c, double J, double b, double g);
+void pin_chain_dyn(const double *x, const double *u, double *out);
+#endif
 #ifdef HAVE_SYMPY
 void sympy_chain(const double *x, const double *u, double *out);
 #endif
@@ -32,7 +43,7 @@ static double sink;
 
 static double now(void) {
   struct timespec t;
-  clock_gettime(CLOCK_MONOTONIC, &t);
+  clock_gettime(CLOCK_THREAD_CPUTIME_ID, &t);
   return t.tv_sec * 1e9 + t.tv_nsec;
 }
 
@@ -65,6 +76,16 @@ static double rel(const double *a, const double *ref) {
 
 static const void *plant;
 static void f_plantc(const double *x, const double *u, double *out) { plantc_chain_dyn(plant, x, u, out); }
+
+#ifdef HAVE_PINOCCHIO
+/* the same mirror as MuJoCo's when its hinge turns the other way */
+static void f_pin_mirrored(const double *x, const double *u, double *out) {
+  double y[2 * NL], v = -u[0];
+  for (int i = 0; i < 2 * NL; i++) y[i] = -x[i];
+  pin_chain_dyn(y, &v, out);
+  for (int i = 0; i < 2 * NL; i++) out[i] = -out[i];
+}
+#endif
 
 #ifdef HAVE_MUJOCO
 static mjModel *mm;
@@ -119,13 +140,26 @@ int main(int argc, char **argv) {
     us[s] = 0.1 * rnd();
   }
   plant = plantc_chain_new();
-  const char *names[4] = {"plantc", "casadi", "sympy", "mujoco"};
-  dyn_fn fns[4] = {f_plantc, cas_chain, 0, 0};
+  const char *names[5] = {"plantc", "casadi", "sympy", "mujoco", "pinocchio"};
+  dyn_fn fns[5] = {f_plantc, 0, 0, 0, 0};
+#ifdef HAVE_CASADI
+  fns[1] = cas_chain;
+#endif
 #ifdef HAVE_SYMPY
   fns[2] = sympy_chain;
 #endif
-  dyn_fn check[4];
+  dyn_fn check[5];
   const char *mirror = "";
+  const char *pmirror = "";
+#ifdef HAVE_PINOCCHIO
+  pin_chain_new(NL, 0.1, 0.2, 0.1, 3.3e-4, 1e-4, 9.81);
+  fns[4] = pin_chain_dyn;
+  check[4] = pin_chain_dyn;
+  if (agree(pin_chain_dyn) > 1e-6 && agree(f_pin_mirrored) < agree(pin_chain_dyn)) {
+    check[4] = f_pin_mirrored;
+    pmirror = ", \"pinocchio_mirrored\": true";
+  }
+#endif
 #ifdef HAVE_MUJOCO
   char err[1000];
   if (argc < 2) {
@@ -146,19 +180,43 @@ int main(int argc, char **argv) {
   }
 #endif
   for (int k = 0; k < 3; k++) check[k] = fns[k];
-  double t[4][ROUNDS];
+  /* CHAIN_DUMP=FILE: every state and each implementation's accelerations
+   * (turned as plantc's, 17 digits) for bench/chain_precision.py */
+  const char *dump = getenv("CHAIN_DUMP");
+  if (dump) {
+    FILE *f = fopen(dump, "w");
+    if (!f) {
+      fprintf(stderr, "cannot write %s\n", dump);
+      return 2;
+    }
+    double a[2 * NL];
+    for (int s = 0; s < NS; s++) {
+      fprintf(f, "state");
+      for (int i = 0; i < 2 * NL; i++) fprintf(f, " %.17g", xs[s][i]);
+      fprintf(f, " %.17g\n", us[s]);
+      for (int k = 0; k < 5; k++) {
+        if (!fns[k]) continue;
+        check[k](xs[s], &us[s], a);
+        fprintf(f, "%s", names[k]);
+        for (int i = 0; i < NL; i++) fprintf(f, " %.17g", a[NL + i]);
+        fprintf(f, "\n");
+      }
+    }
+    fclose(f);
+  }
+  double t[5][ROUNDS];
   for (int r = 0; r < ROUNDS; r++)
-    for (int k = 0; k < 4; k++)
+    for (int k = 0; k < 5; k++)
       if (fns[k]) t[k][r] = time_one(fns[k]);
   printf("{\"n\": %d", NL);
-  for (int k = 0; k < 4; k++)
+  for (int k = 0; k < 5; k++)
     if (fns[k]) printf(", \"%s_ns\": %.1f", names[k], median(t[k], ROUNDS));
-  for (int k = 1; k < 4; k++)
+  for (int k = 1; k < 5; k++)
     if (fns[k]) printf(", \"%s_rel_err\": %.3g", names[k], agree(check[k]));
-#ifdef HAVE_SYMPY
+#if defined(HAVE_SYMPY) && defined(HAVE_CASADI)
   printf(", \"casadi_vs_sympy_rel_err\": %.3g", agree2(cas_chain, sympy_chain));
 #endif
-  printf("%s, \"sink\": %g}\n", mirror, sink != sink ? 0.0 : 1.0);
+  printf("%s%s, \"sink\": %g}\n", mirror, pmirror, sink != sink ? 0.0 : 1.0);
   (void)argc;
   (void)argv;
   return 0;

@@ -10,7 +10,7 @@ joint 1), built three ways:
 * MuJoCo (if importable): an MJCF model of the chain (hinge joints, inertial
   frames, joint damping), called through its C API by the harness.
 
-Usage: python chain_peers.py OUTDIR N [--no-sympy]
+Usage: python chain_peers.py OUTDIR N [--no-sympy] [--no-casadi]
 Writes OUTDIR/sympy_chain.c, OUTDIR/cas_chain.c (+ .h), OUTDIR/chain.xml and
 prints one JSON line with the times (s) and peak memory (KB) of each stage.
 """
@@ -22,6 +22,7 @@ import time
 
 out, n = sys.argv[1], int(sys.argv[2])
 use_sympy = "--no-sympy" not in sys.argv
+use_casadi = "--no-casadi" not in sys.argv
 m, L, c, J, b, g = 0.1, 0.2, 0.1, 3.3e-4, 1e-4, 9.81
 res = {"n": n}
 
@@ -114,39 +115,40 @@ if use_sympy:
     res["sympy_peak_kb"] = peak_kb()
 
 # ---------------------------------------------------------------- CasADi
-import casadi as ca
+if use_casadi:
+    import casadi as ca
 
-t0 = time.perf_counter()
-x = ca.SX.sym("x", 2 * n)
-uu = ca.SX.sym("u", 1)
-q = [x[i] for i in range(n)]
-qd = [x[n + i] for i in range(n)]
-T, V = lagrangian(ca.cos, ca.sin, q, qd)
-Lg = T - V
-qv, qdv = x[:n], x[n:]
-dLdqd = ca.gradient(Lg, qdv)
-M = ca.jacobian(dLdqd, qdv)
-Q = ca.vertcat(*[(uu[0] if i == 0 else 0) - b * qd[i] for i in range(n)])
-F = Q + ca.gradient(Lg, qv) - ca.mtimes(ca.jacobian(dLdqd, qv), qdv)
-acc = ca.solve(M, F)
-dyn = ca.Function("cas_chain_f", [x, uu], [ca.vertcat(qdv, acc)])
-res["casadi_derive_s"] = time.perf_counter() - t0
-t0 = time.perf_counter()
-cwd = os.getcwd()
-os.chdir(out)
-cg = ca.CodeGenerator("cas_chain.c", {"with_header": True})
-cg.add(dyn)
-cg.generate()
-os.chdir(cwd)
-with open(os.path.join(out, "cas_wrap.c"), "w") as f:
-    f.write(
-        '#include "cas_chain.h"\nstatic casadi_int iw[4096];\nstatic casadi_real w[1 << 20];\n'
-        "void cas_chain(const double *x, const double *u, double *out) {\n"
-        "  const casadi_real *arg[2] = {x, u};\n  casadi_real *res[1] = {out};\n"
-        "  cas_chain_f(arg, res, iw, w, 0);\n}\n"
-    )
-res["casadi_codegen_s"] = time.perf_counter() - t0
-res["casadi"] = ca.__version__
+    t0 = time.perf_counter()
+    x = ca.SX.sym("x", 2 * n)
+    uu = ca.SX.sym("u", 1)
+    q = [x[i] for i in range(n)]
+    qd = [x[n + i] for i in range(n)]
+    T, V = lagrangian(ca.cos, ca.sin, q, qd)
+    Lg = T - V
+    qv, qdv = x[:n], x[n:]
+    dLdqd = ca.gradient(Lg, qdv)
+    M = ca.jacobian(dLdqd, qdv)
+    Q = ca.vertcat(*[(uu[0] if i == 0 else 0) - b * qd[i] for i in range(n)])
+    F = Q + ca.gradient(Lg, qv) - ca.mtimes(ca.jacobian(dLdqd, qv), qdv)
+    acc = ca.solve(M, F)
+    dyn = ca.Function("cas_chain_f", [x, uu], [ca.vertcat(qdv, acc)])
+    res["casadi_derive_s"] = time.perf_counter() - t0
+    t0 = time.perf_counter()
+    cwd = os.getcwd()
+    os.chdir(out)
+    cg = ca.CodeGenerator("cas_chain.c", {"with_header": True})
+    cg.add(dyn)
+    cg.generate()
+    os.chdir(cwd)
+    with open(os.path.join(out, "cas_wrap.c"), "w") as f:
+        f.write(
+            '#include "cas_chain.h"\nstatic casadi_int iw[4096];\nstatic casadi_real w[1 << 20];\n'
+            "void cas_chain(const double *x, const double *u, double *out) {\n"
+            "  const casadi_real *arg[2] = {x, u};\n  casadi_real *res[1] = {out};\n"
+            "  cas_chain_f(arg, res, iw, w, 0);\n}\n"
+        )
+    res["casadi_codegen_s"] = time.perf_counter() - t0
+    res["casadi"] = ca.__version__
 
 # ---------------------------------------------------------------- MuJoCo
 try:

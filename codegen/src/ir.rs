@@ -49,6 +49,10 @@ pub(crate) enum Level {
     Param,
     /// Depends on the state, the input or the step: computed on every call.
     Call,
+    /// Depends on a direction of differentiation (the seeds of a tangent,
+    /// [`Graph::tangent`]): computed once per direction, inside the loop of
+    /// a Jacobian ([`Function::inner`]).
+    Dir,
 }
 
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
@@ -128,6 +132,9 @@ struct Fused {
 /// Statements of one emitted function and one expression per output.
 pub(crate) struct Function {
     pub stmts: Vec<TokenStream>,
+    /// Statements of the values that depend on a direction
+    /// ([`Level::Dir`]), after `stmts`: the body of a Jacobian's loop.
+    pub inner: Vec<TokenStream>,
     pub outputs: Vec<TokenStream>,
 }
 
@@ -401,6 +408,7 @@ impl Graph {
                 let a = self.expr(env, *a)?;
                 self.unary(*f, a)
             }
+            Node::Named(_, d) => self.expr(env, *d)?,
             Node::Atan2(y, x) => {
                 let (y, x) = (self.expr(env, *y)?, self.expr(env, *x)?);
                 match (self.as_const(y), self.as_const(x)) {
@@ -495,7 +503,7 @@ impl Graph {
         // terms as a balanced tree (short dependency chains)
         let (params, mut calls): (Vec<_>, Vec<_>) = lowered
             .into_iter()
-            .partition(|(v, _)| self.lv(*v) != Level::Call);
+            .partition(|(v, _)| self.lv(*v) < Level::Call);
         let mut acc: Option<(V, bool)> = None;
         for (v, neg) in params {
             acc = Some(self.accumulate(acc, v, neg));
@@ -598,7 +606,7 @@ impl Graph {
                     (v, false)
                 }
             };
-            let call = self.lv(v) == Level::Call;
+            let call = self.lv(v) >= Level::Call;
             match (call, den) {
                 (false, false) => pn.push(v),
                 (false, true) => pd.push(v),
@@ -740,6 +748,129 @@ impl Graph {
             .collect()
     }
 
+    /// The directional derivatives of `roots` (forward mode over the graph):
+    /// `seeds` gives the derivative of some per-call values (inputs), every
+    /// other value's follows by the chain rule; parameter-level values and
+    /// constants have derivative 0. With seeds read from a direction
+    /// ([`Level::Dir`] inputs), the derivatives are the body of a
+    /// Jacobian's loop over directions.
+    pub fn tangent(&mut self, roots: &[V], seeds: &HashMap<V, V>) -> Result<Vec<V>, Error> {
+        let mut order: Vec<V> = self
+            .reach(roots, true)
+            .into_iter()
+            .filter(|v| self.lv(*v) >= Level::Call)
+            .collect();
+        order.sort_unstable();
+        let zero = self.konst(0.0);
+        let mut d: HashMap<V, V> = seeds.clone();
+        for v in order {
+            if d.contains_key(&v) {
+                continue;
+            }
+            let get = |d: &HashMap<V, V>, x: V| d.get(&x).copied().unwrap_or(zero);
+            let dv = match self.ops[v as usize] {
+                Op::Const(_) | Op::Input(_) => zero,
+                Op::Add(a, b) => {
+                    let (da, db) = (get(&d, a), get(&d, b));
+                    self.add(da, db)
+                }
+                Op::Sub(a, b) => {
+                    let (da, db) = (get(&d, a), get(&d, b));
+                    self.sub(da, db)
+                }
+                Op::Neg(a) => {
+                    let da = get(&d, a);
+                    self.neg(da)
+                }
+                Op::Mul(a, b) => {
+                    let (da, db) = (get(&d, a), get(&d, b));
+                    let (x, y) = (self.mul(da, b), self.mul(a, db));
+                    self.add(x, y)
+                }
+                Op::Div(a, b) => {
+                    // (da - v db) / b
+                    let (da, db) = (get(&d, a), get(&d, b));
+                    let t = self.mul(v, db);
+                    let n = self.sub(da, t);
+                    self.div(n, b)
+                }
+                Op::Sqrt(a) => {
+                    let da = get(&d, a);
+                    let two = self.konst(2.0);
+                    let den = self.mul(two, v);
+                    self.div(da, den)
+                }
+                Op::Sin(a) => {
+                    let da = get(&d, a);
+                    let c = self.op(Op::Cos(a));
+                    self.mul(c, da)
+                }
+                Op::Cos(a) => {
+                    let da = get(&d, a);
+                    let s = self.op(Op::Sin(a));
+                    let t = self.mul(s, da);
+                    self.neg(t)
+                }
+                Op::Atan2(y, x) => {
+                    // (x dy - y dx) / (x^2 + y^2)
+                    let (dy, dx) = (get(&d, y), get(&d, x));
+                    let (p, q) = (self.mul(x, dy), self.mul(y, dx));
+                    let num = self.sub(p, q);
+                    let (xx, yy) = (self.mul(x, x), self.mul(y, y));
+                    let den = self.add(xx, yy);
+                    self.div(num, den)
+                }
+                Op::Powf(a, b) => {
+                    // v (db ln a + b da / a)
+                    let (da, db) = (get(&d, a), get(&d, b));
+                    let ln = self.unary(Func::Ln, a);
+                    let t1 = self.mul(db, ln);
+                    let t2 = self.mul(b, da);
+                    let t2 = self.div(t2, a);
+                    let s = self.add(t1, t2);
+                    self.mul(v, s)
+                }
+                Op::Func(f, a) => {
+                    let da = get(&d, a);
+                    let slope = match f {
+                        Func::Sin => self.op(Op::Cos(a)),
+                        Func::Cos => {
+                            let s = self.op(Op::Sin(a));
+                            self.neg(s)
+                        }
+                        Func::Tan | Func::Tanh => {
+                            let vv = self.mul(v, v);
+                            let one = self.konst(1.0);
+                            if f == Func::Tan {
+                                self.add(one, vv)
+                            } else {
+                                self.sub(one, vv)
+                            }
+                        }
+                        Func::Exp => v,
+                        Func::Ln => {
+                            let one = self.konst(1.0);
+                            self.div(one, a)
+                        }
+                        Func::Abs => self.unary(Func::Sign, a),
+                        Func::Sign => zero,
+                    };
+                    self.mul(slope, da)
+                }
+                Op::SinStep(_) | Op::CosStep(_) => {
+                    return Err(Error::Generate(
+                        "internal: a tangent through a Runge-Kutta stage increment".into(),
+                    ))
+                }
+            };
+            d.insert(v, dv);
+        }
+        Ok(roots
+            .iter()
+            .map(|r| d.get(r).copied().unwrap_or(zero))
+            .collect())
+    }
+
     /// Values reachable from `roots` (including them).
     fn reach(&self, roots: &[V], stop_at_param: bool) -> HashSet<V> {
         let mut seen = HashSet::new();
@@ -748,7 +879,7 @@ impl Graph {
             if !seen.insert(v) {
                 continue;
             }
-            if stop_at_param && self.lv(v) != Level::Call {
+            if stop_at_param && self.lv(v) < Level::Call {
                 continue;
             }
             stack.extend(self.operands(v));
@@ -887,7 +1018,7 @@ impl Graph {
     fn fused_products(&self, order: &[V], outputs: &[V]) -> Fused {
         let mut uses: HashMap<V, usize> = HashMap::new();
         for &v in order {
-            if self.lv(v) == Level::Call {
+            if self.lv(v) >= Level::Call {
                 for o in self.operands(v) {
                     *uses.entry(o).or_default() += 1;
                 }
@@ -898,14 +1029,15 @@ impl Graph {
         }
         let mut f = Fused::default();
         for &v in order {
-            if self.lv(v) != Level::Call {
+            if self.lv(v) < Level::Call {
                 continue;
             }
             let (Op::Add(a, b) | Op::Sub(a, b)) = self.ops[v as usize] else {
                 continue;
             };
             let single = |m: V| {
-                self.lv(m) == Level::Call
+                self.lv(m) >= Level::Call
+                    && self.lv(m) <= self.lv(v)
                     && matches!(self.ops[m as usize], Op::Mul(..))
                     && uses.get(&m) == Some(&1)
             };
@@ -958,6 +1090,7 @@ impl Graph {
         let fused = self.fused_products(&order, outputs);
         let mut bound: HashMap<V, TokenStream> = HashMap::new();
         let mut stmts = Vec::new();
+        let mut inner = Vec::new();
         let mut counter = 0usize;
         let mut fresh = || {
             let id: Ident = format_ident!("t{}", counter);
@@ -981,8 +1114,13 @@ impl Graph {
                     bound.insert(v, quote!(#coeffs[#s]));
                     continue;
                 }
-                Level::Call => {}
+                Level::Call | Level::Dir => {}
             }
+            let stmts = if self.lv(v) == Level::Dir {
+                &mut inner
+            } else {
+                &mut stmts
+            };
             match self.ops[v as usize] {
                 Op::Input(i) => {
                     bound.insert(v, self.inputs[i as usize].0.clone());
@@ -1027,7 +1165,11 @@ impl Graph {
             }
         }
         let outputs = outputs.iter().map(|v| bound[v].clone()).collect();
-        Ok(Function { stmts, outputs })
+        Ok(Function {
+            stmts,
+            inner,
+            outputs,
+        })
     }
 }
 

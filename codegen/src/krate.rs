@@ -154,6 +154,9 @@ pub(crate) fn standalone_package(name: &str) -> String {
 /// `force`. Files are written only when their content changed. Returns the
 /// paths written or checked.
 pub fn write_crate(opts: &CrateOptions) -> Result<Vec<PathBuf>, Error> {
+    // a commit a killed run left half done is finished before the directory
+    // is judged (its manifest is written last)
+    plantc_fsio::finish_interrupted(&opts.dir);
     if !opts.force && !is_empty_dir(&opts.dir) && !is_generated_dir(&opts.dir) {
         return Err(Error::NotGenerated {
             dir: opts.dir.clone(),

@@ -51,6 +51,7 @@ mod ir;
 mod krate;
 mod lower;
 mod plant;
+mod recursive;
 mod rig;
 
 use std::fmt;

@@ -10,7 +10,9 @@
 use proc_macro2::TokenStream;
 use quote::quote;
 
-use plantc_derive::mechanics::{angle_coordinates, AngleCoordinates, Equations};
+use plantc_derive::mechanics::{
+    angle_coordinates, separable_mass, AngleCoordinates, Equations, SeparableMass,
+};
 use plantc_derive::model::Model;
 use plantc_derive::sym::{diff, Expr, Rational, Symbol};
 
@@ -77,7 +79,7 @@ impl Frame<'_> {
 }
 
 /// `sum_j c_j v_j` for rational `c_j` (exact zeros skipped).
-fn combination(g: &mut Graph, coeffs: &[Rational], vs: &[V]) -> V {
+pub(crate) fn combination(g: &mut Graph, coeffs: &[Rational], vs: &[V]) -> V {
     let mut acc = g.konst(0.0);
     for (c, v) in coeffs.iter().zip(vs) {
         if c.is_zero() {
@@ -263,13 +265,203 @@ fn state_diff(frame: &Frame, model: &Model, e: Expr, j: usize) -> Expr {
     }
 }
 
+/// Fewest coordinates for which the forward dynamics are generated as the
+/// separable recursion ([`crate::recursive`]) when the mass matrix has that
+/// structure, instead of the closed form (`M` formed, LDL^T unrolled, the
+/// Jacobians by symbolic derivatives, the four Runge-Kutta stages in one
+/// graph). Measured on the n-link chain (`bench/chain_scaling.sh` with
+/// `PLANTC_DYNAMICS_FORM=closed|recursive`, CPU ns per `Plant::dynamics`
+/// call, two runs): closed 197/195 ns against recursive 228/212 at n = 8,
+/// 234 against 290 at n = 9, 376/293 against 279/281 at n = 10, 527
+/// against 367 at n = 12. The value is the smallest n at which the
+/// recursion was faster in both runs (beyond it the closed form's `n^3/6`
+/// LDL^T only loses more, and its code grows as `n^3`).
+pub const RECURSIVE_MIN_COORDINATES: usize = 10;
+
+/// The bodies of the plant functions and the coefficients they read.
+struct PlantBodies {
+    nk: proc_macro2::Literal,
+    p_unused: bool,
+    cstmts: Vec<TokenStream>,
+    cvals: Vec<TokenStream>,
+    dynamics: TokenStream,
+    jacobian_x: TokenStream,
+    jacobian_u: TokenStream,
+    rk4: TokenStream,
+}
+
+/// Whether a function's statements or outputs mention `name` (tokens).
+fn uses(f: &crate::ir::Function, name: &str) -> bool {
+    f.stmts
+        .iter()
+        .chain(&f.inner)
+        .chain(&f.outputs)
+        .any(|t| format!(" {t}").contains(name))
+}
+
+/// `let _ = u;` / `let _ = k;` for a function that does not read them.
+fn silence(f: &crate::ir::Function) -> TokenStream {
+    let mut t = TokenStream::new();
+    if !uses(f, " u [") {
+        t.extend(quote!(let _ = u;));
+    }
+    if !uses(f, " k . 0") {
+        t.extend(quote!(let _ = k;));
+    }
+    t
+}
+
 /// The generated plant items.
 pub(crate) fn plant_items(model: &Model, eqs: &Equations) -> Result<TokenStream, Error> {
     let n = eqs.coords.len();
+    let computed;
+    let ac: Option<&AngleCoordinates> = match &eqs.angles {
+        Some(ac) => Some(ac),
+        None => {
+            computed = angle_coordinates(model).map_err(Error::Mechanics)?;
+            computed.as_ref()
+        }
+    };
+    // `PLANTC_DYNAMICS_FORM=closed|recursive` overrides the size rule: a
+    // benchmark knob (bench/chain_scaling.sh measures the rule with it),
+    // not an option of the product
+    let recursive = match std::env::var("PLANTC_DYNAMICS_FORM").as_deref() {
+        Ok("closed") => false,
+        Ok("recursive") => true,
+        _ => n >= RECURSIVE_MIN_COORDINATES,
+    };
+    let separable = match ac {
+        Some(ac) if recursive => separable_mass(ac).map(|sm| (ac, sm)),
+        _ => None,
+    };
+    let bodies = match &separable {
+        Some((ac, sm)) => recursive_bodies(model, eqs, ac, sm)?,
+        None => closed_form_bodies(model, eqs, ac)?,
+    };
+    Ok(plant_tokens(bodies))
+}
+
+/// The plant functions by the separable recursion: `dynamics` unrolled
+/// (`O(n)`), the Jacobians as its forward-mode derivative in a loop over the
+/// directions, `rk4_step` calling `dynamics` four times.
+fn recursive_bodies(
+    model: &Model,
+    eqs: &Equations,
+    ac: &AngleCoordinates,
+    sm: &SeparableMass,
+) -> Result<PlantBodies, Error> {
+    let n = eqs.coords.len();
     let nx = 2 * n;
     let nu = eqs.inputs.len();
-    let ac = angle_coordinates(model).map_err(Error::Mechanics)?;
-    let frame = match &ac {
+    let mut g = Graph::new();
+    let xs: Vec<V> = (0..nx)
+        .map(|i| {
+            let i = idx(i);
+            g.input(quote!(x[#i]), Level::Call)
+        })
+        .collect();
+    let us: Vec<V> = (0..nu)
+        .map(|i| {
+            let i = idx(i);
+            g.input(quote!(u[#i]), Level::Call)
+        })
+        .collect();
+    let ps = param_inputs(&mut g, model, &quote!(p));
+    let dyn_out = crate::recursive::separable_dynamics(&mut g, model, eqs, ac, sm, &xs, &us, &ps)?;
+    let seeds = |g: &mut Graph, vs: &[V]| -> std::collections::HashMap<V, V> {
+        vs.iter()
+            .enumerate()
+            .map(|(i, v)| {
+                let i = idx(i);
+                (*v, g.input(quote!(e[#i]), Level::Dir))
+            })
+            .collect()
+    };
+    let sx = seeds(&mut g, &xs);
+    let jx = g.tangent(&dyn_out, &sx)?;
+    let su = seeds(&mut g, &us);
+    let ju = g.tangent(&dyn_out, &su)?;
+    let mut roots = dyn_out.clone();
+    roots.extend(&jx);
+    roots.extend(&ju);
+    let plan = g.plan(&roots)?;
+    let kref = quote!(k.0);
+    let fd = g.function(&dyn_out, &plan, &kref)?;
+    let fjx = g.function(&jx, &plan, &kref)?;
+    let fju = g.function(&ju, &plan, &kref)?;
+    let looped = |f: &crate::ir::Function, cols: TokenStream| {
+        let s = silence(f);
+        let (stmts, inner, outs) = (&f.stmts, &f.inner, &f.outputs);
+        quote! {
+            let _ = x;
+            #s
+            #(#stmts)*
+            let mut jac = [[0.0; #cols]; N_STATES];
+            let mut j = 0;
+            while j < #cols {
+                let mut e = [0.0; #cols];
+                e[j] = 1.0;
+                #(#inner)*
+                let col: [f64; N_STATES] = [#(#outs),*];
+                let mut i = 0;
+                while i < N_STATES {
+                    jac[i][j] = col[i];
+                    i += 1;
+                }
+                j += 1;
+            }
+            jac
+        }
+    };
+    let sd = silence(&fd);
+    let (ds, dout) = (&fd.stmts, &fd.outputs);
+    Ok(PlantBodies {
+        nk: idx(plan.len()),
+        p_unused: plan.stmts.is_empty() && plan.values.is_empty(),
+        cstmts: plan.stmts,
+        cvals: plan.values,
+        dynamics: quote! {
+            #sd
+            #(#ds)*
+            [#(#dout),*]
+        },
+        jacobian_x: looped(&fjx, quote!(N_STATES)),
+        jacobian_u: looped(&fju, quote!(N_INPUTS)),
+        rk4: quote! {
+            let k1 = dynamics_k(x, u, k);
+            let mut y = [0.0; N_STATES];
+            let mut i = 0;
+            while i < N_STATES { y[i] = x[i] + 0.5 * h * k1[i]; i += 1; }
+            let k2 = dynamics_k(&y, u, k);
+            let mut i = 0;
+            while i < N_STATES { y[i] = x[i] + 0.5 * h * k2[i]; i += 1; }
+            let k3 = dynamics_k(&y, u, k);
+            let mut i = 0;
+            while i < N_STATES { y[i] = x[i] + h * k3[i]; i += 1; }
+            let k4 = dynamics_k(&y, u, k);
+            let mut out = [0.0; N_STATES];
+            let mut i = 0;
+            while i < N_STATES {
+                out[i] = x[i] + h / 6.0 * (k1[i] + 2.0 * (k2[i] + k3[i]) + k4[i]);
+                i += 1;
+            }
+            out
+        },
+    })
+}
+
+/// The plant functions in closed form: `M` and `r` formed and solved
+/// (Cramer up to three coordinates, LDL^T beyond), the Jacobians from
+/// symbolic derivatives, the four Runge-Kutta stages in one graph.
+fn closed_form_bodies(
+    model: &Model,
+    eqs: &Equations,
+    ac: Option<&AngleCoordinates>,
+) -> Result<PlantBodies, Error> {
+    let n = eqs.coords.len();
+    let nx = 2 * n;
+    let nu = eqs.inputs.len();
+    let frame = match ac {
         Some(ac) => Frame::Angles(eqs, ac),
         None => Frame::Model(eqs),
     };
@@ -413,42 +605,65 @@ pub(crate) fn plant_items(model: &Model, eqs: &Equations) -> Result<TokenStream,
     let fju = g.function(&ju, &plan, &kref)?;
     let frk = g.function(&rk, &plan, &kref)?;
 
-    let nk = idx(plan.len());
-    let cstmts = &plan.stmts;
-    let cvals = &plan.values;
     let (ds, dout) = (&fd.stmts, &fd.outputs);
     let (jxs, jxo) = (&fjx.stmts, rows(&fjx.outputs, nx));
     let (jus, juo) = (&fju.stmts, rows(&fju.outputs, nu));
     let (rks, rko) = (&frk.stmts, &frk.outputs);
-    let uses = |f: &crate::ir::Function, name: &str| {
-        f.stmts
-            .iter()
-            .chain(&f.outputs)
-            .any(|t| format!(" {t}").contains(name))
-    };
-    let silence = |f: &crate::ir::Function| {
-        let mut t = TokenStream::new();
-        if !uses(f, " u [") {
-            t.extend(quote!(let _ = u;));
-        }
-        if !uses(f, " k . 0") {
-            t.extend(quote!(let _ = k;));
-        }
-        t
-    };
     let (sd, sjx, sju, srk) = (silence(&fd), silence(&fjx), silence(&fju), silence(&frk));
     let rk_x = if uses(&frk, " x [") {
         quote!()
     } else {
         quote!(let _ = x;)
     };
-    let p_unused = if cstmts.is_empty() && cvals.is_empty() {
+    Ok(PlantBodies {
+        nk: idx(plan.len()),
+        p_unused: plan.stmts.is_empty() && plan.values.is_empty(),
+        cstmts: plan.stmts,
+        cvals: plan.values,
+        dynamics: quote! {
+            #sd
+            #(#ds)*
+            [#(#dout),*]
+        },
+        jacobian_x: quote! {
+            #sjx
+            #(#jxs)*
+            [#(#jxo),*]
+        },
+        jacobian_u: quote! {
+            let _ = x;
+            #sju
+            #(#jus)*
+            [#(#juo),*]
+        },
+        rk4: quote! {
+            #rk_x
+            #srk
+            #(#rks)*
+            [#(#rko),*]
+        },
+    })
+}
+
+/// The plant items around the function bodies.
+fn plant_tokens(b: PlantBodies) -> TokenStream {
+    let PlantBodies {
+        nk,
+        p_unused,
+        cstmts,
+        cvals,
+        dynamics,
+        jacobian_x,
+        jacobian_u,
+        rk4,
+    } = b;
+    let p_unused = if p_unused {
         quote!(let _ = p;)
     } else {
         quote!()
     };
 
-    Ok(quote! {
+    quote! {
         /// Parameter-only subexpressions of the plant functions (products of
         /// parameters, derived quantities, ...), computed once from [`Params`]
         /// so that [`Plant`]'s functions only do the work that depends on the
@@ -469,32 +684,22 @@ pub(crate) fn plant_items(model: &Model, eqs: &Equations) -> Result<TokenStream,
 
         #[inline(always)]
         fn dynamics_k(x: &[f64; N_STATES], u: &[f64; N_INPUTS], k: &PlantCoeffs) -> [f64; N_STATES] {
-            #sd
-            #(#ds)*
-            [#(#dout),*]
+            #dynamics
         }
 
         #[inline(always)]
         fn jacobian_x_k(x: &[f64; N_STATES], u: &[f64; N_INPUTS], k: &PlantCoeffs) -> [[f64; N_STATES]; N_STATES] {
-            #sjx
-            #(#jxs)*
-            [#(#jxo),*]
+            #jacobian_x
         }
 
         #[inline(always)]
         fn jacobian_u_k(x: &[f64; N_STATES], u: &[f64; N_INPUTS], k: &PlantCoeffs) -> [[f64; N_INPUTS]; N_STATES] {
-            let _ = x;
-            #sju
-            #(#jus)*
-            [#(#juo),*]
+            #jacobian_u
         }
 
         #[inline(always)]
         fn rk4_step_k(x: &[f64; N_STATES], u: &[f64; N_INPUTS], k: &PlantCoeffs, h: f64) -> [f64; N_STATES] {
-            #rk_x
-            #srk
-            #(#rks)*
-            [#(#rko),*]
+            #rk4
         }
 
         /// The plant with its parameters and their precomputed coefficients
@@ -630,7 +835,7 @@ pub(crate) fn plant_items(model: &Model, eqs: &Equations) -> Result<TokenStream,
         pub fn rk4_step(x: &[f64; N_STATES], u: &[f64; N_INPUTS], p: &Params, h: f64) -> [f64; N_STATES] {
             rk4_step_k(x, u, &PlantCoeffs::new(p), h)
         }
-    })
+    }
 }
 
 fn rows(flat: &[TokenStream], cols: usize) -> Vec<TokenStream> {

@@ -107,6 +107,7 @@ fn value_and_error(
             };
             slope * ue + 2.0 * U * v.abs()
         }
+        Node::Named(_, d) => value_and_error(*d, vals, memo).1,
         Node::Atan2(y, x) => {
             let (yv, ye) = value_and_error(*y, vals, memo);
             let (xv, xe) = value_and_error(*x, vals, memo);

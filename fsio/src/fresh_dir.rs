@@ -260,6 +260,26 @@ fn recover(target: &Path) {
     }
 }
 
+/// Finishes what killed runs left in the directory `target`, as
+/// [`FreshDir::create`] does first: their journaled commits are carried out
+/// (each file new, the manifest written), their staging directories removed.
+/// Nothing for a path that is not a directory (a symbolic link included).
+/// A command that decides from a directory's contents whether it may write
+/// there (is it plantc's output? is it empty?) calls this before looking, so
+/// a run killed half-way through its commit does not make the next run
+/// refuse its own output.
+pub fn finish_interrupted(target: &Path) {
+    if let Ok(m) = fs::symlink_metadata(target) {
+        if m.file_type().is_symlink() || !m.is_dir() {
+            return;
+        }
+    }
+    recover_swapped(target);
+    if fs::symlink_metadata(target).is_ok() {
+        recover(target);
+    }
+}
+
 /// Repairs what a killed run of an earlier plantc (which swapped whole
 /// directories) left next to `target`: a directory moved aside but not
 /// replaced goes back; the user's entries it had carried into its unfinished

@@ -43,4 +43,4 @@ mod sys;
 
 pub use atomic_file::{probe_writable, write_atomic, write_if_changed, AtomicFile};
 pub use error::Error;
-pub use fresh_dir::{manifest, FreshDir};
+pub use fresh_dir::{finish_interrupted, manifest, FreshDir};

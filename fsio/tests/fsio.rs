@@ -458,3 +458,37 @@ fn a_new_directory_appears_only_at_the_commit() {
     fresh.commit().unwrap();
     assert_eq!(tree(&later), t(&[("notes.txt", "mine"), ("y.csv", "2")]));
 }
+
+/// Issue 31 (r09): `finish_interrupted` carries out a journaled commit a
+/// killed run left (as `FreshDir::create` does), for the commands that judge
+/// a directory by its contents before creating anything; through a symbolic
+/// link it does nothing.
+#[test]
+fn finish_interrupted_completes_a_journaled_commit_and_ignores_links() {
+    let d = tmp("finish_interrupted");
+    let out = d.join("out");
+    commit(&out, "gen", &[("src/lib.rs", "old")]).unwrap();
+    fs::write(out.join("notes.txt"), "mine").unwrap();
+    fs::remove_file(out.join(".plantc-manifest-gen")).unwrap();
+    let staging = out.join(format!(".plantc-new-{DEAD}-2"));
+    fs::create_dir_all(staging.join("src")).unwrap();
+    fs::write(staging.join("src/lib.rs"), "new").unwrap();
+    let journal = "owner gen\n+ src/lib.rs\n= src/lib.rs\n";
+    fs::write(out.join(format!(".plantc-commit-{DEAD}-2")), journal).unwrap();
+    let link = d.join("link");
+    std::os::unix::fs::symlink(&out, &link).unwrap();
+    plantc_fsio::finish_interrupted(&link);
+    assert!(
+        plantc_fsio::manifest(&out, "gen").is_none(),
+        "through a link"
+    );
+    plantc_fsio::finish_interrupted(&out);
+    assert_eq!(
+        tree(&out),
+        t(&[("notes.txt", "mine"), ("src/lib.rs", "new")])
+    );
+    assert_eq!(names(&out), [".plantc-manifest-gen", "notes.txt", "src"]);
+    // a path that does not exist: nothing made
+    plantc_fsio::finish_interrupted(&d.join("absent"));
+    assert!(!d.join("absent").exists());
+}

@@ -5,7 +5,7 @@
 
 use libfuzzer_sys::fuzz_target;
 use lsp_server::Message;
-use plantc_lsp::transport::{read_message, Incoming};
+use plantc_lsp::transport::{read_message, skip_body, Incoming};
 use plantc_lsp::State;
 
 fuzz_target!(|data: &[u8]| {
@@ -19,6 +19,11 @@ fuzz_target!(|data: &[u8]| {
             }
             Ok(Some(Incoming::Message(Message::Notification(n)))) => {
                 let _ = state.notify(n);
+            }
+            Ok(Some(Incoming::Refused { skip, .. })) => {
+                if !matches!(skip_body(&mut input, skip), Ok(true)) {
+                    break;
+                }
             }
             Ok(Some(_)) => {}
             Ok(None) | Err(_) => break,

@@ -327,7 +327,14 @@ pub fn serve(connection: &Connection) -> Result<(), ServerError> {
         "capabilities": caps,
         "serverInfo": { "name": "plantc-lsp", "version": env!("CARGO_PKG_VERSION") },
     });
-    connection.initialize_finish(id, init)?;
+    // not `initialize_finish`, which ends the session when the next message
+    // is anything but `initialized`: a client that sends a request first is
+    // answered like any other (`initialized` itself is a notification the
+    // loop below ignores)
+    connection
+        .sender
+        .send(Response::new_ok(id, init).into())
+        .map_err(|e| ServerError::Protocol(format!("cannot send: {e}")))?;
     let mut state = State::default();
     let send = |m: Message| {
         connection
@@ -405,6 +412,14 @@ pub fn run_stdio() -> Result<(), ServerError> {
                     transport::Incoming::Reply(v) => {
                         let body = serde_json::to_vec(&v).unwrap_or_default();
                         if transport::write_frame(&mut std::io::stdout().lock(), &body).is_err() {
+                            return;
+                        }
+                    }
+                    transport::Incoming::Refused { reply, skip } => {
+                        let body = serde_json::to_vec(&reply).unwrap_or_default();
+                        if transport::write_frame(&mut std::io::stdout().lock(), &body).is_err()
+                            || !matches!(transport::skip_body(&mut input, skip), Ok(true))
+                        {
                             return;
                         }
                     }

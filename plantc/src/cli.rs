@@ -89,8 +89,10 @@ pub enum Command {
     Analyze {
         /// The model file.
         model: PathBuf,
-        /// The output to analyse (default: the model's first output).
-        #[arg(long)]
+        /// The output to analyse (default: the model's first output); for a
+        /// model with several inputs as many outputs, `a,b` (default: the
+        /// declared outputs when they are that many).
+        #[arg(long, value_name = "NAME[,NAME...]")]
         output: Option<String>,
         /// Analyse this controller: a `surface` (sliding-mode) controller, or
         /// a `linearize output` controller (its output).

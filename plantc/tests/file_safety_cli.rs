@@ -290,3 +290,59 @@ fn regenerating_touches_only_the_files_plantc_listed() {
         names(&krate)
     );
 }
+
+/// Issue 31 (r09): a `gen` killed half-way through its commit (journaled,
+/// `Cargo.toml` moved in, `src/lib.rs` still staged, the manifest not yet
+/// written) does not make the next `gen` (without --force) refuse the
+/// directory as not plantc's: the commit is finished first. The state is
+/// the one fsio's journal format describes (`fresh_dir.rs`), built by hand
+/// with a process id that is not running.
+#[test]
+fn a_gen_killed_during_its_commit_does_not_lock_the_next_one_out() {
+    const DEAD: u32 = 999_999_999;
+    let dir = tmp("gen_half_committed");
+    let krate = dir.join("rotpen");
+    let gen = || {
+        plantc(&[
+            "gen".to_string(),
+            model(),
+            "--controller".into(),
+            "pole_placement".into(),
+            "-o".into(),
+            s(&krate),
+        ])
+    };
+    let (code, _, err) = gen();
+    assert_eq!(code, 0, "{err}");
+    std::fs::write(krate.join("notes.txt"), "mine").unwrap();
+    let listed = plantc_fsio::manifest(&krate, "gen").unwrap();
+    let lib = std::fs::read_to_string(krate.join("src/lib.rs")).unwrap();
+    // the killed run: lib.rs staged, journal written, manifest not yet
+    let staging = krate.join(format!(".plantc-new-{DEAD}-4"));
+    std::fs::create_dir_all(staging.join("src")).unwrap();
+    std::fs::rename(krate.join("src/lib.rs"), staging.join("src/lib.rs")).unwrap();
+    std::fs::remove_file(krate.join(".plantc-manifest-gen")).unwrap();
+    let mut journal = "owner gen\n+ src/lib.rs\n".to_string();
+    for p in &listed {
+        journal.push_str(&format!("= {}\n", p.display()));
+    }
+    std::fs::write(krate.join(format!(".plantc-commit-{DEAD}-4")), journal).unwrap();
+    let (code, _, err) = gen();
+    assert_eq!(code, 0, "{err}");
+    assert_eq!(
+        std::fs::read_to_string(krate.join("src/lib.rs")).unwrap(),
+        lib
+    );
+    assert_eq!(
+        std::fs::read_to_string(krate.join("notes.txt")).unwrap(),
+        "mine"
+    );
+    assert_eq!(plantc_fsio::manifest(&krate, "gen").unwrap(), listed);
+    assert!(
+        !names(&krate)
+            .iter()
+            .any(|n| n.contains("plantc-new") || n.contains("plantc-commit")),
+        "{:?}",
+        names(&krate)
+    );
+}

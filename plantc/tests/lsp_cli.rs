@@ -513,3 +513,62 @@ fn no_frame_ends_the_server() {
     let status = c.child.wait().unwrap();
     assert_eq!(status.code(), Some(1), "exit without shutdown");
 }
+
+/// Issue 31 (r05): a Content-Length beyond the server's limit is answered as
+/// soon as its header is read, before any byte of the body (a client that
+/// announced 2^64 - 1 bytes would otherwise wait for ever); the body, when
+/// it comes, is skipped and the next frame answered.
+#[test]
+fn a_refused_length_is_answered_before_its_body() {
+    let mut c = Client::start();
+    c.request("initialize", json!({"capabilities": {}}));
+    c.notify("initialized", json!({}));
+    // 64 MiB + 1: one byte over the limit (transport::MAX_CONTENT_LENGTH)
+    let n = (64u64 << 20) + 1;
+    write!(c.stdin, "Content-Length: {n}\r\n\r\n").unwrap();
+    c.stdin.flush().unwrap();
+    let r = c.wait(|m| m.get("error").is_some());
+    assert_eq!(r["error"]["code"], json!(-32600), "{r}");
+    assert!(
+        r["error"]["message"]
+            .as_str()
+            .unwrap()
+            .contains(&n.to_string()),
+        "{r}"
+    );
+    c.stdin.write_all(&vec![b' '; n as usize]).unwrap();
+    let r = c.request("shutdown", Value::Null);
+    assert!(r["error"].is_null(), "{r}");
+    c.notify("exit", Value::Null);
+    assert_eq!(c.child.wait().unwrap().code(), Some(0));
+    // 2^64 - 1: answered at once too; the server then skips what comes
+    let mut c = Client::start();
+    c.request("initialize", json!({"capabilities": {}}));
+    c.notify("initialized", json!({}));
+    c.stdin
+        .write_all(b"Content-Length: 18446744073709551615\r\n\r\n")
+        .unwrap();
+    c.stdin.flush().unwrap();
+    let r = c.wait(|m| m.get("error").is_some());
+    assert_eq!(r["error"]["code"], json!(-32600), "{r}");
+    c.child.kill().unwrap();
+    c.child.wait().unwrap();
+}
+
+/// A request sent between `initialize` and `initialized` is answered; the
+/// session goes on (it used to end with "expected initialized notification").
+#[test]
+fn a_request_before_initialized_is_answered() {
+    let mut c = Client::start();
+    c.request("initialize", json!({"capabilities": {}}));
+    let r = c.request(
+        "textDocument/hover",
+        json!({"textDocument": {"uri": URI}, "position": {"line": 0, "character": 0}}),
+    );
+    assert!(r.get("id").is_some(), "{r}");
+    c.notify("initialized", json!({}));
+    let bye = c.request("shutdown", Value::Null);
+    assert!(bye["error"].is_null(), "{bye}");
+    c.notify("exit", Value::Null);
+    assert_eq!(c.child.wait().unwrap().code(), Some(0));
+}

@@ -26,6 +26,20 @@ pub enum AnalysisError {
         /// What stopped, and why.
         reason: String,
     },
+    /// A square (decoupling) analysis needs as many outputs as inputs.
+    NotSquare {
+        /// Outputs given.
+        outputs: usize,
+        /// Inputs of the model.
+        inputs: usize,
+    },
+    /// The decoupling matrix `A(x) = [L_g L_f^(r_i-1) h_i]` is singular
+    /// (identically, or at the operating point): the vector relative degree
+    /// is not defined there.
+    SingularDecoupling {
+        /// Where, and how it was found.
+        reason: String,
+    },
     /// The output named is not declared in the model.
     UnknownOutput {
         /// The name.
@@ -47,6 +61,16 @@ impl fmt::Display for AnalysisError {
                 "input-output linearization is implemented for one input; the model has {inputs}"
             ),
             AnalysisError::Budget { reason } => write!(f, "analysis stopped: {reason}"),
+            AnalysisError::NotSquare { outputs, inputs } => write!(
+                f,
+                "a decoupling analysis needs as many outputs as inputs: {outputs} output{} for {inputs} inputs",
+                if *outputs == 1 { "" } else { "s" }
+            ),
+            AnalysisError::SingularDecoupling { reason } => write!(
+                f,
+                "the decoupling matrix A(x) = [L_g L_f^(r_i-1) h_i] is singular {reason}: \
+                 the vector relative degree is not defined (static feedback cannot decouple these outputs)"
+            ),
             AnalysisError::UnknownOutput { name, known } => {
                 write!(
                     f,
@@ -99,17 +123,11 @@ impl LieChain {
 
     /// The singular set as text, e.g. `cos(alpha) = 0`.
     pub fn singular_set(&self) -> String {
-        if let Some(note) = &self.singular_note {
-            return note.clone();
-        }
-        if self.singular_factors.is_empty() {
-            return "none (L_g L_f^(r-1) h has no state-dependent factor)".into();
-        }
-        self.singular_factors
-            .iter()
-            .map(|f| format!("{f} = 0"))
-            .collect::<Vec<_>>()
-            .join(" or ")
+        singular_set_text(
+            self.singular_note.as_deref(),
+            &self.singular_factors,
+            "L_g L_f^(r-1) h",
+        )
     }
 
     /// The linearizing law `u = (v - L_f^r h) / (L_g L_f^(r-1) h)`, where `v`
@@ -122,6 +140,22 @@ impl LieChain {
         let v = crate::sym::substitute(v, &map);
         (v - self.lf[self.relative_degree]) / self.decoupling()
     }
+}
+
+/// A singular set as text: `note` if given, else `f1 = 0 or f2 = 0`, else
+/// none (`what` has no state-dependent factor).
+pub(crate) fn singular_set_text(note: Option<&str>, factors: &[Expr], what: &str) -> String {
+    if let Some(note) = note {
+        return note.to_string();
+    }
+    if factors.is_empty() {
+        return format!("none ({what} has no state-dependent factor)");
+    }
+    factors
+        .iter()
+        .map(|f| format!("{f} = 0"))
+        .collect::<Vec<_>>()
+        .join(" or ")
 }
 
 /// Factors of `e`'s numerator that depend on the state.

@@ -31,7 +31,7 @@ pub const EXPLICIT_MAX_COORDINATES: usize = 3;
 pub const ANALYSIS_MAX_TERMS: usize = 40_000;
 
 /// Number of random states of the numeric screening.
-const SCREEN_POINTS: usize = 4;
+pub(crate) const SCREEN_POINTS: usize = 4;
 
 /// The parts of the Lie derivatives of a mechanical output.
 #[derive(Clone, Debug)]
@@ -48,7 +48,7 @@ pub struct MechanicalParts {
     pub screening_margin: f64,
 }
 
-fn budget_reason(what: &str, e: CanonError) -> String {
+pub(crate) fn budget_reason(what: &str, e: CanonError) -> String {
     format!("{what}: {e} (budget {ANALYSIS_MAX_TERMS} terms)")
 }
 
@@ -89,7 +89,7 @@ fn explicit(
 
 /// `Some(k)` if `v` has exactly one structurally nonzero entry, at `k`, and
 /// it is free of the state.
-fn unit_direction(v: &[Expr], state: &[Symbol]) -> Option<usize> {
+pub(crate) fn unit_direction(v: &[Expr], state: &[Symbol]) -> Option<usize> {
     let nz: Vec<usize> = (0..v.len()).filter(|i| !v[*i].is_zero()).collect();
     match nz.as_slice() {
         [k] if state.iter().all(|s| !v[*k].contains(*s)) => Some(*k),
@@ -117,6 +117,102 @@ fn is_principal_minor(f: Expr, m: &[Vec<Expr>], state: &[Symbol]) -> bool {
     false
 }
 
+/// The state-dependent factors of `e`'s numerator whose zeros make `e`
+/// vanish, leaving out principal minors of `M` (positive wherever `M` is
+/// positive definite); when only those were found, the note that says so
+/// (`what` names `e` in it).
+pub(crate) fn split_singular_factors(
+    e: Expr,
+    eqs: &Equations,
+    state: &[Symbol],
+    what: &str,
+) -> (Vec<Expr>, Option<String>) {
+    let m: Vec<Vec<Expr>> = eqs
+        .mass_matrix
+        .iter()
+        .map(|row| row.iter().map(|x| crate::sym::simplify(*x)).collect())
+        .collect();
+    let (dropped, kept): (Vec<Expr>, Vec<Expr>) = state_factors(e, state)
+        .into_iter()
+        .partition(|f| is_principal_minor(*f, &m, state));
+    let note = (kept.is_empty() && !dropped.is_empty()).then(|| {
+        let several = dropped.len() > 1;
+        format!(
+            "none: the state-dependent factor{} of {what} ({}) {} principal minor{} of M, positive because M is positive definite",
+            if several { "s" } else { "" },
+            dropped.iter().map(|f| f.to_string()).collect::<Vec<_>>().join(", "),
+            if several { "are" } else { "is a" },
+            if several { "s" } else { "" },
+        )
+    });
+    (kept, note)
+}
+
+/// A position-level output `h(q)` and the parts of its first derivatives.
+pub(crate) struct PositionOutput {
+    /// `h`, simplified.
+    pub h: Expr,
+    /// `J = dh/dq`.
+    pub gradient: Vec<Expr>,
+    /// `L_f h = J q'`.
+    pub lfh: Expr,
+    /// `q'^T (d^2 h/dq^2) q'`.
+    pub curvature: Expr,
+}
+
+/// `h`, `J = dh/dq`, `L_f h = J q'` and `q'^T (d^2 h/dq^2) q'`, each
+/// simplified within the analysis budget.
+pub(crate) fn position_output(
+    canon: &mut Canonicalizer,
+    eqs: &Equations,
+    h: Expr,
+) -> Result<PositionOutput, AnalysisError> {
+    let n = eqs.coords.len();
+    let simp = |c: &mut Canonicalizer, e: Expr, what: &str| {
+        c.try_simplify(e).map_err(|x| AnalysisError::Budget {
+            reason: budget_reason(what, x),
+        })
+    };
+    let h = simp(canon, h, "h")?;
+    let grad: Vec<Expr> = eqs
+        .coords
+        .iter()
+        .map(|c| simp(canon, diff(h, c.q), "dh/dq"))
+        .collect::<Result<_, _>>()?;
+    let qd: Vec<Expr> = eqs.coords.iter().map(|c| Expr::symbol(c.qd)).collect();
+    let lfh = simp(
+        canon,
+        Expr::add_all((0..n).map(|i| grad[i] * qd[i])),
+        "L_f h",
+    )?;
+    let mut curv = Vec::new();
+    for i in 0..n {
+        for k in 0..n {
+            let d = diff(grad[i], eqs.coords[k].q);
+            if !d.is_zero() {
+                curv.push(d * qd[k] * qd[i]);
+            }
+        }
+    }
+    let curvature = simp(canon, Expr::add_all(curv), "q'^T H q'")?;
+    Ok(PositionOutput {
+        h,
+        gradient: grad,
+        lfh,
+        curvature,
+    })
+}
+
+/// True if `h` is a position-level output of `eqs` (free of velocities,
+/// accelerations and inputs).
+pub(crate) fn is_position_output(eqs: &Equations, h: Expr) -> bool {
+    !eqs.coords
+        .iter()
+        .flat_map(|c| [c.qd, c.qdd])
+        .chain(eqs.inputs.iter().copied())
+        .any(|s| h.contains(s))
+}
+
 /// The Lie chain of an output `h(q)` through the mechanical structure, or
 /// `None` if the structure does not apply (an output depending on velocities
 /// or inputs, or `L_g L_f h` identically zero: relative degree above 2).
@@ -130,46 +226,19 @@ pub fn mechanical_chain(
             inputs: eqs.inputs.len(),
         });
     }
-    let moving: Vec<Symbol> = eqs
-        .coords
-        .iter()
-        .flat_map(|c| [c.qd, c.qdd])
-        .chain(eqs.inputs.iter().copied())
-        .collect();
-    if moving.iter().any(|s| h.contains(*s)) {
+    if !is_position_output(eqs, h) {
         return Ok(None);
     }
     let n = eqs.coords.len();
     let mut state: Vec<Symbol> = eqs.coords.iter().map(|c| c.q).collect();
     state.extend(eqs.coords.iter().map(|c| c.qd));
     let mut canon = Canonicalizer::new(ANALYSIS_MAX_TERMS);
-    let simp = |c: &mut Canonicalizer, e: Expr, what: &str| {
-        c.try_simplify(e).map_err(|x| AnalysisError::Budget {
-            reason: budget_reason(what, x),
-        })
-    };
-    let h = simp(&mut canon, h, "h")?;
-    let grad: Vec<Expr> = eqs
-        .coords
-        .iter()
-        .map(|c| simp(&mut canon, diff(h, c.q), "dh/dq"))
-        .collect::<Result<_, _>>()?;
-    let qd: Vec<Expr> = eqs.coords.iter().map(|c| Expr::symbol(c.qd)).collect();
-    let lfh = simp(
-        &mut canon,
-        Expr::add_all((0..n).map(|i| grad[i] * qd[i])),
-        "L_f h",
-    )?;
-    let mut curv = Vec::new();
-    for i in 0..n {
-        for k in 0..n {
-            let d = diff(grad[i], eqs.coords[k].q);
-            if !d.is_zero() {
-                curv.push(d * qd[k] * qd[i]);
-            }
-        }
-    }
-    let curvature = simp(&mut canon, Expr::add_all(curv), "q'^T H q'")?;
+    let PositionOutput {
+        h,
+        gradient: grad,
+        lfh,
+        curvature,
+    } = position_output(&mut canon, eqs, h)?;
     let r0: Vec<Expr> = (0..n).map(|i| eqs.forces[i] - eqs.bias[i]).collect();
     let b: Vec<Expr> = eqs.input_matrix.iter().map(|r| r[0]).collect();
     // numeric screening of L_g L_f h = w . B with M w = J^T
@@ -177,11 +246,12 @@ pub fn mechanical_chain(
     let lglf_dag = Expr::add_all((0..n).map(|i| w[i] * b[i]));
     let mut margin = f64::INFINITY;
     for p in screening_points(model, eqs, SCREEN_POINTS) {
+        let mut ev = crate::sym::Evaluator::new(&p);
         let mut scale = 0.0;
         for i in 0..n {
-            scale += (w[i].eval_map(&p) * b[i].eval_map(&p)).abs();
+            scale += (ev.eval(w[i]) * ev.eval(b[i])).abs();
         }
-        let v = lglf_dag.eval_map(&p).abs();
+        let v = ev.eval(lglf_dag).abs();
         let rel = if scale > 0.0 { v / scale } else { 0.0 };
         margin = margin.min(if rel.is_finite() { rel } else { 0.0 });
     }
@@ -234,30 +304,8 @@ pub fn mechanical_chain(
         if not_expanded.is_some() {
             singular_note = Some("where J M^-1 B = 0 (not expanded)".into());
         } else {
-            let m: Vec<Vec<Expr>> = (0..n)
-                .map(|i| {
-                    (0..n)
-                        .map(|j| crate::sym::simplify(eqs.mass_matrix[i][j]))
-                        .collect()
-                })
-                .collect();
-            let mut dropped = Vec::new();
-            for f in state_factors(lglf, &state) {
-                if is_principal_minor(f, &m, &state) {
-                    dropped.push(f);
-                } else {
-                    singular_factors.push(f);
-                }
-            }
-            if !dropped.is_empty() && singular_factors.is_empty() {
-                singular_note = Some(format!(
-                    "none: the state-dependent factor{} of L_g L_f h ({}) {} principal minor{} of M, positive because M is positive definite",
-                    if dropped.len() > 1 { "s" } else { "" },
-                    dropped.iter().map(|f| f.to_string()).collect::<Vec<_>>().join(", "),
-                    if dropped.len() > 1 { "are" } else { "is a" },
-                    if dropped.len() > 1 { "s" } else { "" },
-                ));
-            }
+            (singular_factors, singular_note) =
+                split_singular_factors(lglf, eqs, &state, "L_g L_f h");
         }
     }
     Ok(Some(LieChain {

@@ -1,7 +1,9 @@
-//! Byrnes-Isidori normal form of a single-input mechanical system with respect
-//! to an output of relative degree `r`:
-//! `xi = (h, L_f h, ..., L_f^(r-1) h)` and `n - r` complementary coordinates
-//! `eta` with `L_g eta = 0`, found among candidates suggested by the mechanical
+//! Byrnes-Isidori normal form of a mechanical system with respect to an output
+//! of relative degree `r` (or, for `m` inputs, `m` outputs of vector relative
+//! degree `(r_1, ..., r_m)`, `r = sum r_i`):
+//! `xi = (h, L_f h, ..., L_f^(r-1) h)` (every output's, in turn) and `n - r`
+//! complementary coordinates `eta` with `L_g eta = 0` (for every input
+//! field), found among candidates suggested by the mechanical
 //! structure, with the Jacobian of `(xi, eta)` checked nonsingular at the
 //! operating point. `L_g eta = 0` and `eta' = L_f eta` come from the structure
 //! (`M q'' = Q0 - bias + B u`), never from the expanded `M^-1`:
@@ -13,7 +15,9 @@
 //!    momentum conjugate to an unactuated coordinate): `L_g eta = B_j - B_j = 0`
 //!    exactly, and by Euler-Lagrange `p' = dL/dq + Q0 + B u`, so
 //!    `eta' = (dL/dq_j + Q0_j) - c (dL/dq_k + Q0_k) - (dc/dt) p_k` with
-//!    `c = B_j/B_k` (a function of the coordinates);
+//!    `c = B_j/B_k` (a function of the coordinates). With `m` inputs, `k`
+//!    runs over `m` pivot rows `K` with `B_K` nonsingular and
+//!    `c = B_j B_K^-1` (a row): `eta = p_j - c p_K`, `L_g eta = B_j - c B_K = 0`;
 //! 3. velocities `q_j'` not in `xi`, accepted only where `L_g q_j' = (M^-1 B)_j`
 //!    is exactly zero (tried only when the expanded forms are within reach).
 
@@ -153,6 +157,46 @@ fn gradient(
 /// words)`.
 type Candidate = (Expr, Expr, String, String);
 
+/// The first set of `m` rows of `b` (lexicographic order) whose `m x m`
+/// block `B_K` is nonsingular as a function (its determinant is not
+/// identically zero), with `B_K^-1` (adjugate over determinant); `None` if
+/// there is none (`B` has rank below `m`).
+fn pivot_rows(b: &[Vec<Expr>], m: usize) -> Option<(Vec<usize>, Vec<Vec<Expr>>)> {
+    fn next(rows: &mut [usize], n: usize) -> bool {
+        let m = rows.len();
+        for i in (0..m).rev() {
+            if rows[i] < n - m + i {
+                rows[i] += 1;
+                for k in i + 1..m {
+                    rows[k] = rows[k - 1] + 1;
+                }
+                return true;
+            }
+        }
+        false
+    }
+    let n = b.len();
+    if m == 0 || m > n {
+        return None;
+    }
+    let mut rows: Vec<usize> = (0..m).collect();
+    loop {
+        let block: Vec<Vec<Expr>> = rows.iter().map(|r| b[*r][..m].to_vec()).collect();
+        let det = crate::mechanics::determinant(&block);
+        if !(det.is_zero() || is_zero(det)) {
+            let adj = crate::mechanics::adjugate(&block);
+            let inverse = adj
+                .iter()
+                .map(|row| row.iter().map(|e| *e / det).collect())
+                .collect();
+            return Some((rows, inverse));
+        }
+        if !next(&mut rows, n) {
+            return None;
+        }
+    }
+}
+
 /// Candidate complementary coordinates suggested by the mechanical structure,
 /// with `L_f eta` (see the module docs); those rejected before the rank test,
 /// with the reason.
@@ -161,16 +205,36 @@ pub fn candidates(
     derivation: &Derivation,
     chain: &LieChain,
 ) -> (Vec<Candidate>, Vec<String>) {
+    candidates_for(
+        model,
+        derivation,
+        &chain.lf[..chain.relative_degree],
+        chain_explicit(chain),
+    )
+}
+
+/// Whether the Lie chain's parts are expanded (small systems).
+fn chain_explicit(chain: &LieChain) -> bool {
+    chain
+        .mechanical
+        .as_ref()
+        .is_none_or(|m| m.not_expanded.is_none())
+}
+
+/// Candidate complementary coordinates for the output coordinates `xi` (one
+/// output's chain, or every output's of a square multi-input system), with
+/// `L_g eta = 0` for every input field; `explicit`: the analysis is expanded
+/// (candidates are simplified for printing, velocities are tried).
+pub(crate) fn candidates_for(
+    model: &Model,
+    derivation: &Derivation,
+    xi: &[Expr],
+    explicit: bool,
+) -> (Vec<Candidate>, Vec<String>) {
     let eqs = &derivation.equations;
-    let r = chain.relative_degree;
-    let xi = &chain.lf[..r];
     let n = eqs.coords.len();
     let mut out = Vec::new();
     let mut rejected = Vec::new();
-    let explicit = chain
-        .mechanical
-        .as_ref()
-        .is_none_or(|m| m.not_expanded.is_none());
     // simplified for printing only when the analysis is expanded (small
     // systems); otherwise they stay as derived (exact)
     let mut canon = Canonicalizer::new(ANALYSIS_MAX_TERMS);
@@ -187,12 +251,13 @@ pub fn candidates(
     // that `xi = 0` can be solved for one of them.
     let positions: Vec<Symbol> = eqs.coords.iter().map(|c| c.q).collect();
     let linear_in = |c: &crate::sym::CoordinateSymbols| {
-        let h = xi[0];
-        if eqs.coords.iter().any(|k| h.contains(k.qd)) {
-            return false;
-        }
-        let d = diff(h, c.q);
-        !is_zero(d) && !positions.iter().any(|s| d.contains(*s))
+        xi.iter().any(|h| {
+            if eqs.coords.iter().any(|k| h.contains(k.qd)) {
+                return false;
+            }
+            let d = diff(*h, c.q);
+            !is_zero(d) && !positions.iter().any(|s| d.contains(*s))
+        })
     };
     let (last, first): (Vec<&crate::sym::CoordinateSymbols>, Vec<_>) =
         eqs.coords.iter().partition(|c| linear_in(c));
@@ -217,44 +282,102 @@ pub fn candidates(
         .map(|j| diff(lagrangian, eqs.coords[j].q) + eqs.forces[j])
         .collect();
     let velocities: Vec<Symbol> = eqs.coords.iter().map(|c| c.qd).collect();
-    if eqs.inputs.len() == 1 {
-        let b: Vec<Expr> = eqs.input_matrix.iter().map(|row| row[0]).collect();
-        let zero = |e: Expr| e.is_zero() || is_zero(e);
-        let pivot = (0..n).find(|k| !zero(b[*k]));
-        for j in 0..n {
-            if zero(b[j]) {
-                let q = eqs.coords[j].q.name();
-                out.push((
-                    tidy(momentum[j]),
-                    tidy(rate[j]),
-                    format!("momentum conjugate to {q}"),
-                    format!("dL/d{q} + Q0[{q}]"),
-                ));
-                continue;
-            }
-            let Some(k) = pivot.filter(|k| *k != j) else {
-                continue;
-            };
-            let c = tidy(b[j] / b[k]);
-            let (qj, qk) = (eqs.coords[j].q.name(), eqs.coords[k].q.name());
-            if velocities.iter().any(|v| c.contains(*v)) {
-                rejected.push(format!(
-                    "p_{qj} - c p_{qk} (c = B[{qj}]/B[{qk}] = {c} depends on velocities)"
-                ));
+    let m = eqs.inputs.len();
+    let zero = |e: Expr| e.is_zero() || is_zero(e);
+    // m pivot rows K of B with B_K nonsingular (exactly, as functions):
+    // the first such set in lexicographic order
+    let pivots = pivot_rows(&eqs.input_matrix, m);
+    for j in 0..n {
+        let q = eqs.coords[j].q.name();
+        if eqs.input_matrix[j].iter().all(|e| zero(*e)) {
+            out.push((
+                tidy(momentum[j]),
+                tidy(rate[j]),
+                format!("momentum conjugate to {q}"),
+                format!("dL/d{q} + Q0[{q}]"),
+            ));
+            continue;
+        }
+        let Some((rows, inverse)) = pivots.as_ref() else {
+            continue;
+        };
+        if rows.contains(&j) {
+            continue;
+        }
+        // c = B_j B_K^-1: p_j - c p_K has L_g = B_j - B_j B_K^-1 B_K = 0
+        let c: Vec<Expr> = (0..m)
+            .map(|k| {
+                tidy(Expr::add_all(
+                    (0..m).map(|l| eqs.input_matrix[j][l] * inverse[l][k]),
+                ))
+            })
+            .collect();
+        let names: Vec<&str> = rows.iter().map(|k| eqs.coords[*k].q.name()).collect();
+        if let Some(k) = (0..m).find(|k| velocities.iter().any(|v| c[*k].contains(*v))) {
+            rejected.push(if m == 1 {
+                format!(
+                    "p_{q} - c p_{qk} (c = B[{q}]/B[{qk}] = {c} depends on velocities)",
+                    qk = names[0],
+                    c = c[0]
+                )
+            } else {
+                format!(
+                    "p_{q} - c p_K (c = B[{q}] B_K^-1, K = {}: c_{} = {} depends on velocities)",
+                    names.join(", "),
+                    names[k],
+                    c[k]
+                )
+            });
+            continue;
+        }
+        if m == 1 {
+            let (k, qk) = (rows[0], names[0]);
+            let dc: Expr = eqs
+                .coords
+                .iter()
+                .map(|s| diff(c[0], s.q) * Expr::symbol(s.qd))
+                .sum();
+            out.push((
+                tidy(momentum[j] - c[0] * momentum[k]),
+                tidy(rate[j] - c[0] * rate[k] - dc * momentum[k]),
+                format!(
+                    "momentum combination p_{q} - ({})*p_{qk} (the input cancels)",
+                    c[0]
+                ),
+                format!("dL/d{q} + Q0[{q}] - c (dL/d{qk} + Q0[{qk}]) - c' p_{qk}"),
+            ));
+            continue;
+        }
+        let mut eta = vec![momentum[j]];
+        let mut dot = vec![rate[j]];
+        let mut shown = Vec::new();
+        for (k, row) in rows.iter().enumerate() {
+            if zero(c[k]) {
                 continue;
             }
             let dc: Expr = eqs
                 .coords
                 .iter()
-                .map(|s| diff(c, s.q) * Expr::symbol(s.qd))
+                .map(|s| diff(c[k], s.q) * Expr::symbol(s.qd))
                 .sum();
-            out.push((
-                tidy(momentum[j] - c * momentum[k]),
-                tidy(rate[j] - c * rate[k] - dc * momentum[k]),
-                format!("momentum combination p_{qj} - ({c})*p_{qk} (the input cancels)"),
-                format!("dL/d{qj} + Q0[{qj}] - c (dL/d{qk} + Q0[{qk}]) - c' p_{qk}"),
-            ));
+            eta.push(-(c[k] * momentum[*row]));
+            dot.push(-(c[k] * rate[*row]) - dc * momentum[*row]);
+            shown.push(match c[k].as_rational() {
+                Some(r) if r.is_one() => format!("- p_{}", names[k]),
+                Some(r) if r.abs().is_one() => format!("+ p_{}", names[k]),
+                _ => format!("- ({})*p_{}", c[k], names[k]),
+            });
         }
+        out.push((
+            tidy(Expr::add_all(eta)),
+            tidy(Expr::add_all(dot)),
+            format!(
+                "momentum combination p_{q} {} (c = B[{q}] B_K^-1 with K = {}: the inputs cancel)",
+                shown.join(" "),
+                names.join(", ")
+            ),
+            format!("dL/d{q} + Q0[{q}] - sum over k in K of (c_k (dL/dq_k + Q0[q_k]) + c_k' p_k)"),
+        ));
     }
     for (i, c) in eqs.coords.iter().enumerate() {
         let qd = Expr::symbol(c.qd);
@@ -269,14 +392,13 @@ pub fn candidates(
             continue;
         }
         match derivation.affine() {
-            Ok(ca) => {
-                let gi = ca.g[n + i][0];
-                if gi.is_zero() || is_zero(gi) {
-                    out.push((qd, ca.f[n + i], what, format!("{}''", c.q.name())));
-                } else {
-                    rejected.push(format!("{what} (L_g = {gi} is not 0)"));
-                }
-            }
+            Ok(ca) => match ca.g[n + i]
+                .iter()
+                .find(|gi| !(gi.is_zero() || is_zero(**gi)))
+            {
+                None => out.push((qd, ca.f[n + i], what, format!("{}''", c.q.name()))),
+                Some(gi) => rejected.push(format!("{what} (L_g = {gi} is not 0)")),
+            },
             Err(e) => rejected.push(format!("{what} ({e})")),
         }
     }
@@ -290,6 +412,28 @@ pub fn normal_form(
     model: &Model,
     derivation: &Derivation,
     chain: &LieChain,
+    values: &ParameterValues,
+    at: Option<&[f64]>,
+) -> Result<NormalForm, NormalFormError> {
+    normal_form_for(
+        model,
+        derivation,
+        &chain.lf[..chain.relative_degree],
+        chain_explicit(chain),
+        values,
+        at,
+    )
+}
+
+/// The normal form with output coordinates `xi` (one output's
+/// `h, ..., L_f^(r-1) h`, or those of every output of a square multi-input
+/// system, `r = sum r_i` of them) and `n - r` complementary coordinates with
+/// `L_g eta = 0` for every input; `explicit` as in [`candidates_for`].
+pub fn normal_form_for(
+    model: &Model,
+    derivation: &Derivation,
+    xi: &[Expr],
+    explicit: bool,
     values: &ParameterValues,
     at: Option<&[f64]>,
 ) -> Result<NormalForm, NormalFormError> {
@@ -309,8 +453,8 @@ pub fn normal_form(
     for (s, v) in state.iter().zip(&x0) {
         point.insert(*s, *v);
     }
-    let r = chain.relative_degree;
-    let xi: Vec<Expr> = chain.lf[..r].to_vec();
+    let r = xi.len();
+    let xi: Vec<Expr> = xi.to_vec();
     let mut rows = Vec::with_capacity(nx);
     for (k, e) in xi.iter().enumerate() {
         rows.push(gradient(*e, &state, &point, &format!("L_f^{k} h"))?);
@@ -327,7 +471,7 @@ pub fn normal_form(
     let mut eta_dot = Vec::new();
     let mut eta_dot_text = Vec::new();
     let mut origin = Vec::new();
-    let (cands, mut rejected) = candidates(model, derivation, chain);
+    let (cands, mut rejected) = candidates_for(model, derivation, &xi, explicit);
     for (cand, dot, what, text) in cands {
         if eta.len() == needed {
             break;

@@ -24,7 +24,7 @@ use nalgebra::DMatrix;
 use super::mechanical::{ANALYSIS_MAX_TERMS, EXPLICIT_MAX_COORDINATES};
 use super::normal_form::NormalForm;
 use crate::linear::{poles, Pole};
-use crate::mechanics::{adjugate, determinant, lu_solve_at};
+use crate::mechanics::{adjugate, determinant};
 use crate::model::{Model, ParameterValues};
 use crate::sym::{
     diff, eval_jacobian, is_zero, substitute_symbols, Canonicalizer, Expr, Node, Symbol,
@@ -293,6 +293,9 @@ pub fn zero_dynamics(
             reason: format!("{} equations for {} unknowns", pending.len(), free.len()),
         });
     }
+    if !explicit {
+        return numeric_zero_dynamics(model, nf, etas, map, free, pending, point, velocities, n);
+    }
     if !pending.is_empty() {
         let zero_free: HashMap<Symbol, Expr> = free.iter().map(|s| (*s, Expr::zero())).collect();
         let mut a = Vec::new();
@@ -302,12 +305,7 @@ pub fn zero_dynamics(
             let mut row = Vec::new();
             for u in &free {
                 let c = diff(e, *u);
-                let nonlinear = if explicit {
-                    free.iter().any(|v| !is_zero(diff(c, *v)))
-                } else {
-                    free.iter().any(|v| c.contains(*v))
-                };
-                if nonlinear {
+                if free.iter().any(|v| !is_zero(diff(c, *v))) {
                     return Err(ZeroDynamicsError::CannotSolveEta {
                         reason: format!("`{e}` is not linear in the remaining state variables"),
                     });
@@ -317,27 +315,16 @@ pub fn zero_dynamics(
             a.push(row);
             rhs.push(*value - substitute_symbols(e, &zero_free));
         }
-        if explicit {
-            let det = tidy(determinant(&a))?;
-            if is_zero(det) {
-                return Err(ZeroDynamicsError::CannotSolveEta {
-                    reason: "the remaining eta components are dependent on xi = 0".into(),
-                });
-            }
-            let adj = adjugate(&a);
-            for (k, u) in free.iter().enumerate() {
-                let num: Expr = (0..free.len()).map(|j| adj[k][j] * rhs[j]).sum();
-                map.insert(*u, tidy(num / det)?);
-            }
-        } else {
-            let y =
-                lu_solve_at(&a, &rhs, &point).map_err(|_| ZeroDynamicsError::CannotSolveEta {
-                    reason: "the remaining eta components are dependent on xi = 0 (at eta = 0)"
-                        .into(),
-                })?;
-            for (u, v) in free.iter().zip(y) {
-                map.insert(*u, v);
-            }
+        let det = tidy(determinant(&a))?;
+        if is_zero(det) {
+            return Err(ZeroDynamicsError::CannotSolveEta {
+                reason: "the remaining eta components are dependent on xi = 0".into(),
+            });
+        }
+        let adj = adjugate(&a);
+        for (k, u) in free.iter().enumerate() {
+            let num: Expr = (0..free.len()).map(|j| adj[k][j] * rhs[j]).sum();
+            map.insert(*u, tidy(num / det)?);
         }
     }
     let state_on_manifold: Vec<(Symbol, Expr)> = state
@@ -364,30 +351,11 @@ pub fn zero_dynamics(
         }
     }
     let (eigenvalues, tolerance, class) = classify(&jac)?;
-    let equations = if explicit {
-        etas.iter()
-            .zip(&rhs)
-            .map(|(s, e)| format!("{}' = {e}", s.name()))
-            .collect()
-    } else {
-        let mut v: Vec<String> = etas
-            .iter()
-            .zip(&nf.eta_dot_text)
-            .map(|(s, t)| format!("{}' = {t}", s.name()))
-            .collect();
-        let coords: Vec<String> = state_on_manifold
-            .iter()
-            .filter(|(s, _)| !velocities.contains(s))
-            .map(|(s, e)| format!("{} = {e}", s.name()))
-            .collect();
-        v.push(format!(
-            "at {} and the velocities solving {} linear equations ({} components of xi and eta; not expanded for {n} coordinates)",
-            coords.join(", "),
-            pending.len(),
-            pending.len()
-        ));
-        v
-    };
+    let equations = etas
+        .iter()
+        .zip(&rhs)
+        .map(|(s, e)| format!("{}' = {e}", s.name()))
+        .collect();
     Ok(ZeroDynamics {
         eta_symbols: etas,
         rhs,
@@ -399,6 +367,138 @@ pub fn zero_dynamics(
         class,
         explicit,
         text: equations,
+    })
+}
+
+/// The zero dynamics of a large system (more than
+/// [`EXPLICIT_MAX_COORDINATES`] coordinates), linearized numerically: the
+/// `pending` equations `E(eta, z) = value(eta)` are affine in the remaining
+/// state variables `z` (`E = A(eta) z + c(eta)`), so at `eta = 0`
+/// `z0 = A^-1 (value(0) - c(0))` and, by the implicit function theorem,
+/// `dz/deta = A^-1 (dvalue/deta - dE/deta)`; the Jacobian of
+/// `eta' = L_f eta (eta, z(eta))` is then `d/deta + d/dz dz/deta`. Forward
+/// mode over the unexpanded expressions (no symbolic solve): exact up to
+/// rounding. The equations are reported by their parts; `rhs` and the
+/// velocities of `state_on_manifold` are left in terms of `z`.
+#[allow(clippy::too_many_arguments)]
+fn numeric_zero_dynamics(
+    model: &Model,
+    nf: &NormalForm,
+    etas: Vec<Symbol>,
+    map: HashMap<Symbol, Expr>,
+    free: Vec<Symbol>,
+    pending: Vec<(Expr, Expr)>,
+    mut point: HashMap<Symbol, f64>,
+    velocities: Vec<Symbol>,
+    n: usize,
+) -> Result<ZeroDynamics, ZeroDynamicsError> {
+    let state = &nf.state;
+    let m = etas.len();
+    let k = free.len();
+    let mut vars = etas.clone();
+    vars.extend(free.iter().copied());
+    let rows: Vec<Expr> = crate::sym::substitute_symbols_all(
+        &pending.iter().map(|(e, _)| *e).collect::<Vec<_>>(),
+        &map,
+    );
+    let values: Vec<Expr> = pending.iter().map(|(_, v)| *v).collect();
+    let not_finite = |what: &str| ZeroDynamicsError::NotFinite {
+        entry: what.to_string(),
+    };
+    let at = |point: &HashMap<Symbol, f64>, z: &[f64]| {
+        let mut p = point.clone();
+        for (s, v) in free.iter().zip(z) {
+            p.insert(*s, *v);
+        }
+        eval_jacobian(&rows, &vars, &p)
+    };
+    // A and c(0) at z = 0
+    let (e0, j0) = at(&point, &vec![0.0; k]);
+    let a = DMatrix::from_fn(k, k, |i, j| j0[i][m + j]);
+    if a.iter().chain(&e0).any(|v| !v.is_finite()) {
+        return Err(not_finite("the equations of the state on xi = 0"));
+    }
+    let lu = a.clone().lu();
+    let (val0, dval) = eval_jacobian(&values, &etas, &point);
+    let b = nalgebra::DVector::from_fn(k, |i, _| val0[i] - e0[i]);
+    let z0 = lu
+        .solve(&b)
+        .ok_or_else(|| ZeroDynamicsError::CannotSolveEta {
+            reason: "the remaining eta components are dependent on xi = 0 (at eta = 0)".into(),
+        })?;
+    // affine in z: the same A at another point (a screening of the
+    // structure: the pending rows are momenta and velocity-level outputs)
+    let probe: Vec<f64> = (0..k).map(|i| 0.37 + 0.11 * i as f64).collect();
+    let (_, jp) = at(&point, &probe);
+    for i in 0..k {
+        for j in 0..k {
+            let (x, y) = (jp[i][m + j], j0[i][m + j]);
+            if (x - y).abs() > 1e-9 * (1.0 + x.abs().max(y.abs())) {
+                return Err(ZeroDynamicsError::CannotSolveEta {
+                    reason: format!(
+                        "`{}` is not linear in the remaining state variables",
+                        pending[i].0
+                    ),
+                });
+            }
+        }
+    }
+    let z0: Vec<f64> = z0.iter().copied().collect();
+    let (_, jz) = at(&point, &z0);
+    let rhs_e = nalgebra::DMatrix::from_fn(k, m, |i, j| dval[i][j] - jz[i][j]);
+    let dz = lu.solve(&rhs_e).ok_or_else(|| not_finite("dz/deta"))?;
+    for (s, v) in free.iter().zip(&z0) {
+        point.insert(*s, *v);
+    }
+    let rhs: Vec<Expr> = crate::sym::substitute_symbols_all(&nf.eta_dot, &map);
+    let (r0, jr) = eval_jacobian(&rhs, &vars, &point);
+    let mut jac = vec![vec![0.0; m]; m];
+    let mut residual: f64 = 0.0;
+    for i in 0..m {
+        residual = residual.max(r0[i].abs());
+        for j in 0..m {
+            let v = jr[i][j] + (0..k).map(|l| jr[i][m + l] * dz[(l, j)]).sum::<f64>();
+            if !v.is_finite() {
+                return Err(ZeroDynamicsError::NotFinite {
+                    entry: format!("d({}')/d{}", etas[i].name(), etas[j].name()),
+                });
+            }
+            jac[i][j] = v;
+        }
+    }
+    let (eigenvalues, tolerance, class) = classify(&jac)?;
+    let state_on_manifold: Vec<(Symbol, Expr)> = state
+        .iter()
+        .map(|s| (*s, map.get(s).copied().unwrap_or_else(|| Expr::symbol(*s))))
+        .collect();
+    let mut text: Vec<String> = etas
+        .iter()
+        .zip(&nf.eta_dot_text)
+        .map(|(s, t)| format!("{}' = {t}", s.name()))
+        .collect();
+    let coords: Vec<String> = state_on_manifold
+        .iter()
+        .filter(|(s, _)| !velocities.contains(s))
+        .map(|(s, e)| format!("{} = {e}", s.name()))
+        .collect();
+    text.push(format!(
+        "at {} and the velocities solving {} linear equations ({} components of xi and eta; not expanded for {n} coordinates)",
+        coords.join(", "),
+        pending.len(),
+        pending.len()
+    ));
+    let _ = model;
+    Ok(ZeroDynamics {
+        eta_symbols: etas,
+        rhs,
+        state_on_manifold,
+        jacobian: jac,
+        eigenvalues,
+        equilibrium_residual: residual,
+        tolerance,
+        class,
+        explicit: false,
+        text,
     })
 }
 

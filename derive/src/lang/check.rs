@@ -210,6 +210,17 @@ pub fn dimension_of(expr: &Expr, symbols: &Symbols) -> Result<Dim, Diagnostic> {
     }
 }
 
+/// The value of `a op b`.
+fn apply(op: BinOp, a: f64, b: f64) -> f64 {
+    match op {
+        BinOp::Add => a + b,
+        BinOp::Sub => a - b,
+        BinOp::Mul => a * b,
+        BinOp::Div => a / b,
+        BinOp::Pow => a.powf(b),
+    }
+}
+
 /// Evaluates a constant expression over parameters (SI values), `pi` and
 /// built-in functions. `None` if it uses anything else.
 pub fn eval_si(expr: &Expr, symbols: &Symbols) -> Option<f64> {
@@ -220,16 +231,7 @@ pub fn eval_si(expr: &Expr, symbols: &Symbols) -> Option<f64> {
         ExprKind::Pi => std::f64::consts::PI,
         ExprKind::Deriv(..) => return None,
         ExprKind::Neg(a) => -eval_si(a, symbols)?,
-        ExprKind::Binary(op, a, b) => {
-            let (a, b) = (eval_si(a, symbols)?, eval_si(b, symbols)?);
-            match op {
-                BinOp::Add => a + b,
-                BinOp::Sub => a - b,
-                BinOp::Mul => a * b,
-                BinOp::Div => a / b,
-                BinOp::Pow => a.powf(b),
-            }
-        }
+        ExprKind::Binary(op, a, b) => apply(*op, eval_si(a, symbols)?, eval_si(b, symbols)?),
         ExprKind::Call(f, args) => {
             let v: Option<Vec<f64>> = args.iter().map(|a| eval_si(a, symbols)).collect();
             let v = v?;
@@ -282,13 +284,7 @@ fn eval_reporting<'e>(
             if !(a.is_finite() && b.is_finite()) {
                 return Some(f64::NAN);
             }
-            match op {
-                BinOp::Add => a + b,
-                BinOp::Sub => a - b,
-                BinOp::Mul => a * b,
-                BinOp::Div => a / b,
-                BinOp::Pow => a.powf(b),
-            }
+            apply(*op, a, b)
         }
         ExprKind::Call(_, args) => {
             let mut all = Some(());

@@ -21,6 +21,7 @@
 use std::collections::HashMap;
 
 use super::euler_lagrange::{derive_equations_from, Equations, MechanicsError};
+use super::quadratic::quadratic_equations;
 use crate::model::Model;
 use crate::sym::{
     diff, substitute_symbols, Canonicalizer, CoordinateSymbols, Expr, Func, Node, Rational, Symbol,
@@ -29,6 +30,10 @@ use crate::sym::{
 /// Term budget of the canonical forms of `M_theta` and `bias_theta` (an
 /// entry over budget stays as derived, which is exact but larger).
 pub const CANONICAL_MAX_TERMS: usize = 40_000;
+
+/// Term budget of the canonical form of the kinetic energy in the angle
+/// coordinates (an n-link chain has about `n^3/6` terms: 20,825 at n = 50).
+pub const CANONICAL_ENERGY_MAX_TERMS: usize = 400_000;
 
 /// The equations of motion in the coordinates `theta = S q`.
 #[derive(Clone, Debug)]
@@ -42,6 +47,11 @@ pub struct AngleCoordinates {
     /// `M_theta(theta)` and `bias_theta(theta, theta')`; its forces and input
     /// matrix are zero (the model's forces are applied as `S^-T (Q0 + B u)`).
     pub equations: Equations,
+    /// `dV/dtheta` when the equations were read off the expanded energy
+    /// with `T = theta'^T M_theta theta' / 2` exactly (then `bias_theta -
+    /// dV/dtheta` is the Coriolis and centrifugal part of `M_theta` alone);
+    /// `None` otherwise.
+    pub potential_gradient: Option<Vec<Expr>>,
 }
 
 /// A trigonometric argument as rational coefficients on the coordinates
@@ -216,11 +226,30 @@ pub fn angle_coordinates(model: &Model) -> Result<Option<AngleCoordinates>, Mech
     }
     let kinetic = substitute_symbols(model.kinetic, &map);
     let potential = substitute_symbols(model.potential, &map);
+    // the energy in canonical (Fourier) form, `cos(theta_a - theta_b)`
+    // collected and `sin^2 + cos^2` gone: the equations are then read off it
+    // term by term; otherwise derived from the energy as written and each
+    // entry brought to canonical form (the raw entry kept where the budget is
+    // exceeded)
+    let mut canon = Canonicalizer::new(CANONICAL_MAX_TERMS);
+    let expanded = Canonicalizer::new(CANONICAL_ENERGY_MAX_TERMS)
+        .try_canonical(kinetic)
+        .ok()
+        .and_then(|t| {
+            let v = canon.try_canonical(potential).ok()?;
+            quadratic_equations(&theta, t, v)
+        });
+    if let Some(q) = expanded {
+        return Ok(Some(AngleCoordinates {
+            s,
+            s_inv,
+            coords: theta,
+            equations: q.equations,
+            potential_gradient: q.homogeneous.then_some(q.potential_gradient),
+        }));
+    }
     let zero_forces = vec![Expr::zero(); n];
     let mut equations = derive_equations_from(&theta, &[], kinetic, potential, &zero_forces)?;
-    // canonical (Fourier) form: `cos(theta_a - theta_b)` collected, `sin^2 +
-    // cos^2` gone; the raw entry is kept where the budget is exceeded
-    let mut canon = Canonicalizer::new(CANONICAL_MAX_TERMS);
     for row in equations.mass_matrix.iter_mut() {
         for e in row.iter_mut() {
             *e = canon.try_canonical(*e).unwrap_or(*e);
@@ -234,6 +263,7 @@ pub fn angle_coordinates(model: &Model) -> Result<Option<AngleCoordinates>, Mech
         s_inv,
         coords: theta,
         equations,
+        potential_gradient: None,
     }))
 }
 

@@ -7,7 +7,9 @@ mod euler_lagrange;
 mod matrix;
 mod numeric;
 mod present;
+mod quadratic;
 mod screen;
+mod separable;
 pub mod small_lu;
 mod solve;
 
@@ -19,8 +21,9 @@ pub use euler_lagrange::{
 pub use matrix::{adjugate, determinant};
 pub use numeric::{flat_outputs, has_sign, smooth_signs, NumericDynamics, NumericError, Workspace};
 pub use present::{
-    det_name, present_equations, Expand, PresentedEquations, EXPAND_MAX_COORDINATES,
-    EXPAND_MAX_TERMS, PRESENT_MAX_TERMS,
+    det_name, present_equations, Expand, PresentedAngles, PresentedEquations, PresentedSeparable,
+    EXPAND_MAX_COORDINATES, EXPAND_MAX_TERMS, PRESENT_MAX_TERMS,
 };
 pub use screen::{mass_matrix_conditioning, screening_points};
+pub use separable::{separable_mass, AngleFactor, SeparableMass};
 pub use solve::{ldl_solve, lu_solve_at, SolveError};

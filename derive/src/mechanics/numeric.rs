@@ -262,6 +262,9 @@ pub fn smooth_signs(eqs: &Equations, width: f64) -> Equations {
             .iter()
             .map(|r| r.iter().map(s).collect())
             .collect(),
+        // the angle frame holds M and bias (from T and V): kept unless a sign
+        // was smoothed in them
+        angles: eqs.angles.clone().filter(|ac| !has_sign(&ac.equations)),
     }
 }
 

@@ -9,7 +9,7 @@ use nalgebra::DMatrix;
 
 use super::Equations;
 use crate::model::{Model, ParameterValues};
-use crate::sym::Symbol;
+use crate::sym::{Expr, Symbol};
 
 /// A small deterministic generator (xorshift) for screening states.
 pub(crate) struct Rng(u64);
@@ -56,7 +56,9 @@ pub fn mass_matrix_conditioning(model: &Model, eqs: &Equations, count: usize) ->
     let n = eqs.coords.len();
     let mut worst = f64::INFINITY;
     for p in screening_points(model, eqs, count) {
-        let m = DMatrix::from_fn(n, n, |i, j| eqs.mass_matrix[i][j].eval_map(&p));
+        let flat: Vec<Expr> = eqs.mass_matrix.iter().flatten().copied().collect();
+        let v = Expr::eval_all(&flat, &p);
+        let m = DMatrix::from_fn(n, n, |i, j| v[i * n + j]);
         if m.iter().any(|v| !v.is_finite()) {
             return 0.0;
         }

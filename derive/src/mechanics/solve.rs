@@ -100,15 +100,8 @@ pub fn lu_solve_at(
     let n = a.len();
     let mut a: Vec<Vec<Expr>> = a.to_vec();
     let mut b: Vec<Expr> = b.to_vec();
-    let mut memo: HashMap<Expr, f64> = HashMap::new();
-    let mut value = |e: Expr| -> f64 {
-        if let Some(v) = memo.get(&e) {
-            return *v;
-        }
-        let v = e.eval_map(point);
-        memo.insert(e, v);
-        v
-    };
+    let mut ev = crate::sym::Evaluator::new(point);
+    let mut value = |e: Expr| -> f64 { ev.eval(e) };
     let scale: f64 = a
         .iter()
         .flatten()

@@ -323,6 +323,7 @@ impl Ctx {
             }
             Node::Pow(b, x) => self.convert_pow(e, *b, *x),
             Node::Func(f, u) => self.convert_func(e, *f, *u),
+            Node::Named(_, d) => Ok((*self.convert(*d)?).clone()),
             Node::Atan2(y, x) => {
                 let cy = self.canon_expr(*y)?;
                 let cx = self.canon_expr(*x)?;

@@ -74,6 +74,7 @@ fn diff_memo(e: Expr, x: Symbol, memo: &mut FxHashMap<Expr, Expr>) -> Expr {
             };
             outer * du
         }
+        Node::Named(_, d) => diff_memo(*d, x, memo),
         Node::Atan2(y, xx) => {
             let dy = diff_memo(*y, x, memo);
             let dx = diff_memo(*xx, x, memo);

@@ -117,6 +117,12 @@ pub fn eval_jacobian(
                     }
                 }
             }
+            Node::Named(_, d) => {
+                let o = get(*d);
+                for k in 0..width {
+                    data[base + k] = data[o + k];
+                }
+            }
             Node::Atan2(y, x) => {
                 let (oy, ox) = (get(*y), get(*x));
                 let (yv, xv) = (data[oy], data[ox]);

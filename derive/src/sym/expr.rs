@@ -133,6 +133,12 @@ pub enum Node {
     Func(Func, Expr),
     /// Two-argument arctangent `atan2(y, x)`.
     Atan2(Expr, Expr),
+    /// A named subexpression: equal to its definition, printed by its name.
+    /// Sums and products do not flatten through it, so a long sum of named
+    /// sums stays a sum of names (the structure of the angle-frame
+    /// equations, `M = S^T M_theta S`, instead of their expansion). Every
+    /// evaluation, derivative and canonical form looks through it.
+    Named(Symbol, Expr),
 }
 
 struct Arena {
@@ -413,13 +419,30 @@ impl Expr {
         }
     }
 
+    /// `definition`, printed as `name` (see [`Node::Named`]); a constant
+    /// or a symbol stays itself.
+    pub fn named(name: &str, definition: Expr) -> Expr {
+        match definition.node() {
+            Node::Rational(_) | Node::Float(_) | Node::Symbol(_) => definition,
+            _ => intern(Node::Named(Symbol::new(name), definition)),
+        }
+    }
+
+    /// The name and definition if this is a named subexpression.
+    pub fn as_named(self) -> Option<(Symbol, Expr)> {
+        match self.node() {
+            Node::Named(s, d) => Some((*s, *d)),
+            _ => None,
+        }
+    }
+
     /// The direct operands of this node (empty for leaves).
     pub fn children(self) -> Vec<Expr> {
         match self.node() {
             Node::Rational(_) | Node::Float(_) | Node::Symbol(_) => Vec::new(),
             Node::Add(xs) | Node::Mul(xs) => xs.to_vec(),
             Node::Pow(a, b) | Node::Atan2(a, b) => vec![*a, *b],
-            Node::Func(_, a) => vec![*a],
+            Node::Func(_, a) | Node::Named(_, a) => vec![*a],
         }
     }
 
@@ -471,6 +494,37 @@ impl Expr {
     pub fn eval_map(self, values: &HashMap<Symbol, f64>) -> f64 {
         self.eval_with(&mut |s| values.get(&s).copied().unwrap_or(f64::NAN))
     }
+
+    /// [`Expr::eval_map`] of several expressions sharing one memo (their
+    /// common subexpressions are evaluated once).
+    pub fn eval_all(exprs: &[Expr], values: &HashMap<Symbol, f64>) -> Vec<f64> {
+        let mut ev = Evaluator::new(values);
+        exprs.iter().map(|e| ev.eval(*e)).collect()
+    }
+}
+
+/// Evaluation of many expressions at one point, every subexpression once
+/// (the memo lives as long as the evaluator).
+pub struct Evaluator<'a> {
+    values: &'a HashMap<Symbol, f64>,
+    memo: FxHashMap<Expr, f64>,
+}
+
+impl<'a> Evaluator<'a> {
+    /// An evaluator at `values` (missing symbols evaluate to NaN).
+    pub fn new(values: &'a HashMap<Symbol, f64>) -> Evaluator<'a> {
+        Evaluator {
+            values,
+            memo: FxHashMap::default(),
+        }
+    }
+
+    /// The value of `e`.
+    pub fn eval(&mut self, e: Expr) -> f64 {
+        let values = self.values;
+        let mut value = |s: Symbol| values.get(&s).copied().unwrap_or(f64::NAN);
+        eval_memo(e, &mut value, &mut self.memo)
+    }
 }
 
 fn contains_memo(e: Expr, sym: Symbol, seen: &mut FxHashMap<Expr, bool>) -> bool {
@@ -515,6 +569,7 @@ fn eval_memo(
         }
         Node::Func(f, x) => f.eval(eval_memo(*x, value, memo)),
         Node::Atan2(y, x) => eval_memo(*y, value, memo).atan2(eval_memo(*x, value, memo)),
+        Node::Named(_, d) => eval_memo(*d, value, memo),
     };
     memo.insert(e, v);
     v
@@ -536,6 +591,7 @@ pub fn structural_cmp(a: Expr, b: Expr) -> Ordering {
             Node::Add(_) => 5,
             Node::Func(..) => 6,
             Node::Atan2(..) => 7,
+            Node::Named(..) => 8,
         }
     }
     let (na, nb) = (a.node(), b.node());
@@ -561,6 +617,9 @@ pub fn structural_cmp(a: Expr, b: Expr) -> Ordering {
         }
         (Node::Func(f1, x1), Node::Func(f2, x2)) => {
             f1.cmp(f2).then_with(|| structural_cmp(*x1, *x2))
+        }
+        (Node::Named(s1, x1), Node::Named(s2, x2)) => {
+            s1.cmp(s2).then_with(|| structural_cmp(*x1, *x2))
         }
         _ => Ordering::Equal,
     }

@@ -23,9 +23,9 @@ pub use canonical::{
 };
 pub use diff::{diff, jacobian, time_derivative, CoordinateSymbols};
 pub use dual::eval_jacobian;
-pub use expr::{Expr, Func, Node, Symbol};
+pub use expr::{Evaluator, Expr, Func, Node, Symbol};
 pub use poly::CanonError;
 pub use present::{present, try_present, try_present_within, Canonicalizer, Name};
 pub use rational::Rational;
-pub use subst::{substitute, substitute_symbols};
+pub use subst::{substitute, substitute_symbols, substitute_symbols_all};
 pub use tape::{Instr, SplitTape, Tape, TapeError};

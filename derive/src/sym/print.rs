@@ -130,7 +130,7 @@ fn write_plain(out: &mut String, e: Expr, outer: u8) {
                 out.push(')');
             }
         }
-        Node::Symbol(s) => out.push_str(s.name()),
+        Node::Symbol(s) | Node::Named(s, _) => out.push_str(s.name()),
         Node::Add(terms) => write_sum(out, terms, outer, ("(", ")"), write_plain, write_product),
         Node::Mul(_) => {
             let (c, rest) = e.coeff_and_rest();
@@ -322,7 +322,7 @@ fn write_latex(out: &mut String, e: Expr, outer: u8) {
             }
         }
         Node::Float(b) => out.push_str(&fmt_float(b.value())),
-        Node::Symbol(s) => out.push_str(&latex_symbol(s.name())),
+        Node::Symbol(s) | Node::Named(s, _) => out.push_str(&latex_symbol(s.name())),
         Node::Add(terms) => write_sum(
             out,
             terms,

@@ -19,6 +19,14 @@ pub fn substitute_symbols(e: Expr, map: &HashMap<Symbol, Expr>) -> Expr {
     substitute(e, &m)
 }
 
+/// [`substitute_symbols`] of several expressions sharing one memo (their
+/// common subexpressions are rebuilt once).
+pub fn substitute_symbols_all(es: &[Expr], map: &HashMap<Symbol, Expr>) -> Vec<Expr> {
+    let m: HashMap<Expr, Expr> = map.iter().map(|(k, v)| (Expr::symbol(*k), *v)).collect();
+    let mut memo = FxHashMap::default();
+    es.iter().map(|e| subst_memo(*e, &m, &mut memo)).collect()
+}
+
 fn subst_memo(e: Expr, map: &HashMap<Expr, Expr>, memo: &mut FxHashMap<Expr, Expr>) -> Expr {
     if let Some(&v) = map.get(&e) {
         return v;
@@ -33,6 +41,14 @@ fn subst_memo(e: Expr, map: &HashMap<Expr, Expr>, memo: &mut FxHashMap<Expr, Exp
         Node::Pow(b, p) => subst_memo(*b, map, memo).pow(subst_memo(*p, map, memo)),
         Node::Func(f, x) => Expr::apply(*f, subst_memo(*x, map, memo)),
         Node::Atan2(y, x) => Expr::atan2(subst_memo(*y, map, memo), subst_memo(*x, map, memo)),
+        Node::Named(s, d) => {
+            let d2 = subst_memo(*d, map, memo);
+            if d2 == *d {
+                e
+            } else {
+                Expr::named(s.name(), d2)
+            }
+        }
     };
     memo.insert(e, r);
     r

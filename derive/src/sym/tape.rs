@@ -477,6 +477,7 @@ impl Lower {
                 let x = self.lower(*x);
                 self.push2(|dst| Instr::Atan2 { dst, y, x })
             }
+            Node::Named(_, d) => self.lower(*d),
         };
         self.memo.insert(e, v);
         v

@@ -67,6 +67,7 @@ pub fn run(
             "f": f,
             "g": g,
             "notes": p.notes,
+            "angle_frame": p.angles.as_ref().map(|a| a.lines(&|e| e.to_string())),
             "derived": model.derived.iter().map(|d| (d.name.clone(), d.expr.to_string())).collect::<std::collections::BTreeMap<_, _>>(),
         });
         write_json(out, &v);
@@ -85,12 +86,20 @@ pub fn run(
     if !model.derived.is_empty() {
         let _ = writeln!(out);
     }
+    if let Some(a) = &p.angles {
+        for line in a.lines(&show) {
+            let _ = writeln!(out, "{line}");
+        }
+        let _ = writeln!(out);
+    }
     for i in 0..n {
         let _ = writeln!(out, "equation of {}:", model.coordinates[i].name);
-        for j in 0..n {
-            let _ = writeln!(out, "  M[{i}][{j}] = {}", show(p.mass_matrix[i][j]));
+        if p.angles.is_none() {
+            for j in 0..n {
+                let _ = writeln!(out, "  M[{i}][{j}] = {}", show(p.mass_matrix[i][j]));
+            }
+            let _ = writeln!(out, "  bias   = {}", show(p.bias[i]));
         }
-        let _ = writeln!(out, "  bias   = {}", show(p.bias[i]));
         let _ = writeln!(out, "  Q0     = {}", show(p.forces[i]));
         for (j, u) in model.inputs.iter().enumerate() {
             let _ = writeln!(out, "  B[{}]  = {}", u.name, show(p.input_matrix[i][j]));

@@ -137,6 +137,9 @@ fn story(
     err: &mut dyn Write,
 ) -> Result<serde_json::Value, CliError> {
     let dir: &PathBuf = &args.out;
+    // a commit a killed run left half done is finished before the directory
+    // is judged (its manifest is written last)
+    plantc_fsio::finish_interrupted(dir);
     if dir.exists()
         && !args.force
         && std::fs::read_dir(dir).map_or(true, |mut d| d.next().is_some())

@@ -103,6 +103,9 @@ pub fn run(args: &SynthArgs, out: &mut dyn Write, _err: &mut dyn Write) -> Resul
         .map(|n| format!("{n}.csv"))
         .collect();
     names.push("truth.json".into());
+    // a commit a killed run left half done is finished before the files
+    // are looked for
+    plantc_fsio::finish_interrupted(&args.out);
     if !args.force {
         for n in &names {
             let p = args.out.join(n);
