@@ -77,12 +77,17 @@ fn identify_finds_the_hidden_friction_and_the_error_falls() {
     // the input model is untouched
     assert_eq!(std::fs::read_to_string(&model).unwrap(), original);
     // its own output directory may be replaced; a foreign one may not.
-    // The re-run replaces the directory as a whole: a stale figure of an
-    // earlier run (other data) does not survive (reliability reproducer 07)
-    std::fs::write(out.join("3-fitted/old_data.svg"), "<svg/>").unwrap();
+    // The re-run replaces what its manifest lists and nothing else: a file
+    // the user put there survives (issue 31, reproducer r02; stale figures
+    // of its own earlier runs go: `gen`'s in
+    // plantc/tests/file_safety_cli.rs)
+    std::fs::write(out.join("3-fitted/my_notes.svg"), "<svg/>").unwrap();
     let (code, _, err) = plantc_bin(&args);
     assert_eq!(code, 0, "{err}");
-    assert!(!out.join("3-fitted/old_data.svg").exists());
+    assert_eq!(
+        std::fs::read_to_string(out.join("3-fitted/my_notes.svg")).unwrap(),
+        "<svg/>"
+    );
     assert!(out.join("3-fitted/driven.svg").is_file());
     // refining the fitted model into the same directory would replace the
     // input model: refused without --force, nothing touched (reproducer 01)
