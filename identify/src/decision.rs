@@ -80,7 +80,7 @@ pub fn correlation_time(r: &[f64]) -> f64 {
     };
     let m = x.len();
     let c0: f64 = x.iter().map(|v| v * v).sum();
-    if !(c0 > 0.0) || !c0.is_finite() {
+    if c0.is_nan() || c0 <= 0.0 || !c0.is_finite() {
         return 1.0;
     }
     let rho = |k: usize| -> f64 {

@@ -167,7 +167,7 @@ fn invert3(m: &[f64; 9]) -> Option<[f64; 9]> {
     let c01 = m[5] * m[6] - m[3] * m[8];
     let c02 = m[3] * m[7] - m[4] * m[6];
     let det = m[0] * c00 + m[1] * c01 + m[2] * c02;
-    if !(det.abs() > 0.0) || !det.is_finite() {
+    if det.is_nan() || det == 0.0 || !det.is_finite() {
         return None;
     }
     let inv = [

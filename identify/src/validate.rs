@@ -241,7 +241,7 @@ pub fn validate(
             (0..n).find(|&i| {
                 let spread = setup.weights()[i].spread;
                 let r = crate::metrics::rmse(&sig.q[i], &s[e][i]).unwrap_or(f64::INFINITY);
-                !(r <= crate::fit::DIVERGED_COST * spread)
+                r.is_nan() || r > crate::fit::DIVERGED_COST * spread
             })
         });
         let sim_e = simulated
