@@ -87,7 +87,8 @@ pub use fit::{
 pub use identifiability::Identifiability;
 pub use metrics::{compare, fit_percent, rmse, ChannelFit, ExperimentFit, FitReport, MetricsError};
 pub use plot::{
-    plot_comparison, plot_residual_tests, render_comparison, render_residual_tests, PlotError,
+    plot_comparison, plot_residual_tests, render_comparison, render_residual_tests,
+    FigureChannels, PlotError,
 };
 pub use residual_tests::{residual_test, CrossCorrelation, ResidualTest};
 pub use sensitivity::{
