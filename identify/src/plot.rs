@@ -352,7 +352,12 @@ pub fn render_comparison(
 /// The minimum and maximum of `x` in each of `columns` equal time columns
 /// over `t0..t1`: `(column centre, min, max)` for every column with a
 /// finite sample.
-pub fn envelope(t: &[f64], x: &[f64], (t0, t1): (f64, f64), columns: usize) -> Vec<(f64, f64, f64)> {
+pub fn envelope(
+    t: &[f64],
+    x: &[f64],
+    (t0, t1): (f64, f64),
+    columns: usize,
+) -> Vec<(f64, f64, f64)> {
     let columns = columns.max(1);
     let width = (t1 - t0).max(f64::MIN_POSITIVE);
     let mut cols = vec![(f64::INFINITY, f64::NEG_INFINITY); columns];

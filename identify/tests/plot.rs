@@ -34,7 +34,10 @@ fn exp(n: usize, values: impl Fn(f64) -> f64) -> Experiment {
 
 fn figure() -> FigureChannels {
     FigureChannels {
-        outputs: vec![("theta".into(), "rad".into()), ("alpha".into(), "rad".into())],
+        outputs: vec![
+            ("theta".into(), "rad".into()),
+            ("alpha".into(), "rad".into()),
+        ],
         inputs: vec![("Vm".into(), "V".into())],
     }
 }
@@ -53,13 +56,22 @@ fn writes_non_empty_deterministic_svg() {
     );
     assert!(text.contains("measured") && text.contains("residual"));
     // units on every axis, the input's panel
-    for label in ["t [s]", "theta [rad]", "residual [rad]", "Vm [V]", "input Vm"] {
+    for label in [
+        "t [s]",
+        "theta [rad]",
+        "residual [rad]",
+        "Vm [V]",
+        "input Vm",
+    ] {
         assert!(text.contains(label), "no `{label}`");
     }
     // fit % in the legend: 100 (1 - 0.05) = 95 % for a 5 % gain error
     // (||y - 0.95 y|| / ||y - mean y|| = 0.05 up to the small mean of the
     // sine over 10 s)
-    assert!(text.contains("simulated, fit 95."), "no fit % in the legend");
+    assert!(
+        text.contains("simulated, fit 95."),
+        "no fit % in the legend"
+    );
     let again = render_comparison(&m, &s, &figure()).unwrap();
     assert_eq!(text, again);
 }
@@ -75,7 +87,9 @@ fn residual_is_an_envelope_whatever_the_length() {
     };
     let large = {
         let m = exp(100_000, |t| (3.0 * t).sin());
-        let s = exp(100_000, |t| 0.9 * (3.0 * t).sin() + 1e-3 * (900.0 * t).sin());
+        let s = exp(100_000, |t| {
+            0.9 * (3.0 * t).sin() + 1e-3 * (900.0 * t).sin()
+        });
         render_comparison(&m, &s, &figure()).unwrap().len()
     };
     assert!(
@@ -84,7 +98,9 @@ fn residual_is_an_envelope_whatever_the_length() {
     );
     // the envelope keeps each column's extremes
     let t: Vec<f64> = (0..1000).map(|k| k as f64).collect();
-    let x: Vec<f64> = (0..1000).map(|k| if k % 2 == 0 { 1.0 } else { -2.0 }).collect();
+    let x: Vec<f64> = (0..1000)
+        .map(|k| if k % 2 == 0 { 1.0 } else { -2.0 })
+        .collect();
     let env = envelope(&t, &x, (0.0, 1000.0), 10);
     assert_eq!(env.len(), 10);
     assert!(env.iter().all(|&(_, lo, hi)| lo == -2.0 && hi == 1.0));

@@ -84,6 +84,16 @@ fn compare_json_shape_table_findings_and_plots() {
     for name in ["driven", "free_swing"] {
         let svg = std::fs::read_to_string(plots.join(format!("{name}.svg"))).unwrap();
         assert!(svg.starts_with("<svg"), "{name}.svg");
+        // units on the axes, fit % in the legend, the input's own panel
+        for label in [
+            "t [s]",
+            "alpha [rad]",
+            "residual [rad]",
+            "simulated, fit ",
+            "Vm [V]",
+        ] {
+            assert!(svg.contains(label), "{name}.svg lacks `{label}`");
+        }
     }
 }
 
