@@ -309,7 +309,7 @@ pub fn render_comparison(
                 // the edges keep an envelope one pixel thin visible
                 for edge in [upper, lower] {
                     chart
-                        .draw_series(std::iter::once(PathElement::new(edge, &BLACK)))
+                        .draw_series(std::iter::once(PathElement::new(edge, BLACK)))
                         .map_err(draw_err)?;
                 }
             }

@@ -157,12 +157,16 @@ fn table(h: &mut String, stages: &[StageRow], r: &Report) {
 /// Per experiment: each output overlaid with every stage, the last stage's
 /// residual, the inputs.
 fn figures(h: &mut String, r: &Report) {
-    h.push_str("<h2 id=\"figures\">Measured and simulated</h2>\n<p class=\"note\">Click a legend entry to hide or show that series in every figure; hover a plot for values.</p>\n");
+    let _ = writeln!(
+        h,
+        "<h2 id=\"figures\">Measured and simulated</h2>\n<p class=\"note\">Click a legend entry to hide or show that series in every figure; hover a plot for values. The residuals are those of the last stage, <code>{}</code>.</p>",
+        esc(&r.residual_stage)
+    );
     for e in &r.experiments {
         let _ = writeln!(h, "<h3>{}</h3>", esc(&e.name));
         for o in &e.outputs {
             overlay(h, e, o);
-            residual(h, e, o, &r.residual_stage);
+            residual(h, e, o);
         }
         for u in &e.inputs {
             let title = format!("{}: input {}", e.name, u.name);
@@ -202,12 +206,12 @@ fn overlay(h: &mut String, e: &ExperimentFigure, o: &OutputFigure) {
 }
 
 /// The last stage's residual as an envelope (min/max per column).
-fn residual(h: &mut String, e: &ExperimentFigure, o: &OutputFigure, stage: &str) {
+fn residual(h: &mut String, e: &ExperimentFigure, o: &OutputFigure) {
     if o.residual.is_empty() {
         return;
     }
     let title = format!(
-        "{}: {} residual of `{stage}` (measured - simulated), min/max per pixel column",
+        "{}: {} residual of the last stage (measured - simulated), min/max per pixel column",
         e.name, o.channel
     );
     let lo = o.residual.iter().map(|c| c.1).fold(0.0, f64::min);
@@ -545,7 +549,14 @@ fn pad(lo: f64, hi: f64) -> (f64, f64) {
     if !lo.is_finite() || !hi.is_finite() {
         return (-1.0, 1.0);
     }
-    let m = ((hi - lo) * 0.05).max(1e-9 * (1.0 + lo.abs().max(hi.abs())));
+    let scale = lo.abs().max(hi.abs());
+    if hi - lo <= 1e-9 * scale || hi - lo < f64::MIN_POSITIVE {
+        // a constant (an input at zero through a free swing): a window
+        // around it that does not magnify rounding into ticks
+        let m = if scale > 0.0 { 0.1 * scale } else { 1.0 };
+        return (lo - m, hi + m);
+    }
+    let m = (hi - lo) * 0.05;
     (lo - m, hi + m)
 }
 
@@ -581,7 +592,7 @@ fn step_of(span: f64) -> f64 {
 fn tick_label(v: f64, r: (f64, f64)) -> String {
     let step = step_of(r.1 - r.0);
     let v = if v.abs() < step * 1e-9 { 0.0 } else { v };
-    if step >= 1e-3 && step < 1e5 {
+    if (1e-3..1e5).contains(&step) {
         let d = (-step.log10().floor()).max(0.0) as usize;
         format!("{v:.d$}")
     } else {

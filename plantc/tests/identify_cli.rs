@@ -62,7 +62,10 @@ fn compare_json_shape_table_findings_and_plots() {
         assert_eq!(ch.keys().collect::<Vec<_>>(), ["alpha", "theta"]);
         for c in ch.values() {
             let o = c.as_object().unwrap();
-            assert_eq!(o.keys().collect::<Vec<_>>(), ["fit_percent", "rmse"]);
+            assert_eq!(
+                o.keys().collect::<Vec<_>>(),
+                ["diverged", "fit_percent", "rmse"]
+            );
             sum += c["rmse"].as_f64().unwrap().powi(2);
         }
     }
