@@ -227,6 +227,12 @@ fn identify_names_the_two_bundled_effects_in_turn() {
 /// `--dump-dom` prints.
 const ERROR_HOOK: &str = r#"<script>(function(){function note(m){var d=document.documentElement;d.setAttribute("data-js-errors",(d.getAttribute("data-js-errors")||"")+m+"|");}window.addEventListener("error",function(e){note(e.message||("failed to load "+(e.target&&(e.target.src||e.target.href))));},true);window.addEventListener("unhandledrejection",function(e){note("unhandled rejection "+e.reason);});var ce=console.error;console.error=function(){note(Array.prototype.join.call(arguments," "));return ce.apply(console,arguments);};})();</script>"#;
 
+/// Run after the report's own script in the same copy: unticking the first
+/// legend entry hides that series in every figure and ticking it shows it
+/// again; a mouse move over the first plot shows the values' tooltip. Each
+/// check that holds is written into the DOM.
+const INTERACTION_CHECK: &str = r#"<script>(function(){var b=document.querySelector(".legend input[data-series]");if(!b){return;}var id=b.getAttribute("data-series");var lines=document.querySelectorAll("polyline.s-"+id);b.checked=false;b.dispatchEvent(new Event("change"));var hidden=lines.length>0;for(var i=0;i<lines.length;i++){if(lines[i].style.display!=="none"){hidden=false;}}b.checked=true;b.dispatchEvent(new Event("change"));var shown=true;for(var j=0;j<lines.length;j++){if(lines[j].style.display==="none"){shown=false;}}if(hidden&&shown){document.body.setAttribute("data-toggle-ok","1");}var svg=document.querySelector("svg.plot");var r=svg.getBoundingClientRect();svg.dispatchEvent(new MouseEvent("mousemove",{clientX:r.left+r.width/2,clientY:r.top+r.height/2,bubbles:true}));var tip=document.getElementById("tip");if(tip.style.display==="block"&&tip.textContent.indexOf("t = ")===0&&tip.textContent.indexOf("measured: ")>0){document.body.setAttribute("data-hover-ok","1");}svg.dispatchEvent(new MouseEvent("mouseleave"));})();</script>"#;
+
 /// Put into the same copy: everything hidden but the plots' series
 /// (polylines and residual envelopes), so the screenshot's non-white
 /// pixels are the plots' lines and nothing else (the page as it stands,
@@ -293,7 +299,8 @@ fn check_report_in_browser(report: &Path, dir: &Path) {
     let hooked = dir.join("report-hooked.html");
     std::fs::write(
         &hooked,
-        html.replacen("<head>", &format!("<head>{ERROR_HOOK}{SERIES_ONLY}"), 1),
+        html.replacen("<head>", &format!("<head>{ERROR_HOOK}{SERIES_ONLY}"), 1)
+            .replacen("</body>", &format!("{INTERACTION_CHECK}</body>"), 1),
     )
     .unwrap();
     let profile = dir.join("chromium-profile");
@@ -322,6 +329,14 @@ fn check_report_in_browser(report: &Path, dir: &Path) {
     assert!(
         dom.contains("data-ready=\"1\""),
         "the report's script did not finish"
+    );
+    assert!(
+        dom.contains("data-toggle-ok=\"1\""),
+        "a legend entry does not toggle its series"
+    );
+    assert!(
+        dom.contains("data-hover-ok=\"1\""),
+        "hovering a plot shows no values"
     );
     assert!(shot.is_file(), "no screenshot: {err}");
     let (w, h, px) = read_png(&std::fs::read(&shot).unwrap());
