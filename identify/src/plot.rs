@@ -393,14 +393,22 @@ fn range<'a>(vals: impl Iterator<Item = &'a f64>) -> (f64, f64) {
 
 /// Min-max decimation to at most [`MAX_BUCKETS`] buckets; non-finite samples dropped.
 fn decimate(t: &[f64], x: &[f64]) -> Vec<(f64, f64)> {
+    min_max(t, x, MAX_BUCKETS)
+}
+
+/// `x` over `t` reduced to the minimum and maximum of each of `buckets`
+/// equal index ranges, in time order (all samples when there are at most
+/// two per bucket); non-finite samples dropped.
+pub fn min_max(t: &[f64], x: &[f64], buckets: usize) -> Vec<(f64, f64)> {
     let n = t.len().min(x.len());
     let finite = |i: &usize| x[*i].is_finite();
-    if n <= 2 * MAX_BUCKETS {
+    let buckets = buckets.max(1);
+    if n <= 2 * buckets {
         return (0..n).filter(finite).map(|i| (t[i], x[i])).collect();
     }
-    let mut out = Vec::with_capacity(2 * MAX_BUCKETS);
-    for b in 0..MAX_BUCKETS {
-        let (a, e) = (b * n / MAX_BUCKETS, (b + 1) * n / MAX_BUCKETS);
+    let mut out = Vec::with_capacity(2 * buckets);
+    for b in 0..buckets {
+        let (a, e) = (b * n / buckets, (b + 1) * n / buckets);
         let idx: Vec<usize> = (a..e).filter(finite).collect();
         let (Some(&imin), Some(&imax)) = (
             idx.iter().min_by(|&&i, &&j| x[i].total_cmp(&x[j])),
@@ -449,36 +457,20 @@ pub fn render_residual_tests(tests: &[crate::ResidualTest]) -> Result<String, Pl
         root.fill(&WHITE).map_err(draw_err)?;
         let areas = root.split_evenly((tests.len(), cols));
         for (r, t) in tests.iter().enumerate() {
-            let auto: Vec<(f64, f64)> = t
-                .autocorrelation
-                .iter()
-                .enumerate()
-                .skip(1)
-                .map(|(k, v)| (k as f64, *v))
-                .collect();
+            let auto = t.autocorrelation_points();
             let title = format!(
                 "{}: {} autocorrelation (correlation time {:.1} samples)",
                 t.experiment, t.channel, t.correlation_time
             );
             stems(&areas[r * cols], &title, &auto, t.band, 0.0, t.lags as f64)?;
             for (c, x) in t.cross.iter().enumerate() {
-                let l = (x.values.len() as f64 - 1.0) / 2.0;
-                let pts: Vec<(f64, f64)> = x
-                    .values
-                    .iter()
-                    .enumerate()
-                    .map(|(k, v)| (k as f64 - l, *v))
-                    .collect();
+                let (l, pts) = (x.half_width(), x.points());
                 let title = format!(
                     "{}: {} vs {} ({})",
                     t.experiment,
                     t.channel,
                     x.input,
-                    if x.independent {
-                        "independent"
-                    } else {
-                        "correlated"
-                    }
+                    x.verdict()
                 );
                 stems(&areas[r * cols + 1 + c], &title, &pts, x.band, -l, l)?;
             }

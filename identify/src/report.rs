@@ -153,37 +153,10 @@ pub struct Trace {
 
 impl Trace {
     /// `x` over `t` reduced to the minimum and maximum of each of
-    /// [`COLUMNS`] time columns (in time order within a column).
+    /// [`COLUMNS`] equal sample ranges (time columns for a uniform rate),
+    /// in time order ([`crate::plot::min_max`]).
     pub fn reduced(name: &str, unit: &str, t: &[f64], x: &[f64]) -> Trace {
-        let n = t.len().min(x.len());
-        let finite = |i: &usize| x[*i].is_finite();
-        let points = if n <= 2 * COLUMNS {
-            (0..n).filter(finite).map(|i| (t[i], x[i])).collect()
-        } else {
-            let mut out = Vec::with_capacity(2 * COLUMNS);
-            for b in 0..COLUMNS {
-                let (a, e) = (b * n / COLUMNS, (b + 1) * n / COLUMNS);
-                let mut lo: Option<usize> = None;
-                let mut hi: Option<usize> = None;
-                for i in (a..e).filter(finite) {
-                    if lo.is_none_or(|j| x[i] < x[j]) {
-                        lo = Some(i);
-                    }
-                    if hi.is_none_or(|j| x[i] > x[j]) {
-                        hi = Some(i);
-                    }
-                }
-                let (Some(p), Some(q)) = (lo, hi) else {
-                    continue;
-                };
-                let (p, q) = (p.min(q), p.max(q));
-                out.push((t[p], x[p]));
-                if q != p {
-                    out.push((t[q], x[q]));
-                }
-            }
-            out
-        };
+        let points = crate::plot::min_max(t, x, COLUMNS);
         Trace {
             name: name.to_string(),
             unit: unit.to_string(),

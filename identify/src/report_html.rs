@@ -310,13 +310,7 @@ fn residual_tests(h: &mut String, r: &Report) {
     }
     h.push_str("<div class=\"grid\">\n");
     for t in &r.residual_tests {
-        let auto: Vec<(f64, f64)> = t
-            .autocorrelation
-            .iter()
-            .enumerate()
-            .skip(1)
-            .map(|(k, v)| (k as f64, *v))
-            .collect();
+        let auto = t.autocorrelation_points();
         let title = format!(
             "{} / {}: autocorrelation, correlation time {:.1} samples{}",
             t.experiment,
@@ -333,23 +327,13 @@ fn residual_tests(h: &mut String, r: &Report) {
 /// The cross-correlation panels of one residual test.
 fn cross(h: &mut String, t: &ResidualTest) {
     for x in &t.cross {
-        let l = (x.values.len() as f64 - 1.0) / 2.0;
-        let pts: Vec<(f64, f64)> = x
-            .values
-            .iter()
-            .enumerate()
-            .map(|(k, v)| (k as f64 - l, *v))
-            .collect();
+        let (l, pts) = (x.half_width(), x.points());
         let title = format!(
             "{} / {} vs input {}: {}, {} of {} lags outside",
             t.experiment,
             t.channel,
             x.input,
-            if x.independent {
-                "independent"
-            } else {
-                "correlated"
-            },
+            x.verdict(),
             x.outside,
             x.values.len()
         );
