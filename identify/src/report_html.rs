@@ -270,7 +270,8 @@ fn line_plot(
         });
     let p = Panel::new(span, pad(lo, hi), height);
     p.open(h, title, "t [s]", &axis(name, unit));
-    for (id, t, colour, legend) in series {
+    // the first series (measured) drawn last: on top of the simulations
+    for (id, t, colour, legend) in series.iter().skip(1).chain(series.iter().take(1)) {
         let mut pts = String::new();
         for &(x, y) in &t.points {
             let _ = write!(pts, "{:.1},{:.1} ", p.px(x), p.py(y));
@@ -614,7 +615,7 @@ body{font-family:system-ui,sans-serif;margin:1.5em auto;max-width:1000px;color:#
 h1{font-size:1.5em}h2{margin-top:1.6em;border-bottom:1px solid #ddd}
 nav a{margin-right:1em}
 table{border-collapse:collapse;font-size:.85em}td,th{border:1px solid #ccc;padding:3px 6px;text-align:right}
-td:first-child{text-align:left}th.seg{color:#666;font-weight:normal}td.bad{color:#b00}
+td{white-space:nowrap}td:first-child{text-align:left}th.seg{color:#666;font-weight:normal}td.bad{color:#b00}
 table.rounds td{text-align:left}tr.pass td{background:#eef8ee}
 .note{color:#555;font-size:.85em}
 figure{margin:.8em 0}svg.plot{display:block;background:#fafafa}

@@ -356,10 +356,11 @@ fn check_report_in_browser(report: &Path, dir: &Path) {
         started.elapsed().as_secs_f64()
     );
     // this case's first 1600 px hold two overlays and two residual
-    // envelopes: 84,462 line pixels, 2,399 coloured when first run; a page
+    // envelopes: 84,463 line pixels, 717 coloured (the simulations where
+    // they leave the measured line, drawn on top) when first run; a page
     // whose series are not drawn has 0 of each
     assert!(non_white > 10_000, "{non_white} line pixels");
-    assert!(coloured > 500, "{coloured} coloured pixels");
+    assert!(coloured > 200, "{coloured} coloured pixels");
 }
 
 /// The RGB pixels of an 8-bit, non-interlaced RGB or RGBA PNG (what
