@@ -171,7 +171,7 @@ fn figures(h: &mut String, r: &Report) {
         for u in &e.inputs {
             let title = format!("{}: input {}", e.name, u.name);
             let series = [("input", u, "#2a8a2a", u.name.clone())];
-            line_plot(h, &title, e.span, 170.0, &u.name, &u.unit, &series);
+            line_plot(h, &title, e.span, 170.0, (&u.name, &u.unit), &series, &[u]);
         }
     }
 }
@@ -202,7 +202,20 @@ fn overlay(h: &mut String, e: &ExperimentFigure, o: &OutputFigure) {
         .iter()
         .map(|(id, t, c, l)| (id.as_str(), *t, *c, l.clone()))
         .collect();
-    line_plot(h, &title, e.span, 260.0, &o.channel, &o.unit, &refs);
+    // the window: the measured signal and the simulations that did not
+    // diverge
+    let window: Vec<&Trace> = std::iter::once(&o.measured)
+        .chain(o.stages.iter().filter(|s| !s.diverged).map(|s| &s.trace))
+        .collect();
+    line_plot(
+        h,
+        &title,
+        e.span,
+        260.0,
+        (&o.channel, &o.unit),
+        &refs,
+        &window,
+    );
 }
 
 /// The last stage's residual as an envelope (min/max per column).
@@ -251,25 +264,32 @@ fn residual(h: &mut String, e: &ExperimentFigure, o: &OutputFigure) {
     h.push_str("</svg></figure>\n");
 }
 
-/// A plot of `series` (`(id, trace, colour, legend)`) against time, with a
-/// clickable legend.
+/// A plot of `series` (`(id, trace, colour, legend)`) against time, its
+/// window that of `window_of`, with a clickable legend.
 fn line_plot(
     h: &mut String,
     title: &str,
     span: (f64, f64),
     height: f64,
-    name: &str,
-    unit: &str,
+    (name, unit): (&str, &str),
     series: &[(impl AsRef<str>, &Trace, &str, String)],
+    window_of: &[&Trace],
 ) {
-    let (lo, hi) = series
+    let (lo, hi) = window_of
         .iter()
-        .flat_map(|s| s.1.points.iter().map(|p| p.1))
+        .flat_map(|t| t.points.iter().map(|p| p.1))
         .fold((f64::INFINITY, f64::NEG_INFINITY), |(l, h), v| {
             (l.min(v), h.max(v))
         });
     let p = Panel::new(span, pad(lo, hi), height);
     p.open(h, title, "t [s]", &axis(name, unit));
+    // the series clipped to the plot's frame (a diverged simulation leaves
+    // the window, which is the measured signal's and the others')
+    let (pw, ph) = (p.width - ML - MR, p.height - MT - MB);
+    let _ = write!(
+        h,
+        "<svg x=\"{ML}\" y=\"{MT}\" width=\"{pw}\" height=\"{ph}\" viewBox=\"{ML} {MT} {pw} {ph}\">"
+    );
     // the first series (measured) drawn last: on top of the simulations
     for (id, t, colour, legend) in series.iter().skip(1).chain(series.iter().take(1)) {
         let mut pts = String::new();
@@ -285,7 +305,7 @@ fn line_plot(
             pts.trim_end()
         );
     }
-    h.push_str("</svg>\n<div class=\"legend\">");
+    h.push_str("</svg></svg>\n<div class=\"legend\">");
     for (id, _, colour, legend) in series {
         let _ = write!(
             h,
@@ -747,12 +767,20 @@ mod tests {
                     channel: "alpha".into(),
                     unit: "rad".into(),
                     measured: trace("alpha", |t| t.sin()),
-                    stages: vec![StageTrace {
-                        label: "nominal".into(),
-                        fit_percent: Some(40.0),
-                        diverged: false,
-                        trace: trace("alpha", |t| 0.6 * t.sin()),
-                    }],
+                    stages: vec![
+                        StageTrace {
+                            label: "nominal".into(),
+                            fit_percent: Some(40.0),
+                            diverged: false,
+                            trace: trace("alpha", |t| 0.6 * t.sin()),
+                        },
+                        StageTrace {
+                            label: "gone".into(),
+                            fit_percent: Some(-1e6),
+                            diverged: true,
+                            trace: trace("alpha", |t| 1e6 * t),
+                        },
+                    ],
                     residual: vec![(0.5, -0.1, 0.1), (1.5, -0.2, 0.05)],
                 }],
                 inputs: vec![trace("Vm", |t| t.cos())],
@@ -781,6 +809,16 @@ mod tests {
         // fit % per stage in the legend, units on the axes, the input
         assert!(h.contains("nominal: fit 40.0 %"));
         assert!(h.contains("alpha [rad]") && h.contains("t [s]") && h.contains("Vm [rad]"));
+        // a diverged stage says so and does not set the window: the
+        // measured sine's +-1 (with 5 % margin) does
+        assert!(h.contains("gone: diverged"));
+        let y1 = h
+            .split("data-y1=\"")
+            .nth(1)
+            .and_then(|r| r.split('"').next())
+            .and_then(|v| v.parse::<f64>().ok())
+            .unwrap();
+        assert!(y1 < 1.2, "window up to {y1}");
         // the segment column is labelled as such
         assert!(h.contains("(segments as fitted)"));
         // reduced to at most 2 points per column
