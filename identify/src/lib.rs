@@ -23,6 +23,9 @@
 //!   simulation-error refits and names the missing effect or says "adequate".
 //! - [`identify()`] is the whole story (rounds of diagnose -> add the effect
 //!   -> refit, then validation), for the CLI, tests and editors alike.
+//! - [`Report`] gathers a story's report (stages, rounds, figures' data,
+//!   residual tests, snippets) and [`render_html`] writes it as one
+//!   self-contained HTML file.
 //! - [`synthesize`] makes measurement-like data from a model with hidden
 //!   effects ([`synth`]).
 
@@ -57,6 +60,8 @@ pub mod fit;
 pub mod initial_state;
 pub mod metrics;
 pub mod plot;
+pub mod report;
+pub mod report_html;
 pub mod residual_tests;
 pub mod savitzky_golay;
 pub mod sensitivity;
@@ -87,8 +92,11 @@ pub use fit::{
 pub use identifiability::Identifiability;
 pub use metrics::{compare, fit_percent, rmse, ChannelFit, ExperimentFit, FitReport, MetricsError};
 pub use plot::{
-    plot_comparison, plot_residual_tests, render_comparison, render_residual_tests, PlotError,
+    plot_comparison, plot_residual_tests, render_comparison, render_residual_tests, FigureChannels,
+    PlotError,
 };
+pub use report::Report;
+pub use report_html::render_html;
 pub use residual_tests::{residual_test, CrossCorrelation, ResidualTest};
 pub use sensitivity::{
     estimated_parameters, ExtraColumn, SensitivitySimulator, SensitivityTrajectory, SignalKind,

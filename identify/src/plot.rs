@@ -1,4 +1,6 @@
-//! SVG figures: measured vs simulated overlay and residual, per channel.
+//! SVG figures: measured vs simulated overlay (fit % in the legend) and the
+//! residual as an envelope, per channel, then the inputs; every axis with
+//! its unit.
 //!
 //! Rendering goes to a string (plotters' SVG backend, no fonts loaded: text is
 //! emitted as SVG `<text>`), then written to the path, so output is
@@ -77,14 +79,90 @@ fn draw_err<E: std::fmt::Debug>(e: E) -> PlotError {
     PlotError::Draw(format!("{e:?}"))
 }
 
-/// Draws, for each channel, measured and simulated against time and, below,
-/// the residual (measured - simulated); writes one SVG to `path`.
-/// Non-finite simulated samples are skipped in the drawing.
+/// The channels of a comparison figure, each with its unit (drawn on its
+/// axis).
+#[derive(Clone, Debug, Default, PartialEq)]
+pub struct FigureChannels {
+    /// Outputs drawn measured vs simulated, then their residual:
+    /// `(name, unit)`.
+    pub outputs: Vec<(String, String)>,
+    /// Inputs drawn in a panel of their own each (skipped when the
+    /// measured experiment lacks them, e.g. computed by a recorded
+    /// controller in the loop): `(name, unit)`.
+    pub inputs: Vec<(String, String)>,
+}
+
+impl FigureChannels {
+    /// A model's coordinates (SI units: rad or m) and inputs (units as
+    /// written in the model file).
+    pub fn of_model(model: &plantc_derive::model::Model) -> FigureChannels {
+        use plantc_derive::model::CoordinateKind;
+        FigureChannels {
+            outputs: model
+                .coordinates
+                .iter()
+                .map(|c| {
+                    let unit = match c.kind {
+                        CoordinateKind::Angle => "rad",
+                        CoordinateKind::Length => "m",
+                    };
+                    (c.name.clone(), unit.to_string())
+                })
+                .collect(),
+            inputs: model
+                .inputs
+                .iter()
+                .map(|i| (i.name.clone(), i.unit.clone()))
+                .collect(),
+        }
+    }
+
+    /// Outputs `names`, all in `unit`, and no inputs.
+    pub fn outputs(names: &[&str], unit: &str) -> FigureChannels {
+        FigureChannels {
+            outputs: names
+                .iter()
+                .map(|n| (n.to_string(), unit.to_string()))
+                .collect(),
+            inputs: Vec::new(),
+        }
+    }
+}
+
+/// `name [unit]`, or the name alone for a unitless channel.
+pub fn axis_label(name: &str, unit: &str) -> String {
+    if unit.is_empty() {
+        name.to_string()
+    } else {
+        format!("{name} [{unit}]")
+    }
+}
+
+/// The legend entry of a simulation: `label, fit 93.2 %` over the finite
+/// samples; `diverged` when samples are not finite or fit % is below
+/// -100 (as [`crate::ChannelFit::diverged`]).
+pub fn fit_legend(label: &str, y: &[f64], yhat: &[f64]) -> String {
+    if yhat.iter().any(|v| !v.is_finite()) {
+        return format!("{label}, diverged");
+    }
+    match crate::metrics::fit_percent(y, yhat) {
+        Ok(Some(f)) if f < -100.0 => format!("{label}, diverged"),
+        Ok(Some(f)) => format!("{label}, fit {f:.1} %"),
+        _ => format!("{label}, fit - (constant channel)"),
+    }
+}
+
+/// Draws, for each output channel, measured and simulated against time
+/// (fit % in the legend) and, below, the residual (measured - simulated)
+/// as an envelope: its minimum and maximum in each pixel column, filled;
+/// then each input in a panel of its own. Every axis has its unit. Writes
+/// one SVG to `path`. Non-finite simulated samples are skipped in the
+/// drawing.
 pub fn plot_comparison(
     path: &Path,
     measured: &Experiment,
     simulated: &Experiment,
-    channels: &[&str],
+    channels: &FigureChannels,
 ) -> Result<(), PlotError> {
     let svg = render_comparison(measured, simulated, channels)?;
     // crash-safe: an existing figure is replaced whole or not at all
@@ -94,17 +172,23 @@ pub fn plot_comparison(
     })
 }
 
+/// Heights of the panels (px): an overlay, a residual, an input.
+const OVERLAY_H: u32 = 240;
+const RESIDUAL_H: u32 = 170;
+const INPUT_H: u32 = 170;
+
 /// The SVG text of [`plot_comparison`].
 pub fn render_comparison(
     measured: &Experiment,
     simulated: &Experiment,
-    channels: &[&str],
+    channels: &FigureChannels,
 ) -> Result<String, PlotError> {
-    if channels.is_empty() {
+    if channels.outputs.is_empty() {
         return Err(PlotError::NoChannels);
     }
     let mut pairs = Vec::new();
-    for &ch in channels {
+    for (ch, unit) in &channels.outputs {
+        let ch = ch.as_str();
         let y = measured.values(ch).ok_or(PlotError::MissingChannel {
             channel: ch.into(),
             side: "measured",
@@ -120,23 +204,39 @@ pub fn render_comparison(
                 simulated: yhat.len(),
             });
         }
-        pairs.push((ch, y, yhat));
+        pairs.push((ch, unit.as_str(), y, yhat));
     }
+    let inputs: Vec<(&str, &str, &[f64])> = channels
+        .inputs
+        .iter()
+        .filter_map(|(n, u)| {
+            let v = measured.values(n)?;
+            (v.len() == measured.t.len()).then_some((n.as_str(), u.as_str(), v))
+        })
+        .collect();
     let t = &measured.t;
     let (t0, t1) = (t[0], t[t.len() - 1].max(t[0] + f64::EPSILON));
-    let panel_h = 240u32;
+    let mut heights = Vec::new();
+    for _ in &pairs {
+        heights.extend([OVERLAY_H, RESIDUAL_H]);
+    }
+    heights.extend(inputs.iter().map(|_| INPUT_H));
+    let total: u32 = heights.iter().sum();
+    let breaks: Vec<i32> = heights
+        .iter()
+        .scan(0u32, |acc, h| {
+            *acc += h;
+            Some(*acc as i32)
+        })
+        .take(heights.len() - 1)
+        .collect();
     let mut buf = String::new();
     {
-        let rows = 2 * pairs.len();
-        let root =
-            SVGBackend::with_string(&mut buf, (1000, panel_h * rows as u32)).into_drawing_area();
+        let root = SVGBackend::with_string(&mut buf, (1000, total)).into_drawing_area();
         root.fill(&WHITE).map_err(draw_err)?;
-        let areas = root.split_evenly((rows, 1));
-        for (k, (ch, y, yhat)) in pairs.iter().enumerate() {
-            let unit = measured
-                .channel(ch)
-                .and_then(|c| c.unit_note.clone())
-                .unwrap_or_default();
+        let areas = root.split_by_breakpoints(Vec::<i32>::new(), breaks);
+        let time = "t [s]";
+        for (k, (ch, unit, y, yhat)) in pairs.iter().enumerate() {
             let r: Vec<f64> = y.iter().zip(yhat.iter()).map(|(a, b)| a - b).collect();
             // Overlay.
             let (lo, hi) = range(y.iter().chain(yhat.iter()));
@@ -146,14 +246,14 @@ pub fn render_comparison(
                     ("sans-serif", 16),
                 )
                 .margin(8)
-                .x_label_area_size(28)
+                .x_label_area_size(34)
                 .y_label_area_size(70)
                 .build_cartesian_2d(t0..t1, lo..hi)
                 .map_err(draw_err)?;
             chart
                 .configure_mesh()
-                .x_desc("t [s]")
-                .y_desc(format!("{ch} {unit}"))
+                .x_desc(time)
+                .y_desc(axis_label(ch, unit))
                 .draw()
                 .map_err(draw_err)?;
             chart
@@ -164,7 +264,7 @@ pub fn render_comparison(
             chart
                 .draw_series(LineSeries::new(decimate(t, yhat), &RED))
                 .map_err(draw_err)?
-                .label("simulated")
+                .label(fit_legend("simulated", y, yhat))
                 .legend(|(x, y)| PathElement::new(vec![(x, y), (x + 20, y)], RED));
             chart
                 .configure_series_labels()
@@ -172,31 +272,109 @@ pub fn render_comparison(
                 .border_style(BLACK)
                 .draw()
                 .map_err(draw_err)?;
-            // Residual.
+            // Residual: an envelope of min/max per pixel column.
             let (lo, hi) = range(r.iter().chain(std::iter::once(&0.0)));
             let mut chart = ChartBuilder::on(&areas[2 * k + 1])
                 .caption(
-                    format!("{}: {ch} residual (measured - simulated)", measured.name),
-                    ("sans-serif", 16),
+                    format!(
+                        "{}: {ch} residual (measured - simulated), min/max per pixel column",
+                        measured.name
+                    ),
+                    ("sans-serif", 14),
                 )
                 .margin(8)
-                .x_label_area_size(28)
+                .x_label_area_size(34)
                 .y_label_area_size(70)
                 .build_cartesian_2d(t0..t1, lo..hi)
                 .map_err(draw_err)?;
             chart
                 .configure_mesh()
-                .x_desc("t [s]")
-                .y_desc(format!("residual {unit}"))
+                .x_desc(time)
+                .y_desc(axis_label("residual", unit))
+                .draw()
+                .map_err(draw_err)?;
+            let columns = chart.plotting_area().dim_in_pixel().0.max(1) as usize;
+            let env = envelope(t, &r, (t0, t1), columns);
+            if !env.is_empty() {
+                let upper: Vec<(f64, f64)> = env.iter().map(|&(t, _, hi)| (t, hi)).collect();
+                let lower: Vec<(f64, f64)> = env.iter().map(|&(t, lo, _)| (t, lo)).collect();
+                let ring: Vec<(f64, f64)> =
+                    upper.iter().chain(lower.iter().rev()).copied().collect();
+                chart
+                    .draw_series(std::iter::once(Polygon::new(
+                        ring,
+                        RGBColor(60, 60, 60).mix(0.55).filled(),
+                    )))
+                    .map_err(draw_err)?;
+                // the edges keep an envelope one pixel thin visible
+                for edge in [upper, lower] {
+                    chart
+                        .draw_series(std::iter::once(PathElement::new(edge, BLACK)))
+                        .map_err(draw_err)?;
+                }
+            }
+            chart
+                .draw_series(std::iter::once(PathElement::new(
+                    vec![(t0, 0.0), (t1, 0.0)],
+                    BLUE.mix(0.6),
+                )))
+                .map_err(draw_err)?;
+        }
+        // Inputs.
+        for (j, (name, unit, u)) in inputs.iter().enumerate() {
+            let area = &areas[2 * pairs.len() + j];
+            let (lo, hi) = range(u.iter());
+            let mut chart = ChartBuilder::on(area)
+                .caption(
+                    format!("{}: input {name}", measured.name),
+                    ("sans-serif", 14),
+                )
+                .margin(8)
+                .x_label_area_size(34)
+                .y_label_area_size(70)
+                .build_cartesian_2d(t0..t1, lo..hi)
+                .map_err(draw_err)?;
+            chart
+                .configure_mesh()
+                .x_desc(time)
+                .y_desc(axis_label(name, unit))
                 .draw()
                 .map_err(draw_err)?;
             chart
-                .draw_series(LineSeries::new(decimate(t, &r), &BLACK))
+                .draw_series(LineSeries::new(decimate(t, u), &RGBColor(0, 128, 0)))
                 .map_err(draw_err)?;
         }
         root.present().map_err(draw_err)?;
     }
     Ok(buf)
+}
+
+/// The minimum and maximum of `x` in each of `columns` equal time columns
+/// over `t0..t1`: `(column centre, min, max)` for every column with a
+/// finite sample.
+pub fn envelope(
+    t: &[f64],
+    x: &[f64],
+    (t0, t1): (f64, f64),
+    columns: usize,
+) -> Vec<(f64, f64, f64)> {
+    let columns = columns.max(1);
+    let width = (t1 - t0).max(f64::MIN_POSITIVE);
+    let mut cols = vec![(f64::INFINITY, f64::NEG_INFINITY); columns];
+    for (&ti, &xi) in t.iter().zip(x) {
+        if !xi.is_finite() {
+            continue;
+        }
+        let c = (((ti - t0) / width) * columns as f64).floor();
+        let c = (c.max(0.0) as usize).min(columns - 1);
+        cols[c].0 = cols[c].0.min(xi);
+        cols[c].1 = cols[c].1.max(xi);
+    }
+    cols.iter()
+        .enumerate()
+        .filter(|(_, (lo, hi))| lo <= hi)
+        .map(|(c, &(lo, hi))| (t0 + (c as f64 + 0.5) / columns as f64 * width, lo, hi))
+        .collect()
 }
 
 /// Finite range with a margin; a constant gives +-1e-9 around it.
@@ -215,14 +393,22 @@ fn range<'a>(vals: impl Iterator<Item = &'a f64>) -> (f64, f64) {
 
 /// Min-max decimation to at most [`MAX_BUCKETS`] buckets; non-finite samples dropped.
 fn decimate(t: &[f64], x: &[f64]) -> Vec<(f64, f64)> {
+    min_max(t, x, MAX_BUCKETS)
+}
+
+/// `x` over `t` reduced to the minimum and maximum of each of `buckets`
+/// equal index ranges, in time order (all samples when there are at most
+/// two per bucket); non-finite samples dropped.
+pub fn min_max(t: &[f64], x: &[f64], buckets: usize) -> Vec<(f64, f64)> {
     let n = t.len().min(x.len());
     let finite = |i: &usize| x[*i].is_finite();
-    if n <= 2 * MAX_BUCKETS {
+    let buckets = buckets.max(1);
+    if n <= 2 * buckets {
         return (0..n).filter(finite).map(|i| (t[i], x[i])).collect();
     }
-    let mut out = Vec::with_capacity(2 * MAX_BUCKETS);
-    for b in 0..MAX_BUCKETS {
-        let (a, e) = (b * n / MAX_BUCKETS, (b + 1) * n / MAX_BUCKETS);
+    let mut out = Vec::with_capacity(2 * buckets);
+    for b in 0..buckets {
+        let (a, e) = (b * n / buckets, (b + 1) * n / buckets);
         let idx: Vec<usize> = (a..e).filter(finite).collect();
         let (Some(&imin), Some(&imax)) = (
             idx.iter().min_by(|&&i, &&j| x[i].total_cmp(&x[j])),
@@ -271,36 +457,20 @@ pub fn render_residual_tests(tests: &[crate::ResidualTest]) -> Result<String, Pl
         root.fill(&WHITE).map_err(draw_err)?;
         let areas = root.split_evenly((tests.len(), cols));
         for (r, t) in tests.iter().enumerate() {
-            let auto: Vec<(f64, f64)> = t
-                .autocorrelation
-                .iter()
-                .enumerate()
-                .skip(1)
-                .map(|(k, v)| (k as f64, *v))
-                .collect();
+            let auto = t.autocorrelation_points();
             let title = format!(
                 "{}: {} autocorrelation (correlation time {:.1} samples)",
                 t.experiment, t.channel, t.correlation_time
             );
             stems(&areas[r * cols], &title, &auto, t.band, 0.0, t.lags as f64)?;
             for (c, x) in t.cross.iter().enumerate() {
-                let l = (x.values.len() as f64 - 1.0) / 2.0;
-                let pts: Vec<(f64, f64)> = x
-                    .values
-                    .iter()
-                    .enumerate()
-                    .map(|(k, v)| (k as f64 - l, *v))
-                    .collect();
+                let (l, pts) = (x.half_width(), x.points());
                 let title = format!(
                     "{}: {} vs {} ({})",
                     t.experiment,
                     t.channel,
                     x.input,
-                    if x.independent {
-                        "independent"
-                    } else {
-                        "correlated"
-                    }
+                    x.verdict()
                 );
                 stems(&areas[r * cols + 1 + c], &title, &pts, x.band, -l, l)?;
             }
@@ -334,6 +504,7 @@ fn stems(
     chart
         .configure_mesh()
         .x_desc("lag [samples]")
+        .y_desc("normalised correlation [-]")
         .draw()
         .map_err(draw_err)?;
     chart

@@ -83,7 +83,44 @@ pub struct ResidualTest {
     pub cross: Vec<CrossCorrelation>,
 }
 
+impl CrossCorrelation {
+    /// `(lag, r_eu(lag))` for `lag = -L..=L`, as drawn.
+    pub fn points(&self) -> Vec<(f64, f64)> {
+        let l = self.half_width();
+        self.values
+            .iter()
+            .enumerate()
+            .map(|(k, v)| (k as f64 - l, *v))
+            .collect()
+    }
+
+    /// `L`: the largest lag either way.
+    pub fn half_width(&self) -> f64 {
+        (self.values.len() as f64 - 1.0) / 2.0
+    }
+
+    /// `independent` or `correlated`.
+    pub fn verdict(&self) -> &'static str {
+        if self.independent {
+            "independent"
+        } else {
+            "correlated"
+        }
+    }
+}
+
 impl ResidualTest {
+    /// `(lag, r_e(lag))` for `lag = 1..=L`, as drawn (lag 0 is 1 by
+    /// definition).
+    pub fn autocorrelation_points(&self) -> Vec<(f64, f64)> {
+        self.autocorrelation
+            .iter()
+            .enumerate()
+            .skip(1)
+            .map(|(k, v)| (k as f64, *v))
+            .collect()
+    }
+
     /// One line: `alpha: white (1 of 25 lags outside the 99 % band);
     /// independent of Vm (0 of 51)`.
     pub fn summary(&self) -> String {

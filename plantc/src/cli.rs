@@ -257,19 +257,24 @@ pub struct IdentifyArgs {
     /// Prediction horizon in s for the validation (k-step-ahead fit %).
     #[arg(long, value_name = "S")]
     pub predict: Option<f64>,
-    /// Output directory: `with_effect.plant`, `fitted.plant`, `report.json`
-    /// and the figures of each stage. Built aside and swapped in when the run
+    /// Output directory: `with_effect.plant`, `fitted.plant`, `report.json`,
+    /// `report.html` and the figures of each stage. Built aside and swapped in when the run
     /// completes: an interrupted run leaves the previous DIR as it was, and
     /// files of an earlier run never survive into the new one.
     #[arg(short = 'o', long = "out", value_name = "DIR")]
     pub out: PathBuf,
     /// Write into a non-empty DIR that identify did not write, or that holds
-    /// the input model (identify's files are replaced, other entries kept).
+    /// the input model (identify's files are replaced, other entries kept);
+    /// replace a `--report` FILE that identify did not write.
     #[arg(long)]
     pub force: bool,
     /// Print the summary as JSON instead of the story.
     #[arg(long)]
     pub json: bool,
+    /// Also write the HTML report to FILE (`report.html` in DIR is always
+    /// written): one self-contained file, no network needed.
+    #[arg(long, value_name = "FILE.html")]
+    pub report: Option<PathBuf>,
 }
 
 /// Arguments of `plantc synth`.

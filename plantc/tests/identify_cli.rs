@@ -62,7 +62,10 @@ fn compare_json_shape_table_findings_and_plots() {
         assert_eq!(ch.keys().collect::<Vec<_>>(), ["alpha", "theta"]);
         for c in ch.values() {
             let o = c.as_object().unwrap();
-            assert_eq!(o.keys().collect::<Vec<_>>(), ["fit_percent", "rmse"]);
+            assert_eq!(
+                o.keys().collect::<Vec<_>>(),
+                ["diverged", "fit_percent", "rmse"]
+            );
             sum += c["rmse"].as_f64().unwrap().powi(2);
         }
     }
@@ -84,6 +87,16 @@ fn compare_json_shape_table_findings_and_plots() {
     for name in ["driven", "free_swing"] {
         let svg = std::fs::read_to_string(plots.join(format!("{name}.svg"))).unwrap();
         assert!(svg.starts_with("<svg"), "{name}.svg");
+        // units on the axes, fit % in the legend, the input's own panel
+        for label in [
+            "t [s]",
+            "alpha [rad]",
+            "residual [rad]",
+            "simulated, fit ",
+            "Vm [V]",
+        ] {
+            assert!(svg.contains(label), "{name}.svg lacks `{label}`");
+        }
     }
 }
 

@@ -8,7 +8,7 @@ use std::path::Path;
 use plantc_derive::model::Model;
 use plantc_identify::{
     as_experiments, compare, plot_comparison, plot_residual_tests, validate, where_it_fails,
-    Experiment, FailOptions, FitReport, ValidateOptions,
+    Experiment, FailOptions, FigureChannels, FitReport, ValidateOptions,
 };
 
 use crate::cli::CompareArgs;
@@ -64,7 +64,7 @@ pub(crate) fn refuse_existing_figures(
     Ok(())
 }
 
-/// An overlay + residual SVG per experiment, `<dir>/<experiment>.svg`;
+/// An overlay + residual (+ input) SVG per experiment, `<dir>/<experiment>.svg`;
 /// `shown` is the directory named in the messages (the final place when
 /// `dir` is a staging directory).
 pub(crate) fn write_figures(
@@ -77,13 +77,13 @@ pub(crate) fn write_figures(
 ) -> Result<(), CliError> {
     std::fs::create_dir_all(dir)
         .map_err(|e| CliError::failure(format!("error: cannot create `{}`: {e}", dir.display())))?;
-    let names: Vec<&str> = model.coordinates.iter().map(|c| c.name.as_str()).collect();
+    let figure = FigureChannels::of_model(model);
     for ((m, s), p) in measured
         .iter()
         .zip(simulated)
         .zip(figure_paths(dir, measured))
     {
-        plot_comparison(&p, m, s, &names).map_err(|e| CliError::failure(format!("error: {e}")))?;
+        plot_comparison(&p, m, s, &figure).map_err(|e| CliError::failure(format!("error: {e}")))?;
         let _ = writeln!(
             err,
             "figure -> {}",
@@ -184,13 +184,13 @@ pub fn run(args: &CompareArgs, out: &mut dyn Write, err: &mut dyn Write) -> Resu
             let preds: Vec<Option<&Vec<Vec<f64>>>> =
                 v.experiments.iter().map(|e| e.predicted.as_ref()).collect();
             let predicted = as_experiments(model, &measured, &preds);
-            let names: Vec<&str> = model.coordinates.iter().map(|c| c.name.as_str()).collect();
+            let figure = FigureChannels::of_model(model);
             std::fs::create_dir_all(dir).map_err(|e| {
                 CliError::failure(format!("error: cannot create `{}`: {e}", dir.display()))
             })?;
             for (m, p) in measured.iter().zip(&predicted) {
                 let path = dir.join(format!("{}-predicted.svg", m.name));
-                plot_comparison(&path, m, p, &names)
+                plot_comparison(&path, m, p, &figure)
                     .map_err(|e| CliError::failure(format!("error: {e}")))?;
                 let _ = writeln!(err, "figure -> {}", path.display());
             }

@@ -3,8 +3,9 @@
 //! nominal model -> compare (where it fails) -> diagnose (which effect is
 //! missing) -> apply it to a copy of the model -> fit -> compare again, with
 //! a before/after table, the fitted model file and overlay/residual figures
-//! for each stage. The input model is never modified; everything is written
-//! under `-o DIR`.
+//! for each stage, and `report.html` (the same story for a person to read:
+//! [`plantc_identify::Report`]). The input model is never modified;
+//! everything is written under `-o DIR` (and the report to `--report FILE`).
 
 use std::io::Write;
 use std::path::{Path, PathBuf};
@@ -13,7 +14,8 @@ use std::time::Instant;
 use plantc_derive::model::Model;
 use plantc_identify::diagnose::model_from_text;
 use plantc_identify::{
-    identify, Experiment, FitReport, FitResult, StoryOptions, StoryProgress, Validation,
+    identify, render_html, Experiment, FigureChannels, FitReport, FitResult, Report, StoryOptions,
+    StoryProgress, Validation,
 };
 
 use crate::cli::IdentifyArgs;
@@ -201,13 +203,16 @@ fn write_validation_lines(out: &mut dyn Write, v: &Validation) {
 
 fn story(
     args: &IdentifyArgs,
-    out: &mut dyn Write,
+    out: &mut Vec<u8>,
     err: &mut dyn Write,
 ) -> Result<serde_json::Value, CliError> {
     let dir: &PathBuf = &args.out;
     // a commit a killed run left half done is finished before the directory
     // is judged (its manifest is written last)
     plantc_fsio::finish_interrupted(dir);
+    if let Some(file) = &args.report {
+        refuse_report_file(file, args.force)?;
+    }
     if dir.exists()
         && !args.force
         && std::fs::read_dir(dir).map_or(true, |mut d| d.next().is_some())
@@ -572,10 +577,54 @@ fn story(
     let mut buf = Vec::new();
     write_json(&mut buf, &summary);
     write_file(&staging.join("report.json"), &String::from_utf8_lossy(&buf))?;
+    // the report a person reads: the story as printed, the summary as above
+    let report = Report::new(
+        &args.model.display().to_string(),
+        &s,
+        &measured,
+        &FigureChannels::of_model(model),
+        &String::from_utf8_lossy(out),
+        summary.clone(),
+    );
+    let html = render_html(&report);
+    write_file(&staging.join("report.html"), &html)?;
     // move the complete output in: only identify's own files (its manifest)
     // are replaced or deleted, the user's stay where they are
     fresh.commit().map_err(fail)?;
+    let _ = writeln!(err, "report -> {}", dir.join("report.html").display());
+    if let Some(file) = &args.report {
+        write_file(file, &html)?;
+        let _ = writeln!(err, "report -> {}", file.display());
+    }
     Ok(summary)
+}
+
+/// Refuses, before any work, a `--report` file that exists and was not
+/// written by identify (unless `force`), or whose directory does not exist.
+fn refuse_report_file(file: &Path, force: bool) -> Result<(), CliError> {
+    if file.is_dir() {
+        return Err(CliError::input(format!(
+            "error: --report `{}` is a directory; name the HTML file to write",
+            file.display()
+        )));
+    }
+    let parent = file.parent().filter(|p| !p.as_os_str().is_empty());
+    if parent.is_some_and(|p| !p.is_dir()) {
+        return Err(CliError::input(format!(
+            "error: --report `{}`: the directory `{}` does not exist",
+            file.display(),
+            parent.unwrap_or(Path::new(".")).display()
+        )));
+    }
+    let ours = std::fs::read_to_string(file)
+        .is_ok_and(|t| t.contains(plantc_identify::report_html::GENERATOR));
+    if file.exists() && !ours && !force {
+        return Err(CliError::input(format!(
+            "error: --report `{}` exists and was not written by `plantc identify`; choose another file or pass --force to replace it",
+            file.display()
+        )));
+    }
+    Ok(())
 }
 
 /// A stage's overlay + residual figures under `dir/sub/`.
