@@ -35,8 +35,10 @@ pub mod error;
 pub mod identifiability;
 mod lm;
 mod mat_reader;
+pub mod parallel;
 pub mod plausibility;
 mod problem;
+mod speculate;
 pub mod units;
 pub mod weights;
 
