@@ -828,6 +828,8 @@ impl Search<'_> {
             ranking[idx] = done;
             return;
         }
+        let label = ranking[idx].candidate.label();
+        crate::progress::candidates(idx + 1, idx + 1, ranking.len(), &label);
         refit(
             &mut ranking[idx],
             &self.edited[idx].0,
@@ -872,7 +874,13 @@ impl Search<'_> {
     fn look_ahead(&self, ranking: &[Ranked], step: Step, upcoming: &[usize]) {
         let (judge, model, baseline, edited, s0) =
             (self.judge, self.model, self.baseline, self.edited, self.s0);
-        self.ahead.compute(step, ranking, upcoming, |r, idx| {
+        let shown = |batch: &[usize]| {
+            if let (Some(&a), Some(&b)) = (batch.first(), batch.last()) {
+                let label = ranking[a].candidate.label();
+                crate::progress::candidates(a + 1, b + 1, ranking.len(), &label);
+            }
+        };
+        self.ahead.compute(step, ranking, upcoming, shown, |r, idx| {
             let m = &edited[idx].0;
             match step {
                 Step::Refit => refit(r, m, model, baseline, judge.experiments, judge.opts),
@@ -1105,6 +1113,7 @@ impl Search<'_> {
             }
         }
         self.stribeck_from_coulomb(ranking, &mut stribecks);
+        crate::progress::clear();
     }
 }
 

@@ -36,6 +36,7 @@ pub mod identifiability;
 mod lm;
 mod mat_reader;
 pub mod parallel;
+pub mod progress;
 pub mod plausibility;
 mod problem;
 mod speculate;

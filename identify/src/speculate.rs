@@ -66,12 +66,14 @@ impl Ahead {
     /// Compute `step` (`run` on a copy of the candidate and its index) for
     /// the first candidates of `upcoming` (indices into `ranking`, in the
     /// search's order) on the workers, if the first has not been computed
-    /// from its present state (see the module docs for the rule).
+    /// from its present state (see the module docs for the rule); `shown`
+    /// is told the batch first (progress).
     pub(crate) fn compute(
         &self,
         step: Step,
         ranking: &[Ranked],
         upcoming: &[usize],
+        shown: impl Fn(&[usize]),
         run: impl Fn(&mut Ranked, usize) + Sync,
     ) {
         let Some(&first) = upcoming.first() else {
@@ -90,6 +92,7 @@ impl Ahead {
         if batch.len() < 2 {
             return;
         }
+        shown(&batch);
         let results = par_map(batch.len(), |b| {
             let idx = batch[b];
             let mut r = ranking[idx].clone();
