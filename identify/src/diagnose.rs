@@ -880,16 +880,17 @@ impl Search<'_> {
                 crate::progress::candidates(a + 1, b + 1, ranking.len(), &label);
             }
         };
-        self.ahead.compute(step, ranking, upcoming, shown, |r, idx| {
-            let m = &edited[idx].0;
-            match step {
-                Step::Refit => refit(r, m, model, baseline, judge.experiments, judge.opts),
-                Step::SecondStart => {
-                    second_start(r, m, baseline, judge.experiments, judge.opts);
+        self.ahead
+            .compute(step, ranking, upcoming, shown, |r, idx| {
+                let m = &edited[idx].0;
+                match step {
+                    Step::Refit => refit(r, m, model, baseline, judge.experiments, judge.opts),
+                    Step::SecondStart => {
+                        second_start(r, m, baseline, judge.experiments, judge.opts);
+                    }
                 }
-            }
-            judge.judge(r, m, s0);
-        });
+                judge.judge(r, m, s0);
+            });
     }
 
     fn may_restart(&self) -> bool {

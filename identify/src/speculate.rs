@@ -50,7 +50,7 @@ impl Ahead {
         self.done
             .borrow()
             .iter()
-            .any(|(s, i, from, _)| *s == step && *i == idx && from == r)
+            .any(|(s, i, from, _)| *s == step && *i == idx && same(from, r))
     }
 
     /// The result of `step` on candidate `idx` if it was computed ahead
@@ -59,7 +59,7 @@ impl Ahead {
         let mut done = self.done.borrow_mut();
         let k = done
             .iter()
-            .position(|(s, i, from, _)| *s == step && *i == idx && from == r)?;
+            .position(|(s, i, from, _)| *s == step && *i == idx && same(from, r))?;
         Some(done.swap_remove(k).3)
     }
 
@@ -103,5 +103,34 @@ impl Ahead {
         for (idx, after) in batch.into_iter().zip(results) {
             done.push((step, idx, ranking[idx].clone(), after));
         }
+    }
+}
+
+/// Whether two states of a candidate are the same, NaN included (`==` is
+/// false on a NaN field: a candidate's estimates hold NaN standard errors
+/// where the equation error could not give one, and `==` alone threw away
+/// every result computed ahead for them). Rust's `{:?}` of an f64 is exact
+/// (the shortest text that reads back to the same bits), so equal texts are
+/// equal values; the fit's samples and warm start, which its `{:?}` leaves
+/// out, are compared apart, by bits.
+fn same(a: &Ranked, b: &Ranked) -> bool {
+    if a == b {
+        return true;
+    }
+    if format!("{a:?}") != format!("{b:?}") {
+        return false;
+    }
+    match (&a.fit, &b.fit) {
+        (None, None) => true,
+        (Some(f), Some(g)) => {
+            let bits = |x: &Vec<Vec<Vec<f64>>>| -> Vec<u64> {
+                x.iter().flatten().flatten().map(|v| v.to_bits()).collect()
+            };
+            bits(&f.simulated) == bits(&g.simulated)
+                && f.simulated_start.as_ref().map(bits) == g.simulated_start.as_ref().map(bits)
+                && format!("{:?}", (&f.warm, &f.nuisance_flags))
+                    == format!("{:?}", (&g.warm, &g.nuisance_flags))
+        }
+        _ => false,
     }
 }
