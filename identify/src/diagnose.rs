@@ -829,7 +829,7 @@ impl Search<'_> {
             return;
         }
         let label = ranking[idx].candidate.label();
-        crate::progress::candidates(idx + 1, idx + 1, ranking.len(), &label);
+        crate::progress::candidates(&[idx + 1], ranking.len(), &label);
         refit(
             &mut ranking[idx],
             &self.edited[idx].0,
@@ -875,9 +875,10 @@ impl Search<'_> {
         let (judge, model, baseline, edited, s0) =
             (self.judge, self.model, self.baseline, self.edited, self.s0);
         let shown = |batch: &[usize]| {
-            if let (Some(&a), Some(&b)) = (batch.first(), batch.last()) {
+            if let Some(&a) = batch.first() {
                 let label = ranking[a].candidate.label();
-                crate::progress::candidates(a + 1, b + 1, ranking.len(), &label);
+                let which: Vec<usize> = batch.iter().map(|i| i + 1).collect();
+                crate::progress::candidates(&which, ranking.len(), &label);
             }
         };
         self.ahead

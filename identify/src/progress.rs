@@ -9,13 +9,13 @@ use std::time::Instant;
 /// The latest status and when its round started.
 static STATUS: Mutex<Option<(String, Instant)>> = Mutex::new(None);
 
-/// Record that candidates `first..=last` (1-based) of `of` are being
-/// refitted, `what` naming the first.
-pub fn candidates(first: usize, last: usize, of: usize, what: &str) {
-    let which = if last > first {
-        format!("candidates {first}-{last} of {of}")
-    } else {
-        format!("candidate {first} of {of}")
+/// Record that candidates `which` (1-based, in the ranking) of `of` are
+/// being refitted, `what` naming the first.
+pub fn candidates(which: &[usize], of: usize, what: &str) {
+    let list: Vec<String> = which.iter().map(ToString::to_string).collect();
+    let which = match list.len() {
+        1 => format!("candidate {} of {of}", list[0]),
+        _ => format!("candidates {} of {of}", list.join(", ")),
     };
     if let Ok(mut s) = STATUS.lock() {
         let since = s.as_ref().map_or_else(Instant::now, |(_, t)| *t);
