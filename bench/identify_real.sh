@@ -23,7 +23,7 @@ real=../shared/data/real
 dir="$target/bench-identify-real"
 mkdir -p "$dir"
 
-want() { [ $# -eq 0 ] || printf '%s\n' "${@}" | grep -qx "$case"; }
+want() { [ $# -eq 0 ] || printf '%s\n' "${@}" | grep -qx "$which"; }
 
 run() { # name model files...
     local name="$1" model="$2"
@@ -43,7 +43,7 @@ run() { # name model files...
 
 printf '%-8s %7s %7s  %5s  %s\n' case "wall s" "CPU s" load verdict
 qube="$real/qube_koopman_prbs/raw"
-case=qube3
+which=qube3
 if want "$@"; then
     if ls "$qube"/*.csv >/dev/null 2>&1; then
         # shellcheck disable=SC2046
@@ -52,7 +52,7 @@ if want "$@"; then
         echo "qube3    skipped: $qube not present"
     fi
 fi
-case=qube16
+which=qube16
 if want "$@"; then
     many="$real/qube_koopman_prbs/more"
     if ls "$many"/*.csv >/dev/null 2>&1; then
@@ -63,7 +63,7 @@ if want "$@"; then
         echo "qube16   skipped: $many not present"
     fi
 fi
-case=dfki
+which=dfki
 if want "$@"; then
     traj="$real/dfki_double_pendulum_sysid/converted/trajectory_00.csv"
     if [ -f "$traj" ]; then
