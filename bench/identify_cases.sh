@@ -15,8 +15,10 @@
 # the other (found by a trial round), `stribeck_theta` a Stribeck hump on the
 # arm the equation error cannot see. Then `plantc identify` runs on it, and the
 # script prints its wall and CPU time (user + sys), the effects it added,
-# where it stopped, and whether the CPU time met the goal. The truth is in
-# each case's truth.json. PLANTC=path/to/plantc skips the cargo build.
+# where it stopped, and whether the CPU time met the goal, with the machine's
+# load average when the case ended (wall times mean little above the core
+# count). The truth is in each case's truth.json. PLANTC=path/to/plantc
+# skips the cargo build; PLANTC_THREADS=N sets the worker count.
 # No peer runs here: bench/identify_vs_scipy.sh has the scipy pipeline side
 # by side on the Coulomb case.
 set -euo pipefail
@@ -54,7 +56,7 @@ cases=(
     "noisy|--effect coulomb_friction:alpha=6e-4 --noise 1e-3"
 )
 
-printf '%-16s %7s %7s  %-5s %s\n' case "wall s" "CPU s" "<=3s" "effects added; stop"
+printf '%-16s %7s %7s %5s  %-5s %s\n' case "wall s" "CPU s" load "<=3s" "effects added; stop"
 met=0
 total=0
 for entry in "${cases[@]}"; do
@@ -88,6 +90,7 @@ effects = [f"{r['effect']}@{r['target']}" for r in p.get("rounds", [])]
 print(f"{', '.join(effects) if effects else 'none'}; {p.get('stop', '')}")
 PY
 )
-    printf '%-16s %7.2f %7.2f  %-5s %s\n' "$name" "$wall" "$cpu" "$ok" "$summary"
+    printf '%-16s %7.2f %7.2f %5s  %-5s %s\n' "$name" "$wall" "$cpu" \
+        "$(cut -d' ' -f1 /proc/loadavg)" "$ok" "$summary"
 done
 echo "goal (issue 11): <= 3 s CPU per case: met in $met of $total"

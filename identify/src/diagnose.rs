@@ -61,6 +61,7 @@ use crate::fit::{
     fit, measured_of, replay_follows, residual_count, simulate_as, values_from, with_estimates,
     Estimate, FitError, FitOptions, FitResult, Horizon, NuisanceFlag, Offsets,
 };
+use crate::speculate::Step;
 
 /// Options of [`diagnose_with`].
 #[derive(Clone, Debug, PartialEq)]
@@ -749,6 +750,7 @@ pub fn diagnose_from(
         s0,
         restart_ok: std::cell::OnceCell::new(),
         second_started: Vec::new(),
+        ahead: Default::default(),
     };
     if !baseline_at_floor {
         search.run(&mut ranking, blind, &mut notes);
@@ -815,11 +817,19 @@ struct Search<'a> {
     /// box, every second start far above the baseline.
     restart_ok: std::cell::OnceCell<bool>,
     second_started: Vec<usize>,
+    /// Refits computed ahead on other cores ([`crate::parallel`]).
+    ahead: crate::speculate::Ahead,
 }
 
 impl Search<'_> {
     /// Refit candidate `idx` warm from the baseline and judge it.
     fn refit(&self, ranking: &mut [Ranked], idx: usize) {
+        if let Some(done) = self.ahead.take(Step::Refit, idx, &ranking[idx]) {
+            ranking[idx] = done;
+            return;
+        }
+        let label = ranking[idx].candidate.label();
+        crate::progress::candidates(&[idx + 1], ranking.len(), &label);
         refit(
             &mut ranking[idx],
             &self.edited[idx].0,
@@ -839,6 +849,10 @@ impl Search<'_> {
             return;
         }
         self.second_started.push(idx);
+        if let Some(done) = self.ahead.take(Step::SecondStart, idx, &ranking[idx]) {
+            ranking[idx] = done;
+            return;
+        }
         second_start(
             &mut ranking[idx],
             &self.edited[idx].0,
@@ -848,6 +862,36 @@ impl Search<'_> {
         );
         self.judge
             .judge(&mut ranking[idx], &self.edited[idx].0, self.s0);
+    }
+
+    /// Compute the next [`Step`]s of `upcoming` (in that order) ahead on
+    /// the other cores: the first [`crate::parallel::threads`] of them not
+    /// already computed from their candidate's present state. Each is the
+    /// same function of that state as when run in turn (a refit or a second
+    /// start, then the judgement), and is used only if the state is still
+    /// the same when its turn comes: the outcome is that of the sequential
+    /// search on any number of threads.
+    fn look_ahead(&self, ranking: &[Ranked], step: Step, upcoming: &[usize]) {
+        let (judge, model, baseline, edited, s0) =
+            (self.judge, self.model, self.baseline, self.edited, self.s0);
+        let shown = |batch: &[usize]| {
+            if let Some(&a) = batch.first() {
+                let label = ranking[a].candidate.label();
+                let which: Vec<usize> = batch.iter().map(|i| i + 1).collect();
+                crate::progress::candidates(&which, ranking.len(), &label);
+            }
+        };
+        self.ahead
+            .compute(step, ranking, upcoming, shown, |r, idx| {
+                let m = &edited[idx].0;
+                match step {
+                    Step::Refit => refit(r, m, model, baseline, judge.experiments, judge.opts),
+                    Step::SecondStart => {
+                        second_start(r, m, baseline, judge.experiments, judge.opts);
+                    }
+                }
+                judge.judge(r, m, s0);
+            });
     }
 
     fn may_restart(&self) -> bool {
@@ -946,7 +990,8 @@ impl Search<'_> {
             settles
         };
         let mut settled = false;
-        for &idx in &leaders {
+        for (k, &idx) in leaders.iter().enumerate() {
+            self.look_ahead(ranking, Step::Refit, &leaders[k..]);
             if try_one(self, ranking, idx) {
                 settled = true;
                 break;
@@ -969,7 +1014,8 @@ impl Search<'_> {
                     rest.len()
                 ));
             }
-            for idx in rest {
+            for (k, &idx) in rest.iter().enumerate() {
+                self.look_ahead(ranking, Step::Refit, &rest[k..]);
                 if try_one(self, ranking, idx) {
                     settled = true;
                     break;
@@ -1002,9 +1048,15 @@ impl Search<'_> {
             // nothing passes: a baseline distorted by the missing effect can
             // trap every refit from it; the refitted candidates are started
             // again from the nominal values, in equation-error order
-            for idx in 0..n {
-                if ranking[idx].fit.is_none() {
-                    continue;
+            let refitted: Vec<usize> = (0..n).filter(|&i| ranking[i].fit.is_some()).collect();
+            for (k, &idx) in refitted.iter().enumerate() {
+                if !self.second_started.contains(&idx) && self.may_restart() {
+                    let next: Vec<usize> = refitted[k..]
+                        .iter()
+                        .copied()
+                        .filter(|i| !self.second_started.contains(i))
+                        .collect();
+                    self.look_ahead(ranking, Step::SecondStart, &next);
                 }
                 self.second_start(ranking, idx);
                 if self.settles(&ranking[idx]) {
@@ -1027,17 +1079,33 @@ impl Search<'_> {
             .map(|r| r.candidate.target.clone())
             .collect();
         if !ranking.iter().any(|r| self.settles(r)) {
-            for j in 0..n {
-                let c = &ranking[j].candidate;
-                if ranking[j].fit.is_none()
-                    && ranking[j].error.is_none()
-                    && SPEED_FORCES.contains(&c.effect.as_str())
-                    && targets.contains(&c.target)
-                    && self.edited[j].1 .1
-                {
-                    self.refit(ranking, j);
-                    self.second_start(ranking, j);
+            let stand_ins: Vec<usize> = (0..n)
+                .filter(|&j| {
+                    let c = &ranking[j].candidate;
+                    ranking[j].fit.is_none()
+                        && ranking[j].error.is_none()
+                        && SPEED_FORCES.contains(&c.effect.as_str())
+                        && targets.contains(&c.target)
+                        && self.edited[j].1 .1
+                })
+                .collect();
+            // (each touches only its own candidate: all refits, then all
+            // second starts, is the same as one after the other per
+            // candidate)
+            for (k, &j) in stand_ins.iter().enumerate() {
+                self.look_ahead(ranking, Step::Refit, &stand_ins[k..]);
+                self.refit(ranking, j);
+            }
+            for (k, &j) in stand_ins.iter().enumerate() {
+                if self.may_restart() {
+                    let next: Vec<usize> = stand_ins[k..]
+                        .iter()
+                        .copied()
+                        .filter(|i| !self.second_started.contains(i))
+                        .collect();
+                    self.look_ahead(ranking, Step::SecondStart, &next);
                 }
+                self.second_start(ranking, j);
             }
         }
         // every passing effect competes with the simpler one it contains
@@ -1047,6 +1115,7 @@ impl Search<'_> {
             }
         }
         self.stribeck_from_coulomb(ranking, &mut stribecks);
+        crate::progress::clear();
     }
 }
 

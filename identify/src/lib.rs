@@ -38,8 +38,11 @@ pub mod error;
 pub mod identifiability;
 mod lm;
 mod mat_reader;
+pub mod parallel;
 pub mod plausibility;
 mod problem;
+pub mod progress;
+mod speculate;
 pub mod units;
 pub mod weights;
 

@@ -29,8 +29,6 @@
 //! in turn).
 
 use std::ops::Range;
-use std::sync::atomic::{AtomicUsize, Ordering};
-use std::sync::Mutex;
 
 use plantc_derive::model::{Model, ParameterValues};
 
@@ -113,39 +111,10 @@ pub(crate) struct Problem<'a> {
     pub hi: Vec<f64>,
 }
 
-/// `f(i)` for `i` in `0..count` on one worker per core; results in order.
+/// `f(i)` for `i` in `0..count` on the workers of [`crate::parallel`];
+/// results in order.
 pub(crate) fn par_each<T: Send>(count: usize, f: impl Fn(usize) -> T + Sync) -> Vec<T> {
-    let workers = std::thread::available_parallelism()
-        .map_or(1, |n| n.get())
-        .min(count);
-    if workers <= 1 {
-        return (0..count).map(f).collect();
-    }
-    let next = AtomicUsize::new(0);
-    let slots: Vec<Mutex<Option<T>>> = (0..count).map(|_| Mutex::new(None)).collect();
-    std::thread::scope(|s| {
-        for _ in 0..workers {
-            s.spawn(|| loop {
-                let i = next.fetch_add(1, Ordering::Relaxed);
-                if i >= count {
-                    break;
-                }
-                let v = f(i);
-                if let Ok(mut slot) = slots[i].lock() {
-                    *slot = Some(v);
-                }
-            });
-        }
-    });
-    slots
-        .into_iter()
-        .map(|m| {
-            m.into_inner()
-                .ok()
-                .flatten()
-                .expect("every block was evaluated")
-        })
-        .collect()
+    crate::parallel::par_map(count, f)
 }
 
 impl Problem<'_> {

@@ -378,6 +378,11 @@ pub struct FitControlArgs {
         default_value = "auto"
     )]
     pub closed_loop: String,
+    /// Worker threads for the fits and the candidate refits (default: the
+    /// `PLANTC_THREADS` environment variable, else one per core); the
+    /// results are the same on any number.
+    #[arg(long, value_name = "N", value_parser = clap::value_parser!(u16).range(1..))]
+    pub threads: Option<u16>,
 }
 
 /// Arguments of `plantc compare`.

@@ -392,6 +392,10 @@ pub fn fit_options(
 ) -> Result<plantc_identify::FitOptions, CliError> {
     use plantc_identify::{ClosedLoop, FitOptions, Horizon, InitialVelocity, Offsets};
     let bad = |m: String| CliError::input(format!("error: {m}"));
+    // every command that fits takes its control arguments here
+    if let Some(n) = c.threads {
+        plantc_identify::parallel::set_threads(usize::from(n));
+    }
     let horizon = match fit_horizon.unwrap_or("auto").trim() {
         "auto" => Horizon::Auto,
         "whole" | "all" => Horizon::Whole,

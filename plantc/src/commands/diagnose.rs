@@ -81,6 +81,9 @@ fn findings(d: &Diagnosis) -> Vec<&Ranked> {
 }
 
 pub fn run(args: &DiagnoseArgs, out: &mut dyn Write, err: &mut dyn Write) -> Result<(), CliError> {
+    if args.json {
+        crate::commands::fit::quiet();
+    }
     if let (true, Some(o)) = (args.apply, &args.out) {
         refuse_to_clobber(o, &args.model, args.force)?;
     }

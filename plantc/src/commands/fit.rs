@@ -18,9 +18,18 @@ use crate::common::{
     values, write_json, write_model, write_parameter_values, CliError,
 };
 
+/// No progress line from now on (`--json`: the output is for a program).
+static QUIET: AtomicBool = AtomicBool::new(false);
+
+/// Silence [`with_progress`] for the rest of the run.
+pub(crate) fn quiet() {
+    QUIET.store(true, Ordering::Relaxed);
+}
+
 /// Runs `work` while showing elapsed time and the latest status that
-/// `work` reports through its argument (a `\r` line on stderr, only when
-/// stderr is a terminal: logs stay clean).
+/// `work` reports through its argument, and the diagnosis' candidate
+/// refits (`plantc_identify::progress`) (a `\r` line on stderr, only when
+/// stderr is a terminal and not after [`quiet`]: logs stay clean).
 pub(crate) fn with_progress<T>(what: &str, work: impl FnOnce(&dyn Fn(String)) -> T) -> T {
     let status = Mutex::new(String::new());
     let set = |s: String| {
@@ -28,7 +37,7 @@ pub(crate) fn with_progress<T>(what: &str, work: impl FnOnce(&dyn Fn(String)) ->
             *g = s;
         }
     };
-    if !std::io::stderr().is_terminal() {
+    if !std::io::stderr().is_terminal() || QUIET.load(Ordering::Relaxed) {
         return work(&set);
     }
     let done = AtomicBool::new(false);
@@ -38,7 +47,10 @@ pub(crate) fn with_progress<T>(what: &str, work: impl FnOnce(&dyn Fn(String)) ->
             let spin = ['|', '/', '-', '\\'];
             let mut k = 0;
             while !done.load(Ordering::Relaxed) {
-                let st = status.lock().map(|g| g.clone()).unwrap_or_default();
+                let mut st = status.lock().map(|g| g.clone()).unwrap_or_default();
+                if let Some(c) = plantc_identify::progress::current() {
+                    st = format!("{st}  {c}");
+                }
                 eprint!(
                     "\r\x1b[K{} {what} {:.1} s  {st}",
                     spin[k % 4],
@@ -248,6 +260,9 @@ pub(crate) fn write_validation(out: &mut dyn Write, v: &plantc_identify::Validat
 }
 
 pub fn run(args: &FitArgs, out: &mut dyn Write, err: &mut dyn Write) -> Result<(), CliError> {
+    if args.json {
+        quiet();
+    }
     if let Some(o) = &args.out {
         refuse_to_clobber(o, &args.model, args.force)?;
     }

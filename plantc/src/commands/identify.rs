@@ -174,6 +174,9 @@ fn table(out: &mut dyn Write, stages: &[Stage], measured: &[Experiment], channel
 }
 
 pub fn run(args: &IdentifyArgs, out: &mut dyn Write, err: &mut dyn Write) -> Result<(), CliError> {
+    if args.json {
+        crate::commands::fit::quiet();
+    }
     // the story goes to a buffer: printed as text, or replaced by JSON
     let mut text_out = Vec::new();
     let summary = story(args, &mut text_out, err)?;
