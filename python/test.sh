@@ -40,6 +40,10 @@ CARGO_TARGET_DIR="$root/target" PYO3_PYTHON="$venv/bin/python" \
 built=$(date +%s)
 echo "python/test.sh: wheel built in $((built - start)) s: $(ls "$work"/wheels/*.whl)"
 "${pip[@]}" install --force-reinstall --no-deps "$work"/wheels/*.whl
+# the command line the tests compare with (already built by `cargo test`)
+if [ -z "${PLANTC_BIN:-}" ]; then
+    (cd "$root" && cargo build -q -p plantc --bin plantc) && export PLANTC_BIN="$root/target/debug/plantc"
+fi
 cd "$work"   # never import the source tree's plantc/ by accident
 "$venv/bin/python" -m pytest -q -p no:cacheprovider "$here/tests" "$@"
 echo "python/test.sh: tests ran in $(( $(date +%s) - built )) s"

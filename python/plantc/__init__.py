@@ -15,7 +15,7 @@ the GIL and can be interrupted with Ctrl-C (``KeyboardInterrupt``).
 Results of the identification workflows (:meth:`Model.compare`,
 :meth:`Model.fit`, :meth:`Model.diagnose`, :meth:`Model.identify`) are the
 JSON of the matching ``plantc ... --json`` command (the same code runs), as
-:class:`Result` objects: ``r.fit.parameters[0].value`` or ``r["fit"]``;
+:class:`Result` objects: ``r.fit.parameters["J1"].value`` or ``r["fit"]``;
 ``r.json`` is the plain dict.
 """
 
@@ -84,8 +84,17 @@ class Result:
     def keys(self):
         return self.json.keys()
 
+    def items(self):
+        return [(k, Result._wrap(v)) for k, v in self.json.items()]
+
+    def __iter__(self):
+        return iter(self.json)
+
+    def __len__(self) -> int:
+        return len(self.json)
+
     def __dir__(self):
-        return list(self.json) + ["json", "keys"]
+        return list(self.json) + ["json", "keys", "items"]
 
     def __repr__(self) -> str:
         return f"{type(self).__name__}({', '.join(self.json)})"
@@ -281,7 +290,8 @@ class IdentifyResult(Result):
         first = stages[0]["report"]["experiments"]
         for i, e in enumerate(first):
             for ch in e["channels"]:
-                row: Dict[str, Any] = {"row": f"{e['name']} / {ch}"}
+                name = e.get("name") or _os.path.splitext(_os.path.basename(e.get("file", f"experiment {i + 1}")))[0]
+                row: Dict[str, Any] = {"row": f"{name} / {ch}"}
                 for s in stages:
                     exps = s["report"]["experiments"]
                     c = exps[i]["channels"].get(ch) if i < len(exps) else None
@@ -324,11 +334,15 @@ class IdentifyResult(Result):
             f"<table><tr><th></th>{head}</tr>{''.join(body)}</table>",
             "<p><small>cells: fit % (as MATLAB's compare) and RMSE in SI units, each stage's model simulated over the whole records</small></p>",
         ]
-        params = self.json.get("fit", {}).get("parameters", [])
+        params = self.json.get("fit", {}).get("parameters", {})
         if params:
+
+            def num(x: Any, f: str) -> str:
+                return "-" if x is None else format(x, f)
+
             rows = "".join(
-                f"<tr><td><code>{esc(p['name'])}</code></td><td>{p['value']:.5e}</td><td>{p.get('std_error', float('nan')):.1e}</td></tr>"
-                for p in params
+                f"<tr><td><code>{esc(name)}</code></td><td>{num(p.get('value'), '.5e')}</td><td>{num(p.get('std_error'), '.1e')}</td></tr>"
+                for name, p in params.items()
             )
             parts.append(f"<table><tr><th>parameter</th><th>value</th><th>std error</th></tr>{rows}</table>")
         for f in self._figures():

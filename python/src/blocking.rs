@@ -4,9 +4,12 @@
 //! released, and asks Python for pending signals between slices: Ctrl-C
 //! raises `KeyboardInterrupt` in the caller at once. The worker is then told
 //! to stop: the command line's progress reports ([`plantc::host`]) unwind it
-//! at the next report (fits report every iteration); a computation without
-//! progress reports (a simulation, a diagnosis) finishes in the background
-//! and its result is dropped.
+//! at the next report (fits report every iteration; `identify` between its
+//! steps and in its fits, not while the diagnosis screens candidates), and
+//! what it was building is dropped (identify's output directory is built
+//! aside and never swapped in). A computation without progress reports (a
+//! simulation, `diagnose`) finishes in the background and its result is
+//! dropped.
 //!
 //! A panic in the worker is caught there and becomes `plantc.PlantcError`;
 //! the worker has a large stack so that deeply nested model text cannot
