@@ -47,7 +47,11 @@ struct Stopped;
 /// Installed as [`plantc::host::set_progress_hook`]: unwinds the worker
 /// whose call was interrupted.
 pub fn progress_hook() {
-    let stop = STOP.with(|s| s.borrow().as_ref().is_some_and(|f| f.load(Ordering::Relaxed)));
+    let stop = STOP.with(|s| {
+        s.borrow()
+            .as_ref()
+            .is_some_and(|f| f.load(Ordering::Relaxed))
+    });
     if stop {
         resume_unwind(Box::new(Stopped));
     }
@@ -87,7 +91,9 @@ where
                 }
             }
             Err(mpsc::RecvTimeoutError::Disconnected) => {
-                return Err(PlantcError::new_err("the worker thread ended without a result"))
+                return Err(PlantcError::new_err(
+                    "the worker thread ended without a result",
+                ))
             }
         }
     }

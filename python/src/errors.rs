@@ -120,11 +120,9 @@ impl Failure {
                     Err(e) => e,
                 }
             }
-            Failure::NotFound(path) => PyFileNotFoundError::new_err((
-                2,
-                "No such file or directory".to_string(),
-                path,
-            )),
+            Failure::NotFound(path) => {
+                PyFileNotFoundError::new_err((2, "No such file or directory".to_string(), path))
+            }
             Failure::Io(m) => PyOSError::new_err(m),
             Failure::Input(m) => PyValueError::new_err(m),
             Failure::Compute(m) => PlantcError::new_err(m),

@@ -282,15 +282,8 @@ pub fn simulate(
         let mut ctrl = resolve(model, &derivation, &controller, &vals).map_err(input)?;
         set_gains(&mut ctrl, &gains).map_err(input)?;
         let control = Control::Feedback(ControllerEval::new(model, &ctrl).map_err(input)?);
-        let problem = SimProblem::new(
-            model,
-            &derivation.equations,
-            &vals,
-            control,
-            x0,
-            duration,
-        )
-        .map_err(input)?;
+        let problem = SimProblem::new(model, &derivation.equations, &vals, control, x0, duration)
+            .map_err(input)?;
         let notes: Vec<String> = problem.dynamics.notes().to_vec();
         let mut options = SimOptions {
             sample_rate,
