@@ -541,8 +541,9 @@ class Model:
 
 class _DataFiles:
     """Measurement files for the CLI: paths (a glob pattern expanded), or
-    DataFrames written to a private directory (``{name: frame}``; the name
-    becomes the experiment's)."""
+    DataFrames and numpy structured arrays written to a private directory
+    as CSV with 17 significant digits (``{name: frame}``; the name becomes
+    the experiment's)."""
 
     def __init__(self, data: Data):
         self.data = data
@@ -576,9 +577,19 @@ class _DataFiles:
                 p = _os.path.join(self.tmp, f"{name if name is not None else f'experiment{k + 1}'}.csv")
                 x.to_csv(p, index=False, float_format="%.17g")
                 files.append(p)
+            elif isinstance(x, _np.ndarray) and x.dtype.names:
+                # a structured array: its field names are the columns
+                if self.tmp is None:
+                    self.tmp = _tempfile.mkdtemp(prefix="plantc-data-")
+                p = _os.path.join(self.tmp, f"{name if name is not None else f'experiment{k + 1}'}.csv")
+                cols = _np.column_stack([_np.asarray(x[n], dtype=float) for n in x.dtype.names])
+                _np.savetxt(p, cols, delimiter=",", header=",".join(x.dtype.names), comments="", fmt="%.17g")
+                files.append(p)
             else:
                 raise TypeError(
-                    f"data: expected a path, a glob pattern or a pandas DataFrame, got {type(x).__name__}"
+                    "data: expected a path, a glob pattern, a pandas DataFrame or a numpy structured "
+                    f"array (field names = columns), got {type(x).__name__}"
+                    + (" without field names" if isinstance(x, _np.ndarray) else "")
                 )
         if not files:
             raise ValueError("data: no files given")

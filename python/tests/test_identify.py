@@ -118,6 +118,18 @@ def test_dataframes_are_data():
     close(a.json["rmse"], b.json["rmse"], rel=1e-12)
 
 
+def test_structured_arrays_are_data():
+    arrays = {
+        os.path.splitext(os.path.basename(p))[0]: np.genfromtxt(p, delimiter=",", names=True)
+        for p in COULOMB
+    }
+    a = plantc.Model.load(PEND).compare(arrays)
+    b = plantc.Model.load(PEND).compare(COULOMB)
+    close(a.json["rmse"], b.json["rmse"], rel=1e-12)
+    with pytest.raises(TypeError, match="field names"):
+        plantc.Model.load(PEND).compare([np.zeros((3, 4))])
+
+
 def test_missing_data_file_raises_file_not_found(tmp_path):
     with pytest.raises(FileNotFoundError):
         plantc.Model.load(PEND).compare([tmp_path / "none.csv"])
