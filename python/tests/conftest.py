@@ -20,14 +20,19 @@ def data_dir(name: str) -> str:
 @pytest.fixture(scope="session")
 def plantc_bin():
     """The `plantc` command line built from this tree (PLANTC_BIN, else
-    target/release or target/debug), or skip: tests that compare Python with
+    the newer of target/release and target/debug), or skip: tests that compare Python with
     the CLI as a separate process need it."""
-    cands = [os.environ.get("PLANTC_BIN")] + [
-        os.path.join(ROOT, "target", p, "plantc") for p in ("release", "debug")
+    env = os.environ.get("PLANTC_BIN")
+    if env:
+        return env
+    # the newer of the two builds (an older one may predate this tree)
+    built = [
+        c
+        for c in (os.path.join(ROOT, "target", p, "plantc") for p in ("release", "debug"))
+        if os.path.isfile(c) and os.access(c, os.X_OK)
     ]
-    for c in cands:
-        if c and os.path.isfile(c) and os.access(c, os.X_OK):
-            return c
+    if built:
+        return max(built, key=os.path.getmtime)
     found = shutil.which("plantc")
     if found:
         return found
