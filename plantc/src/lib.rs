@@ -6,6 +6,7 @@
 mod cli;
 mod commands;
 mod common;
+pub mod host;
 
 pub use cli::Cli;
 pub use common::CliError;

@@ -33,6 +33,7 @@ pub(crate) fn quiet() {
 pub(crate) fn with_progress<T>(what: &str, work: impl FnOnce(&dyn Fn(String)) -> T) -> T {
     let status = Mutex::new(String::new());
     let set = |s: String| {
+        crate::host::progress();
         if let Ok(mut g) = status.lock() {
             *g = s;
         }
@@ -61,10 +62,20 @@ pub(crate) fn with_progress<T>(what: &str, work: impl FnOnce(&dyn Fn(String)) ->
             }
             eprint!("\r\x1b[K");
         });
-        let r = work(&set);
-        done.store(true, Ordering::Relaxed);
-        r
+        // the spinner stops also when `work` unwinds (a host's progress
+        // hook stopping it): the scope waits for the spinner thread
+        let _stop_spinner = SetOnDrop(&done);
+        work(&set)
     })
+}
+
+/// Sets its flag when dropped.
+struct SetOnDrop<'a>(&'a AtomicBool);
+
+impl Drop for SetOnDrop<'_> {
+    fn drop(&mut self) {
+        self.0.store(true, Ordering::Relaxed);
+    }
 }
 
 /// A status line for [`with_progress`] from a fit's progress.
