@@ -9,8 +9,7 @@ use common::simulated::pendulum_text;
 
 use plantc_identify::synth::{parse_effect_spec, parse_experiment_spec};
 use plantc_identify::{
-    diagnose_with, read_experiment, synthesize, DiagnoseOptions, Diagnosis, Experiment, FitOptions,
-    SynthOptions, SynthSpec,
+    diagnose_with, DiagnoseOptions, Diagnosis, Experiment, FitOptions, SynthOptions, SynthSpec,
 };
 
 /// Synthesise `experiments` of `text` with `effects` hidden and read them
@@ -42,16 +41,7 @@ fn synth(
             ..SynthOptions::default()
         },
     };
-    let out = synthesize(text, &spec).expect("synthesizes");
-    out.files
-        .iter()
-        .map(|f| {
-            let p = common::write(test, &f.file_name, &f.text);
-            read_experiment(&p, &common::pendulum_spec())
-                .expect("reads")
-                .0
-        })
-        .collect()
+    common::synthesized(test, text, &spec)
 }
 
 fn verdict(d: &Diagnosis) -> Option<String> {

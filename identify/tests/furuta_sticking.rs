@@ -10,7 +10,7 @@
 mod common;
 
 use plantc_identify::synth::{parse_effect_spec, parse_experiment_spec};
-use plantc_identify::{read_experiment, synthesize, Experiment, SynthOptions, SynthSpec};
+use plantc_identify::{Experiment, SynthOptions, SynthSpec};
 
 /// A Furuta pendulum in lumped parameters (the arm's inertia and damping,
 /// the pendulum's centre-of-mass distance and damping estimated; the input
@@ -83,16 +83,7 @@ fn experiments(test: &str) -> Vec<Experiment> {
             ..SynthOptions::default()
         },
     };
-    let out = synthesize(FURUTA, &spec).expect("synthesizes");
-    out.files
-        .iter()
-        .map(|f| {
-            let p = common::write(test, &f.file_name, &f.text);
-            read_experiment(&p, &common::pendulum_spec())
-                .expect("reads")
-                .0
-        })
-        .collect()
+    common::synthesized(test, FURUTA, &spec)
 }
 
 // 5.7 min CPU in release (the story's three rounds on four records of

@@ -97,7 +97,14 @@ pub fn synth_pendulum(
             ..SynthOptions::default()
         },
     };
-    let out = synthesize(text, &spec).expect("synthesizes");
+    synthesized(test, text, &spec)
+}
+
+/// Synthesise `spec` from model `text`, write its files in the test's
+/// scratch directory and read them back as the CLI would (the pendulum's
+/// channels).
+pub fn synthesized(test: &str, text: &str, spec: &SynthSpec) -> Vec<Experiment> {
+    let out = synthesize(text, spec).expect("synthesizes");
     out.files
         .iter()
         .map(|f| {
