@@ -869,31 +869,6 @@ fn rms(ssr: f64, count: usize) -> f64 {
     (ssr / count.max(1) as f64).sqrt()
 }
 
-/// LM on the nuisance unknowns of `pb` only (the model parameters held) from
-/// `pt` over the whole record, with a fresh damping.
-fn lm_nuisance_only(
-    setup: &Setup<'_>,
-    pb: &Problem<'_>,
-    pt: &mut Point,
-    max_iterations: usize,
-    final_stage: bool,
-    run: &mut Run<'_>,
-) -> Result<(f64, usize, Stop), SimError> {
-    let p = setup.free.len();
-    let frozen: Vec<bool> = (0..pb.n_globals()).map(|j| j < p).collect();
-    let mut lambda = 1e-3;
-    lm(
-        pb,
-        pt,
-        f64::INFINITY,
-        &frozen,
-        max_iterations,
-        final_stage,
-        &mut lambda,
-        run,
-    )
-}
-
 /// Refit `q` on the whole record with the globals where `frozen` is true
 /// held (fresh damping, final tolerance); its SSR there, None when the fit
 /// or the cost could not be simulated.
@@ -1118,8 +1093,8 @@ impl<'a> Setup<'a> {
             .collect();
         let mut lo: Vec<f64> = self.bounds.iter().map(|b| b.0).collect();
         let mut hi: Vec<f64> = self.bounds.iter().map(|b| b.1).collect();
-        for &(_, i) in &offsets {
-            let d = self.offset_bound(i);
+        for &(e, i) in &offsets {
+            let d = self.offset_bound(e, i);
             lo.push(-d);
             hi.push(d);
         }
@@ -1139,19 +1114,24 @@ impl<'a> Setup<'a> {
         }
     }
 
-    /// How far a per-experiment offset on coordinate `i` may go: half a
-    /// turn on an angle (an encoder zero beyond it is the same zero on the
-    /// other side), on a length the largest magnitude the records measure
-    /// (a zero cannot lie beyond every position the rig visited).
-    fn offset_bound(&self, i: usize) -> f64 {
+    /// How far experiment `e`'s offset on coordinate `i` may go: the
+    /// largest magnitude its record measures on it, and on an angle at
+    /// most half a turn (an encoder zero beyond it is the same zero on the
+    /// other side). A sensor zero is a calibration error of the model's
+    /// landmark (upright, hanging, the track's centre): a pendulum swings
+    /// about it or a controller holds it, so a record passes it, and a
+    /// zero beyond every value it measured would put the landmark where
+    /// the rig never went. Without this bound a closed-loop fit whose
+    /// replay fell found the pendulum hanging with a zero of half a turn
+    /// (QUBE, offsets near +-pi).
+    fn offset_bound(&self, e: usize, i: usize) -> f64 {
+        let visited = self.sigs[e].q[i]
+            .iter()
+            .fold(0.0f64, |m, v| m.max(v.abs()))
+            .max(f64::MIN_POSITIVE);
         match self.model.coordinates[i].kind {
-            plantc_derive::model::CoordinateKind::Angle => std::f64::consts::PI,
-            _ => self
-                .sigs
-                .iter()
-                .flat_map(|s| s.q[i].iter())
-                .fold(0.0f64, |m, v| m.max(v.abs()))
-                .max(f64::MIN_POSITIVE),
+            plantc_derive::model::CoordinateKind::Angle => visited.min(std::f64::consts::PI),
+            _ => visited,
         }
     }
 
@@ -1713,7 +1693,8 @@ fn choose_segments(setup: &Setup<'_>, g0: &[f64], run: &mut Run<'_>) -> f64 {
 fn whole_before(setup: &Setup<'_>, g0: &[f64], run: &mut Run<'_>) -> (Point, (f64, usize)) {
     let pb = setup.nuisance_problem(None);
     let mut pt = setup.start_point(&pb, g0);
-    let _ = lm_nuisance_only(setup, &pb, &mut pt, 10, false, run);
+    run.simulations += 1;
+    let _ = lm_nuisance(setup, &pb, &mut pt);
     let frozen: Vec<bool> = (0..pb.n_globals()).map(|j| j < setup.free.len()).collect();
     let count = pb.count_all();
     let (pt, ssr) = bounded_polish(&pb, pt, &frozen, 10, run);
@@ -1786,7 +1767,8 @@ fn solve(
     let has_nuisance = ng > p || pb.n_locals() > 0;
     if has_nuisance && !warm {
         let pbn = setup.nuisance_problem(segments);
-        let _ = lm_nuisance_only(setup, &pbn, &mut pt, 10, false, run);
+        run.simulations += 1;
+        let _ = lm_nuisance(setup, &pbn, &mut pt);
     }
     run.simulations += 1;
     // the start within its priors' bounds, as the answer will be
@@ -1972,7 +1954,9 @@ fn staged(
 }
 
 /// Fit only the nuisance unknowns of `pb` (model parameters held) from
-/// `pt`; true when the result can be simulated.
+/// `pt`; true when the result can be simulated. The one estimator of the
+/// nuisance at given parameters: the fit's start (and its "before"),
+/// validation and compare all use it.
 ///
 /// Two steps, each unknown from the data that determine it:
 /// 1. **the initial state, an observer over the first samples**: the
