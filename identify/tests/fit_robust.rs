@@ -447,8 +447,11 @@ fn staged_horizons_never_end_worse() {
         r.before_cost, r.after_cost, r.parameters
     );
     assert!(r.after_cost <= r.before_cost);
-    // the printed cost is the whole record's at the result: re-evaluate it
-    // with a nuisance-only fit at the result's parameters
+    // the printed cost is the whole record's at the result: re-evaluated
+    // at the result's parameters with the start's nuisance (the observer
+    // over the first quarter second, as validation estimates it), it cannot
+    // be below the fit's, whose states and zeros were refined on the whole
+    // records with the parameters
     let again = fit(
         &m,
         &exps,
@@ -465,7 +468,7 @@ fn staged_horizons_never_end_worse() {
     )
     .expect("evaluates");
     assert!(
-        (again.before_cost / r.after_cost - 1.0).abs() < 0.05,
+        r.after_cost <= again.before_cost * (1.0 + 1e-9),
         "{} vs {}",
         again.before_cost,
         r.after_cost
