@@ -108,12 +108,7 @@ fn story(test: &str, text: &str, exps: &[Experiment]) -> (Story, Vec<String>) {
     let story = plantc_identify::identify(text, exps, &StoryOptions::default(), &mut |_| {})
         .expect("identifies");
     common::show_rounds(&story);
-    let effects: Vec<String> = story
-        .rounds
-        .iter()
-        .filter_map(|r| r.effect.as_ref().map(|e| e.label()))
-        .filter(|l| !story.removals.iter().any(|r| &r.effect.label() == l))
-        .collect();
+    let effects = common::final_effects(&story);
     eprintln!(
         "{test}: {} in {:.1} s wall; final effects {effects:?}",
         story.stop,
@@ -211,17 +206,7 @@ fn five_sticking_cases_on_the_shipped_model() {
 #[test]
 #[ignore = "issue 26 open: round 1 names stribeck_friction@q2 (Fs 0.1199, vs 7.7 rad/s, Fc 0.1184: a Stribeck friction that is Coulomb in all but name), round 2 coulomb_friction@q1 (0.1501, +0.06 %), round 3 a quadratic drag on q1 (8.2e-5 N m s^2) the rig does not have; 47.6 s CPU in release, measured 2026-11-27"]
 fn dry_friction_the_model_lacks() {
-    let full = shipped();
-    let text: String = full
-        .lines()
-        .filter(|l| !l.starts_with("parameter Fc"))
-        .map(|l| {
-            l.replace(" + coulomb_friction(Fc1)", "")
-                .replace(" + coulomb_friction(Fc2)", "")
-        })
-        .collect::<Vec<_>>()
-        .join("\n");
-    assert!(!text.contains("coulomb"), "{text}");
+    let text = common::double_pendulum_without_dry_friction();
     let exps = records("lacks", &[], FC_NEAR);
     let (story, mut found) = story("lacks", &text, &exps);
     found.sort();
