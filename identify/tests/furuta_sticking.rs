@@ -109,12 +109,7 @@ fn an_arm_held_by_static_friction_and_the_pendulums_dry_friction_are_both_named(
     .expect("identifies");
     common::show_rounds(&story);
     eprintln!("{}", story.stop);
-    let final_effects: Vec<String> = story
-        .rounds
-        .iter()
-        .filter_map(|r| r.effect.as_ref().map(|e| e.label()))
-        .filter(|l| !story.removals.iter().any(|r| &r.effect.label() == l))
-        .collect();
+    let final_effects = common::final_effects(&story);
     eprintln!("final effects: {final_effects:?}");
     // the arm's static friction may be named first as a deadzone of the
     // voltage (the same breakaway at the start of a step); the model that

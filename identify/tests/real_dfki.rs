@@ -3,6 +3,8 @@
 //! torques as input, `models/double_pendulum.plant`. Skipped when the shared
 //! data are absent.
 
+mod common;
+
 use std::path::{Path, PathBuf};
 
 use plantc_derive::model::load_model;
@@ -106,18 +108,7 @@ fn viscous_only_model_first_finds_coulomb_friction() {
     let Some(exps) = read_trajectory() else {
         return;
     };
-    let full =
-        std::fs::read_to_string(repo().join("models/double_pendulum.plant")).expect("model text");
-    let text: String = full
-        .lines()
-        .filter(|l| !l.starts_with("parameter Fc"))
-        .map(|l| {
-            l.replace(" + coulomb_friction(Fc1)", "")
-                .replace(" + coulomb_friction(Fc2)", "")
-        })
-        .collect::<Vec<_>>()
-        .join("\n");
-    assert!(!text.contains("coulomb"), "{text}");
+    let text = common::double_pendulum_without_dry_friction();
     let t = std::time::Instant::now();
     let d = plantc_identify::diagnose(&text, &exps, &FitOptions::default()).expect("diagnoses");
     eprintln!(

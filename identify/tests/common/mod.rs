@@ -126,3 +126,33 @@ pub fn show_rounds(story: &plantc_identify::Story) {
         );
     }
 }
+
+/// The effects a story ends with: those its rounds named, less those its
+/// end step removed again (`effect@target` labels, in the order named).
+pub fn final_effects(story: &plantc_identify::Story) -> Vec<String> {
+    story
+        .rounds
+        .iter()
+        .filter_map(|r| r.effect.as_ref().map(|e| e.label()))
+        .filter(|l| !story.removals.iter().any(|r| &r.effect.label() == l))
+        .collect()
+}
+
+/// `models/double_pendulum.plant`'s text with its dry friction taken out
+/// (the `Fc` parameters and their `coulomb_friction` terms): viscous
+/// friction only.
+pub fn double_pendulum_without_dry_friction() -> String {
+    let path = PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../models/double_pendulum.plant");
+    let full = std::fs::read_to_string(path).expect("models/double_pendulum.plant");
+    let text: String = full
+        .lines()
+        .filter(|l| !l.starts_with("parameter Fc"))
+        .map(|l| {
+            l.replace(" + coulomb_friction(Fc1)", "")
+                .replace(" + coulomb_friction(Fc2)", "")
+        })
+        .collect::<Vec<_>>()
+        .join("\n");
+    assert!(!text.contains("coulomb"), "{text}");
+    text
+}
