@@ -1534,19 +1534,21 @@ fn second_start(
     } else {
         r.parameters.clone()
     };
-    let from_baseline = if baseline.segments.is_none() {
-        Some((model, baseline))
-    } else {
-        // (on segments there is no growing horizon to take)
-        None
-    };
-    for (from, is_baseline) in [(from_baseline, true), (None, false)] {
-        if is_baseline && from.is_none() {
-            continue;
-        }
+    // the baseline's values with the growing horizons (not on segments:
+    // there is no growing horizon to take), then the nominal values
+    let mut starts = Vec::new();
+    if baseline.segments.is_none() {
+        starts.push(Some((model, baseline)));
+    }
+    starts.push(None);
+    for from in starts {
         if let Ok(f) = refit_from(&estimates, m, horizon, from, false, experiments, opts) {
+            // credited as a restart (not the warm refit from the baseline),
+            // so a winner among them is checked against the model without
+            // it refitted from its values (`decide`): a gain that belongs
+            // to the restart is not the effect's
             if r.fit.as_ref().is_none_or(|g| f.after_cost < g.after_cost) {
-                credit(r, f, is_baseline);
+                credit(r, f, false);
             }
         }
     }
