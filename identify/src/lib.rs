@@ -113,7 +113,8 @@ pub use synth::{
     SynthOptions, SynthSpec, Synthesized,
 };
 pub use validate::{
-    as_experiments, validate, ChannelScore, ExperimentValidation, ValidateOptions, Validation,
+    as_experiments, into_experiments, validate, ChannelScore, ExperimentValidation,
+    ValidateOptions, Validation,
 };
 pub use weights::ChannelWeight;
 pub use where_it_fails::{
