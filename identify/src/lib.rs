@@ -36,6 +36,7 @@ mod csv_reader;
 pub mod data;
 pub mod error;
 pub mod identifiability;
+mod lagged_products;
 mod lm;
 mod mat_reader;
 pub mod parallel;

@@ -34,6 +34,8 @@
 
 use serde::Serialize;
 
+use crate::lagged_products::lagged_products;
+
 /// Standard normal quantile of 99.5 % (two-sided 99 % band).
 pub const Z99: f64 = 2.5758293035489004;
 
@@ -202,18 +204,15 @@ pub fn residual_test(
     // the residual's autocorrelation out to where it has died away (its
     // correlation time's reach), for Bartlett's band
     let reach = ((4.0 * tau).ceil() as usize).clamp(lags, (n / 4).max(lags));
-    let rho = |x: &[f64], x0: f64, k: usize| -> f64 {
-        if x0 == 0.0 || k >= x.len() {
-            return 0.0;
+    // lagged products out to the reach (a quarter of the record for a slow
+    // model error: through the FFT, [`crate::lagged_products`])
+    let rho_of = |x: &[f64], x0: f64| -> Vec<f64> {
+        if x0 == 0.0 {
+            return vec![0.0; reach + 1];
         }
-        x[..x.len() - k]
-            .iter()
-            .zip(&x[k..])
-            .map(|(a, b)| a * b)
-            .sum::<f64>()
-            / x0
+        lagged_products(x, reach).iter().map(|p| p / x0).collect()
     };
-    let rho_e: Vec<f64> = (0..=reach).map(|k| rho(e, e0, k)).collect();
+    let rho_e = rho_of(e, e0);
     let cross = inputs
         .iter()
         .map(|(name, u)| {
@@ -244,8 +243,9 @@ pub fn residual_test(
                 })
                 .collect();
             // Bartlett: var = (1/N) sum_j rho_e(j) rho_u(j), j = -reach..reach
-            let var = (rho_e[0] * rho(&u, u0, 0)
-                + 2.0 * (1..=reach).map(|j| rho_e[j] * rho(&u, u0, j)).sum::<f64>())
+            let rho_u = rho_of(&u, u0);
+            let var = (rho_e[0] * rho_u[0]
+                + 2.0 * (1..=reach).map(|j| rho_e[j] * rho_u[j]).sum::<f64>())
             .max(1.0)
                 / n.max(1) as f64;
             let cband = Z99 * var.sqrt();
