@@ -164,7 +164,12 @@ mod tests {
         // products the dispatch avoids)
         let at = |k: usize| -> f64 { long.iter().zip(&long[k..]).map(|(a, b)| a * b).sum() };
         for k in [0, 99] {
-            assert!((f[k] - at(k)).abs() <= 1e-12 * at(0), "{} vs {}", f[k], at(k));
+            assert!(
+                (f[k] - at(k)).abs() <= 1e-12 * at(0),
+                "{} vs {}",
+                f[k],
+                at(k)
+            );
         }
     }
 }
