@@ -36,6 +36,7 @@ mod csv_reader;
 pub mod data;
 pub mod error;
 pub mod identifiability;
+mod lagged_products;
 mod lm;
 mod mat_reader;
 pub mod parallel;
@@ -113,7 +114,8 @@ pub use synth::{
     SynthOptions, SynthSpec, Synthesized,
 };
 pub use validate::{
-    as_experiments, validate, ChannelScore, ExperimentValidation, ValidateOptions, Validation,
+    as_experiments, into_experiments, validate, ChannelScore, ExperimentValidation,
+    ValidateOptions, Validation,
 };
 pub use weights::ChannelWeight;
 pub use where_it_fails::{

@@ -35,7 +35,7 @@ use plantc_derive::model::{Model, ParameterValues};
 use crate::experiment_sim::{BlockStart, Signals, SimError, Simulator};
 use crate::initial_state::Prior;
 use crate::lm::{BlockNormal, Normal};
-use crate::sensitivity::{ExtraColumn, SensitivitySimulator};
+use crate::sensitivity::{ExtraColumn, SampleSink, SensitivitySimulator};
 
 /// How one block is laid out.
 #[derive(Clone, Debug, PartialEq)]
@@ -313,16 +313,30 @@ impl Problem<'_> {
             self.sim
                 .simulate_block(&self.sigs[self.blocks[b].exp], &full, &start)
         });
-        let mut out: Vec<Vec<Vec<f64>>> = self
-            .sigs
-            .iter()
-            .map(|s| vec![vec![f64::NAN; s.len()]; self.n()])
-            .collect();
+        // a block that is its whole record is taken as it is (not copied:
+        // a long record's trajectory is large); others are stitched into
+        // NaN-filled records
+        let mut out: Vec<Vec<Vec<f64>>> = vec![Vec::new(); self.sigs.len()];
         for (b, tr) in parts.into_iter().enumerate() {
             let tr = tr?;
             let blk = &self.blocks[b];
+            let len = self.sigs[blk.exp].len();
+            let whole = blk.range == (0..len) && tr.q.iter().all(|q| q.len() == len);
+            if whole && out[blk.exp].is_empty() {
+                out[blk.exp] = tr.q;
+                continue;
+            }
+            let rec = &mut out[blk.exp];
+            if rec.is_empty() {
+                *rec = vec![vec![f64::NAN; len]; self.n()];
+            }
             for (i, q) in tr.q.iter().enumerate() {
-                out[blk.exp][i][blk.range.start..blk.range.start + q.len()].copy_from_slice(q);
+                rec[i][blk.range.start..blk.range.start + q.len()].copy_from_slice(q);
+            }
+        }
+        for (rec, s) in out.iter_mut().zip(self.sigs) {
+            if rec.is_empty() {
+                *rec = vec![vec![f64::NAN; s.len()]; self.n()];
             }
         }
         Ok(out)
@@ -371,42 +385,20 @@ impl Problem<'_> {
                 });
                 map.push(Col::Local(j));
             }
-            let tr = self
+            // J'J and J'r summed sample by sample as the simulation runs:
+            // the Jacobian (samples x columns) is never stored
+            let mut acc = NormalSink {
+                measured: sig.q.iter().map(|q| &q[k0..]).collect(),
+                weights: &self.weights,
+                parts: Vec::new(),
+                row: Vec::new(),
+            };
+            let refined = self
                 .sens
-                .simulate_block(sig, &full, &start, &tied, &extra)?;
+                .visit_block(sig, &full, &start, (&tied, &extra), &mut acc)?;
             let nc = map.len();
-            let mut jtj = vec![0.0; nc * nc];
-            let mut jtr = vec![0.0; nc];
-            let mut ssr = 0.0;
-            let mut count = 0;
-            let mut row = vec![0.0; nc];
-            for i in 0..n {
-                let w = self.weights[i];
-                for (k, v) in tr.q[i].iter().enumerate() {
-                    let r = w * (v - sig.q[i][k0 + k]);
-                    ssr += r * r;
-                    count += 1;
-                    for (c, rc) in row.iter_mut().enumerate() {
-                        *rc = w * tr.dq[i][c][k];
-                    }
-                    for c in 0..nc {
-                        let rc = row[c];
-                        if rc == 0.0 {
-                            continue;
-                        }
-                        jtr[c] += rc * r;
-                        for d in c..nc {
-                            jtj[c * nc + d] += rc * row[d];
-                        }
-                    }
-                }
-            }
-            for c in 0..nc {
-                for d in 0..c {
-                    jtj[c * nc + d] = jtj[d * nc + c];
-                }
-            }
-            Ok((map, jtj, jtr, ssr, count, tr.refined))
+            let (jtj, jtr, ssr, count) = acc.total(nc);
+            Ok((map, jtj, jtr, ssr, count, refined))
         });
         let mut nrm = Normal::new(ng, self.blocks.iter().map(|b| b.free_state.len()));
         // the priors: residual (l - mean)/sigma, Jacobian 1/sigma
@@ -459,4 +451,90 @@ impl Problem<'_> {
 enum Col {
     Global(usize),
     Local(usize),
+}
+
+/// One coordinate's share of a block's normal equations.
+struct CoordinateNormal {
+    /// `J'J` (upper triangle used), `nc x nc`.
+    jtj: Vec<f64>,
+    jtr: Vec<f64>,
+    ssr: f64,
+    count: usize,
+}
+
+/// Sums a block's `J'J`, `J'r` and SSR as its sensitivity simulation
+/// hands over the samples ([`SampleSink`]). One sum per coordinate, each in
+/// sample order, added in coordinate order at the end: the same terms in
+/// the same order as summing a stored Jacobian coordinate by coordinate,
+/// but for the last additions of each coordinate's share (rounding only).
+struct NormalSink<'s> {
+    /// Each coordinate's measurements from the block's first sample.
+    measured: Vec<&'s [f64]>,
+    weights: &'s [f64],
+    parts: Vec<CoordinateNormal>,
+    /// One weighted Jacobian row.
+    row: Vec<f64>,
+}
+
+impl SampleSink for NormalSink<'_> {
+    fn restart(&mut self, n: usize, nc: usize) {
+        self.parts = (0..n)
+            .map(|_| CoordinateNormal {
+                jtj: vec![0.0; nc * nc],
+                jtr: vec![0.0; nc],
+                ssr: 0.0,
+                count: 0,
+            })
+            .collect();
+        self.row = vec![0.0; nc];
+    }
+
+    fn sample(&mut self, k: usize, y: &[f64], dy: &[f64]) {
+        let nc = self.row.len();
+        let row = &mut self.row;
+        for (i, part) in self.parts.iter_mut().enumerate() {
+            let w = self.weights[i];
+            let r = w * (y[i] - self.measured[i][k]);
+            part.ssr += r * r;
+            part.count += 1;
+            for (c, rc) in row.iter_mut().enumerate() {
+                *rc = w * dy[i * nc + c];
+            }
+            for c in 0..nc {
+                let rc = row[c];
+                if rc == 0.0 {
+                    continue;
+                }
+                part.jtr[c] += rc * r;
+                for d in c..nc {
+                    part.jtj[c * nc + d] += rc * row[d];
+                }
+            }
+        }
+    }
+}
+
+impl NormalSink<'_> {
+    /// The block's `J'J` (full, symmetric), `J'r`, SSR and residual count.
+    fn total(self, nc: usize) -> (Vec<f64>, Vec<f64>, f64, usize) {
+        let mut jtj = vec![0.0; nc * nc];
+        let mut jtr = vec![0.0; nc];
+        let (mut ssr, mut count) = (0.0, 0);
+        for p in &self.parts {
+            for (a, b) in jtj.iter_mut().zip(&p.jtj) {
+                *a += b;
+            }
+            for (a, b) in jtr.iter_mut().zip(&p.jtr) {
+                *a += b;
+            }
+            ssr += p.ssr;
+            count += p.count;
+        }
+        for c in 0..nc {
+            for d in 0..c {
+                jtj[c * nc + d] = jtj[d * nc + c];
+            }
+        }
+        (jtj, jtr, ssr, count)
+    }
 }

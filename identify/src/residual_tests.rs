@@ -34,6 +34,8 @@
 
 use serde::Serialize;
 
+use crate::lagged_products::lagged_products;
+
 /// Standard normal quantile of 99.5 % (two-sided 99 % band).
 pub const Z99: f64 = 2.5758293035489004;
 
@@ -164,10 +166,22 @@ pub fn residual_test(
     lags: usize,
     dt: f64,
 ) -> ResidualTest {
-    let keep: Vec<usize> = (0..residual.len())
-        .filter(|&k| residual[k].is_finite())
-        .collect();
-    let e: Vec<f64> = keep.iter().map(|&k| residual[k]).collect();
+    // the finite samples: the residual itself when all are (no copies of a
+    // long record's residual and of the indices)
+    let keep: Option<Vec<usize>> = if residual.iter().all(|v| v.is_finite()) {
+        None
+    } else {
+        Some(
+            (0..residual.len())
+                .filter(|&k| residual[k].is_finite())
+                .collect(),
+        )
+    };
+    let e: std::borrow::Cow<[f64]> = match &keep {
+        None => residual.into(),
+        Some(keep) => keep.iter().map(|&k| residual[k]).collect(),
+    };
+    let e = &e[..];
     let n = e.len();
     let lags = lags.min(n.saturating_sub(1));
     let band = Z99 / (n.max(1) as f64).sqrt();
@@ -186,31 +200,31 @@ pub fn residual_test(
         })
         .collect();
     let outside = auto.iter().skip(1).filter(|r| r.abs() > band).count();
-    let tau = crate::decision::correlation_time(&e);
+    let tau = crate::decision::correlation_time(e);
     // the residual's autocorrelation out to where it has died away (its
     // correlation time's reach), for Bartlett's band
     let reach = ((4.0 * tau).ceil() as usize).clamp(lags, (n / 4).max(lags));
-    let rho = |x: &[f64], x0: f64, k: usize| -> f64 {
-        if x0 == 0.0 || k >= x.len() {
-            return 0.0;
+    // lagged products out to the reach (a quarter of the record for a slow
+    // model error: through the FFT, [`crate::lagged_products`])
+    let rho_of = |x: &[f64], x0: f64| -> Vec<f64> {
+        if x0 == 0.0 {
+            return vec![0.0; reach + 1];
         }
-        x[..x.len() - k]
-            .iter()
-            .zip(&x[k..])
-            .map(|(a, b)| a * b)
-            .sum::<f64>()
-            / x0
+        lagged_products(x, reach).iter().map(|p| p / x0).collect()
     };
-    let rho_e: Vec<f64> = (0..=reach).map(|k| rho(&e, e0, k)).collect();
+    let rho_e = rho_of(e, e0);
     let cross = inputs
         .iter()
         .map(|(name, u)| {
-            let u: Vec<f64> = keep
-                .iter()
-                .map(|&k| u.get(k).copied().unwrap_or(0.0))
-                .collect();
-            let mean = u.iter().sum::<f64>() / n.max(1) as f64;
-            let u: Vec<f64> = u.iter().map(|v| v - mean).collect();
+            let at = |k: usize| u.get(k).copied().unwrap_or(0.0);
+            let picked = || -> Box<dyn Iterator<Item = f64> + '_> {
+                match &keep {
+                    None => Box::new((0..n).map(at)),
+                    Some(keep) => Box::new(keep.iter().map(move |&k| at(k))),
+                }
+            };
+            let mean = picked().sum::<f64>() / n.max(1) as f64;
+            let u: Vec<f64> = picked().map(|v| v - mean).collect();
             let u0: f64 = u.iter().map(|v| v * v).sum();
             let den = (e0 * u0).sqrt();
             let values: Vec<f64> = (-(lags as i64)..=lags as i64)
@@ -229,8 +243,9 @@ pub fn residual_test(
                 })
                 .collect();
             // Bartlett: var = (1/N) sum_j rho_e(j) rho_u(j), j = -reach..reach
-            let var = (rho_e[0] * rho(&u, u0, 0)
-                + 2.0 * (1..=reach).map(|j| rho_e[j] * rho(&u, u0, j)).sum::<f64>())
+            let rho_u = rho_of(&u, u0);
+            let var = (rho_e[0] * rho_u[0]
+                + 2.0 * (1..=reach).map(|j| rho_e[j] * rho_u[j]).sum::<f64>())
             .max(1.0)
                 / n.max(1) as f64;
             let cband = Z99 * var.sqrt();

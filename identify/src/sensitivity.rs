@@ -238,6 +238,42 @@ pub struct SensitivityTrajectory {
     pub refined: bool,
 }
 
+/// Where a sensitivity simulation puts each sample: stored whole
+/// ([`SensitivitySimulator::simulate_block`]) or reduced as it comes
+/// ([`SensitivitySimulator::visit_block`], e.g. into normal equations).
+pub(crate) trait SampleSink {
+    /// A run of `n` coordinates and `nc` columns starts (again, after a
+    /// divergence, at a finer substep): forget any samples of a previous run.
+    fn restart(&mut self, n: usize, nc: usize);
+    /// Sample `k` (counted from the block's start): the measurements `y`
+    /// (`n`) and their sensitivities `dy[i * nc + j]` to column `j`.
+    fn sample(&mut self, k: usize, y: &[f64], dy: &[f64]);
+}
+
+/// The sink that stores the trajectory.
+struct Store {
+    q: Vec<Vec<f64>>,
+    dq: Vec<Vec<Vec<f64>>>,
+    len: usize,
+}
+
+impl SampleSink for Store {
+    fn restart(&mut self, n: usize, nc: usize) {
+        self.q = vec![vec![0.0; self.len]; n];
+        self.dq = vec![vec![vec![0.0; self.len]; nc]; n];
+    }
+
+    fn sample(&mut self, k: usize, y: &[f64], dy: &[f64]) {
+        let nc = self.dq.first().map_or(0, Vec::len);
+        for (i, (q, dq)) in self.q.iter_mut().zip(&mut self.dq).enumerate() {
+            q[k] = y[i];
+            for (j, d) in dq.iter_mut().enumerate() {
+                d[k] = dy[i * nc + j];
+            }
+        }
+    }
+}
+
 /// A compiled simulator with forward sensitivities.
 #[derive(Clone, Debug)]
 pub struct SensitivitySimulator {
@@ -413,6 +449,23 @@ impl SensitivitySimulator {
         self.run(sig, params, start, tied, extra, false)
     }
 
+    /// [`SensitivitySimulator::simulate_block`] handing each sample to
+    /// `sink` instead of storing the trajectory: memory independent of the
+    /// block's length (a whole 1e7-sample record's sensitivities would be
+    /// `coordinates x columns x samples` values). Same simulation, same
+    /// values. Returns whether the substep was refined
+    /// ([`SensitivityTrajectory::refined`]).
+    pub(crate) fn visit_block(
+        &self,
+        sig: &Signals,
+        params: &[f64],
+        start: &BlockStart,
+        (tied, extra): (&[bool], &[ExtraColumn]),
+        sink: &mut dyn SampleSink,
+    ) -> Result<bool, SimError> {
+        self.run_with(sig, params, start, tied, extra, false, sink)
+    }
+
     /// [`SensitivitySimulator::simulate_block`], evaluating the tape split
     /// (parameter part once per call) or, with `unsplit`, whole at every
     /// stage: the reference path the tests compare against.
@@ -426,11 +479,37 @@ impl SensitivitySimulator {
         extra: &[ExtraColumn],
         unsplit: bool,
     ) -> Result<SensitivityTrajectory, SimError> {
-        match self.run_refined(sig, params, start, tied, extra, unsplit, 1.0) {
+        let len = start.range.end.saturating_sub(start.range.start);
+        let mut store = Store {
+            q: Vec::new(),
+            dq: Vec::new(),
+            len,
+        };
+        let refined = self.run_with(sig, params, start, tied, extra, unsplit, &mut store)?;
+        Ok(SensitivityTrajectory {
+            q: store.q,
+            dq: store.dq,
+            refined,
+        })
+    }
+
+    /// [`SensitivitySimulator::run`] into `sink`; whether refined.
+    #[allow(clippy::too_many_arguments)]
+    fn run_with(
+        &self,
+        sig: &Signals,
+        params: &[f64],
+        start: &BlockStart,
+        tied: &[bool],
+        extra: &[ExtraColumn],
+        unsplit: bool,
+        sink: &mut dyn SampleSink,
+    ) -> Result<bool, SimError> {
+        match self.run_refined(sig, params, start, tied, extra, unsplit, 1.0, sink) {
             Err(SimError::Diverged { .. }) if self.opts.substep.is_none() => self
-                .run_refined(sig, params, start, tied, extra, unsplit, REFINE)
-                .map(|t| SensitivityTrajectory { refined: true, ..t }),
-            r => r,
+                .run_refined(sig, params, start, tied, extra, unsplit, REFINE, sink)
+                .map(|()| true),
+            r => r.map(|()| false),
         }
     }
 
@@ -446,7 +525,8 @@ impl SensitivitySimulator {
         extra: &[ExtraColumn],
         unsplit: bool,
         refine: f64,
-    ) -> Result<SensitivityTrajectory, SimError> {
+        sink: &mut dyn SampleSink,
+    ) -> Result<(), SimError> {
         let (h, effects, mut u) = prepare_run(
             sig,
             params,
@@ -515,9 +595,7 @@ impl SensitivitySimulator {
                 direct[i * nc + p + e] = c.direct[i];
             }
         }
-        let len = k1 - k0;
-        let mut q = vec![vec![0.0; len]; n];
-        let mut dq = vec![vec![vec![0.0; len]; nc]; n];
+        sink.restart(n, nc);
         let mut y = vec![0.0; n];
         let mut dy = vec![0.0; n * nc];
         let mut du_k = vec![0.0; nd * nc];
@@ -526,13 +604,11 @@ impl SensitivitySimulator {
             let kk = k - k0;
             for i in 0..n {
                 y[i] = z[i] + meas_off[i];
-                q[i][kk] = y[i];
                 for j in 0..nc {
-                    let v = z[nx + i * nc + j] + direct[i * nc + j];
-                    dy[i * nc + j] = v;
-                    dq[i][j][kk] = v;
+                    dy[i * nc + j] = z[nx + i * nc + j] + direct[i * nc + j];
                 }
             }
+            sink.sample(kk, &y, &dy);
             if let Some((law, rep, ev, fstate, u_law, ls)) = closed.as_mut() {
                 ev.step(law, rep, k, &y, fstate, u_law, Some((ls, &dy, &mut du_k)));
                 let mut hist = du_hist.borrow_mut();
@@ -566,11 +642,7 @@ impl SensitivitySimulator {
             &mut sys,
             at_sample,
         )?;
-        Ok(SensitivityTrajectory {
-            q,
-            dq,
-            refined: false,
-        })
+        Ok(())
     }
 
     /// Loop state at a block starting at `k0` ([`loop_start`]) and the

@@ -41,7 +41,6 @@ use crate::experiment_sim::BlockStart;
 use crate::fit::{lm_nuisance, nuisance_estimates, FitError, FitOptions, Offsets, Setup};
 use crate::fit::{ExperimentEstimate, Horizon};
 use crate::initial_state::smoothed_state;
-use crate::metrics::fit_percent;
 use crate::problem::par_each;
 use crate::residual_tests::{residual_test, ResidualTest, DEFAULT_LAGS};
 
@@ -138,31 +137,36 @@ impl Validation {
 }
 
 /// Fit % and RMSE over the samples where the prediction is finite.
+///
+/// Summed in passes over the pairs rather than over copies of them (a long
+/// record's copies cost as much as its simulation): the same sums in the
+/// same order as [`crate::metrics::fit_percent`] and the RMSE on the filtered copies.
 fn score(channel: &str, y: &[f64], yhat: &[f64]) -> ChannelScore {
-    let (ys, hs): (Vec<f64>, Vec<f64>) = y
-        .iter()
-        .zip(yhat)
-        .filter(|(_, h)| h.is_finite())
-        .map(|(a, b)| (*a, *b))
-        .unzip();
-    let n = ys.len();
+    let pairs = || y.iter().zip(yhat).filter(|(_, h)| h.is_finite());
+    let n = pairs().count();
+    let sse: f64 = pairs().map(|(a, b)| (a - b).powi(2)).sum();
     let rmse = if n == 0 {
         f64::NAN
     } else {
-        (ys.iter()
-            .zip(&hs)
-            .map(|(a, b)| (a - b).powi(2))
+        (sse / n as f64).sqrt()
+    };
+    // fit % as `fit_percent`: None for a non-finite measurement or a
+    // constant channel
+    let fit = || -> Option<f64> {
+        if pairs().any(|(a, _)| !a.is_finite()) {
+            return None;
+        }
+        let mean = pairs().map(|(a, _)| a).sum::<f64>() / n as f64;
+        let den = pairs()
+            .map(|(a, _)| (a - mean) * (a - mean))
             .sum::<f64>()
-            / n as f64)
-            .sqrt()
+            .sqrt();
+        let sse: f64 = pairs().map(|(a, b)| (a - b) * (a - b)).sum();
+        (den != 0.0).then(|| 100.0 * (1.0 - sse.sqrt() / den))
     };
     ChannelScore {
         channel: channel.to_string(),
-        fit_percent: if n == 0 {
-            None
-        } else {
-            fit_percent(&ys, &hs).ok().flatten()
-        },
+        fit_percent: if n == 0 { None } else { fit() },
         rmse,
         samples: n,
     }
@@ -197,15 +201,17 @@ pub fn validate(
         },
         ..opts.fit.clone()
     };
-    let setup = Setup::new(model, experiments, &fo, &[])?;
+    let mut setup = Setup::new(model, experiments, &fo, &[])?;
     let n = model.coordinates.len();
     let names: Vec<&str> = model.coordinates.iter().map(|c| c.name.as_str()).collect();
     let pb = setup.nuisance_problem(None);
     let mut pt = setup.start_point(&pb, &[]);
     // nuisance: per experiment (independent), whole records
     let fitted = lm_nuisance(&setup, &pb, &mut pt);
-    let simulated = if fitted { pb.predict(&pt).ok() } else { None };
+    // the estimates (their normal equations run a sensitivity simulation of
+    // every record) before the records' simulations are held
     let estimates = nuisance_estimates(&setup, &pb, &pt);
+    let mut simulated = if fitted { pb.predict(&pt).ok() } else { None };
     let full = pb.full_at(&pt.g);
     let model_off = setup.sim.model_offsets(&full).map_err(FitError::Sim)?;
     let noise: Vec<f64> = setup.weights().iter().map(|w| w.noise).collect();
@@ -220,7 +226,7 @@ pub fn validate(
             })
         })
         .collect();
-    let predictions: Vec<Option<Vec<Vec<f64>>>> = match opts.horizon {
+    let mut predictions: Vec<Option<Vec<Vec<f64>>>> = match opts.horizon {
         None => vec![None; experiments.len()],
         Some(h) => par_each(experiments.len(), |e| {
             predict_ahead(
@@ -233,28 +239,60 @@ pub fn validate(
             )
         }),
     };
+    let spreads: Vec<f64> = setup.weights().iter().map(|w| w.spread).collect();
+    let closed_loop = setup.sim.law().map(|l| l.name.clone());
+    drop(pb);
+    // The scoring needs of the signals only the inputs (in closed loop the
+    // law's replayed ones) and the sample times: the measured coordinates
+    // are the experiments' own (the signals hold copies of them, which a
+    // long record cannot afford twice beside its simulation and residuals).
+    let mut sigs = std::mem::take(&mut setup.sigs);
+    drop(setup);
+    let dts: Vec<f64> = sigs.iter().map(|s| s.sample_time()).collect();
+    for (sig, exp) in sigs.iter_mut().zip(experiments) {
+        sig.t = Vec::new();
+        let same = names.iter().zip(&sig.q).all(|(name, q)| {
+            exp.values(name)
+                .is_some_and(|v| v.len() == q.len() && v.iter().zip(q).all(|(a, b)| a == b))
+        });
+        if same {
+            sig.q = Vec::new();
+        }
+    }
     let mut out = Vec::new();
     for (e, exp) in experiments.iter().enumerate() {
-        let sig = &setup.sigs[e];
+        let sig = &sigs[e];
+        let measured: Vec<&[f64]> = if sig.q.is_empty() {
+            names
+                .iter()
+                .map(|name| exp.values(name).unwrap_or_default())
+                .collect()
+        } else {
+            sig.q.iter().map(Vec::as_slice).collect()
+        };
         // a simulation that left the data is called diverged
         let left = simulated.as_ref().and_then(|s| {
             (0..n).find(|&i| {
-                let spread = setup.weights()[i].spread;
-                let r = crate::metrics::rmse(&sig.q[i], &s[e][i]).unwrap_or(f64::INFINITY);
-                r.is_nan() || r > crate::fit::DIVERGED_COST * spread
+                let r = crate::metrics::rmse(measured[i], &s[e][i]).unwrap_or(f64::INFINITY);
+                r.is_nan() || r > crate::fit::DIVERGED_COST * spreads[i]
             })
         });
+        // (moved out, not copied: a long record's simulation is large)
         let sim_e = simulated
-            .as_ref()
-            .map(|s| s[e].clone())
+            .as_mut()
+            .map(|s| std::mem::take(&mut s[e]))
             .filter(|_| left.is_none());
         let simulation: Vec<ChannelScore> = match &sim_e {
-            Some(s) => (0..n).map(|i| score(names[i], &sig.q[i], &s[i])).collect(),
+            Some(s) => (0..n)
+                .map(|i| score(names[i], measured[i], &s[i]))
+                .collect(),
             None => Vec::new(),
         };
-        let pred = predictions[e].clone();
+        let pred = predictions[e].take();
         let prediction: Vec<ChannelScore> = match &pred {
-            Some(p) => (0..n).map(|i| score(names[i], &sig.q[i], &p[i])).collect(),
+            Some(p) => (0..n)
+                .map(|i| score(names[i], measured[i], &p[i]))
+                .collect(),
             None => Vec::new(),
         };
         let resid_source = pred.as_ref().or(sim_e.as_ref());
@@ -267,15 +305,8 @@ pub fn validate(
         let residual_tests = match resid_source {
             Some(p) => (0..n)
                 .map(|i| {
-                    let r: Vec<f64> = sig.q[i].iter().zip(&p[i]).map(|(a, b)| a - b).collect();
-                    residual_test(
-                        &exp.name,
-                        names[i],
-                        &r,
-                        &inputs,
-                        opts.lags,
-                        sig.sample_time(),
-                    )
+                    let r: Vec<f64> = measured[i].iter().zip(&p[i]).map(|(a, b)| a - b).collect();
+                    residual_test(&exp.name, names[i], &r, &inputs, opts.lags, dts[e])
                 })
                 .collect(),
             None => Vec::new(),
@@ -303,7 +334,7 @@ pub fn validate(
     Ok(Validation {
         experiments: out,
         horizon: opts.horizon,
-        closed_loop: setup.sim.law().map(|l| l.name.clone()),
+        closed_loop,
     })
 }
 
@@ -367,20 +398,42 @@ pub fn as_experiments(
     measured
         .iter()
         .zip(sim)
-        .map(|(m, s)| Experiment {
-            name: m.name.clone(),
-            file: m.file.clone(),
-            t: m.t.clone(),
-            channels: model
-                .coordinates
-                .iter()
-                .enumerate()
-                .map(|(i, c)| crate::data::Channel {
-                    name: c.name.clone(),
-                    unit_note: None,
-                    values: s.map_or_else(|| vec![f64::NAN; m.len()], |s| s[i].clone()),
-                })
-                .collect(),
-        })
+        .map(|(m, s)| experiment_like(model, m, s.cloned()))
         .collect()
+}
+
+/// [`as_experiments`] taking the simulations over instead of copying them
+/// (a long record's simulation is as large as its data).
+pub fn into_experiments(
+    model: &Model,
+    measured: &[Experiment],
+    sim: Vec<Option<Vec<Vec<f64>>>>,
+) -> Vec<Experiment> {
+    measured
+        .iter()
+        .zip(sim)
+        .map(|(m, s)| experiment_like(model, m, s))
+        .collect()
+}
+
+/// `sim` (one vector per coordinate; None: NaN) as an experiment like `m`.
+fn experiment_like(model: &Model, m: &Experiment, sim: Option<Vec<Vec<f64>>>) -> Experiment {
+    let mut sim = sim.map(Vec::into_iter);
+    Experiment {
+        name: m.name.clone(),
+        file: m.file.clone(),
+        t: m.t.clone(),
+        channels: model
+            .coordinates
+            .iter()
+            .map(|c| crate::data::Channel {
+                name: c.name.clone(),
+                unit_note: None,
+                values: sim
+                    .as_mut()
+                    .and_then(Iterator::next)
+                    .unwrap_or_else(|| vec![f64::NAN; m.len()]),
+            })
+            .collect(),
+    }
 }

@@ -331,9 +331,8 @@ fn diagnose(
     let segments: Vec<GroupStats> = (0..nseg)
         .map(|s| {
             let (a, b) = (s * n / nseg, (s + 1) * n / nseg);
-            let idx: Vec<usize> = (a..b).collect();
             let (lo, hi) = (t[a.min(n - 1)], t[b.saturating_sub(1).max(a).min(n - 1)]);
-            stats(format!("segment {}", s + 1), lo, hi, &idx, &r)
+            stats(format!("segment {}", s + 1), lo, hi, a..b, &r)
         })
         .collect();
 
@@ -342,15 +341,23 @@ fn diagnose(
     let env = envelope(y, half_env);
     let (elo, ehi) = min_max(&env);
     let amplitude = thirds(&env, elo, ehi, ["small", "medium", "large"], &r);
+    // (each full-length buffer freed once used: a long record cannot hold
+    // them all at once)
+    drop(env);
 
     // Speed tertiles.
     let half_vel = ((o.velocity_window / 2.0) / dt).round().max(1.0) as usize;
-    let speed_abs: Vec<f64> = velocity(t, y, half_vel).iter().map(|v| v.abs()).collect();
+    let mut speed_abs = velocity(t, y, half_vel);
+    for v in &mut speed_abs {
+        *v = v.abs();
+    }
     let mut sorted = speed_abs.clone();
     sorted.sort_by(f64::total_cmp);
     let q = |p: f64| sorted[((p * (n - 1) as f64).round() as usize).min(n - 1)];
     let (c1, c2) = (q(1.0 / 3.0), q(2.0 / 3.0));
     let (smin, smax) = (sorted[0], sorted[n - 1]);
+    let q95 = q(0.95);
+    drop(sorted);
     let speed = vec![
         group("low", smin, c1, &speed_abs, &r, |v| v <= c1),
         group("medium", c1, c2, &speed_abs, &r, |v| v > c1 && v <= c2),
@@ -358,7 +365,7 @@ fn diagnose(
     ];
 
     // Turnarounds.
-    let thr = o.turnaround_fraction * q(0.95);
+    let thr = o.turnaround_fraction * q95;
     let turnarounds = vec![
         group("turnaround", 0.0, thr, &speed_abs, &r, |v| v < thr),
         group("moving", thr, smax, &speed_abs, &r, |v| v >= thr),
@@ -574,13 +581,21 @@ fn min_max(x: &[f64]) -> (f64, f64) {
 }
 
 /// Residual statistics over the given sample indices.
-fn stats(label: String, lower: f64, upper: f64, idx: &[usize], r: &[f64]) -> GroupStats {
-    let n = idx.len();
+/// (The indices are walked, not collected: a long record's would be as
+/// large as the record.)
+fn stats(
+    label: String,
+    lower: f64,
+    upper: f64,
+    idx: impl Iterator<Item = usize> + Clone,
+    r: &[f64],
+) -> GroupStats {
+    let n = idx.clone().count();
     let (rmse, bias) = if n == 0 {
         (None, None)
     } else {
-        let s2: f64 = idx.iter().map(|&i| r[i] * r[i]).sum();
-        let s1: f64 = idx.iter().map(|&i| r[i]).sum();
+        let s2: f64 = idx.clone().map(|i| r[i] * r[i]).sum();
+        let s1: f64 = idx.map(|i| r[i]).sum();
         (Some((s2 / n as f64).sqrt()), Some(s1 / n as f64))
     };
     GroupStats {
@@ -600,10 +615,10 @@ fn group(
     upper: f64,
     var: &[f64],
     r: &[f64],
-    keep: impl Fn(f64) -> bool,
+    keep: impl Fn(f64) -> bool + Copy,
 ) -> GroupStats {
-    let idx: Vec<usize> = (0..var.len()).filter(|&i| keep(var[i])).collect();
-    stats(label.to_string(), lower, upper, &idx, r)
+    let idx = (0..var.len()).filter(move |&i| keep(var[i]));
+    stats(label.to_string(), lower, upper, idx, r)
 }
 
 /// Three equal-width bins of `var` over [lo, hi].
@@ -632,6 +647,7 @@ pub fn envelope(x: &[f64], h: usize) -> Vec<f64> {
             (x[i] - mean).abs()
         })
         .collect();
+    drop(prefix);
     // the moving maximum in O(n) (a monotonic queue of candidate indices),
     // not O(n h): a 2 s window at 2 kHz is 4,000 samples wide
     let mut out = Vec::with_capacity(n);

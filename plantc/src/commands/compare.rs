@@ -7,8 +7,8 @@ use std::path::Path;
 
 use plantc_derive::model::Model;
 use plantc_identify::{
-    as_experiments, compare, plot_comparison, plot_residual_tests, validate, where_it_fails,
-    Experiment, FailOptions, FigureChannels, FitReport, ValidateOptions,
+    as_experiments, compare, into_experiments, plot_comparison, plot_residual_tests, validate,
+    where_it_fails, Experiment, FailOptions, FigureChannels, FitReport, ValidateOptions,
 };
 
 use crate::cli::CompareArgs;
@@ -163,14 +163,18 @@ pub fn run(args: &CompareArgs, out: &mut dyn Write, err: &mut dyn Write) -> Resu
         horizon: args.horizon,
         lags: args.lags,
     };
-    let v = with_progress("simulating", |_| {
+    let mut v = with_progress("simulating", |_| {
         validate(model, &vals.base, &measured, &opts)
     })
     .map_err(|e| CliError::failure(format!("error: {e}")))?;
-    let sims: Vec<Option<&Vec<Vec<f64>>>> =
-        v.experiments.iter().map(|e| e.simulated.as_ref()).collect();
-    let simulated = as_experiments(model, &measured, &sims);
+    // the simulations taken over, not copied (a long record's is large)
+    let sims: Vec<Option<Vec<Vec<f64>>>> = v
+        .experiments
+        .iter_mut()
+        .map(|e| e.simulated.take())
+        .collect();
     let all_simulated = sims.iter().all(Option::is_some);
+    let simulated = into_experiments(model, &measured, sims);
     let rep = if all_simulated {
         Some(report(model, &measured, &simulated)?)
     } else {
