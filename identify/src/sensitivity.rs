@@ -61,10 +61,10 @@ use plantc_derive::sym::{diff, Expr, SplitTape, Tape};
 
 use crate::closed_loop::{LoopEval, LoopLaw, LoopSens, Replay};
 use crate::experiment_sim::{
-    check_options, check_start, dynamics_outputs, forces, integrate, loop_start, parameters_slow,
-    prepare_run, received, received_derivatives, tape_inputs, BlockStart, Boundary, Dynamics,
-    Located, Rate, Segment, SignalEffects, Signals, SimError, SimOptions, StateDynamics,
-    StiffnessProbe, REFINE,
+    check_options, check_start, copy_short, dynamics_outputs, forces, integrate, loop_start,
+    parameters_slow, prepare_run, received, received_derivatives, tape_inputs, BlockStart,
+    Boundary, Dynamics, Located, Rate, Segment, SignalEffects, Signals, SimError, SimOptions,
+    StateDynamics, StiffnessProbe, REFINE,
 };
 
 /// The number of coordinates `n` of the per-stage kernels below: a constant
@@ -919,8 +919,8 @@ impl Dynamics for SensDynamics<'_> {
         let (n, m, p, nc) = (self.n, self.m, self.p, self.nc);
         let nx = 2 * n;
         let dim = nx + nx * nc;
-        self.tin[..nx].copy_from_slice(&z[..nx]);
-        self.tin[nx..nx + m].copy_from_slice(u);
+        copy_short(&mut self.tin[..nx], &z[..nx]);
+        copy_short(&mut self.tin[nx..nx + m], u);
         if self.unsplit {
             self.tape.eval(&self.tin, &mut self.out, &mut self.scratch);
         } else {
@@ -955,8 +955,8 @@ impl Dynamics for SensDynamics<'_> {
             None
         };
         mat_vec(&self.minv, n, &self.tmp, &mut self.acc);
-        dz[..n].copy_from_slice(&z[n..nx]);
-        dz[n..nx].copy_from_slice(&self.acc);
+        copy_short(&mut dz[..n], &z[n..nx]);
+        copy_short(&mut dz[n..nx], &self.acc);
         let s = &z[nx..dim];
         let (ds, tangent) = dz[nx..].split_at_mut(nx * nc);
         let blocks = &self.out[bs..bs * (nx + p + 1)];
