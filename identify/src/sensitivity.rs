@@ -642,6 +642,9 @@ struct SensDynamics<'s> {
     db: Vec<f64>,
     rate: Vec<f64>,
     moving: bool,
+    /// Whether `da`, `db` and `rate` are all zero (set by a segment
+    /// between two samples).
+    still: bool,
     /// `d t / d column` of the last event (the start of the segment after it).
     event_start: Vec<f64>,
     /// Event bookkeeping: the guard's gradient along the state and its
@@ -714,6 +717,7 @@ impl<'s> SensDynamics<'s> {
             db: vec![0.0; nc],
             rate: vec![0.0; nc],
             moving: false,
+            still: true,
             event_start: vec![0.0; nc],
             gz: vec![0.0; nx],
             gcol: vec![0.0; nc],
@@ -870,6 +874,19 @@ impl Dynamics for SensDynamics<'_> {
     }
 
     fn begin_segment(&mut self, seg: &Segment) {
+        // a whole sample interval (the common case): every boundary
+        // derivative is zero, as the loop below would write them
+        if seg.start == Boundary::Sample && seg.end == Boundary::Sample {
+            if !self.still {
+                self.da.fill(0.0);
+                self.db.fill(0.0);
+                self.rate.fill(0.0);
+                self.still = true;
+            }
+            self.moving = false;
+            return;
+        }
+        self.still = false;
         let mut moving = false;
         for c in 0..self.nc {
             let a = self.boundary_derivative(seg.start, c);
