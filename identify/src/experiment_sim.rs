@@ -643,7 +643,8 @@ pub(crate) trait Dynamics {
 /// array. The simulators copy such short slices several times per RK4
 /// stage, and a call to the platform's `memcpy` for 2-4 numbers cost more
 /// than the copy (6.5 % of the README main job's CPU time went to those
-/// calls, perf 2026-11-27).
+/// calls, perf 2026-11-27; callgrind on `plantc fit` of 3 x 10,000 samples:
+/// 170 M fewer instructions in `memcpy`, 125 M more inline, of 5.5 G).
 #[inline(always)]
 pub(crate) fn copy_short(dst: &mut [f64], src: &[f64]) {
     macro_rules! fixed {
