@@ -61,10 +61,10 @@ use plantc_derive::sym::{diff, Expr, SplitTape, Tape};
 
 use crate::closed_loop::{LoopEval, LoopLaw, LoopSens, Replay};
 use crate::experiment_sim::{
-    check_options, check_start, dynamics_outputs, forces, integrate, loop_start, parameters_slow,
-    prepare_run, received, received_derivatives, tape_inputs, BlockStart, Boundary, Dynamics,
-    Located, Rate, Segment, SignalEffects, Signals, SimError, SimOptions, StateDynamics,
-    StiffnessProbe, REFINE,
+    check_options, check_start, copy_short, dynamics_outputs, forces, integrate, loop_start,
+    parameters_slow, prepare_run, received, received_derivatives, tape_inputs, BlockStart,
+    Boundary, Dynamics, Located, Rate, Segment, SignalEffects, Signals, SimError, SimOptions,
+    StateDynamics, StiffnessProbe, REFINE,
 };
 
 /// The number of coordinates `n` of the per-stage kernels below: a constant
@@ -714,6 +714,9 @@ struct SensDynamics<'s> {
     db: Vec<f64>,
     rate: Vec<f64>,
     moving: bool,
+    /// Whether `da`, `db` and `rate` are all zero (set by a segment
+    /// between two samples).
+    still: bool,
     /// `d t / d column` of the last event (the start of the segment after it).
     event_start: Vec<f64>,
     /// Event bookkeeping: the guard's gradient along the state and its
@@ -786,6 +789,7 @@ impl<'s> SensDynamics<'s> {
             db: vec![0.0; nc],
             rate: vec![0.0; nc],
             moving: false,
+            still: true,
             event_start: vec![0.0; nc],
             gz: vec![0.0; nx],
             gcol: vec![0.0; nc],
@@ -942,6 +946,19 @@ impl Dynamics for SensDynamics<'_> {
     }
 
     fn begin_segment(&mut self, seg: &Segment) {
+        // a whole sample interval (the common case): every boundary
+        // derivative is zero, as the loop below would write them
+        if seg.start == Boundary::Sample && seg.end == Boundary::Sample {
+            if !self.still {
+                self.da.fill(0.0);
+                self.db.fill(0.0);
+                self.rate.fill(0.0);
+                self.still = true;
+            }
+            self.moving = false;
+            return;
+        }
+        self.still = false;
         let mut moving = false;
         for c in 0..self.nc {
             let a = self.boundary_derivative(seg.start, c);
@@ -991,8 +1008,8 @@ impl Dynamics for SensDynamics<'_> {
         let (n, m, p, nc) = (self.n, self.m, self.p, self.nc);
         let nx = 2 * n;
         let dim = nx + nx * nc;
-        self.tin[..nx].copy_from_slice(&z[..nx]);
-        self.tin[nx..nx + m].copy_from_slice(u);
+        copy_short(&mut self.tin[..nx], &z[..nx]);
+        copy_short(&mut self.tin[nx..nx + m], u);
         if self.unsplit {
             self.tape.eval(&self.tin, &mut self.out, &mut self.scratch);
         } else {
@@ -1027,8 +1044,8 @@ impl Dynamics for SensDynamics<'_> {
             None
         };
         mat_vec(&self.minv, n, &self.tmp, &mut self.acc);
-        dz[..n].copy_from_slice(&z[n..nx]);
-        dz[n..nx].copy_from_slice(&self.acc);
+        copy_short(&mut dz[..n], &z[n..nx]);
+        copy_short(&mut dz[n..nx], &self.acc);
         let s = &z[nx..dim];
         let (ds, tangent) = dz[nx..].split_at_mut(nx * nc);
         let blocks = &self.out[bs..bs * (nx + p + 1)];
