@@ -870,8 +870,12 @@ fn rms(ssr: f64, count: usize) -> f64 {
 }
 
 /// The nuisance of a fit's start (model parameters held): the observer
-/// ([`lm_nuisance`]), the one estimator validation and compare use; the
-/// fit's own steps refine it jointly with the parameters. Whole-record LM
+/// ([`lm_nuisance`]), the one estimator validation and compare use, with
+/// the sensor zeros at their prior's mean (0): the start values need not
+/// follow the whole record, and a zero fitted over a record the model does
+/// not follow goes anywhere its bound lets it (a cart-pole's hanging
+/// pendulum, 10 % off in length, got a zero of -pi); the fit's own steps
+/// refine states and zeros jointly with the parameters. Whole-record LM
 /// steps on the states alone do not serve as a start: on a closed-loop
 /// replay they lead the states and zeros where the parameters then follow
 /// (eight QUBE episodes with clipped starts, fitted from the data's smoothed
@@ -882,7 +886,7 @@ fn rms(ssr: f64, count: usize) -> f64 {
 /// 87-91 % on the other eight).
 fn start_nuisance(setup: &Setup<'_>, pb: &Problem<'_>, pt: &mut Point, run: &mut Run<'_>) {
     run.simulations += 1;
-    let _ = lm_nuisance(setup, pb, pt);
+    let _ = observe_nuisance(setup, pb, pt, false);
 }
 
 /// Refit `q` on the whole record with the globals where `frozen` is true
@@ -1993,6 +1997,11 @@ fn staged(
 /// within its bounds: a clipped release, where the smoother can only
 /// extrapolate).
 pub(crate) fn lm_nuisance(setup: &Setup<'_>, pb: &Problem<'_>, pt: &mut Point) -> bool {
+    observe_nuisance(setup, pb, pt, true)
+}
+
+/// [`lm_nuisance`], the sensor zeros fitted (step 2) only when `zeros`.
+fn observe_nuisance(setup: &Setup<'_>, pb: &Problem<'_>, pt: &mut Point, zeros: bool) -> bool {
     let mut sink = |_: &FitProgress| {};
     let mut run = Run {
         bounded: true,
@@ -2062,7 +2071,7 @@ pub(crate) fn lm_nuisance(setup: &Setup<'_>, pb: &Problem<'_>, pt: &mut Point) -
     let mut out = best.0;
     // 2. the sensor zeros over the whole record, the observed states held
     let p = setup.free.len();
-    if ng > p {
+    if zeros && ng > p {
         run.stage = OBSERVER_HORIZONS.len() + 1;
         run.hold_locals = true;
         let frozen: Vec<bool> = (0..ng).map(|j| j < p).collect();
