@@ -1188,15 +1188,35 @@ fn decide(
                 }
             }
         }
-        let top = ranking.first()?;
-        if !top.passes() {
+        // a gain a restart made belongs to the model without the effect: the
+        // passing leader, or with none passing the refit that passes the
+        // likelihood part with the largest margin (its effect below the
+        // noise, the rest of its gain the restart's), when it did not start
+        // from the baseline, is checked against the model without it
+        // refitted from its values
+        let passing = ranking.first().is_some_and(Ranked::passes);
+        let restart = if passing {
+            ranking.first()
+        } else {
+            ranking
+                .iter()
+                .filter(|r| {
+                    r.fit.is_some()
+                        && !r.from_baseline
+                        && r.test.as_ref().is_some_and(EffectTest::likely)
+                        && !checked.contains(&r.candidate.label())
+                })
+                .max_by(|a, b| margin(a).total_cmp(&margin(b)))
+        };
+        let Some(top) = restart else {
             return None;
-        }
+        };
         let label = top.candidate.label();
         if top.from_baseline || checked.contains(&label) {
-            return Some(top.candidate.clone());
+            return passing.then(|| top.candidate.clone());
         }
         checked.push(label.clone());
+        let verdict = passing.then(|| top.candidate.clone());
         let f = top.fit.as_ref().expect("passes implies refitted");
         // the model without the effect, from the candidate's values
         let start = with_estimates(model, baseline.base.clone(), &f.parameters);
@@ -1204,10 +1224,14 @@ fn decide(
         let mut again_opts = screening(judge.opts, start, horizon);
         again_opts.warm = Some(f.warm.clone());
         let Ok(again) = fit(model, judge.experiments, &again_opts) else {
-            return Some(top.candidate.clone());
+            return verdict;
         };
         if again.after_cost >= baseline.after_cost {
-            return Some(top.candidate.clone());
+            if passing {
+                return verdict;
+            }
+            // (no verdict: the next such refit is checked)
+            continue;
         }
         notes.push(format!(
             "the model without {label}, refitted from that candidate's values, reaches a weighted RMS {:.3}x lower than the first baseline: the better baseline is kept and every candidate is judged against it",
