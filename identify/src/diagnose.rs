@@ -1208,9 +1208,7 @@ fn decide(
                 })
                 .max_by(|a, b| margin(a).total_cmp(&margin(b)))
         };
-        let Some(top) = restart else {
-            return None;
-        };
+        let top = restart?;
         let label = top.candidate.label();
         if top.from_baseline || checked.contains(&label) {
             return passing.then(|| top.candidate.clone());
