@@ -204,7 +204,7 @@ fn five_sticking_cases_on_the_shipped_model() {
 /// terms (as `real_dfki.rs`'s viscous-only model), the clean rig's records.
 /// Both joints' dry friction should be named, within 2 %.
 #[test]
-#[ignore = "issue 26 open: round 1 names stribeck_friction@q2 (Fs 0.1199, vs 7.7 rad/s, Fc 0.1184: a Stribeck friction that is Coulomb in all but name), round 2 coulomb_friction@q1 (0.1501, +0.06 %), round 3 a quadratic drag on q1 (8.2e-5 N m s^2) the rig does not have: round 2 ends in a local minimum 41x the floor and the drag's refit, escaping it, reaches 0.96x and is credited with the restart; 47.6 s CPU in release (plantc identify), 126 s wall here, measured 2026-11-27"]
+#[ignore = "issue 26 open: round 1 names stribeck_friction@q2 (Coulomb in all but name), round 2 coulomb_friction@q1, round 3 a speed_limit@q2 the rig does not have (round 2 ends 31.6 in cost, the speed limit reaches 0.93); 35 s wall in release, measured 2026-11-28 (before: a quadratic drag in round 3, 47.6 s CPU)"]
 fn dry_friction_the_model_lacks() {
     let text = common::double_pendulum_without_dry_friction();
     let exps = records("lacks", &[], FC_NEAR);
