@@ -1210,11 +1210,11 @@ fn decide(
         };
         let top = restart?;
         let label = top.candidate.label();
+        let verdict = passing.then(|| top.candidate.clone());
         if top.from_baseline || checked.contains(&label) {
-            return passing.then(|| top.candidate.clone());
+            return verdict;
         }
         checked.push(label.clone());
-        let verdict = passing.then(|| top.candidate.clone());
         let f = top.fit.as_ref().expect("passes implies refitted");
         // the model without the effect, from the candidate's values
         let start = with_estimates(model, baseline.base.clone(), &f.parameters);

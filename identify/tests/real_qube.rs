@@ -55,6 +55,16 @@ fn episodes_in(dirs: &[&str]) -> Option<Vec<Experiment>> {
     Some(exps)
 }
 
+/// Channel `c`'s fit % in `scores` (minus infinity when absent or
+/// undefined).
+fn fit_percent(scores: &[plantc_identify::ChannelScore], c: &str) -> f64 {
+    scores
+        .iter()
+        .find(|x| x.channel == c)
+        .and_then(|x| x.fit_percent)
+        .unwrap_or(f64::NEG_INFINITY)
+}
+
 /// The recorded law replayed on the measured angles and references
 /// reproduces the logged controller output (`control_output`, before the
 /// feedforward is added... the law includes it: compare with plant_input)
@@ -114,12 +124,7 @@ fn leave_one_episode_out() {
             },
         )
         .expect("validates");
-        let get = |s: &[plantc_identify::ChannelScore], c: &str| {
-            s.iter()
-                .find(|x| x.channel == c)
-                .and_then(|x| x.fit_percent)
-                .unwrap_or(f64::NEG_INFINITY)
-        };
+        let get = fit_percent;
         let e = &v.experiments[0];
         eprintln!(
             "held out {}: fit {:.1} s, {}; simulation theta {:.1} % alpha {:.1} %; 0.5 s ahead theta {:.1} % alpha {:.1} %",
@@ -242,12 +247,7 @@ fn eight_fitted_eight_held_out() {
         },
     )
     .expect("validates");
-    let get = |s: &[plantc_identify::ChannelScore], c: &str| {
-        s.iter()
-            .find(|x| x.channel == c)
-            .and_then(|x| x.fit_percent)
-            .unwrap_or(f64::NEG_INFINITY)
-    };
+    let get = fit_percent;
     let mut bad = Vec::new();
     for e in &v.experiments {
         let (st, sa) = (get(&e.simulation, "theta"), get(&e.simulation, "alpha"));
