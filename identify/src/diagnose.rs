@@ -657,6 +657,15 @@ pub fn diagnose_from(
     opts: &DiagnoseOptions,
 ) -> Result<Diagnosis, DiagnoseError> {
     let model = model_from_text("baseline", text)?;
+    // every refit is judged on the samples the baseline was (a record's
+    // release transient left out, [`crate::release`])
+    let opts = &DiagnoseOptions {
+        fit: FitOptions {
+            starts: Some(baseline.warm.starts().to_vec()),
+            ..opts.fit.clone()
+        },
+        ..opts.clone()
+    };
     let nuisance = opts.fit.free_names(&model);
     let ee = EquationError::new(
         &model,

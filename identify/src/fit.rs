@@ -179,6 +179,12 @@ pub struct FitOptions {
     /// start values as a stage of their own (the identify story's nominal
     /// stage).
     pub simulate_start: bool,
+    /// The first sample of each record the model is asked to follow (see
+    /// [`crate::release`]); `None`: found from the data at the start values
+    /// (or taken from [`FitOptions::warm`]). A diagnosis passes its
+    /// baseline's to every refit so that all are judged on the same
+    /// samples.
+    pub starts: Option<Vec<usize>>,
 }
 
 /// Where a fit's nuisance ended: per experiment its sensor offsets by
@@ -191,6 +197,28 @@ pub struct WarmStart {
     offsets: Vec<Vec<(usize, f64)>>,
     /// Per block: experiment, first sample, initial state.
     blocks: Vec<(usize, usize, Vec<f64>)>,
+    /// Per experiment: the first sample the model follows.
+    starts: Vec<usize>,
+}
+
+impl WarmStart {
+    /// Per experiment: the first sample the model was asked to follow
+    /// ([`crate::release`]).
+    pub fn starts(&self) -> &[usize] {
+        &self.starts
+    }
+}
+
+/// Per experiment, the first sample `model` (at `opts.start`, or its
+/// nominal values) is asked to follow under `opts` (see
+/// [`crate::release`]): what [`fit`] finds, for callers that fit several
+/// models to the same records and judge them on the same samples.
+pub fn record_starts(
+    model: &Model,
+    experiments: &[Experiment],
+    opts: &FitOptions,
+) -> Result<Vec<usize>, FitError> {
+    Ok(Setup::new(model, experiments, opts, &[])?.starts)
 }
 
 impl FitOptions {
@@ -226,6 +254,7 @@ impl Default for FitOptions {
             warm: None,
             alternative_start: None,
             simulate_start: false,
+            starts: None,
         }
     }
 }
@@ -384,6 +413,23 @@ pub struct ExperimentEstimate {
     pub fit_before: Vec<Option<f64>>,
     /// Fit % per coordinate at the result.
     pub fit_after: Vec<Option<f64>>,
+    /// When the record follows the model only from a later sample (a
+    /// release transient at its start, [`crate::release`]): that sample's
+    /// time from the record's first, in s. The initial state is the state
+    /// there; the samples before it are in no cost, simulation or fit %.
+    pub release: Option<f64>,
+}
+
+impl ExperimentEstimate {
+    /// The release transient in words, when the record has one.
+    pub fn release_line(&self) -> Option<String> {
+        self.release.map(|t| {
+            format!(
+                "{}: followed from t = {t:.3} s: before it, a release transient the model cannot follow (an outside force, such as a hand letting go: the first prediction windows miss by more than the data move, and by more than any later window); those samples are in no cost or fit %",
+                self.name
+            )
+        })
+    }
 }
 
 /// The result of [`fit`].
@@ -931,6 +977,9 @@ pub(crate) struct Setup<'a> {
     base: Vec<f64>,
     bounds: Vec<(f64, f64)>,
     offset_coords: Vec<usize>,
+    /// Per experiment: the first sample the model is asked to follow
+    /// ([`crate::release`]).
+    pub(crate) starts: Vec<usize>,
     opts: &'a FitOptions,
 }
 
@@ -989,7 +1038,12 @@ impl<'a> Setup<'a> {
         let weights = channel_weights(&names, &records, &opts.weights);
         let offset_coords =
             offset_coordinates(model, &opts.offsets, law.as_ref(), opts.sim.dry_friction)?;
-        Ok(Setup {
+        let given = opts
+            .starts
+            .clone()
+            .or_else(|| opts.warm.as_ref().map(|w| w.starts.clone()))
+            .filter(|s| s.len() == sigs.len() && s.iter().zip(&sigs).all(|(&k, g)| k < g.len()));
+        let mut setup = Setup {
             model,
             sigs,
             sim,
@@ -1001,8 +1055,24 @@ impl<'a> Setup<'a> {
             base,
             bounds,
             offset_coords,
+            starts: Vec::new(),
             opts,
-        })
+        };
+        setup.starts = match given {
+            Some(s) => s,
+            None => crate::release::record_starts(&setup),
+        };
+        Ok(setup)
+    }
+
+    /// The model.
+    pub(crate) fn model(&self) -> &'a Model {
+        self.model
+    }
+
+    /// The free parameters' start values.
+    pub(crate) fn free_start(&self) -> Vec<f64> {
+        self.free.iter().map(|&i| self.base[i]).collect()
     }
 
     /// [`Setup::problem`] with sensitivities to the nuisance unknowns only
@@ -1019,11 +1089,12 @@ impl<'a> Setup<'a> {
         let n = self.model.coordinates.len();
         let mut blocks = Vec::new();
         for (e, sig) in self.sigs.iter().enumerate() {
+            let first = self.starts.get(e).copied().unwrap_or(0);
             let cuts: Vec<usize> = match segments {
-                None => vec![0, sig.len()],
+                None => vec![first, sig.len()],
                 Some(h) => {
-                    let mut c = vec![0];
-                    let mut k = 0;
+                    let mut c = vec![first];
+                    let mut k = first;
                     while k < sig.len() {
                         let t0 = sig.t[k];
                         let next = k + sig.t[k..].partition_point(|&t| t < t0 + h - 1e-12);
@@ -1221,7 +1292,11 @@ impl<'a> Setup<'a> {
                 (blk.exp, blk.range.start, x0)
             })
             .collect();
-        WarmStart { offsets, blocks }
+        WarmStart {
+            offsets,
+            blocks,
+            starts: self.starts.clone(),
+        }
     }
 
     /// `pt` with the nuisance of [`FitOptions::warm`] where it applies: the
@@ -1803,7 +1878,10 @@ fn solve(
     let first = (pt.clone(), before.0);
     let (mut best, last_stop) = staged(&pb, pt, first, &frozen, &horizons, opts, run);
     let floor = crate::weights::noise_cost(&setup.weights);
-    // multi-start when stalled far above the floor at a bound
+    // multi-start when stalled far above the floor at a bound (a damping
+    // at zero included: on the double pendulum missing a 4 ms delay the
+    // baseline stalls at 74x the floor with one there, and other starts
+    // find the basin where the delay is named)
     let at_bound =
         |g: &[f64]| (0..p).any(|j| crate::identifiability::at_bound(g[j], pb.lo[j], pb.hi[j]));
     if opts.multistart > 0
@@ -1998,6 +2076,13 @@ fn staged(
 /// extrapolate).
 pub(crate) fn lm_nuisance(setup: &Setup<'_>, pb: &Problem<'_>, pt: &mut Point) -> bool {
     observe_nuisance(setup, pb, pt, true)
+}
+
+/// The observer alone (step 1 of [`lm_nuisance`]) on every block of `pb`,
+/// the globals held: the start of each block that lets the model follow it
+/// best (for [`crate::release`], on windows).
+pub(crate) fn observe_windows(setup: &Setup<'_>, pb: &Problem<'_>, pt: &mut Point) -> bool {
+    observe_nuisance(setup, pb, pt, false)
 }
 
 /// [`lm_nuisance`], the sensor zeros fitted (step 2) only when `zeros`.
@@ -2389,13 +2474,17 @@ fn experiment_estimates(
                     })
                     .collect()
             };
+            // (over the samples simulated: a record's release transient,
+            // before its start, is not)
+            let first = setup.starts.get(e).copied().unwrap_or(0);
             let fits = |s: &Vec<Vec<f64>>| -> Vec<Option<f64>> {
                 (0..n)
                     .map(|i| {
-                        if s[i].iter().any(|v| !v.is_finite()) {
+                        let (y, yhat) = (&sig.q[i][first..], &s[i][first.min(s[i].len())..]);
+                        if yhat.iter().any(|v| !v.is_finite()) {
                             return None;
                         }
-                        crate::metrics::fit_percent(&sig.q[i], &s[i]).ok().flatten()
+                        crate::metrics::fit_percent(y, yhat).ok().flatten()
                     })
                     .collect()
             };
@@ -2407,6 +2496,7 @@ fn experiment_estimates(
                 rmse_after: rmse(&sim[e]),
                 fit_before: before.map_or(vec![None; n], |b| fits(&b[e])),
                 fit_after: fits(&sim[e]),
+                release: (first > 0).then(|| sig.t[first] - sig.t[0]),
             }
         })
         .collect()

@@ -43,6 +43,7 @@ pub mod parallel;
 pub mod plausibility;
 mod problem;
 pub mod progress;
+mod release;
 mod speculate;
 pub mod units;
 pub mod weights;

@@ -202,8 +202,12 @@ pub fn compare(
         let mut fits = BTreeMap::new();
         for &ch in channels {
             let (y, yhat) = channel_pair(m, s, ch)?;
-            // a simulation that could not be finished is diverged, not an
-            // error of the comparison (measured values must be finite)
+            // a simulation starts at its first finite sample (a record
+            // followed only after a release transient); one that could
+            // not be finished from there is diverged, not an error of the
+            // comparison (measured values must be finite)
+            let first = simulated_from(y, yhat);
+            let (y, yhat) = (&y[first..], &yhat[first..]);
             if y.len() == yhat.len()
                 && y.iter().all(|v| v.is_finite())
                 && yhat.iter().any(|v| !v.is_finite())
@@ -249,6 +253,18 @@ pub fn compare(
 }
 
 /// The measured and simulated values of one channel.
+/// Where a simulation `yhat` of `y` starts: its first finite sample when
+/// it has as many samples as `y` (a record followed only after a release
+/// transient, [`crate::release`], is not simulated before it), else 0.
+/// Comparisons, figures and where-it-fails look at the samples from there.
+pub(crate) fn simulated_from(y: &[f64], yhat: &[f64]) -> usize {
+    if y.len() == yhat.len() {
+        yhat.iter().position(|v| v.is_finite()).unwrap_or(0)
+    } else {
+        0
+    }
+}
+
 pub(crate) fn channel_pair<'a>(
     m: &'a Experiment,
     s: &'a Experiment,

@@ -142,6 +142,9 @@ pub fn axis_label(name: &str, unit: &str) -> String {
 /// samples; `diverged` when samples are not finite or fit % is below
 /// -100 (as [`crate::ChannelFit::diverged`]).
 pub fn fit_legend(label: &str, y: &[f64], yhat: &[f64]) -> String {
+    // (from where the simulation starts: not over a release transient)
+    let first = crate::metrics::simulated_from(y, yhat);
+    let (y, yhat) = (&y[first..], &yhat[first..]);
     if yhat.iter().any(|v| !v.is_finite()) {
         return format!("{label}, diverged");
     }

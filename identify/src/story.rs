@@ -492,6 +492,20 @@ fn story(
     opts: &StoryOptions,
     progress: &mut dyn FnMut(&StoryProgress),
 ) -> Result<Story, StoryError> {
+    // every round's models are fitted and judged on the same samples: each
+    // record from where the nominal model follows it (a release transient
+    // left out, [`crate::release`])
+    let opts = &StoryOptions {
+        fit: FitOptions {
+            starts: Some(match &opts.fit.starts {
+                Some(s) => s.clone(),
+                None => crate::fit::record_starts(model, experiments, &opts.fit)
+                    .map_err(StoryError::Fit)?,
+            }),
+            ..opts.fit.clone()
+        },
+        ..opts.clone()
+    };
     let mut stages = Vec::new();
     let mut rounds: Vec<Round> = Vec::new();
     let mut current_text = text.to_string();

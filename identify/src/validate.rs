@@ -247,6 +247,7 @@ pub fn validate(
     // are the experiments' own (the signals hold copies of them, which a
     // long record cannot afford twice beside its simulation and residuals).
     let mut sigs = std::mem::take(&mut setup.sigs);
+    let starts = std::mem::take(&mut setup.starts);
     drop(setup);
     let dts: Vec<f64> = sigs.iter().map(|s| s.sample_time()).collect();
     for (sig, exp) in sigs.iter_mut().zip(experiments) {
@@ -273,7 +274,16 @@ pub fn validate(
         // a simulation that left the data is called diverged
         let left = simulated.as_ref().and_then(|s| {
             (0..n).find(|&i| {
-                let r = crate::metrics::rmse(measured[i], &s[e][i]).unwrap_or(f64::INFINITY);
+                // (over the samples simulated: none before a release)
+                let sim = &s[e][i];
+                let r = if sim[starts[e].min(sim.len())..]
+                    .iter()
+                    .all(|v| v.is_finite())
+                {
+                    score(names[i], measured[i], sim).rmse
+                } else {
+                    f64::NAN
+                };
                 r.is_nan() || r > crate::fit::DIVERGED_COST * spreads[i]
             })
         });
@@ -355,11 +365,13 @@ fn predict_ahead(
     let dt = sig.sample_time();
     let hk = ((horizon / dt).round() as usize).max(1);
     let stride = (hk / 10).max(1);
-    let mut k0 = 0;
+    // (a release transient before the record's start is not predicted)
+    let first = setup.starts.get(e).copied().unwrap_or(0);
+    let mut k0 = first;
     while k0 + hk < len {
         let end = (k0 + hk + stride).min(len);
         let mut x0 = vec![0.0; 2 * n];
-        match start.filter(|_| k0 == 0) {
+        match start.filter(|_| k0 == first) {
             // at the record's start a smoother only extrapolates: the
             // state fitted over the first samples
             Some(s) => x0.copy_from_slice(s),

@@ -233,6 +233,10 @@ pub fn where_it_fails(
     let mut out = Vec::new();
     for &ch in channels {
         let (y, yhat) = channel_pair(measured, simulated, ch)?;
+        // (from where the simulation starts: not over a release transient)
+        let first = crate::metrics::simulated_from(y, yhat);
+        let (y, yhat) = (&y[first..], &yhat[first..]);
+        let t = measured.t.get(first..).unwrap_or(&measured.t);
         // a simulation that could not be finished: diverged, and nothing more
         if y.len() == yhat.len()
             && y.iter().all(|v| v.is_finite())
@@ -262,7 +266,7 @@ pub fn where_it_fails(
                     ratio: f64::INFINITY,
                     sentence: format!(
                         "the simulation diverged: it could not be continued past t = {:.3} s",
-                        measured.t.get(at).copied().unwrap_or(f64::NAN)
+                        t.get(at).copied().unwrap_or(f64::NAN)
                             - measured.t.first().copied().unwrap_or(0.0)
                     ),
                 }],
@@ -287,23 +291,15 @@ pub fn where_it_fails(
             },
             other => other,
         })?;
-        if measured.t.len() != y.len() {
+        if t.len() != y.len() {
             return Err(MetricsError::LengthMismatch {
                 experiment: measured.name.clone(),
                 channel: "t".into(),
-                measured: measured.t.len(),
+                measured: t.len(),
                 simulated: y.len(),
             });
         }
-        out.push(diagnose(
-            &measured.name,
-            ch,
-            &measured.t,
-            y,
-            yhat,
-            summary,
-            options,
-        ));
+        out.push(diagnose(&measured.name, ch, t, y, yhat, summary, options));
     }
     Ok(out)
 }

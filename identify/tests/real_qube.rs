@@ -218,46 +218,61 @@ fn diagnosis_does_not_absorb_the_controller() {
 }
 
 /// Issue 26's acceptance on the session's 16 episodes (raw/ and more/, 9 of
-/// them start clipped at +-10 V): fitted on the first 8 of more/ with the
-/// defaults (the README's `plantc fit` command), validated on the other 8.
-/// Every held-out episode 0.5 s ahead >= 90 % on the arm and >= 85 % on
-/// the pendulum (the issue's numbers), and no simulation diverges.
-/// Measured 2026-11-27 (release, 32 s CPU): 0.5 s ahead 92.0-96.4 % arm,
-/// 87.0-90.9 % pendulum; simulation 78.4-95.3 % arm, 62.3-88.2 % pendulum,
-/// short of the issue's 85 / 75 on two episodes (163141: 82.5 / 71.2,
-/// 163847: 78.4 / 62.3), which is why simulation is only checked for
-/// divergence here. Ignored in CI for its cost: run with
+/// them start clipped at +-10 V): fitted on 8 with the defaults (the
+/// README's `plantc fit` command), validated on the other 8, both ways
+/// round (the first 8 of more/, then the other 8). Every held-out episode
+/// 0.5 s ahead >= 90 % on the arm and >= 85 % on the pendulum, simulation
+/// at least 85 % / 75 % (the issue's numbers), no simulation diverges, and every
+/// episode that starts clipped is followed only after its release transient
+/// (the hand that still holds the pendulum when the controller starts,
+/// `plantc_identify::fit::ExperimentEstimate::release`).
+/// Measured 2026-11-28 (release build, 19.6 + 19.3 s CPU): simulation
+/// 90.5-94.7 % arm, 85.6-92.1 % pendulum; 0.5 s ahead 92.2-96.5 % /
+/// 87.7-91.5 %; clipped episodes followed from t = 0.25 s. Before the
+/// release rule (2026-11-27) the simulation was 62.3-88.2 % on the
+/// pendulum (163847: 78.4 / 62.3), all of it lost in the first second.
+/// Ignored in CI for its cost: run with
 /// `cargo test --release -p plantc-identify --test real_qube -- --ignored`.
 #[test]
-#[ignore = "16 real episodes, about 35 s CPU in release, minutes in debug"]
+#[ignore = "16 real episodes, about 40 s CPU in release, minutes in debug"]
 fn eight_fitted_eight_held_out() {
     let Some(all) = episodes_in(&["more", "raw"]) else {
         return;
     };
     let model = qube_model();
-    let (train, held) = all.split_at(8);
-    let r = fit(&model, train, &FitOptions::default()).expect("fits");
-    let v = validate(
-        &model,
-        &r.base,
-        held,
-        &ValidateOptions {
-            horizon: Some(0.5),
-            ..ValidateOptions::default()
-        },
-    )
-    .expect("validates");
-    let get = fit_percent;
     let mut bad = Vec::new();
-    for e in &v.experiments {
-        let (st, sa) = (get(&e.simulation, "theta"), get(&e.simulation, "alpha"));
-        let (pt, pa) = (get(&e.prediction, "theta"), get(&e.prediction, "alpha"));
-        eprintln!(
-            "{}: simulation theta {st:.1} % alpha {sa:.1} %; 0.5 s ahead theta {pt:.1} % alpha {pa:.1} %",
-            e.name
-        );
-        if !(pt >= 90.0 && pa >= 85.0 && st > 0.0 && sa > 0.0) {
-            bad.push(e.name.clone());
+    for (train, held) in [all.split_at(8), {
+        let (a, b) = all.split_at(8);
+        (b, a)
+    }] {
+        let r = fit(&model, train, &FitOptions::default()).expect("fits");
+        let v = validate(
+            &model,
+            &r.base,
+            held,
+            &ValidateOptions {
+                horizon: Some(0.5),
+                ..ValidateOptions::default()
+            },
+        )
+        .expect("validates");
+        let get = fit_percent;
+        for (e, exp) in v.experiments.iter().zip(held) {
+            let (st, sa) = (get(&e.simulation, "theta"), get(&e.simulation, "alpha"));
+            let (pt, pa) = (get(&e.prediction, "theta"), get(&e.prediction, "alpha"));
+            let clipped = exp
+                .values("Vm")
+                .is_some_and(|u| u.iter().take(20).any(|v| v.abs() >= 10.0));
+            eprintln!(
+                "{}: simulation theta {st:.1} % alpha {sa:.1} %; 0.5 s ahead theta {pt:.1} % alpha {pa:.1} %; clipped {clipped}, followed from {:?} s",
+                e.name, e.nuisance.release
+            );
+            if !(pt >= 90.0 && pa >= 85.0 && st >= 85.0 && sa >= 75.0) {
+                bad.push(e.name.clone());
+            }
+            if clipped && e.nuisance.release.is_none() {
+                bad.push(format!("{}: clipped start followed from t = 0", e.name));
+            }
         }
     }
     assert!(bad.is_empty(), "below the acceptance: {bad:?}");

@@ -243,6 +243,11 @@ pub fn run(args: &CompareArgs, out: &mut dyn Write, err: &mut dyn Write) -> Resu
     }
     // what was estimated per experiment
     for e in &v.experiments {
+        if let Some(l) = e.nuisance.release_line() {
+            let _ = writeln!(out, "  {l}");
+        }
+    }
+    for e in &v.experiments {
         let est: Vec<String> = e
             .nuisance
             .initial_state

@@ -208,6 +208,11 @@ pub(crate) fn write_fit(out: &mut dyn Write, r: &FitResult) {
         );
     }
     for e in &r.experiments {
+        if let Some(l) = e.release_line() {
+            let _ = writeln!(out, "  {l}");
+        }
+    }
+    for e in &r.experiments {
         let mut parts: Vec<String> = e
             .initial_state
             .iter()
@@ -256,6 +261,9 @@ pub(crate) fn write_validation(out: &mut dyn Write, v: &plantc_identify::Validat
             channel_fits(&e.simulation)
         };
         let _ = writeln!(out, "  {}: simulation fit {sim}", e.name);
+        if let Some(l) = e.nuisance.release_line() {
+            let _ = writeln!(out, "    {l}");
+        }
         if let Some(h) = v.horizon {
             let _ = writeln!(
                 out,

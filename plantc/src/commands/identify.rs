@@ -294,6 +294,11 @@ fn story(
     if let Some(replay) = &s.stabilised {
         let _ = writeln!(out, "   note: {}", replay.note());
     }
+    for e in &s.fit.experiments {
+        if let Some(l) = e.release_line() {
+            let _ = writeln!(out, "   {l}");
+        }
+    }
     write_stage_figures((&staging, dir), "1-nominal", model, &measured, nominal, err)?;
     let _ = writeln!(out, "   RMSE {:.3e}; where it fails:", nominal.report.rmse);
     if write_failures(out, model, &measured, &nominal.simulated)? == 0 {
