@@ -915,6 +915,27 @@ impl Search<'_> {
             })
     }
 
+    /// Whether `r`, a likely refit that did not start from the baseline,
+    /// owes its gain to the restart: the model without its effect, refitted
+    /// from its values, ends below the baseline (the check `decide` makes).
+    fn restart_is_the_baselines(&self, r: &Ranked) -> bool {
+        if r.from_baseline || !r.test.as_ref().is_some_and(EffectTest::likely) {
+            return false;
+        }
+        let Some(f) = r.fit.as_ref() else {
+            return false;
+        };
+        let start = with_estimates(self.model, self.baseline.base.clone(), &f.parameters);
+        let horizon = self
+            .baseline
+            .segments
+            .map_or(Horizon::Whole, Horizon::Segments);
+        let mut o = screening(self.judge.opts, start, horizon);
+        o.warm = Some(f.warm.clone());
+        fit(self.model, self.judge.experiments, &o)
+            .is_ok_and(|again| again.after_cost < self.baseline.after_cost)
+    }
+
     /// A candidate that passes with its residual at the floor: nothing is
     /// left for another to explain.
     fn settles(&self, r: &Ranked) -> bool {
@@ -1059,6 +1080,7 @@ impl Search<'_> {
             // trap every refit from it; the refitted candidates are started
             // again from the nominal values, in equation-error order
             let refitted: Vec<usize> = (0..n).filter(|&i| ranking[i].fit.is_some()).collect();
+            let mut checked_restart = false;
             for (k, &idx) in refitted.iter().enumerate() {
                 if !self.second_started.contains(&idx) && self.may_restart() {
                     let next: Vec<usize> = refitted[k..]
@@ -1073,6 +1095,17 @@ impl Search<'_> {
                     self.refit_nested(ranking, idx);
                     break;
                 }
+                // a restart's gain is the baseline's: once one is likely,
+                // the model without the effect is refitted from its values
+                // (as `decide` will); when that is a better minimum the
+                // other second starts are of no use (every candidate is
+                // judged again against it, and the story diagnoses again
+                // from it)
+                if !checked_restart && self.restart_is_the_baselines(&ranking[idx]) {
+                    break;
+                }
+                checked_restart |= ranking[idx].test.as_ref().is_some_and(EffectTest::likely)
+                    && !ranking[idx].from_baseline;
             }
         }
         // a speed force that passes without reaching the floor may stand in
