@@ -211,8 +211,7 @@ impl WarmStart {
 
 /// Per experiment, the first sample `model` (at `opts.start`, or its
 /// nominal values) is asked to follow under `opts` (see
-/// [`crate::release`]): what [`fit`] finds, for callers that fit several
-/// models to the same records and judge them on the same samples.
+/// [`crate::release`]) at those values, or what `opts.starts` gives.
 pub fn record_starts(
     model: &Model,
     experiments: &[Experiment],
@@ -1354,7 +1353,41 @@ impl<'a> Setup<'a> {
 
 /// [`fit`], calling `progress` after each LM iteration's linearisation (for
 /// progress bars on long fits).
+///
+/// A record is fitted from the sample its model follows ([`crate::release`]),
+/// judged at the start values unless [`FitOptions::starts`] gives it; when
+/// the fitted model draws that line elsewhere (a start so far off that every
+/// window misses, a hand's hold only the fitted model tells from the rest),
+/// the fit is done once more, from the same start values, on the samples the
+/// fitted model follows.
 pub fn fit_with_progress(
+    model: &Model,
+    experiments: &[Experiment],
+    opts: &FitOptions,
+    progress: &mut dyn FnMut(&FitProgress),
+) -> Result<FitResult, FitError> {
+    let r = fit_on_starts(model, experiments, opts, progress)?;
+    if opts.starts.is_some() || opts.warm.is_some() {
+        return Ok(r);
+    }
+    let at_result = FitOptions {
+        start: Some(r.base.clone()),
+        ..opts.clone()
+    };
+    let starts = record_starts(model, experiments, &at_result)?;
+    if starts == r.warm.starts {
+        return Ok(r);
+    }
+    let again = FitOptions {
+        starts: Some(starts),
+        ..opts.clone()
+    };
+    fit_on_starts(model, experiments, &again, progress)
+}
+
+/// [`fit_with_progress`] on the samples `opts` gives or the start values
+/// find.
+fn fit_on_starts(
     model: &Model,
     experiments: &[Experiment],
     opts: &FitOptions,

@@ -492,20 +492,10 @@ fn story(
     opts: &StoryOptions,
     progress: &mut dyn FnMut(&StoryProgress),
 ) -> Result<Story, StoryError> {
-    // every round's models are fitted and judged on the same samples: each
-    // record from where the nominal model follows it (a release transient
-    // left out, [`crate::release`])
-    let opts = &StoryOptions {
-        fit: FitOptions {
-            starts: Some(match &opts.fit.starts {
-                Some(s) => s.clone(),
-                None => crate::fit::record_starts(model, experiments, &opts.fit)
-                    .map_err(StoryError::Fit)?,
-            }),
-            ..opts.fit.clone()
-        },
-        ..opts.clone()
-    };
+    // every round's models are fitted and judged on the samples the first
+    // baseline was (each record from where that fitted model follows it, a
+    // release transient left out, [`crate::release`])
+    let mut opts = opts.clone();
     let mut stages = Vec::new();
     let mut rounds: Vec<Round> = Vec::new();
     let mut current_text = text.to_string();
@@ -527,6 +517,10 @@ fn story(
             None => diagnose_with(&current_text, experiments, &dopts),
         }
         .map_err(StoryError::Diagnose)?;
+        if opts.fit.starts.is_none() {
+            opts.fit.starts = Some(d.baseline.warm.starts().to_vec());
+        }
+        let opts = &opts;
         let current_model = model_from_text("model", &current_text).map_err(StoryError::Model)?;
         if rounds.is_empty() {
             // (the baseline as the diagnosis fitted it: a better baseline
@@ -658,7 +652,7 @@ fn story(
         removals: Vec::new(),
         stages,
     };
-    end.run(text, &rounds, experiments, opts, progress)?;
+    end.run(text, &rounds, experiments, &opts, progress)?;
     Ok(Story {
         stages: end.stages,
         rounds,
