@@ -1358,8 +1358,9 @@ impl<'a> Setup<'a> {
 /// judged at the start values unless [`FitOptions::starts`] gives it; when
 /// the fitted model draws that line elsewhere (a start so far off that every
 /// window misses, a hand's hold only the fitted model tells from the rest),
-/// the fit is done once more, from the same start values, on the samples the
-/// fitted model follows.
+/// the fit is refined once more on the samples the fitted model follows,
+/// from its result (no extra starts: the first fit had them; the
+/// simulation at the start values, when asked, is the first fit's).
 pub fn fit_with_progress(
     model: &Model,
     experiments: &[Experiment],
@@ -1380,9 +1381,23 @@ pub fn fit_with_progress(
     }
     let again = FitOptions {
         starts: Some(starts),
-        ..opts.clone()
+        multistart: 0,
+        simulate_start: false,
+        ..at_result
     };
-    fit_on_starts(model, experiments, &again, progress)
+    let mut out = fit_on_starts(model, experiments, &again, progress)?;
+    // the start values are the first fit's: so are the figures at them
+    // (over that fit's samples)
+    out.simulated_start = r.simulated_start;
+    out.before_cost = r.before_cost.max(out.after_cost);
+    out.before_rmse = r.before_rmse;
+    for (o, f) in out.experiments.iter_mut().zip(r.experiments) {
+        o.fit_before = f.fit_before;
+        o.rmse_before = f.rmse_before;
+    }
+    out.iterations += r.iterations;
+    out.simulations += r.simulations;
+    Ok(out)
 }
 
 /// [`fit_with_progress`] on the samples `opts` gives or the start values
