@@ -226,17 +226,17 @@ fn diagnosis_does_not_absorb_the_controller() {
 /// episode that starts clipped is followed only after its release transient
 /// (the hand that still holds the pendulum when the controller starts,
 /// `plantc_identify::fit::ExperimentEstimate::release`).
-/// Measured 2026-11-28 (release build, both splits 28 s wall on 2
-/// threads): simulation 90.3-96.2 % arm, 85.1-91.7 % pendulum; 0.5 s ahead
-/// 92.1-96.4 % / 87.0-91.1 %; the 9 clipped episodes followed from t = 0.25
-/// or 0.5 s, 4 of the 7 unclipped ones too (the hand holds them as well,
+/// Measured 2026-11-28 (release build, both splits about 60 s wall on 2
+/// threads): simulation 90.5-96.3 % arm, 85.3-92.1 % pendulum; 0.5 s ahead
+/// 92.2-96.5 % / 87.7-91.5 %; the 9 clipped episodes followed from t = 0.25
+/// or 0.5 s, 5 of the 7 unclipped ones too (the hand holds them as well,
 /// with a smaller kick). Before the
 /// release rule (2026-11-27) the simulation was 62.3-88.2 % on the
 /// pendulum (163847: 78.4 / 62.3), all of it lost in the first second.
 /// Ignored in CI for its cost: run with
 /// `cargo test --release -p plantc-identify --test real_qube -- --ignored`.
 #[test]
-#[ignore = "16 real episodes, about 40 s CPU in release, minutes in debug"]
+#[ignore = "16 real episodes, about 75 s CPU in release, minutes in debug"]
 fn eight_fitted_eight_held_out() {
     let Some(all) = episodes_in(&["more", "raw"]) else {
         return;
