@@ -760,6 +760,7 @@ pub fn diagnose_from(
         restart_ok: std::cell::OnceCell::new(),
         second_started: Vec::new(),
         ahead: Default::default(),
+        restart_fit: None,
     };
     if !baseline_at_floor {
         search.run(&mut ranking, blind, &mut notes);
@@ -778,6 +779,7 @@ pub fn diagnose_from(
             "the whole records replayed from the nominal values leave the data: no candidate refitted again from there (second starts), only from the baseline".to_string(),
         );
     }
+    let restart_fit = search.restart_fit.take();
     let mut baseline = baseline;
     let by_label = edited_by_label(&ranking, &edited);
     let verdict = decide(
@@ -786,6 +788,7 @@ pub fn diagnose_from(
         &model,
         &mut baseline,
         &judge,
+        restart_fit,
         &mut notes,
     );
     Ok(Diagnosis {
@@ -828,6 +831,18 @@ struct Search<'a> {
     second_started: Vec<usize>,
     /// Refits computed ahead on other cores ([`crate::parallel`]).
     ahead: crate::speculate::Ahead,
+    /// The model without a candidate's effect refitted from its values
+    /// ([`Search::restart_is_the_baselines`]), for `decide`, which would
+    /// make the same fit.
+    restart_fit: Option<RestartFit>,
+}
+
+/// A refit of the baseline model from candidate `label`'s fit (the one of
+/// weighted RMS `from_cost`).
+struct RestartFit {
+    label: String,
+    from_cost: f64,
+    fit: FitResult,
 }
 
 impl Search<'_> {
@@ -918,22 +933,29 @@ impl Search<'_> {
     /// Whether `r`, a likely refit that did not start from the baseline,
     /// owes its gain to the restart: the model without its effect, refitted
     /// from its values, ends below the baseline (the check `decide` makes).
-    fn restart_is_the_baselines(&self, r: &Ranked) -> bool {
+    fn restart_is_the_baselines(&mut self, r: &Ranked) -> bool {
         if r.from_baseline || !r.test.as_ref().is_some_and(EffectTest::likely) {
             return false;
         }
         let Some(f) = r.fit.as_ref() else {
             return false;
         };
-        let start = with_estimates(self.model, self.baseline.base.clone(), &f.parameters);
-        let horizon = self
-            .baseline
-            .segments
-            .map_or(Horizon::Whole, Horizon::Segments);
-        let mut o = screening(self.judge.opts, start, horizon);
-        o.warm = Some(f.warm.clone());
-        fit(self.model, self.judge.experiments, &o)
-            .is_ok_and(|again| again.after_cost < self.baseline.after_cost)
+        let Ok(again) = refit_from_fit(
+            self.model,
+            &self.baseline.base,
+            f,
+            self.baseline,
+            self.judge,
+        ) else {
+            return false;
+        };
+        let lower = again.after_cost < self.baseline.after_cost;
+        self.restart_fit = Some(RestartFit {
+            label: r.candidate.label(),
+            from_cost: f.after_cost,
+            fit: again,
+        });
+        lower
     }
 
     /// A candidate that passes with its residual at the floor: nothing is
@@ -1181,12 +1203,17 @@ pub(crate) const NESTED: &[(&str, &str)] = &[("stribeck_friction", "coulomb_fric
 /// passing candidate with the largest margin, a bigger effect over its
 /// simpler form only when it passes the rule against it, and not a gain a
 /// restart made (see the module docs).
+///
+/// `known`: a refit of the model without a candidate's effect from that
+/// candidate's values that the search made already (the same fit this
+/// check makes).
 fn decide(
     ranking: &mut [Ranked],
     edited: &[(String, Model)],
     model: &Model,
     baseline: &mut FitResult,
     judge: &Judge<'_>,
+    mut known: Option<RestartFit>,
     notes: &mut Vec<String>,
 ) -> Option<Candidate> {
     let model_of = |label: &str| edited.iter().find(|(l, _)| l == label).map(|(_, m)| m);
@@ -1265,12 +1292,12 @@ fn decide(
         checked.push(label.clone());
         let f = top.fit.as_ref().expect("passes implies refitted");
         // the model without the effect, from the candidate's values
-        let start = with_estimates(model, baseline.base.clone(), &f.parameters);
-        let horizon = baseline.segments.map_or(Horizon::Whole, Horizon::Segments);
-        let mut again_opts = screening(judge.opts, start, horizon);
-        again_opts.warm = Some(f.warm.clone());
-        let Ok(again) = fit(model, judge.experiments, &again_opts) else {
-            return verdict;
+        let again = match known.take() {
+            Some(k) if k.label == label && k.from_cost == f.after_cost => k.fit,
+            _ => match refit_from_fit(model, &baseline.base, f, baseline, judge) {
+                Ok(a) => a,
+                Err(_) => return verdict,
+            },
         };
         if again.after_cost >= baseline.after_cost {
             if passing {
@@ -1442,11 +1469,7 @@ fn simpler_from_bigger<'m>(
     ) else {
         return;
     };
-    let start = with_estimates(m, own.base.clone(), &big.parameters);
-    let horizon = baseline.segments.map_or(Horizon::Whole, Horizon::Segments);
-    let mut o = screening(judge.opts, start, horizon);
-    o.warm = Some(big.warm.clone());
-    let Ok(again) = fit(m, judge.experiments, &o) else {
+    let Ok(again) = refit_from_fit(m, &own.base, big, baseline, judge) else {
         return;
     };
     if again.after_cost >= own.after_cost {
@@ -1461,6 +1484,22 @@ fn simpler_from_bigger<'m>(
     credit(&mut ranking[0], again, false);
     let s0 = judge.ssr(baseline);
     judge.judge(&mut ranking[0], m, s0);
+}
+
+/// Model `m` refitted from fit `f`'s values (its estimates over `base`, its
+/// nuisance warm), on the baseline's horizon, as a screening refit.
+fn refit_from_fit(
+    m: &Model,
+    base: &[f64],
+    f: &FitResult,
+    baseline: &FitResult,
+    judge: &Judge<'_>,
+) -> Result<FitResult, FitError> {
+    let start = with_estimates(m, base.to_vec(), &f.parameters);
+    let horizon = baseline.segments.map_or(Horizon::Whole, Horizon::Segments);
+    let mut o = screening(judge.opts, start, horizon);
+    o.warm = Some(f.warm.clone());
+    fit(m, judge.experiments, &o)
 }
 
 /// Record candidate `r`'s refit `f` (its test is the caller's).

@@ -2126,15 +2126,16 @@ pub(crate) fn lm_nuisance(setup: &Setup<'_>, pb: &Problem<'_>, pt: &mut Point) -
     observe_nuisance(setup, pb, pt, true)
 }
 
-/// The observer alone (step 1 of [`lm_nuisance`]) on every block of `pb`,
-/// the globals held: the start of each block that lets the model follow it
-/// best (for [`crate::release`], on windows).
-pub(crate) fn observe_windows(setup: &Setup<'_>, pb: &Problem<'_>, pt: &mut Point) -> bool {
-    observe_nuisance(setup, pb, pt, false)
-}
-
-/// [`lm_nuisance`], the sensor zeros fitted (step 2) only when `zeros`.
-fn observe_nuisance(setup: &Setup<'_>, pb: &Problem<'_>, pt: &mut Point, zeros: bool) -> bool {
+/// [`lm_nuisance`], the sensor zeros fitted (step 2) only when `zeros`:
+/// without them, the observer alone on every block of `pb` (the start of
+/// each block that lets the model follow it best; the fit's start, and
+/// [`crate::release`] on windows).
+pub(crate) fn observe_nuisance(
+    setup: &Setup<'_>,
+    pb: &Problem<'_>,
+    pt: &mut Point,
+    zeros: bool,
+) -> bool {
     let mut sink = |_: &FitProgress| {};
     let mut run = Run {
         bounded: true,

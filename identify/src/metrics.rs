@@ -171,16 +171,27 @@ pub fn rmse(y: &[f64], yhat: &[f64]) -> Result<f64, MetricsError> {
 /// `Ok(None)` when `y` is constant.
 pub fn fit_percent(y: &[f64], yhat: &[f64]) -> Result<Option<f64>, MetricsError> {
     check(y, yhat, "", "")?;
-    let mean = y.iter().sum::<f64>() / y.len() as f64;
-    let den: f64 = y
-        .iter()
-        .map(|a| (a - mean) * (a - mean))
+    Ok(fit_percent_of(|| y.iter().zip(yhat)))
+}
+
+/// [`fit_percent`] over the `(measured, simulated)` pairs `pairs` yields,
+/// walked rather than collected (a long record's copies cost as much as its
+/// simulation): None for no pairs or a constant measurement.
+pub(crate) fn fit_percent_of<'a, I>(pairs: impl Fn() -> I) -> Option<f64>
+where
+    I: Iterator<Item = (&'a f64, &'a f64)>,
+{
+    let n = pairs().count();
+    if n == 0 {
+        return None;
+    }
+    let mean = pairs().map(|(a, _)| a).sum::<f64>() / n as f64;
+    let den = pairs()
+        .map(|(a, _)| (a - mean) * (a - mean))
         .sum::<f64>()
         .sqrt();
-    if den == 0.0 {
-        return Ok(None);
-    }
-    Ok(Some(100.0 * (1.0 - sse(y, yhat).sqrt() / den)))
+    let sse: f64 = pairs().map(|(a, b)| (a - b) * (a - b)).sum();
+    (den != 0.0).then(|| 100.0 * (1.0 - sse.sqrt() / den))
 }
 
 /// Compares measured experiments with simulated ones (same order, same
@@ -252,7 +263,6 @@ pub fn compare(
     })
 }
 
-/// The measured and simulated values of one channel.
 /// Where a simulation `yhat` of `y` starts: its first finite sample when
 /// it has as many samples as `y` (a record followed only after a release
 /// transient, [`crate::release`], is not simulated before it), else 0.
@@ -265,6 +275,7 @@ pub(crate) fn simulated_from(y: &[f64], yhat: &[f64]) -> usize {
     }
 }
 
+/// The measured and simulated values of one channel.
 pub(crate) fn channel_pair<'a>(
     m: &'a Experiment,
     s: &'a Experiment,

@@ -51,7 +51,7 @@ pub(crate) fn record_starts(setup: &Setup<'_>) -> Vec<usize> {
     // the model follow it best (the observer, parameters and zeros held)
     let pb = setup.nuisance_problem(Some(OBSERVER_WINDOW));
     let mut pt = setup.start_point(&pb, &setup.free_start());
-    if !crate::fit::observe_windows(setup, &pb, &mut pt) {
+    if !crate::fit::observe_nuisance(setup, &pb, &mut pt, false) {
         return zeros;
     }
     let full = pb.full_at(&pt.g);

@@ -250,6 +250,18 @@ pub(crate) trait SampleSink {
     fn sample(&mut self, k: usize, y: &[f64], dy: &[f64]);
 }
 
+/// One sensitivity run's inputs (see [`SensitivitySimulator::simulate_block`]).
+#[derive(Clone, Copy)]
+struct BlockRun<'a> {
+    sig: &'a Signals,
+    params: &'a [f64],
+    start: &'a BlockStart,
+    tied: &'a [bool],
+    extra: &'a [ExtraColumn],
+    /// The tape evaluated whole at every stage (the tests' reference path).
+    unsplit: bool,
+}
+
 /// The sink that stores the trajectory.
 struct Store {
     q: Vec<Vec<f64>>,
@@ -418,10 +430,29 @@ impl SensitivitySimulator {
         params: &[f64],
         n_samples: usize,
     ) -> Result<SensitivityTrajectory, SimError> {
+        self.run_n(sig, params, n_samples, false)
+    }
+
+    /// The first `n` samples from the measured state, the tape split or
+    /// (`unsplit`, the tests' reference) not.
+    fn run_n(
+        &self,
+        sig: &Signals,
+        params: &[f64],
+        n: usize,
+        unsplit: bool,
+    ) -> Result<SensitivityTrajectory, SimError> {
         let offsets = self.signals.eval(params)?.offsets;
         let mut start = BlockStart::from_data(sig, self.opts.initial_velocity, &offsets);
-        start.range = 0..n_samples.min(sig.len());
-        self.run(sig, params, &start, &vec![true; self.n], &[], false)
+        start.range = 0..n.min(sig.len());
+        self.run(BlockRun {
+            sig,
+            params,
+            start: &start,
+            tied: &vec![true; self.n],
+            extra: &[],
+            unsplit,
+        })
     }
 
     /// The same simulator with a recorded controller in the loop (compile it
@@ -446,7 +477,14 @@ impl SensitivitySimulator {
         tied: &[bool],
         extra: &[ExtraColumn],
     ) -> Result<SensitivityTrajectory, SimError> {
-        self.run(sig, params, start, tied, extra, false)
+        self.run(BlockRun {
+            sig,
+            params,
+            start,
+            tied,
+            extra,
+            unsplit: false,
+        })
     }
 
     /// [`SensitivitySimulator::simulate_block`] handing each sample to
@@ -463,29 +501,28 @@ impl SensitivitySimulator {
         (tied, extra): (&[bool], &[ExtraColumn]),
         sink: &mut dyn SampleSink,
     ) -> Result<bool, SimError> {
-        self.run_with(sig, params, start, tied, extra, false, sink)
+        let run = BlockRun {
+            sig,
+            params,
+            start,
+            tied,
+            extra,
+            unsplit: false,
+        };
+        self.run_with(run, sink)
     }
 
     /// [`SensitivitySimulator::simulate_block`], evaluating the tape split
     /// (parameter part once per call) or, with `unsplit`, whole at every
     /// stage: the reference path the tests compare against.
-    #[allow(clippy::too_many_arguments)]
-    fn run(
-        &self,
-        sig: &Signals,
-        params: &[f64],
-        start: &BlockStart,
-        tied: &[bool],
-        extra: &[ExtraColumn],
-        unsplit: bool,
-    ) -> Result<SensitivityTrajectory, SimError> {
-        let len = start.range.end.saturating_sub(start.range.start);
+    fn run(&self, run: BlockRun<'_>) -> Result<SensitivityTrajectory, SimError> {
+        let len = run.start.range.end.saturating_sub(run.start.range.start);
         let mut store = Store {
             q: Vec::new(),
             dq: Vec::new(),
             len,
         };
-        let refined = self.run_with(sig, params, start, tied, extra, unsplit, &mut store)?;
+        let refined = self.run_with(run, &mut store)?;
         Ok(SensitivityTrajectory {
             q: store.q,
             dq: store.dq,
@@ -494,39 +531,31 @@ impl SensitivitySimulator {
     }
 
     /// [`SensitivitySimulator::run`] into `sink`; whether refined.
-    #[allow(clippy::too_many_arguments)]
-    fn run_with(
-        &self,
-        sig: &Signals,
-        params: &[f64],
-        start: &BlockStart,
-        tied: &[bool],
-        extra: &[ExtraColumn],
-        unsplit: bool,
-        sink: &mut dyn SampleSink,
-    ) -> Result<bool, SimError> {
-        match self.run_refined(sig, params, start, tied, extra, unsplit, 1.0, sink) {
-            Err(SimError::Diverged { .. }) if self.opts.substep.is_none() => self
-                .run_refined(sig, params, start, tied, extra, unsplit, REFINE, sink)
-                .map(|()| true),
+    fn run_with(&self, run: BlockRun<'_>, sink: &mut dyn SampleSink) -> Result<bool, SimError> {
+        match self.run_refined(run, 1.0, sink) {
+            Err(SimError::Diverged { .. }) if self.opts.substep.is_none() => {
+                self.run_refined(run, REFINE, sink).map(|()| true)
+            }
             r => r.map(|()| false),
         }
     }
 
     /// [`SensitivitySimulator::run`] with the automatic substep divided by
     /// `refine`.
-    #[allow(clippy::too_many_arguments)]
     fn run_refined(
         &self,
-        sig: &Signals,
-        params: &[f64],
-        start: &BlockStart,
-        tied: &[bool],
-        extra: &[ExtraColumn],
-        unsplit: bool,
+        run: BlockRun<'_>,
         refine: f64,
         sink: &mut dyn SampleSink,
     ) -> Result<(), SimError> {
+        let BlockRun {
+            sig,
+            params,
+            start,
+            tied,
+            extra,
+            unsplit,
+        } = run;
         let (h, effects, mut u) = prepare_run(
             sig,
             params,
@@ -1215,23 +1244,6 @@ impl Dynamics for SensDynamics<'_> {
             self.event_start[c] = self.da[c] + frac * (self.db[c] - self.da[c]) + self.dtau[c];
         }
         true
-    }
-}
-
-#[cfg(test)]
-impl SensitivitySimulator {
-    /// The first `n` samples from the measured state, split or not (tests).
-    fn run_n(
-        &self,
-        sig: &Signals,
-        params: &[f64],
-        n: usize,
-        unsplit: bool,
-    ) -> Result<SensitivityTrajectory, SimError> {
-        let offsets = self.signals.eval(params)?.offsets;
-        let mut start = BlockStart::from_data(sig, self.opts.initial_velocity, &offsets);
-        start.range = 0..n.min(sig.len());
-        self.run(sig, params, &start, &vec![true; self.n], &[], unsplit)
     }
 }
 

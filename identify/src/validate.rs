@@ -136,11 +136,9 @@ impl Validation {
     }
 }
 
-/// Fit % and RMSE over the samples where the prediction is finite.
-///
-/// Summed in passes over the pairs rather than over copies of them (a long
-/// record's copies cost as much as its simulation): the same sums in the
-/// same order as [`crate::metrics::fit_percent`] and the RMSE on the filtered copies.
+/// Fit % and RMSE over the samples where the prediction is finite (walked
+/// in passes, not copied: a long record's copies cost as much as its
+/// simulation).
 fn score(channel: &str, y: &[f64], yhat: &[f64]) -> ChannelScore {
     let pairs = || y.iter().zip(yhat).filter(|(_, h)| h.is_finite());
     let n = pairs().count();
@@ -150,23 +148,15 @@ fn score(channel: &str, y: &[f64], yhat: &[f64]) -> ChannelScore {
     } else {
         (sse / n as f64).sqrt()
     };
-    // fit % as `fit_percent`: None for a non-finite measurement or a
-    // constant channel
-    let fit = || -> Option<f64> {
-        if pairs().any(|(a, _)| !a.is_finite()) {
-            return None;
-        }
-        let mean = pairs().map(|(a, _)| a).sum::<f64>() / n as f64;
-        let den = pairs()
-            .map(|(a, _)| (a - mean) * (a - mean))
-            .sum::<f64>()
-            .sqrt();
-        let sse: f64 = pairs().map(|(a, b)| (a - b) * (a - b)).sum();
-        (den != 0.0).then(|| 100.0 * (1.0 - sse.sqrt() / den))
+    // as `fit_percent`: None for a non-finite measurement
+    let fit = if pairs().any(|(a, _)| !a.is_finite()) {
+        None
+    } else {
+        crate::metrics::fit_percent_of(pairs)
     };
     ChannelScore {
         channel: channel.to_string(),
-        fit_percent: if n == 0 { None } else { fit() },
+        fit_percent: fit,
         rmse,
         samples: n,
     }
