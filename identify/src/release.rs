@@ -45,21 +45,63 @@ use crate::fit::{Setup, OBSERVER_WINDOW};
 /// The first sample each record's model is asked to follow (0 when the
 /// record follows it from the start), at the setup's start values.
 pub(crate) fn record_starts(setup: &Setup<'_>) -> Vec<usize> {
+    let records = setup.sigs.len();
+    // The first windows alone first: a record whose first window is
+    // explained has no transient, whatever its later windows (most records;
+    // a few windows' work instead of the whole record's). The first
+    // windows' starts are observed on their own here, which only settles
+    // them further than beside every later window.
+    let mut firsts = setup.nuisance_problem(Some(OBSERVER_WINDOW));
+    firsts.blocks.dedup_by_key(|b| b.exp);
+    let Some(first) = windows(setup, &firsts) else {
+        return vec![0; records];
+    };
+    let suspect: Vec<bool> = (0..records)
+        .map(|e| first.iter().any(|w| w.0 == e && w.2))
+        .collect();
+    if !suspect.contains(&true) {
+        return vec![0; records];
+    }
+    let Some(windows) = windows(setup, &setup.nuisance_problem(Some(OBSERVER_WINDOW))) else {
+        return vec![0; records];
+    };
+    (0..records)
+        .map(|e| {
+            let w: Vec<&Window> = windows.iter().filter(|w| w.0 == e).collect();
+            // the largest misfit of the windows after each one
+            let mut later = vec![f64::NEG_INFINITY; w.len()];
+            for j in (0..w.len().saturating_sub(1)).rev() {
+                later[j] = later[j + 1].max(w[j + 1].3);
+            }
+            let worst = |j: usize| w[j].3 > later[j];
+            if !suspect[e] || w.len() < 2 || !(w[0].2 && worst(0)) {
+                return 0;
+            }
+            let mut j = 1;
+            while j + 1 < w.len() && worst(j) {
+                j += 1;
+            }
+            w[j].1
+        })
+        .collect()
+}
+
+/// One window: (experiment, first sample, unexplained, misfit per sample).
+type Window = (usize, usize, bool, f64);
+
+/// Every block of `pb` (windows of [`OBSERVER_WINDOW`]) started from the
+/// state that lets the model follow it best (the observer, parameters and
+/// zeros held), judged; None when the observer or the model's offsets
+/// cannot be computed.
+fn windows(setup: &Setup<'_>, pb: &crate::problem::Problem<'_>) -> Option<Vec<Window>> {
     let n = setup.model().coordinates.len();
-    let zeros = vec![0; setup.sigs.len()];
-    // every record cut into windows, each started from the state that lets
-    // the model follow it best (the observer, parameters and zeros held)
-    let pb = setup.nuisance_problem(Some(OBSERVER_WINDOW));
-    let mut pt = setup.start_point(&pb, &setup.free_start());
-    if !crate::fit::observe_nuisance(setup, &pb, &mut pt, false) {
-        return zeros;
+    let mut pt = setup.start_point(pb, &setup.free_start());
+    if !crate::fit::observe_nuisance(setup, pb, &mut pt, false) {
+        return None;
     }
     let full = pb.full_at(&pt.g);
-    let Ok(model_off) = setup.sim.model_offsets(&full) else {
-        return zeros;
-    };
-    // (experiment, first sample, unexplained, misfit per sample)
-    let windows: Vec<(usize, usize, bool, f64)> = crate::parallel::par_map(pb.blocks.len(), |b| {
+    let model_off = setup.sim.model_offsets(&full).ok()?;
+    Some(crate::parallel::par_map(pb.blocks.len(), |b| {
         let blk = &pb.blocks[b];
         let sig = &pb.sigs[blk.exp];
         let start = pb.block_start(b, &pt, &model_off, blk.range.clone());
@@ -83,24 +125,5 @@ pub(crate) fn record_starts(setup: &Setup<'_>) -> Vec<usize> {
         let s = if s.is_finite() { s } else { f64::INFINITY };
         let m = (n * len) as f64;
         (blk.exp, k0, s > d + m, s / m)
-    });
-    (0..setup.sigs.len())
-        .map(|e| {
-            let w: Vec<&(usize, usize, bool, f64)> = windows.iter().filter(|w| w.0 == e).collect();
-            // the largest misfit of the windows after each one
-            let mut later = vec![f64::NEG_INFINITY; w.len()];
-            for j in (0..w.len().saturating_sub(1)).rev() {
-                later[j] = later[j + 1].max(w[j + 1].3);
-            }
-            let worst = |j: usize| w[j].3 > later[j];
-            if w.len() < 2 || !(w[0].2 && worst(0)) {
-                return 0;
-            }
-            let mut j = 1;
-            while j + 1 < w.len() && worst(j) {
-                j += 1;
-            }
-            w[j].1
-        })
-        .collect()
+    }))
 }
