@@ -59,7 +59,7 @@ use crate::equation_error::{
 };
 use crate::fit::{
     fit, measured_of, replay_follows, residual_count, simulate_as, values_from, with_estimates,
-    Estimate, FitError, FitOptions, FitResult, Horizon, NuisanceFlag, Offsets,
+    Estimate, FitError, FitOptions, FitResult, GiveUp, Horizon, NuisanceFlag, Offsets,
 };
 use crate::speculate::Step;
 
@@ -220,6 +220,21 @@ impl Ranked {
     /// True when the decision rule names it against the baseline.
     pub fn passes(&self) -> bool {
         self.test.as_ref().is_some_and(EffectTest::passes)
+    }
+
+    /// The decision rule's words on it: passes or not, with the test's
+    /// numbers; a refit that stopped where it could no longer pass
+    /// ([`crate::GiveUp`]) says so.
+    pub fn rule_line(&self) -> String {
+        let mut line = match &self.test {
+            Some(t) if self.passes() => format!("passes: {}", t.describe()),
+            Some(t) => format!("does not pass: {}", t.describe()),
+            None => "not judged".to_string(),
+        };
+        if self.fit.as_ref().is_some_and(|f| f.gave_up) {
+            line.push_str("; refit stopped where it could no longer pass (its cost not refined)");
+        }
+        line
     }
 }
 
@@ -635,6 +650,30 @@ impl<'a> Judge<'a> {
         t
     }
 
+    /// The options of a screening refit of candidate `r` against
+    /// `baseline`: it gives up once it is at least as good as the baseline
+    /// but cannot pass the likelihood part of the rule, `N_eff ln(S0/S1) >
+    /// k ln N_eff`, i.e. cannot bring its weighted RMS below the
+    /// baseline's times `exp(-k ln N_eff / (2 N_eff))` ([`GiveUp`]). Such a
+    /// candidate can change no decision (it neither passes nor is likely;
+    /// against the simpler effect it contains, a bigger one that passes
+    /// passes by the same algebra), so its cost is not refined to the
+    /// screening tolerance: work in proportion to the question.
+    fn screening_options(&self, r: &Ranked, baseline: &FitResult) -> DiagnoseOptions {
+        let n = self.effective.max(1.0);
+        let k = r.candidate.parameters.len() as f64;
+        DiagnoseOptions {
+            fit: FitOptions {
+                give_up: Some(GiveUp {
+                    once_at: baseline.after_cost,
+                    unless_below: baseline.after_cost * (-k * n.ln() / (2.0 * n)).exp(),
+                }),
+                ..self.opts.fit.clone()
+            },
+            ..self.opts.clone()
+        }
+    }
+
     /// Judge `r` against the baseline (sum of squares `s0`).
     fn judge(&self, r: &mut Ranked, m: &Model, s0: f64) {
         r.test = self.test(r, m, s0, false);
@@ -854,13 +893,14 @@ impl Search<'_> {
         }
         let label = ranking[idx].candidate.label();
         crate::progress::candidates(&[idx + 1], ranking.len(), &label);
+        let opts = self.judge.screening_options(&ranking[idx], self.baseline);
         refit(
             &mut ranking[idx],
             &self.edited[idx].0,
             self.model,
             self.baseline,
             self.judge.experiments,
-            self.judge.opts,
+            &opts,
         );
         self.judge
             .judge(&mut ranking[idx], &self.edited[idx].0, self.s0);
@@ -877,13 +917,14 @@ impl Search<'_> {
             ranking[idx] = done;
             return;
         }
+        let opts = self.judge.screening_options(&ranking[idx], self.baseline);
         second_start(
             &mut ranking[idx],
             &self.edited[idx].0,
             self.model,
             self.baseline,
             self.judge.experiments,
-            self.judge.opts,
+            &opts,
         );
         self.judge
             .judge(&mut ranking[idx], &self.edited[idx].0, self.s0);
@@ -909,10 +950,11 @@ impl Search<'_> {
         self.ahead
             .compute(step, ranking, upcoming, shown, |r, idx| {
                 let m = &edited[idx].0;
+                let opts = judge.screening_options(r, baseline);
                 match step {
-                    Step::Refit => refit(r, m, model, baseline, judge.experiments, judge.opts),
+                    Step::Refit => refit(r, m, model, baseline, judge.experiments, &opts),
                     Step::SecondStart => {
-                        second_start(r, m, model, baseline, judge.experiments, judge.opts);
+                        second_start(r, m, model, baseline, judge.experiments, &opts);
                     }
                 }
                 judge.judge(r, m, s0);

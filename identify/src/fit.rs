@@ -185,6 +185,26 @@ pub struct FitOptions {
     /// baseline's to every refit so that all are judged on the same
     /// samples.
     pub starts: Option<Vec<usize>>,
+    /// Stop short where the fit cannot reach a cost ([`GiveUp`]); `None`
+    /// (the default) never gives up.
+    pub give_up: Option<GiveUp>,
+}
+
+/// When a fit stops short ([`FitOptions::give_up`]): on the final horizon,
+/// once its weighted RMS is at most `once_at` and the Gauss-Newton model at
+/// the iterate cannot bring it below `unless_below` (the residual's part
+/// outside the span of the sensitivities is above it: no step, however
+/// long, reaches lower to first order). A diagnosis' screening refit of a
+/// candidate effect gets the baseline's cost as `once_at` (a refit that
+/// ends above it was trapped and is started again, see `diagnose`) and the
+/// cost the decision rule needs for the candidate to pass as
+/// `unless_below`: it cannot pass, and its cost is not refined further.
+#[derive(Copy, Clone, Debug, PartialEq)]
+pub struct GiveUp {
+    /// The weighted RMS at or below which the fit may stop.
+    pub once_at: f64,
+    /// The weighted RMS the fit must be able to reach to go on.
+    pub unless_below: f64,
 }
 
 /// Where a fit's nuisance ended: per experiment its sensor offsets by
@@ -254,6 +274,7 @@ impl Default for FitOptions {
             alternative_start: None,
             simulate_start: false,
             starts: None,
+            give_up: None,
         }
     }
 }
@@ -486,6 +507,10 @@ pub struct FitResult {
     /// needed a start or a zero the data do not show, so it is not
     /// adequate however low its cost.
     pub nuisance_flags: Vec<NuisanceFlag>,
+    /// The fit stopped short where it could not reach
+    /// [`GiveUp::unless_below`] (a screening refit of a candidate that
+    /// cannot pass): its cost is above what a full refit would reach.
+    pub gave_up: bool,
 }
 
 /// A nuisance estimate at the edge of what the data allow (see
@@ -726,6 +751,10 @@ struct Run<'a> {
     /// The weighted RMS above which the screening tolerance suffices
     /// ([`FitOptions::coarse_far_above_floor`]; infinite when not).
     coarse_above: f64,
+    /// [`FitOptions::give_up`].
+    give_up: Option<GiveUp>,
+    /// Whether an LM run stopped at [`Stop::CannotReach`].
+    gave_up: bool,
     iterations: usize,
     simulations: usize,
     stage: usize,
@@ -739,6 +768,8 @@ enum Stop {
     Converged,
     NoDescent,
     MaxIterations,
+    /// The Gauss-Newton model cannot reach [`GiveUp::unless_below`].
+    CannotReach,
 }
 
 /// LM on `pb` from `pt` over `horizon` with the globals where `frozen` is
@@ -832,6 +863,16 @@ fn lm(
         } else {
             &nrm
         };
+        if final_stage
+            && run.give_up.is_some_and(|g| {
+                rms(nrm.ssr, nrm.count) <= g.once_at
+                    && rms(nrm.ssr - gauss_newton_reduction(nrm_step, &held), nrm.count)
+                        > g.unless_below
+            })
+        {
+            run.gave_up = true;
+            return Ok((nrm.ssr, nrm.count, Stop::CannotReach));
+        }
         let mut accepted = None;
         let mut first_trial = true;
         while *lambda < 1e12 {
@@ -907,6 +948,24 @@ fn lm(
         }
     }
     Ok((last.0, last.1, Stop::MaxIterations))
+}
+
+/// The reduction of the SSR the Gauss-Newton model at `nrm` predicts for
+/// its full step (the globals where `held` is true kept), bounds ignored:
+/// the residual's projection on the span of the sensitivities, the most
+/// any step can remove to first order. Solved with the smallest damping
+/// that keeps the system positive definite (from 1e-10 of each diagonal:
+/// the prediction of a damped step only falls short of the full one).
+fn gauss_newton_reduction(nrm: &crate::lm::Normal, held: &[bool]) -> f64 {
+    let mut lambda = 1e-10;
+    while lambda < 1e12 {
+        if let Some(d) = Damped::solve(nrm, lambda, held) {
+            let dl = d.locals(&d.dg);
+            return predicted_reduction(nrm, &d.dg, &dl).max(0.0);
+        }
+        lambda *= 10.0;
+    }
+    0.0
 }
 
 /// Weighted RMS from an SSR and count.
@@ -1435,6 +1494,8 @@ fn fit_on_starts(
         } else {
             f64::INFINITY
         },
+        give_up: opts.give_up,
+        gave_up: false,
         iterations: 0,
         simulations: 0,
         stage: 0,
@@ -1706,6 +1767,7 @@ fn fit_on_starts(
         warm,
         simulated_start,
         nuisance_flags: nuisance_flags(&setup, &pb, &pt),
+        gave_up: run.gave_up,
     })
 }
 
@@ -2142,6 +2204,8 @@ pub(crate) fn observe_nuisance(
         hold_locals: false,
         tolerance: FINAL_TOLERANCE,
         coarse_above: f64::INFINITY,
+        give_up: None,
+        gave_up: false,
         iterations: 0,
         simulations: 0,
         stage: 0,

@@ -91,8 +91,8 @@ pub use experiment_sim::{
 };
 pub use fit::{
     fit, fit_with_progress, resolve_closed_loop, signals_for, ClosedLoop, Estimate,
-    ExperimentEstimate, FitError, FitOptions, FitProgress, FitResult, Horizon, NuisanceFlag,
-    NuisanceValue, Offsets, WarmStart,
+    ExperimentEstimate, FitError, FitOptions, FitProgress, FitResult, GiveUp, Horizon,
+    NuisanceFlag, NuisanceValue, Offsets, WarmStart,
 };
 pub use identifiability::Identifiability;
 pub use metrics::{compare, fit_percent, rmse, ChannelFit, ExperimentFit, FitReport, MetricsError};

@@ -204,11 +204,7 @@ impl Report {
                         rank: c.evidence.equation_error_rank,
                         passes: c.passes(),
                         // the words identify prints
-                        rule: match &c.test {
-                            Some(t) if c.passes() => format!("passes: {}", t.describe()),
-                            Some(t) => format!("does not pass: {}", t.describe()),
-                            None => "not judged".to_string(),
-                        },
+                        rule: c.rule_line(),
                     })
                     .collect(),
                 effect: r.effect.as_ref().map(|e| e.label()),

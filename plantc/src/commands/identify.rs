@@ -338,11 +338,7 @@ fn story(
     for (k, round) in s.rounds.iter().enumerate() {
         let _ = writeln!(out, "\n{}. round {}:", 3 + k, k + 1);
         for r in round.ranking.iter().filter(|r| r.fit.is_some()) {
-            let rule = match &r.test {
-                Some(t) if r.passes() => format!("passes: {}", t.describe()),
-                Some(t) => format!("does not pass: {}", t.describe()),
-                None => "not judged".to_string(),
-            };
+            let rule = r.rule_line();
             let _ = writeln!(
                 out,
                 "   candidate {:<28} refit RMSE {:.3e}, equation-error rank {}; {rule}",
