@@ -659,7 +659,18 @@ impl<'a> Judge<'a> {
     /// against the simpler effect it contains, a bigger one that passes
     /// passes by the same algebra), so its cost is not refined to the
     /// screening tolerance: work in proportion to the question.
+    ///
+    /// "Cannot" is the Gauss-Newton model's word, a first-order one: it is
+    /// taken only for an effect linear in its parameters, whose reach
+    /// varies smoothly with them. An effect with a shape parameter is
+    /// refitted to the tolerance: its sensitivity can vanish at a start
+    /// and its cost has several basins (a Stribeck hump on the QUBE arm
+    /// that a long descent takes to a weighted RMS ratio of 1.050 was
+    /// stopped at 1.001 on that word).
     fn screening_options(&self, r: &Ranked, baseline: &FitResult) -> DiagnoseOptions {
+        if !r.candidate.linear_in_parameters() {
+            return self.opts.clone();
+        }
         let n = self.effective.max(1.0);
         let k = r.candidate.parameters.len() as f64;
         DiagnoseOptions {

@@ -515,6 +515,16 @@ impl EffectInstance {
         }
     }
 
+    /// Whether the effect enters the equations (or the measurement) linearly
+    /// in each of its parameters: a level times a fixed function of the
+    /// state or input (Coulomb and viscous friction, a drag, a spring, an
+    /// added inertia, an input or sensor offset). Not an effect with a
+    /// shape parameter: a Stribeck hump's width, cogging's period and
+    /// phase, a speed limit, a delay, a deadzone or saturation level.
+    pub fn linear_in_parameters(&self) -> bool {
+        !SHAPED_EFFECTS.contains(&self.effect.as_str())
+    }
+
     /// `effect@target`.
     pub fn label(&self) -> String {
         format!("{}@{}", self.effect, self.target)
@@ -599,6 +609,17 @@ impl EffectInstance {
 /// period scan would fit anything periodic there). They can be written on
 /// any coordinate by hand.
 pub const DRIVE_EFFECTS: &[&str] = &["cogging", "speed_limit"];
+
+/// Effects with a parameter they are not linear in (see
+/// [`EffectInstance::linear_in_parameters`]).
+pub const SHAPED_EFFECTS: &[&str] = &[
+    "stribeck_friction",
+    "cogging",
+    "speed_limit",
+    "input_delay",
+    "deadzone",
+    "saturation",
+];
 
 /// Every template effect on every valid target of `model`, as fit
 /// candidates (see [`EffectInstance::candidate`]): for each coordinate the

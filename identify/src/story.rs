@@ -142,18 +142,16 @@ pub struct Story {
     /// The last diagnosis found the residual well above the noise floor
     /// with no candidate explaining it ([`crate::Diagnosis::unexplained`]).
     pub unexplained: bool,
+    /// The effects in the final model, in the order they were added, as
+    /// the end steps left them (removed ones out, simplified ones in their
+    /// simpler form).
+    pub effects: Vec<EffectInstance>,
 }
 
 impl Story {
     /// How many effects the final model has gained.
     pub fn effects_added(&self) -> usize {
-        self.rounds.iter().filter(|r| r.effect.is_some()).count()
-            + self
-                .simplifications
-                .iter()
-                .filter(|x| x.then.is_some())
-                .count()
-            - self.removals.len()
+        self.effects.len()
     }
 }
 
@@ -664,6 +662,7 @@ fn story(
         better_start,
         stabilised: None,
         unexplained,
+        effects: end.applied.into_iter().flatten().collect(),
     })
 }
 
@@ -747,6 +746,8 @@ impl EndSteps {
     ///    more, and that is kept when the diagnosis names an effect (not
     ///    past `max_effects`) and the model with both has the lower
     ///    information criterion ([`prefers`]).
+    /// 4. After a change in 2. or 3., every effect in the model (the last
+    ///    round's too) is judged again as in 1.
     fn run(
         &mut self,
         text: &str,
@@ -759,18 +760,13 @@ impl EndSteps {
             .filter(|&k| rounds[k].effect.is_some())
             .collect();
         let dopts = opts.diagnose_options();
-        for &k in found.iter().take(found.len().saturating_sub(1)) {
-            let Some((text2, f2, _)) = self.rebuilt(text, k, None, experiments, opts, progress)
-            else {
-                continue;
-            };
-            let Some(test) = self.need(k, &f2, experiments, &dopts) else {
-                continue;
-            };
-            if !test.passes() {
-                self.remove(k, (text2, f2), test, experiments, opts)?;
-            }
-        }
+        let earlier: Vec<usize> = found
+            .iter()
+            .take(found.len().saturating_sub(1))
+            .copied()
+            .collect();
+        self.remove_unneeded(&earlier, text, experiments, opts, progress)?;
+        let changes = self.simplifications.len();
         for &k in found.iter().take(found.len().saturating_sub(1)) {
             let Some((text2, f2, to)) = self.simpler(text, k, experiments, opts, progress) else {
                 continue;
@@ -834,6 +830,48 @@ impl EndSteps {
                 write_fitted(&mut to, &f3);
                 write_fitted(&mut then, &f3);
                 self.adopt(k, (to, Some(then)), (text3, f3), None, experiments, opts)?;
+            }
+        }
+        // 4. A simplification changed the model around every other effect
+        //    after the rounds judged them: each effect in the model, the
+        //    last round's too, is judged again as in 1. (the double
+        //    pendulum lacking both dry frictions: round 1's Stribeck
+        //    friction, trapped at 31.6x the floor with round 2's Coulomb
+        //    friction, let round 3 name a speed limit whose refit escaped
+        //    the trap; with the Stribeck friction simplified to the
+        //    Coulomb friction it is, the speed limit's two parameters had
+        //    standard errors of 14x and 35x their values)
+        if self.simplifications.len() > changes {
+            let all: Vec<usize> = (0..self.applied.len())
+                .filter(|&k| self.applied[k].is_some())
+                .collect();
+            self.remove_unneeded(&all, text, experiments, opts, progress)?;
+        }
+        Ok(())
+    }
+
+    /// Step 1 of [`EndSteps::run`] on the effects `ks` (indices into
+    /// `applied`), in turn: each whose test against the model without it
+    /// (refitted) fails is removed.
+    fn remove_unneeded(
+        &mut self,
+        ks: &[usize],
+        text: &str,
+        experiments: &[Experiment],
+        opts: &StoryOptions,
+        progress: &mut dyn FnMut(&StoryProgress),
+    ) -> Result<(), StoryError> {
+        let dopts = opts.diagnose_options();
+        for &k in ks {
+            let Some((text2, f2, _)) = self.rebuilt(text, k, None, experiments, opts, progress)
+            else {
+                continue;
+            };
+            let Some(test) = self.need(k, &f2, experiments, &dopts) else {
+                continue;
+            };
+            if !test.passes() {
+                self.remove(k, (text2, f2), test, experiments, opts)?;
             }
         }
         Ok(())

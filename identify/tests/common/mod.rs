@@ -127,15 +127,11 @@ pub fn show_rounds(story: &plantc_identify::Story) {
     }
 }
 
-/// The effects a story ends with: those its rounds named, less those its
-/// end step removed again (`effect@target` labels, in the order named).
+/// The effects a story ends with (`Story::effects`: those its rounds named
+/// as its end steps left them), as `effect@target` labels in the order
+/// named.
 pub fn final_effects(story: &plantc_identify::Story) -> Vec<String> {
-    story
-        .rounds
-        .iter()
-        .filter_map(|r| r.effect.as_ref().map(|e| e.label()))
-        .filter(|l| !story.removals.iter().any(|r| &r.effect.label() == l))
-        .collect()
+    story.effects.iter().map(|e| e.label()).collect()
 }
 
 /// `models/double_pendulum.plant`'s text with its dry friction taken out

@@ -407,93 +407,111 @@ fn story(
             }
         }
     }
-    // earlier effects the model no longer needs (before the
-    // simplifications, as the story ran them)
-    let mut summary_removed = Vec::new();
-    for (i, removal) in s.removals.iter().enumerate() {
-        let n = 3 + s.rounds.len() + i;
-        let ratio = removal.cost_without / removal.cost_with.max(f64::MIN_POSITIVE);
-        let _ = writeln!(
-            out,
-            "\n{n}. removed: `{}` (round {}) no longer passes the decision rule with the later effects in the model (weighted RMS {:.3e} with it, {:.3e} without: ratio {ratio:.3}; {})",
-            removal.effect.label(),
-            removal.round,
-            removal.cost_with,
-            removal.cost_without,
-            removal.test.describe(),
-        );
-        if let Some(stage) = s.stages.get(removal.stage) {
-            let m2 = model_from_text("stage", &stage.text).map_err(fail)?;
-            show_stage(
-                (out, err),
-                (&staging, dir),
-                &format!("{n}-removed"),
-                &m2,
-                &measured,
-                stage,
-            )?;
-        }
-        summary_removed.push(serde_json::json!({
-            "round": removal.round,
-            "effect": removal.effect.label(),
-            "cost_with": removal.cost_with,
-            "cost_without": removal.cost_without,
-        }));
+    // the end steps in the order the story ran them (its stages): earlier
+    // effects the model no longer needs removed, effects replaced by their
+    // simpler form
+    enum EndStep<'s> {
+        Removed(&'s plantc_identify::story::Removal),
+        Simplified(&'s plantc_identify::story::Simplification),
     }
-    // earlier effects replaced by their simpler form
+    let mut end_steps: Vec<(usize, EndStep)> = s
+        .removals
+        .iter()
+        .map(|r| (r.stage, EndStep::Removed(r)))
+        .chain(
+            s.simplifications
+                .iter()
+                .map(|x| (x.stage, EndStep::Simplified(x))),
+        )
+        .collect();
+    end_steps.sort_by_key(|(stage, _)| *stage);
+    let mut summary_removed = Vec::new();
     let mut summary_simplified = Vec::new();
-    for (i, simple) in s.simplifications.iter().enumerate() {
-        let n = 3 + s.rounds.len() + s.removals.len() + i;
-        let ratio = simple.cost_simpler / simple.cost_with.max(f64::MIN_POSITIVE);
-        match &simple.then {
-            None => {
+    for (i, (_, step)) in end_steps.iter().enumerate() {
+        let n = 3 + s.rounds.len() + i;
+        match step {
+            EndStep::Removed(removal) => {
+                let ratio = removal.cost_without / removal.cost_with.max(f64::MIN_POSITIVE);
                 let _ = writeln!(
                     out,
-                    "\n{n}. simplification: with the later effects in, `{}` (round {}) no longer passes the decision rule against the simpler `{}` it contains (weighted RMS {:.3e} with it, {:.3e} with the simpler one: ratio {ratio:.3}; {}); replaced:\n{}",
-                    simple.from.label(),
-                    simple.round,
-                    simple.to.label(),
-                    simple.cost_with,
-                    simple.cost_simpler,
-                    simple.test.as_ref().map_or_else(String::new, |t| t.describe()),
-                    indent(&simple.to.snippet())
+                    "\n{n}. removed: `{}` (round {}) no longer passes the decision rule against the model as it now stands without it (weighted RMS {:.3e} with it, {:.3e} without: ratio {ratio:.3}; {})",
+                    removal.effect.label(),
+                    removal.round,
+                    removal.cost_with,
+                    removal.cost_without,
+                    removal.test.describe(),
                 );
+                if let Some(stage) = s.stages.get(removal.stage) {
+                    let m2 = model_from_text("stage", &stage.text).map_err(fail)?;
+                    show_stage(
+                        (out, err),
+                        (&staging, dir),
+                        &format!("{n}-removed"),
+                        &m2,
+                        &measured,
+                        stage,
+                    )?;
+                }
+                summary_removed.push(serde_json::json!({
+                    "round": removal.round,
+                    "effect": removal.effect.label(),
+                    "cost_with": removal.cost_with,
+                    "cost_without": removal.cost_without,
+                }));
             }
-            Some(then) => {
-                let _ = writeln!(
-                    out,
-                    "\n{n}. simplification: `{}` (round {}) was fitted to no shape of its own (no hump, or its velocity at a bound of its box); with `{}` in its place the diagnosis names `{}`, and the model with both (weighted RMS {:.3e} against {:.3e}, ratio {ratio:.3}) has the lower information criterion; replaced and added:\n{}\n{}",
-                    simple.from.label(),
-                    simple.round,
-                    simple.to.label(),
-                    then.label(),
-                    simple.cost_simpler,
-                    simple.cost_with,
-                    indent(&simple.to.snippet()),
-                    indent(&then.snippet())
-                );
+            EndStep::Simplified(simple) => {
+                let ratio = simple.cost_simpler / simple.cost_with.max(f64::MIN_POSITIVE);
+                match &simple.then {
+                    None => {
+                        let _ = writeln!(
+                            out,
+                            "\n{n}. simplification: with the later effects in, `{}` (round {}) no longer passes the decision rule against the simpler `{}` it contains (weighted RMS {:.3e} with it, {:.3e} with the simpler one: ratio {ratio:.3}; {}); replaced:\n{}",
+                            simple.from.label(),
+                            simple.round,
+                            simple.to.label(),
+                            simple.cost_with,
+                            simple.cost_simpler,
+                            simple.test.as_ref().map_or_else(String::new, |t| t.describe()),
+                            indent(&simple.to.snippet())
+                        );
+                    }
+                    Some(then) => {
+                        let _ = writeln!(
+                            out,
+                            "\n{n}. simplification: `{}` (round {}) was fitted to no shape of its own (no hump, or its velocity at a bound of its box); with `{}` in its place the diagnosis names `{}`, and the model with both (weighted RMS {:.3e} against {:.3e}, ratio {ratio:.3}) has the lower information criterion; replaced and added:\n{}\n{}",
+                            simple.from.label(),
+                            simple.round,
+                            simple.to.label(),
+                            then.label(),
+                            simple.cost_simpler,
+                            simple.cost_with,
+                            indent(&simple.to.snippet()),
+                            indent(&then.snippet())
+                        );
+                    }
+                }
+                if let Some(stage) = s.stages.get(simple.stage) {
+                    let m2 = model_from_text("stage", &stage.text).map_err(fail)?;
+                    show_stage(
+                        (out, err),
+                        (&staging, dir),
+                        &format!("{n}-simplified"),
+                        &m2,
+                        &measured,
+                        stage,
+                    )?;
+                }
+                summary_simplified.push(serde_json::json!({
+                    "round": simple.round,
+                    "from": simple.from.label(),
+                    "to": simple.to.label(),
+                    "snippet": simple.to.snippet(),
+                    "then": simple.then.as_ref().map(|t| t.label()),
+                    "cost_with": simple.cost_with,
+                    "cost_simpler": simple.cost_simpler,
+                }));
             }
         }
-        if let Some(stage) = s.stages.get(simple.stage) {
-            let m2 = model_from_text("stage", &stage.text).map_err(fail)?;
-            show_stage(
-                (out, err),
-                (&staging, dir),
-                &format!("{n}-simplified"),
-                &m2,
-                &measured,
-                stage,
-            )?;
-        }
-        summary_simplified.push(serde_json::json!({
-            "round": simple.round,
-            "from": simple.from.label(),
-            "to": simple.to.label(),
-            "snippet": simple.to.snippet(),
-            "then": simple.then.as_ref().map(|t| t.label()),
-            "cost_with": simple.cost_with,
-            "cost_simpler": simple.cost_simpler,
-        }));
     }
     if !s.simplifications.is_empty() || !s.removals.is_empty() {
         write_estimates(out, &s.fit.parameters);
@@ -526,7 +544,7 @@ fn story(
     let elapsed = started.elapsed().as_secs_f64();
     let _ = writeln!(
         out,
-        "RMSE {first:.3e} -> {last:.3e} (RMSE ratio {:.1}); {} ({} effect(s) added); model -> {}, figures -> {}/ ({elapsed:.1} s)",
+        "RMSE {first:.3e} -> {last:.3e} (RMSE ratio {:.1}); {} ({} effect(s) in the final model); model -> {}, figures -> {}/ ({elapsed:.1} s)",
         first / last.max(f64::MIN_POSITIVE),
         s.stop,
         s.effects_added(),
