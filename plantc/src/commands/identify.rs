@@ -441,17 +441,6 @@ fn story(
                     removal.cost_without,
                     removal.test.describe(),
                 );
-                if let Some(stage) = s.stages.get(removal.stage) {
-                    let m2 = model_from_text("stage", &stage.text).map_err(fail)?;
-                    show_stage(
-                        (out, err),
-                        (&staging, dir),
-                        &format!("{n}-removed"),
-                        &m2,
-                        &measured,
-                        stage,
-                    )?;
-                }
                 summary_removed.push(serde_json::json!({
                     "round": removal.round,
                     "effect": removal.effect.label(),
@@ -490,17 +479,6 @@ fn story(
                         );
                     }
                 }
-                if let Some(stage) = s.stages.get(simple.stage) {
-                    let m2 = model_from_text("stage", &stage.text).map_err(fail)?;
-                    show_stage(
-                        (out, err),
-                        (&staging, dir),
-                        &format!("{n}-simplified"),
-                        &m2,
-                        &measured,
-                        stage,
-                    )?;
-                }
                 summary_simplified.push(serde_json::json!({
                     "round": simple.round,
                     "from": simple.from.label(),
@@ -511,6 +489,21 @@ fn story(
                     "cost_simpler": simple.cost_simpler,
                 }));
             }
+        }
+        let (stage, what) = match step {
+            EndStep::Removed(r) => (r.stage, "removed"),
+            EndStep::Simplified(x) => (x.stage, "simplified"),
+        };
+        if let Some(stage) = s.stages.get(stage) {
+            let m2 = model_from_text("stage", &stage.text).map_err(fail)?;
+            show_stage(
+                (out, err),
+                (&staging, dir),
+                &format!("{n}-{what}"),
+                &m2,
+                &measured,
+                stage,
+            )?;
         }
     }
     if !s.simplifications.is_empty() || !s.removals.is_empty() {
