@@ -158,6 +158,7 @@ pub fn run(args: &DiagnoseArgs, out: &mut dyn Write, err: &mut dyn Write) -> Res
                 "bic_gain": r.evidence.bic_gain,
                 "equation_error_rank": r.evidence.equation_error_rank,
                 "refitted": r.fit.is_some(),
+                "stopped_short": r.fit.as_ref().is_some_and(|f| f.gave_up),
                 "error": r.error,
             })).collect::<Vec<_>>(),
         });
@@ -183,6 +184,7 @@ pub fn run(args: &DiagnoseArgs, out: &mut dyn Write, err: &mut dyn Write) -> Res
         let rule = match &r.test {
             Some(_) if r.passes() => "passes",
             Some(t) if t.likely() => "small",
+            Some(_) if r.fit.as_ref().is_some_and(|f| f.gave_up) => "short",
             Some(_) => "fails",
             None => "-",
         };
@@ -200,7 +202,7 @@ pub fn run(args: &DiagnoseArgs, out: &mut dyn Write, err: &mut dyn Write) -> Res
     }
     let _ = writeln!(
         out,
-        "(wRMS ratio: the baseline's weighted RMS over the refit's, in noise units; rule: the decision rule against the baseline, `small` = likely but its contribution stays below the noise)"
+        "(wRMS ratio: the baseline's weighted RMS over the refit's, in noise units; rule: the decision rule against the baseline, `small` = likely but its contribution stays below the noise, `short` = fails, its refit stopped where it could no longer pass)"
     );
     for n in &d.notes {
         let _ = writeln!(out, "note: {n}");
