@@ -755,6 +755,12 @@ struct Run<'a> {
     give_up: Option<GiveUp>,
     /// Whether an LM run stopped at [`Stop::CannotReach`].
     gave_up: bool,
+    /// The normal equations over the whole records at the point where the
+    /// last LM run on them ended, when it had them (a stop without a step,
+    /// or a last step taken with its sensitivities): the fit's final
+    /// statistics use them instead of simulating that point again (the
+    /// same numbers: the two simulators agree to the bit).
+    last_normal: Option<(Point, crate::lm::Normal)>,
     iterations: usize,
     simulations: usize,
     stage: usize,
@@ -834,7 +840,9 @@ fn lm(
             })
             .collect();
         if held.iter().all(|h| *h) && pb.n_locals() == 0 {
-            return Ok((nrm.ssr, nrm.count, Stop::Converged));
+            let out = (nrm.ssr, nrm.count, Stop::Converged);
+            keep_normal(run, horizon, pt, nrm);
+            return Ok(out);
         }
         // on the final stage, locals at a bound of their prior that the
         // gradient pushes outwards are held too (the step `-J'r` direction
@@ -871,7 +879,9 @@ fn lm(
             })
         {
             run.gave_up = true;
-            return Ok((nrm.ssr, nrm.count, Stop::CannotReach));
+            let out = (nrm.ssr, nrm.count, Stop::CannotReach);
+            keep_normal(run, horizon, pt, nrm);
+            return Ok(out);
         }
         let mut accepted = None;
         let mut first_trial = true;
@@ -904,8 +914,12 @@ fn lm(
             };
             run.simulations += 1;
             // (not when the sensitivity simulation had to refine its
-            // substep: the plain one may not have, and its cost decides)
-            let with_normal = if eager && first_trial {
+            // substep: the plain one may not have, and its cost decides).
+            // On the final stage a first trial the model predicts to be
+            // the last step is simulated with its sensitivities too: the
+            // fit's final statistics need them there.
+            let last_expected = final_stage && horizon.is_infinite() && pred < tol * nrm.ssr;
+            let with_normal = if (eager || last_expected) && first_trial {
                 pb.normal(&trial, horizon).ok().filter(|n| !n.refined)
             } else {
                 None
@@ -937,17 +951,28 @@ fn lm(
             }
         }
         let Some((trial, s, next)) = accepted else {
-            return Ok((nrm.ssr, nrm.count, Stop::NoDescent));
+            let out = (nrm.ssr, nrm.count, Stop::NoDescent);
+            keep_normal(run, horizon, pt, nrm);
+            return Ok(out);
         };
         let small = (nrm.ssr - s) < tol * nrm.ssr;
         *pt = trial;
         cached = next;
         last = (s, nrm.count);
         if small {
+            if let Some(n) = cached.take() {
+                keep_normal(run, horizon, pt, n);
+            }
             return Ok((s, nrm.count, Stop::Converged));
         }
     }
     Ok((last.0, last.1, Stop::MaxIterations))
+}
+
+/// Keep `nrm`, the normal equations at `pt` over `horizon`, as the last
+/// LM run's ([`Run::last_normal`]; only over the whole records).
+fn keep_normal(run: &mut Run<'_>, horizon: f64, pt: &Point, nrm: crate::lm::Normal) {
+    run.last_normal = horizon.is_infinite().then(|| (pt.clone(), nrm));
 }
 
 /// The reduction of the SSR the Gauss-Newton model at `nrm` predicts for
@@ -1496,6 +1521,7 @@ fn fit_on_starts(
         },
         give_up: opts.give_up,
         gave_up: false,
+        last_normal: None,
         iterations: 0,
         simulations: 0,
         stage: 0,
@@ -1574,8 +1600,13 @@ fn fit_on_starts(
 
     // the normal equations at the best point (reused below when the point
     // does not move)
-    let mut nrm = pb.normal(&pt, f64::INFINITY)?;
-    run.simulations += 1;
+    let mut nrm = match run.last_normal.take() {
+        Some((at, n)) if at == pt => n,
+        _ => {
+            run.simulations += 1;
+            pb.normal(&pt, f64::INFINITY)?
+        }
+    };
     // 6. per-experiment offsets that are not significant are dropped
     if matches!(opts.offsets, Offsets::Auto) && !pb.offsets.is_empty() {
         let (cov, _) = covariance(&nrm, &frozen, unknowns);
@@ -2206,6 +2237,7 @@ pub(crate) fn observe_nuisance(
         coarse_above: f64::INFINITY,
         give_up: None,
         gave_up: false,
+        last_normal: None,
         iterations: 0,
         simulations: 0,
         stage: 0,
