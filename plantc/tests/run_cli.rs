@@ -299,15 +299,30 @@ fn bad_estimator_settings_are_input_errors() {
 #[cfg(unix)]
 #[test]
 fn ctrl_c_stops_with_zero_volts_and_a_readable_log() {
+    use std::os::unix::process::CommandExt;
     use std::process::{Command, Stdio};
     use std::time::Duration;
     extern "C" {
         fn kill(pid: i32, sig: i32) -> i32;
+        fn signal(sig: i32, handler: usize) -> usize;
     }
     const SIGINT: i32 = 2;
+    const SIG_DFL: usize = 0;
     let dir = tmp("ctrl_c");
     let log = dir.join("out.csv");
-    let mut child = Command::new(env!("CARGO_BIN_EXE_plantc"))
+    let mut cmd = Command::new(env!("CARGO_BIN_EXE_plantc"));
+    // Ctrl-C as from a terminal: SIGINT at its default disposition in the
+    // child, whatever this test inherited (a background job of a
+    // non-interactive shell starts with SIGINT ignored, and plantc keeps a
+    // signal ignored at its start ignored, as `nohup` asks).
+    // SAFETY: between fork and exec, only the async-signal-safe `signal`.
+    unsafe {
+        cmd.pre_exec(|| {
+            signal(SIGINT, SIG_DFL);
+            Ok(())
+        });
+    }
+    let mut child = cmd
         .args([
             "run",
             &model(),

@@ -19,6 +19,26 @@ use common::{model, repo, tmp};
 
 extern "C" {
     fn kill(pid: i32, sig: i32) -> i32;
+    fn signal(sig: i32, handler: usize) -> usize;
+}
+
+/// Every signal of [`SIGNALS`] at its default disposition in the child, as
+/// when a run is started from a terminal, whatever this test inherited (a
+/// background job of a non-interactive shell starts with SIGINT and SIGQUIT
+/// ignored, and plantc keeps a signal ignored at its start ignored, as
+/// `nohup` asks: `nohup_keeps_sighup_ignored`).
+fn default_signals(cmd: &mut Command) -> &mut Command {
+    use std::os::unix::process::CommandExt;
+    const SIG_DFL: usize = 0;
+    // SAFETY: between fork and exec, only the async-signal-safe `signal`.
+    unsafe {
+        cmd.pre_exec(|| {
+            for (_, sig) in SIGNALS {
+                signal(sig, SIG_DFL);
+            }
+            Ok(())
+        })
+    }
 }
 
 /// Builds (once) and locates the fake HIL cdylib.
@@ -115,7 +135,7 @@ fn every_terminating_signal_stops_the_board_at_zero_volts() {
     for (name, sig) in SIGNALS {
         let log = dir.join(format!("{name}.csv"));
         let trace = dir.join(format!("{name}.trace"));
-        let mut child = Command::new(env!("CARGO_BIN_EXE_plantc"))
+        let mut child = default_signals(&mut Command::new(env!("CARGO_BIN_EXE_plantc")))
             .args(["run", &model(), "--controller", "pole_placement"])
             .args(["--backend", "q2usb", "--hil-lib", lib.to_str().unwrap()])
             .args(["--allow-no-watchdog", "--duration", "100000"])
