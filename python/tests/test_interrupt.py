@@ -3,6 +3,7 @@
 import _thread
 import glob
 import os
+import signal
 import threading
 import time
 
@@ -37,6 +38,10 @@ def test_keyboard_interrupt_stops_identify(tmp_path):
             ticks.append(1)
             time.sleep(0.01)
 
+    # Ctrl-C as at a terminal: Python's own SIGINT handler, whatever the
+    # process inherited (a background job of a non-interactive shell starts
+    # with SIGINT ignored, and then `interrupt_main` does nothing)
+    previous = signal.signal(signal.SIGINT, signal.default_int_handler)
     counter = threading.Thread(target=count)
     counter.start()
     timer = threading.Timer(1.0, _thread.interrupt_main)
@@ -49,6 +54,7 @@ def test_keyboard_interrupt_stops_identify(tmp_path):
         stop.set()
         counter.join()
         timer.cancel()
+        signal.signal(signal.SIGINT, previous)
     # the GIL was released: the other Python thread ran during the call
     assert len(ticks) > 20
     # the worker unwinds at its next progress report (every fit iteration;
