@@ -222,6 +222,12 @@ impl Ranked {
         self.test.as_ref().is_some_and(EffectTest::passes)
     }
 
+    /// Its refit stopped where it could no longer pass ([`crate::GiveUp`]):
+    /// its cost is not refined.
+    pub fn stopped_short(&self) -> bool {
+        self.fit.as_ref().is_some_and(|f| f.gave_up)
+    }
+
     /// The decision rule's words on it: passes or not, with the test's
     /// numbers; a refit that stopped where it could no longer pass
     /// ([`crate::GiveUp`]) says so.
@@ -231,7 +237,7 @@ impl Ranked {
             Some(t) => format!("does not pass: {}", t.describe()),
             None => "not judged".to_string(),
         };
-        if self.fit.as_ref().is_some_and(|f| f.gave_up) {
+        if self.stopped_short() {
             line.push_str("; refit stopped where it could no longer pass (its cost not refined)");
         }
         line

@@ -1564,6 +1564,19 @@ impl BlockStart {
             offsets: vec![0.0; sig.q.len()],
         }
     }
+
+    /// [`BlockStart::from_data`] over the first `n` samples only (clamped
+    /// to the record's length).
+    pub fn first_samples(
+        sig: &Signals,
+        how: InitialVelocity,
+        model_offsets: &[f64],
+        n: usize,
+    ) -> BlockStart {
+        let mut start = BlockStart::from_data(sig, how, model_offsets);
+        start.range = 0..n.min(sig.len());
+        start
+    }
 }
 
 /// When a simulation with the automatic substep diverges, it is tried once
@@ -1958,13 +1971,21 @@ impl Simulator {
         params: &[f64],
         n_samples: usize,
     ) -> Result<Trajectory, SimError> {
-        let mut start = BlockStart::from_data(
-            sig,
-            self.opts.initial_velocity,
-            &self.model_offsets(params)?,
-        );
-        start.range = 0..n_samples.min(sig.len());
-        self.run(sig, params, &start, false)
+        self.run_n(sig, params, n_samples, false)
+    }
+
+    /// The first `n` samples from the measured state, the tape split or
+    /// (`unsplit`, the tests' reference) not.
+    fn run_n(
+        &self,
+        sig: &Signals,
+        params: &[f64],
+        n: usize,
+        unsplit: bool,
+    ) -> Result<Trajectory, SimError> {
+        let offsets = self.model_offsets(params)?;
+        let start = BlockStart::first_samples(sig, self.opts.initial_velocity, &offsets, n);
+        self.run(sig, params, &start, unsplit)
     }
 
     /// Simulate one block of a record from a given state; the trajectory
@@ -2082,26 +2103,6 @@ pub(crate) fn check_start(sig: &Signals, start: &BlockStart, n: usize) -> Result
         )));
     }
     Ok(())
-}
-
-#[cfg(test)]
-impl Simulator {
-    /// The first `n` samples from the measured state, split or not (tests).
-    fn run_n(
-        &self,
-        sig: &Signals,
-        params: &[f64],
-        n: usize,
-        unsplit: bool,
-    ) -> Result<Trajectory, SimError> {
-        let mut start = BlockStart::from_data(
-            sig,
-            self.opts.initial_velocity,
-            &self.model_offsets(params)?,
-        );
-        start.range = 0..n.min(sig.len());
-        self.run(sig, params, &start, unsplit)
-    }
 }
 
 #[cfg(test)]

@@ -262,6 +262,26 @@ struct BlockRun<'a> {
     unsplit: bool,
 }
 
+impl<'a> BlockRun<'a> {
+    /// The run of one block with the split tape (the product's path).
+    fn split(
+        sig: &'a Signals,
+        params: &'a [f64],
+        start: &'a BlockStart,
+        tied: &'a [bool],
+        extra: &'a [ExtraColumn],
+    ) -> BlockRun<'a> {
+        BlockRun {
+            sig,
+            params,
+            start,
+            tied,
+            extra,
+            unsplit: false,
+        }
+    }
+}
+
 /// The sink that stores the trajectory.
 struct Store {
     q: Vec<Vec<f64>>,
@@ -443,15 +463,11 @@ impl SensitivitySimulator {
         unsplit: bool,
     ) -> Result<SensitivityTrajectory, SimError> {
         let offsets = self.signals.eval(params)?.offsets;
-        let mut start = BlockStart::from_data(sig, self.opts.initial_velocity, &offsets);
-        start.range = 0..n.min(sig.len());
+        let start = BlockStart::first_samples(sig, self.opts.initial_velocity, &offsets, n);
+        let tied = vec![true; self.n];
         self.run(BlockRun {
-            sig,
-            params,
-            start: &start,
-            tied: &vec![true; self.n],
-            extra: &[],
             unsplit,
+            ..BlockRun::split(sig, params, &start, &tied, &[])
         })
     }
 
@@ -477,14 +493,7 @@ impl SensitivitySimulator {
         tied: &[bool],
         extra: &[ExtraColumn],
     ) -> Result<SensitivityTrajectory, SimError> {
-        self.run(BlockRun {
-            sig,
-            params,
-            start,
-            tied,
-            extra,
-            unsplit: false,
-        })
+        self.run(BlockRun::split(sig, params, start, tied, extra))
     }
 
     /// [`SensitivitySimulator::simulate_block`] handing each sample to
@@ -501,15 +510,7 @@ impl SensitivitySimulator {
         (tied, extra): (&[bool], &[ExtraColumn]),
         sink: &mut dyn SampleSink,
     ) -> Result<bool, SimError> {
-        let run = BlockRun {
-            sig,
-            params,
-            start,
-            tied,
-            extra,
-            unsplit: false,
-        };
-        self.run_with(run, sink)
+        self.run_with(BlockRun::split(sig, params, start, tied, extra), sink)
     }
 
     /// [`SensitivitySimulator::simulate_block`], evaluating the tape split

@@ -767,7 +767,7 @@ impl EndSteps {
             .collect();
         self.remove_unneeded(&earlier, text, experiments, opts, progress)?;
         let changes = self.simplifications.len();
-        for &k in found.iter().take(found.len().saturating_sub(1)) {
+        for &k in &earlier {
             let Some((text2, f2, to)) = self.simpler(text, k, experiments, opts, progress) else {
                 continue;
             };

@@ -18,21 +18,9 @@ use plantc_identify::{fit, FitOptions, GiveUp};
 fn a_fit_gives_up_only_where_its_model_cannot_reach_the_cost() {
     let text = pendulum_text();
     let m = model(&text);
-    let experiments = [
-        "driven:alpha0=180deg,duration=6,seed=7,rms=1.2,name=driven",
-        "free_swing:alpha0=120deg,duration=6,name=swing",
-    ]
-    .map(String::from);
     let values = vec![("J1".to_string(), 1.35e-3), ("b2".to_string(), 6e-4)];
-    let exps = common::synth_pendulum(
-        "give_up",
-        &text,
-        "coulomb_friction:alpha=6e-4",
-        values,
-        &experiments,
-        3,
-    );
-    let _ = std::fs::remove_dir_all(common::scratch("give_up"));
+    let exps =
+        common::short_pendulum_records("give_up", &text, "coulomb_friction:alpha=6e-4", values);
     let opts = FitOptions {
         multistart: 0,
         ..FitOptions::default()

@@ -38,16 +38,9 @@ fn held(e: &Experiment, volts: f64) -> Experiment {
 fn a_held_start_is_left_out_and_a_clean_one_is_not() {
     let text = pendulum_text();
     let m = model(&text);
-    let experiments = [
-        // from rest, hanging, driven by a random voltage: the hand holds
-        // the arm against 2 V
-        "driven:alpha0=180deg,duration=6,seed=7,rms=1.2,name=driven",
-        // released from 120 degrees: the hand holds the pendulum up
-        "free_swing:alpha0=120deg,duration=6,name=swing",
-    ]
-    .map(String::from);
-    let clean = common::synth_pendulum("release", &text, "", Vec::new(), &experiments, 3);
-    let _ = std::fs::remove_dir_all(common::scratch("release"));
+    // the driven run from rest (the hand holds the arm against 2 V) and
+    // the free swing from 120 degrees (the hand holds the pendulum up)
+    let clean = common::short_pendulum_records("release", &text, "", Vec::new());
     let base: Vec<f64> = m.parameters.iter().map(|p| p.value).collect();
     let opts = ValidateOptions::default();
     let v_clean = validate(&m, &base, &clean, &opts).expect("validates");

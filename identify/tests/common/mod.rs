@@ -67,6 +67,26 @@ pub fn shared_data() -> Option<PathBuf> {
     [p, p2].into_iter().find(|p| p.join("clean").is_dir())
 }
 
+/// Two short records of the rotary pendulum model `text` made by `synth`
+/// ([`synth_pendulum`], noise seed 3): a run from rest, hanging, driven by
+/// a random voltage (`driven`), and a free swing released from 120 degrees
+/// (`swing`), 6 s each; the scratch directory removed again.
+pub fn short_pendulum_records(
+    test: &str,
+    text: &str,
+    effect: &str,
+    values: Vec<(String, f64)>,
+) -> Vec<Experiment> {
+    let experiments = [
+        "driven:alpha0=180deg,duration=6,seed=7,rms=1.2,name=driven",
+        "free_swing:alpha0=120deg,duration=6,name=swing",
+    ]
+    .map(String::from);
+    let exps = synth_pendulum(test, text, effect, values, &experiments, 3);
+    let _ = std::fs::remove_dir_all(scratch(test));
+    exps
+}
+
 /// Data of the rotary pendulum model `text` made by `synth` in scratch
 /// directory `test`: `effect` hidden (empty: none), true `values`, the
 /// `experiments` specs, 500 Hz and 4096 counts with noise seed `seed`.

@@ -158,7 +158,7 @@ pub fn run(args: &DiagnoseArgs, out: &mut dyn Write, err: &mut dyn Write) -> Res
                 "bic_gain": r.evidence.bic_gain,
                 "equation_error_rank": r.evidence.equation_error_rank,
                 "refitted": r.fit.is_some(),
-                "stopped_short": r.fit.as_ref().is_some_and(|f| f.gave_up),
+                "stopped_short": r.stopped_short(),
                 "error": r.error,
             })).collect::<Vec<_>>(),
         });
@@ -184,7 +184,7 @@ pub fn run(args: &DiagnoseArgs, out: &mut dyn Write, err: &mut dyn Write) -> Res
         let rule = match &r.test {
             Some(_) if r.passes() => "passes",
             Some(t) if t.likely() => "small",
-            Some(_) if r.fit.as_ref().is_some_and(|f| f.gave_up) => "short",
+            Some(_) if r.stopped_short() => "short",
             Some(_) => "fails",
             None => "-",
         };
