@@ -153,7 +153,6 @@ fn added_inertia_is_named_first() {
 // clean 5 of 5.
 
 #[test]
-#[ignore = "issue 26 open: under the one decision rule Coulomb on the pendulum is first in 4 of 5 rigs (Stribeck in one), measured 2026-11-27"]
 fn coulomb_friction_on_the_pendulum_is_named_first() {
     rate(
         "rate_coulomb_alpha",
