@@ -107,12 +107,14 @@ pub fn fake_hil_lib() -> PathBuf {
         );
         let mut candidates = Vec::new();
         if let Ok(exe) = std::env::current_exe() {
-            // target/<profile>/deps/<test> -> target/<profile>/, then target/debug/
+            // target/<profile>/deps/<test> -> target/debug/ (what the
+            // build above made), then target/<profile>/ (a release test run
+            // would otherwise load a stale library left there)
             if let Some(dir) = exe.parent().and_then(|d| d.parent()) {
-                candidates.push(dir.join(&name));
                 if let Some(target) = dir.parent() {
                     candidates.push(target.join("debug").join(&name));
                 }
+                candidates.push(dir.join(&name));
             }
         }
         if let Ok(t) = std::env::var("CARGO_TARGET_DIR") {
