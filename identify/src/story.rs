@@ -20,7 +20,7 @@ use crate::diagnose::{
 use crate::effect_edit::EffectInstance;
 use crate::fit::{
     fit, fit_with_progress, replay_follows, values_from, with_estimates, ClosedLoop, FitError,
-    FitOptions, FitProgress, FitResult, Horizon,
+    FitOptions, FitProgress, FitResult, GiveUp, Horizon,
 };
 use crate::metrics::{compare, FitReport};
 use crate::stabilised_replay::StabilisedReplay;
@@ -863,7 +863,9 @@ impl EndSteps {
     ) -> Result<(), StoryError> {
         let dopts = opts.diagnose_options();
         for &k in ks {
-            let Some((text2, f2, _)) = self.rebuilt(text, k, None, experiments, opts, progress)
+            let give_up = self.removal_give_up(k);
+            let Some((text2, f2, _)) =
+                self.rebuilt(text, k, None, give_up, experiments, opts, progress)
             else {
                 continue;
             };
@@ -978,20 +980,49 @@ impl EndSteps {
     ) -> Option<(String, FitResult, EffectInstance)> {
         let from = self.applied.get(k)?.as_ref()?;
         let (_, simpler) = NESTED.iter().find(|(outer, _)| *outer == from.effect)?;
-        let (text, f, put) = self.rebuilt(text, k, Some(simpler), experiments, opts, progress)?;
+        let (text, f, put) =
+            self.rebuilt(text, k, Some(simpler), None, experiments, opts, progress)?;
         Some((text, f, put?))
+    }
+
+    /// Where the fits of the model without round `k`'s effect may stop
+    /// short ([`GiveUp`]): the weighted RMS below which the effect could
+    /// fail the likelihood part of the decision rule, whatever the
+    /// effective sample count of the fit without it. The effect passes when
+    /// `N_eff ln(S0/S1) > k ln N_eff`, i.e. when the RMS without it is above
+    /// `rms1 exp(k ln N_eff / (2 N_eff))`; `ln N / N` is at most `1/e` (at
+    /// `N = e`), so below `rms1 exp(k / (2e))` is where a fit without the
+    /// effect must be able to reach for the effect to be removed. A fit
+    /// that cannot (to first order, see [`GiveUp`]) changes no decision:
+    /// the effect stays and that fit is not used. None when a remaining
+    /// effect has a shape parameter (the first-order word is taken only
+    /// where the screening refits take it, see `Judge::screening_options`).
+    fn removal_give_up(&self, k: usize) -> Option<f64> {
+        let effect = self.applied.get(k)?.as_ref()?;
+        let linear = self
+            .applied
+            .iter()
+            .enumerate()
+            .filter(|&(j, _)| j != k)
+            .filter_map(|(_, e)| e.as_ref())
+            .all(EffectInstance::linear_in_parameters);
+        let kp = effect.parameters.len() as f64;
+        linear.then(|| self.fit.after_cost * (kp / (2.0 * std::f64::consts::E)).exp())
     }
 
     /// The model rebuilt from `text` with round `k`'s effect replaced by
     /// effect `with` on its target, or left out (None), the other effects
     /// as `applied` has them, fitted from the values of the model as it
     /// stands: its text, fit and the effect put in; None when it cannot be
-    /// built or fitted.
+    /// built or fitted. With `give_up` ([`EndSteps::removal_give_up`]) the
+    /// fits stop once they cannot reach below it.
+    #[allow(clippy::too_many_arguments)]
     fn rebuilt(
         &self,
         text: &str,
         k: usize,
         with: Option<&str>,
+        give_up: Option<f64>,
         experiments: &[Experiment],
         opts: &StoryOptions,
         progress: &mut dyn FnMut(&StoryProgress),
@@ -1022,9 +1053,18 @@ impl EndSteps {
         }
         let last_model = model_from_text("last", &self.text).ok()?;
         let m2 = model_from_text("simpler", &current).ok()?;
+        let stop_short = |once_at: f64| {
+            give_up.map(|unless_below| GiveUp {
+                once_at,
+                unless_below,
+            })
+        };
         let fo = FitOptions {
             start: Some(values_from(&m2, (&last_model, &self.fit.base))),
             warm: Some(self.fit.warm.clone()),
+            // (a fit from there that ends above the model as it stands is
+            // started again below, so it may stop wherever it cannot pass)
+            give_up: stop_short(f64::INFINITY),
             ..opts.fit.clone()
         };
         let f = fit(&m2, experiments, &fo).ok();
@@ -1036,7 +1076,12 @@ impl EndSteps {
         let f = match f {
             Some(f) if f.after_cost <= self.fit.after_cost => f,
             first => {
-                let cold = fit(&m2, experiments, &opts.fit).ok();
+                let fo = FitOptions {
+                    // (once at least as good as the first)
+                    give_up: stop_short(first.as_ref().map_or(f64::INFINITY, |f| f.after_cost)),
+                    ..opts.fit.clone()
+                };
+                let cold = fit(&m2, experiments, &fo).ok();
                 match (first, cold) {
                     (Some(a), Some(b)) => {
                         if b.after_cost < a.after_cost {

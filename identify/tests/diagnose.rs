@@ -248,14 +248,37 @@ fn spring_arm_names_spring_on_theta() {
 
 /// Clean data: no finding (a false alarm is a failure), and the baseline
 /// fit recovers J1 and l2 within 5 % of truth.json's `true_parameters`.
+///
+/// The shared cases come from an independent simulator whose dry friction
+/// is `tanh(v / 1e-3)` (`../shared/reference/identification-notes.md`, trap
+/// 8: the smooth law the Python pipeline matched): its held arm creeps, and
+/// the creep drains the pendulum's swing where a sticking arm would not.
+/// Simulated with that law (`--friction smooth:1e-3`), the baseline reaches
+/// the floor and nothing is named.
 #[test]
-#[ignore = "issue 26 open: on the shared clean case (an independent simulator; its gearbox friction integrated as sign()) the rule names coulomb_friction@alpha of 1.65e-5 N m (cost ratio 1.63, baseline 1.6x the floor), measured 2026-11-27"]
+fn clean_case_is_adequate_under_the_simulators_friction_law() {
+    let Some((exps, truth)) = case("clean") else {
+        return;
+    };
+    let mut opts = FitOptions::default();
+    opts.sim.dry_friction = plantc_identify::DryFriction::Smooth { width: 1e-3 };
+    clean_case_check(&exps, &truth, &opts);
+}
+
+/// [`clean_case_is_adequate_under_the_simulators_friction_law`] under
+/// plantc's default sticking law, which the data do not follow.
+#[test]
+#[ignore = "issue 26 open: the shared clean case's arm creeps (its simulator's friction is tanh(v/1e-3)); under the sticking law the rule names coulomb_friction@alpha of 1.65e-5 N m (weighted RMS ratio 1.63, baseline 1.6x the floor); no automatic choice of the law yet, measured 2026-11-28"]
 fn clean_case_is_adequate() {
     let Some((exps, truth)) = case("clean") else {
         return;
     };
+    clean_case_check(&exps, &truth, &FitOptions::default());
+}
+
+fn clean_case_check(exps: &[Experiment], truth: &serde_json::Value, opts: &FitOptions) {
     let start = Instant::now();
-    let d = diagnose(&pendulum_text(), &exps, &FitOptions::default()).expect("diagnoses");
+    let d = diagnose(&pendulum_text(), exps, opts).expect("diagnoses");
     eprintln!("clean: diagnose in {:?}", start.elapsed());
     report(&d);
     assert!(d.verdict.is_none(), "false alarm: {:?}", d.verdict);

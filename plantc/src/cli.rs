@@ -383,6 +383,12 @@ pub struct FitControlArgs {
     /// results are the same on any number.
     #[arg(long, value_name = "N", value_parser = clap::value_parser!(u16).range(1..))]
     pub threads: Option<u16>,
+    /// How the model's dry friction is simulated: `sticking` (a joint at
+    /// rest stays at rest below its static level, as on a rig) or
+    /// `smooth:WIDTH` (`sign(v)` replaced by `tanh(v / WIDTH)`: a held joint
+    /// creeps, as in simulators that integrate that law, e.g. `smooth:1e-3`).
+    #[arg(long, value_name = "LAW", default_value = "sticking")]
+    pub friction: String,
 }
 
 /// Arguments of `plantc compare`.

@@ -488,6 +488,8 @@ pub fn fit_options(
             ClosedLoop::Named(name.to_string())
         }
     };
+    let friction = plantc_identify::synth::parse_friction(&c.friction)
+        .map_err(|e| bad(format!("--friction: {e}")))?;
     let mut opts = FitOptions {
         horizon,
         weights,
@@ -497,6 +499,7 @@ pub fn fit_options(
         closed_loop,
         ..FitOptions::default()
     };
+    opts.sim.dry_friction = friction;
     if !estimate_velocities {
         opts.sim.initial_velocity = InitialVelocity::Zero;
     }
