@@ -61,6 +61,7 @@ use crate::fit::{
     fit, measured_of, replay_follows, residual_count, simulate_as, values_from, with_estimates,
     Estimate, FitError, FitOptions, FitResult, GiveUp, Horizon, NuisanceFlag, Offsets,
 };
+use crate::friction_law::{creeping_law, CreepingLaw};
 use crate::speculate::Step;
 
 /// Options of [`diagnose_with`].
@@ -273,6 +274,10 @@ pub struct Diagnosis {
     /// equation-error ranking, screening extended beyond the leaders, a
     /// baseline improved by a restart), in words.
     pub notes: Vec<String>,
+    /// The creeping dry-friction law, when the records follow it
+    /// ([`crate::friction_law`]): then `baseline` is the fit under it, at
+    /// the floor, and there is no verdict.
+    pub creeping: Option<CreepingLaw>,
 }
 
 impl Diagnosis {
@@ -339,6 +344,12 @@ impl Diagnosis {
     /// [`Diagnosis::segments_caveat`] when there is one and the nuisance
     /// that the data do not allow.
     pub fn verdict_line(&self) -> String {
+        if let Some(law) = &self.creeping {
+            return format!(
+                "adequate under another dry-friction law: {}",
+                law.describe()
+            );
+        }
         if let Some(v) = &self.verdict {
             let test = self
                 .ranking
@@ -847,15 +858,49 @@ pub fn diagnose_from(
         restart_fit,
         &mut notes,
     );
+    // the records may follow another dry-friction law than the sticking
+    // one ([`crate::friction_law`]): tried while the baseline is above the
+    // floor, adopted when it reaches the floor with a larger margin than
+    // the verdict's
+    let creeping = (!baseline_at_floor)
+        .then(|| creeping_law(text, &model, experiments, opts, &baseline))
+        .flatten()
+        .filter(|law| {
+            let verdict_margin = verdict
+                .as_ref()
+                .and_then(|v| ranking.iter().find(|r| r.candidate.label() == v.label()))
+                .map_or(f64::NEG_INFINITY, margin);
+            law.test.margin() > verdict_margin
+        });
+    let (verdict, at_floor, worst) = match &creeping {
+        Some(law) => {
+            notes.push(format!(
+                "{}; the candidates above were judged against the baseline fitted sticking",
+                law.describe()
+            ));
+            baseline = law.fit.clone();
+            let res = judge.residuals(&baseline);
+            let worst = worst_channel(&res).map(|(r, e, c)| {
+                (
+                    r,
+                    judge.records.get(e).cloned().unwrap_or_default(),
+                    judge.channels.get(c).cloned().unwrap_or_default(),
+                )
+            });
+            (None, true, worst)
+        }
+        None => (verdict, baseline_at_floor, worst),
+    };
     Ok(Diagnosis {
         baseline,
         ranking,
         verdict,
         floor,
         effective_samples: judge.effective,
-        at_floor: baseline_at_floor,
+        at_floor,
         worst,
         notes,
+        creeping,
     })
 }
 

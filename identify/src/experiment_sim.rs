@@ -69,7 +69,7 @@ use std::fmt;
 use plantc_derive::mechanics::stick_slip::{first_crossing, mat_vec, Mode, StickSlip, MAX_EVENTS};
 use plantc_derive::mechanics::{
     decompose_dry_friction, derive_equations, flat_outputs, small_lu, smooth_signs,
-    FALLBACK_SIGN_WIDTH,
+    smooth_signs_with, FALLBACK_SIGN_WIDTH,
 };
 use plantc_derive::model::Model;
 use plantc_derive::sym::{diff, Expr, SplitTape, Symbol, Tape};
@@ -103,6 +103,13 @@ pub enum DryFriction {
     Smooth {
         /// The smoothing width in the coordinate's speed unit (rad/s, m/s).
         width: f64,
+    },
+    /// The smooth law with its width a parameter of the model (the index
+    /// of its value in the full parameter vector), so that a fit estimates
+    /// it ([`crate::friction_law`]).
+    SmoothFitted {
+        /// Index of the width among the model's parameters.
+        parameter: usize,
     },
 }
 
@@ -426,6 +433,23 @@ pub(crate) fn dynamics_outputs(model: &Model, law: DryFriction) -> Result<Compil
         DryFriction::Smooth { width } => {
             let smoothed = plantc_derive::mechanics::has_sign(&eqs);
             let eqs = smooth_signs(&eqs, width);
+            Ok(Compiled {
+                outs: flat_outputs(&eqs),
+                dry: vec![false; n],
+                levels: false,
+                smoothed,
+                notes: Vec::new(),
+            })
+        }
+        DryFriction::SmoothFitted { parameter } => {
+            let smoothed = plantc_derive::mechanics::has_sign(&eqs);
+            let Some(&w) = model.parameter_symbols().get(parameter) else {
+                return Err(SimError::BadOption(format!(
+                    "the dry friction's width is parameter {parameter}, beyond the model's {}",
+                    model.parameters.len()
+                )));
+            };
+            let eqs = smooth_signs_with(&eqs, |v| (v / Expr::symbol(w)).tanh());
             Ok(Compiled {
                 outs: flat_outputs(&eqs),
                 dry: vec![false; n],
@@ -1498,6 +1522,10 @@ pub(crate) fn prepare_run(
         let long = sig.sample_time().min(2e-3);
         let w = match opts.dry_friction {
             DryFriction::Smooth { width } => width,
+            DryFriction::SmoothFitted { parameter } => params
+                .get(parameter)
+                .copied()
+                .unwrap_or(FALLBACK_SIGN_WIDTH),
             DryFriction::Sticking => FALLBACK_SIGN_WIDTH,
         };
         if long > step.h {
@@ -1534,7 +1562,9 @@ pub(crate) fn substep_for(sig: &Signals, opts: &SimOptions) -> Result<f64, SimEr
             "substep must be positive, got {h}"
         ))),
         (None, DryFriction::Sticking) => Ok(sig.sample_time().min(MAX_SUBSTEP)),
-        (None, DryFriction::Smooth { .. }) => Ok((sig.sample_time() / 2.0).min(1e-3)),
+        (None, DryFriction::Smooth { .. } | DryFriction::SmoothFitted { .. }) => {
+            Ok((sig.sample_time() / 2.0).min(1e-3))
+        }
     }
 }
 

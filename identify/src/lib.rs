@@ -62,6 +62,7 @@ pub mod effect_edit;
 pub mod equation_error;
 pub mod experiment_sim;
 pub mod fit;
+pub mod friction_law;
 pub mod initial_state;
 pub mod metrics;
 pub mod plot;

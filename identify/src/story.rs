@@ -18,10 +18,12 @@ use crate::diagnose::{
     NESTED,
 };
 use crate::effect_edit::EffectInstance;
+use crate::experiment_sim::DryFriction;
 use crate::fit::{
     fit, fit_with_progress, replay_follows, values_from, with_estimates, ClosedLoop, FitError,
     FitOptions, FitProgress, FitResult, GiveUp, Horizon,
 };
+use crate::friction_law::CreepingLaw;
 use crate::metrics::{compare, FitReport};
 use crate::stabilised_replay::StabilisedReplay;
 use crate::validate::{as_experiments, validate, ValidateOptions, Validation};
@@ -146,6 +148,10 @@ pub struct Story {
     /// the end steps left them (removed ones out, simplified ones in their
     /// simpler form).
     pub effects: Vec<EffectInstance>,
+    /// The creeping dry-friction law the records follow, when a diagnosis
+    /// adopted it ([`crate::friction_law`]): the stages from that round on
+    /// are simulated under it.
+    pub creeping: Option<CreepingLaw>,
 }
 
 impl Story {
@@ -503,6 +509,7 @@ fn story(
     // whether this round's diagnosis was already repeated from a better
     // minimum of the same model (see below)
     let mut repeated = false;
+    let mut creeping: Option<CreepingLaw> = None;
     let stop;
     loop {
         let round = rounds.len() + 1;
@@ -517,6 +524,12 @@ fn story(
         .map_err(StoryError::Diagnose)?;
         if opts.fit.starts.is_none() {
             opts.fit.starts = Some(d.baseline.warm.starts().to_vec());
+        }
+        // the records follow the creeping dry-friction law: every later fit
+        // and stage is simulated under it
+        if let Some(law) = &d.creeping {
+            opts.fit.sim.dry_friction = DryFriction::Smooth { width: law.width };
+            creeping = Some(law.clone());
         }
         let opts = &opts;
         let current_model = model_from_text("model", &current_text).map_err(StoryError::Model)?;
@@ -567,6 +580,31 @@ fn story(
                     progress,
                 )?;
                 (inst, edited, m2, f, top.test.clone())
+            }
+            None if d.creeping.is_some() => {
+                // (round 1: the nominal model refitted above is the fit
+                // under the law)
+                if round > 1 {
+                    stages.push(stage(
+                        "dry friction creeping, refitted",
+                        &current_text,
+                        &current_model,
+                        Some(&d.baseline),
+                        experiments,
+                        opts,
+                    )?);
+                    current_fit = Some(d.baseline.clone());
+                }
+                stop = d.verdict_line();
+                rounds.push(Round {
+                    ranking: d.ranking,
+                    effect: None,
+                    fit: None,
+                    cost_before,
+                    cost_after: None,
+                    test: None,
+                });
+                break;
             }
             None => {
                 // the diagnosis may have found the model as it stands a better
@@ -663,6 +701,7 @@ fn story(
         stabilised: None,
         unexplained,
         effects: end.applied.into_iter().flatten().collect(),
+        creeping,
     })
 }
 

@@ -563,6 +563,7 @@ pub fn friction_name(law: DryFriction) -> String {
     match law {
         DryFriction::Sticking => "sticking".to_string(),
         DryFriction::Smooth { width } => format!("smooth:{width:e}"),
+        DryFriction::SmoothFitted { .. } => "smooth:fitted".to_string(),
     }
 }
 

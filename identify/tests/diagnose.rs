@@ -265,18 +265,28 @@ fn clean_case_is_adequate_under_the_simulators_friction_law() {
     clean_case_check(&exps, &truth, &opts);
 }
 
-/// [`clean_case_is_adequate_under_the_simulators_friction_law`] under
-/// plantc's default sticking law, which the data do not follow.
+/// The same records under plantc's default law: the diagnosis finds that
+/// they creep ([`plantc_identify::friction_law`]) and adopts the creeping
+/// law with its width fitted, within 10 % of the simulator's 1e-3 rad/s
+/// (identification notes, trap 8); under the sticking law alone the rule
+/// named a Coulomb friction of 1.65e-5 N m on the pendulum (weighted RMS
+/// ratio 1.63, baseline 1.6x the floor), measured 2026-11-27.
 #[test]
-#[ignore = "issue 26 open: the shared clean case's arm creeps (its simulator's friction is tanh(v/1e-3)); under the sticking law the rule names coulomb_friction@alpha of 1.65e-5 N m (weighted RMS ratio 1.63, baseline 1.6x the floor); no automatic choice of the law yet, measured 2026-11-28"]
 fn clean_case_is_adequate() {
     let Some((exps, truth)) = case("clean") else {
         return;
     };
-    clean_case_check(&exps, &truth, &FitOptions::default());
+    let d = clean_case_check(&exps, &truth, &FitOptions::default());
+    let law = d.creeping.as_ref().expect("the creeping law adopted");
+    eprintln!("{}", law.describe());
+    assert!((law.width / 1e-3 - 1.0).abs() < 0.1, "width {}", law.width);
 }
 
-fn clean_case_check(exps: &[Experiment], truth: &serde_json::Value, opts: &FitOptions) {
+fn clean_case_check(
+    exps: &[Experiment],
+    truth: &serde_json::Value,
+    opts: &FitOptions,
+) -> plantc_identify::Diagnosis {
     let start = Instant::now();
     let d = diagnose(&pendulum_text(), exps, opts).expect("diagnoses");
     eprintln!("clean: diagnose in {:?}", start.elapsed());
@@ -293,6 +303,7 @@ fn clean_case_check(exps: &[Experiment], truth: &serde_json::Value, opts: &FitOp
         eprintln!("{name} {:.5e} (true {t:.5e})", e.value);
         assert!((e.value / t - 1.0).abs() < 0.05, "{name}");
     }
+    d
 }
 
 /// The generic columns for effects that are not force terms, on the clean
@@ -443,4 +454,45 @@ fn equation_error_rejects_bad_requests() {
         name: "d".into(),
     });
     assert_eq!(bad.err(), Some(EquationErrorError::BadIndex(7)));
+}
+
+/// The shared Coulomb case through the whole story under plantc's default
+/// law: round 1 names the pendulum's dry friction (fitted sticking), round
+/// 2 finds that both joints' dry friction creeps (the simulator's
+/// `tanh(v/1e-3)`, identification notes trap 8) and adopts that law at the
+/// floor. The friction is truth.json's within 2 % (the issue's bar). Under
+/// the sticking law alone the story went on to name a quadratic drag and a
+/// cogging torque and stopped at 3 effects above the floor (measured
+/// 2026-11-28).
+#[test]
+fn coulomb_case_story_names_the_friction_then_the_creeping_law() {
+    let Some((exps, truth)) = case("coulomb_pendulum") else {
+        return;
+    };
+    let story = plantc_identify::identify(
+        &pendulum_text(),
+        &exps,
+        &plantc_identify::StoryOptions::default(),
+        &mut |_| {},
+    )
+    .expect("identifies");
+    eprintln!("{}", story.stop);
+    let effects: Vec<String> = story.effects.iter().map(|e| e.label()).collect();
+    assert_eq!(effects, ["coulomb_friction@alpha"], "{}", story.stop);
+    let law = story.creeping.as_ref().expect("the creeping law adopted");
+    assert!((law.width / 1e-3 - 1.0).abs() < 0.3, "width {}", law.width);
+    let model = model_from_text("final", &story.text).expect("checks");
+    let i = model
+        .parameters
+        .iter()
+        .position(|p| p.name == "Fc_alpha")
+        .expect("Fc_alpha");
+    let fc = story.fit.base[i];
+    let want = truth["effect_parameters"]["Fc"].as_f64().expect("Fc");
+    eprintln!(
+        "Fc_alpha {fc:.4e} (true {want:.4e}), width {:.3e}",
+        law.width
+    );
+    assert!((fc / want - 1.0).abs() < 0.02, "Fc_alpha = {fc}");
+    assert!(story.fit.after_cost <= 1.3 * plantc_identify::weights::noise_cost(&story.fit.weights));
 }

@@ -23,8 +23,8 @@ pub use euler_lagrange::{
 };
 pub use matrix::{adjugate, determinant};
 pub use numeric::{
-    flat_outputs, has_sign, smooth_signs, NumericDynamics, NumericError, Workspace,
-    FALLBACK_SIGN_WIDTH,
+    flat_outputs, has_sign, smooth_signs, smooth_signs_with, NumericDynamics, NumericError,
+    Workspace, FALLBACK_SIGN_WIDTH,
 };
 pub use present::{
     det_name, present_equations, Expand, PresentedAngles, PresentedEquations, PresentedSeparable,

@@ -430,10 +430,16 @@ fn visit_signs(eqs: &Equations, f: &mut dyn FnMut(Expr)) {
 /// sticking velocity band is about `width`; a joint under a load below the
 /// friction level creeps at roughly `width * atanh(load / friction)`.
 pub fn smooth_signs(eqs: &Equations, width: f64) -> Equations {
+    smooth_signs_with(eqs, |v| (v * Expr::float(1.0 / width)).tanh())
+}
+
+/// [`smooth_signs`] with `sign(v)` replaced by `law(v)` (e.g.
+/// `tanh(v / w)` with `w` a parameter symbol, to fit the width).
+pub fn smooth_signs_with(eqs: &Equations, law: impl Fn(Expr) -> Expr) -> Equations {
     let mut map: HashMap<Expr, Expr> = HashMap::new();
     visit_signs(eqs, &mut |e| {
         if let Node::Func(Func::Sign, v) = e.node() {
-            map.insert(e, (*v * Expr::float(1.0 / width)).tanh());
+            map.insert(e, law(*v));
         }
     });
     let s = |e: &Expr| crate::sym::substitute(*e, &map);

@@ -140,6 +140,10 @@ pub fn run(args: &DiagnoseArgs, out: &mut dyn Write, err: &mut dyn Write) -> Res
                 "adequate"
             },
             "verdict_line": d.verdict_line(),
+            "dry_friction": match &d.creeping {
+                Some(law) => serde_json::json!({"law": "creeping", "width": law.width, "test": law.test}),
+                None => serde_json::json!({"law": "sticking"}),
+            },
             "noise_floor_cost": d.floor,
             "baseline_cost": d.baseline.after_cost,
             "at_floor": d.at_floor,

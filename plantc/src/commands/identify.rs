@@ -511,7 +511,15 @@ fn story(
     }
     // the result
     let final_model = model_from_text("final", &s.text).map_err(fail)?;
-    let fitted = restore(with_values(&s.text, &final_model, &s.fit)?)?;
+    let mut fitted = restore(with_values(&s.text, &final_model, &s.fit)?)?;
+    if let Some(law) = &s.creeping {
+        // the values were fitted under the creeping law: said where the
+        // model is read
+        fitted = format!(
+            "# fitted with dry friction creeping: simulate it with `--friction smooth:{:.4e}`\n# (the records' joints creep rather than stick; see `plantc identify`'s verdict)\n{fitted}",
+            law.width
+        );
+    }
     write_file(&staging.join("fitted.plant"), &fitted)?;
     let stage_refs: Vec<Stage> = s
         .stages
@@ -555,6 +563,10 @@ fn story(
             "adequate"
         },
         "stop": s.stop,
+        "dry_friction": match &s.creeping {
+            Some(law) => serde_json::json!({"law": "creeping", "width": law.width}),
+            None => serde_json::json!({"law": "sticking"}),
+        },
         "stabilised_replay": s.stabilised.as_ref().map(|r| serde_json::json!({
             "note": r.note(),
             "controller": r.name,
