@@ -429,51 +429,41 @@ pub(crate) struct Compiled {
 pub(crate) fn dynamics_outputs(model: &Model, law: DryFriction) -> Result<Compiled, SimError> {
     let eqs = derive_equations(model).map_err(|e| SimError::Mechanics(e.to_string()))?;
     let n = eqs.coords.len();
-    match law {
-        DryFriction::Smooth { width } => {
-            let smoothed = plantc_derive::mechanics::has_sign(&eqs);
-            let eqs = smooth_signs(&eqs, width);
-            Ok(Compiled {
-                outs: flat_outputs(&eqs),
-                dry: vec![false; n],
-                levels: false,
-                smoothed,
-                notes: Vec::new(),
-            })
-        }
+    let smooth = match law {
+        DryFriction::Smooth { width } => Some(smooth_signs(&eqs, width)),
         DryFriction::SmoothFitted { parameter } => {
-            let smoothed = plantc_derive::mechanics::has_sign(&eqs);
             let Some(&w) = model.parameter_symbols().get(parameter) else {
                 return Err(SimError::BadOption(format!(
                     "the dry friction's width is parameter {parameter}, beyond the model's {}",
                     model.parameters.len()
                 )));
             };
-            let eqs = smooth_signs_with(&eqs, |v| (v / Expr::symbol(w)).tanh());
-            Ok(Compiled {
-                outs: flat_outputs(&eqs),
-                dry: vec![false; n],
-                levels: false,
-                smoothed,
-                notes: Vec::new(),
-            })
+            Some(smooth_signs_with(&eqs, |v| (v / Expr::symbol(w)).tanh()))
         }
-        DryFriction::Sticking => {
-            let split = decompose_dry_friction(&eqs, FALLBACK_SIGN_WIDTH);
-            let mut outs = flat_outputs(&split.smooth);
-            let levels = split.any();
-            if levels {
-                outs.extend(split.levels.iter().copied());
-            }
-            Ok(Compiled {
-                outs,
-                dry: (0..n).map(|i| split.has(i)).collect(),
-                levels,
-                smoothed: !split.notes.is_empty(),
-                notes: split.notes,
-            })
-        }
+        DryFriction::Sticking => None,
+    };
+    if let Some(smooth) = smooth {
+        return Ok(Compiled {
+            outs: flat_outputs(&smooth),
+            dry: vec![false; n],
+            levels: false,
+            smoothed: plantc_derive::mechanics::has_sign(&eqs),
+            notes: Vec::new(),
+        });
     }
+    let split = decompose_dry_friction(&eqs, FALLBACK_SIGN_WIDTH);
+    let mut outs = flat_outputs(&split.smooth);
+    let levels = split.any();
+    if levels {
+        outs.extend(split.levels.iter().copied());
+    }
+    Ok(Compiled {
+        outs,
+        dry: (0..n).map(|i| split.has(i)).collect(),
+        levels,
+        smoothed: !split.notes.is_empty(),
+        notes: split.notes,
+    })
 }
 
 /// Tape input symbols: state, inputs, full parameters.

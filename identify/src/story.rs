@@ -113,6 +113,21 @@ pub struct Round {
     pub test: Option<EffectTest>,
 }
 
+impl Round {
+    /// The round that named no effect: its ranking, the cost it started
+    /// from.
+    fn closing(ranking: Vec<Ranked>, cost_before: f64) -> Round {
+        Round {
+            ranking,
+            effect: None,
+            fit: None,
+            cost_before,
+            cost_after: None,
+            test: None,
+        }
+    }
+}
+
 /// The result of [`identify`].
 #[derive(Clone, Debug)]
 pub struct Story {
@@ -596,14 +611,7 @@ fn story(
                     current_fit = Some(d.baseline.clone());
                 }
                 stop = d.verdict_line();
-                rounds.push(Round {
-                    ranking: d.ranking,
-                    effect: None,
-                    fit: None,
-                    cost_before,
-                    cost_after: None,
-                    test: None,
-                });
+                rounds.push(Round::closing(d.ranking, cost_before));
                 break;
             }
             None => {
@@ -650,14 +658,7 @@ fn story(
                 } else {
                     format!("the residual is at the noise floor: nothing left for an effect to explain{caveat}")
                 };
-                rounds.push(Round {
-                    ranking: d.ranking,
-                    effect: None,
-                    fit: None,
-                    cost_before,
-                    cost_after: None,
-                    test: None,
-                });
+                rounds.push(Round::closing(d.ranking, cost_before));
                 break;
             }
         };
