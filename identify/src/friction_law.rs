@@ -55,7 +55,10 @@ use crate::fit::{
     fit, measured_of, residual_count, simulate_as, values_from, FitOptions, FitResult, GiveUp,
 };
 
-/// Grid points per decade of the width scan.
+/// Grid points per decade of the width scan. The scan only places the
+/// fits' starts, at its best point and every half-decade above: two points
+/// a decade would be the least that resolves those; four put the best
+/// within a quarter decade of the scan's minimum.
 const PER_DECADE: f64 = 4.0;
 
 /// The name of the width parameter while it is fitted.
