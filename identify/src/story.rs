@@ -573,8 +573,13 @@ fn story(
                 .and_then(Result::ok)
                 .filter(|f| f.after_cost <= d.baseline.after_cost);
             let refitted = finished.unwrap_or_else(|| d.baseline.clone());
+            let label = if d.creeping.is_some() {
+                "nominal, refitted, dry friction creeping"
+            } else {
+                "nominal, refitted"
+            };
             stages.push(stage(
-                "nominal, refitted",
+                label,
                 &current_text,
                 &current_model,
                 Some(&refitted),

@@ -321,9 +321,14 @@ fn story(
         refitted,
         err,
     )?;
+    // (", dry friction creeping" when the records' law was adopted there)
+    let law = refitted
+        .label
+        .strip_prefix("nominal, refitted")
+        .unwrap_or_default();
     let _ = writeln!(
         out,
-        "   nominal model refitted: RMSE {:.3e}; where it still fails:",
+        "   nominal model refitted{law}: RMSE {:.3e}; where it still fails:",
         refitted.report.rmse
     );
     if write_failures(out, model, &measured, &refitted.simulated)? == 0 {
