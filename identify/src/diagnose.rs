@@ -574,8 +574,36 @@ impl<'a> Judge<'a> {
     }
 
     /// A fit's residual in noise units.
-    fn residuals(&self, f: &FitResult) -> Vec<Vec<Vec<f64>>> {
+    pub(crate) fn residuals(&self, f: &FitResult) -> Vec<Vec<Vec<f64>>> {
         noise_residuals(&self.measured, &f.simulated, &self.noise)
+    }
+
+    /// The weighted sum of squares of simulated outputs (`simulate_as`'s
+    /// shape; samples a simulation left out do not count).
+    pub(crate) fn ssr_of(&self, simulated: &[Vec<Vec<f64>>]) -> f64 {
+        noise_residuals(&self.measured, simulated, &self.noise)
+            .iter()
+            .flatten()
+            .flatten()
+            .map(|r| r * r)
+            .sum()
+    }
+
+    /// The decision rule's likelihood test of sums of squares `s0`
+    /// (without) against `s1` (with `k` more parameters) over
+    /// `effective` independent residuals.
+    pub(crate) fn likelihood_test(&self, s0: f64, s1: f64, effective: f64, k: usize) -> EffectTest {
+        EffectTest::new(s0, s1, self.samples, effective, k)
+    }
+
+    /// The experiments judged on.
+    pub(crate) fn experiments(&self) -> &'a [Experiment] {
+        self.experiments
+    }
+
+    /// The diagnosis' options.
+    pub(crate) fn options(&self) -> &'a DiagnoseOptions {
+        self.opts
     }
 
     /// The test of `r` (refitted, model `m`) against a fit without its
@@ -708,8 +736,20 @@ impl<'a> Judge<'a> {
         r.gain = r.test.as_ref().map_or(0.0, EffectTest::rms_ratio);
     }
 
+    /// The largest residual RMS over the records' channels (`residuals`
+    /// in noise units), with its record and channel names.
+    fn worst(&self, residuals: &[Vec<Vec<f64>>]) -> Option<(f64, String, String)> {
+        worst_channel(residuals).map(|(r, e, c)| {
+            (
+                r,
+                self.records.get(e).cloned().unwrap_or_default(),
+                self.channels.get(c).cloned().unwrap_or_default(),
+            )
+        })
+    }
+
     /// Is a fit's residual at the floor?
-    fn fit_at_floor(&self, f: &FitResult) -> bool {
+    pub(crate) fn fit_at_floor(&self, f: &FitResult) -> bool {
         at_floor(&self.residuals(f))
     }
 }
@@ -801,13 +841,7 @@ pub fn diagnose_from(
     let judge = Judge::new(&model, experiments, opts, &baseline);
     let base_res = judge.residuals(&baseline);
     let baseline_at_floor = at_floor(&base_res);
-    let worst = worst_channel(&base_res).map(|(r, e, c)| {
-        (
-            r,
-            judge.records.get(e).cloned().unwrap_or_default(),
-            judge.channels.get(c).cloned().unwrap_or_default(),
-        )
-    });
+    let worst = judge.worst(&base_res);
     if baseline_at_floor {
         notes.push(
             "the baseline's residual is below sqrt(2) noise RMS on every channel of every record: a missing effect of the noise's size would raise it above, so no candidate effect was refitted (sensor offsets still checked)".to_string(),
@@ -863,7 +897,7 @@ pub fn diagnose_from(
     // floor, adopted when it reaches the floor with a larger margin than
     // the verdict's
     let creeping = (!baseline_at_floor)
-        .then(|| creeping_law(text, &model, experiments, opts, &baseline))
+        .then(|| creeping_law(text, &model, &judge, &baseline))
         .flatten()
         .filter(|law| {
             let verdict_margin = verdict
@@ -879,15 +913,7 @@ pub fn diagnose_from(
                 law.describe()
             ));
             baseline = law.fit.clone();
-            let res = judge.residuals(&baseline);
-            let worst = worst_channel(&res).map(|(r, e, c)| {
-                (
-                    r,
-                    judge.records.get(e).cloned().unwrap_or_default(),
-                    judge.channels.get(c).cloned().unwrap_or_default(),
-                )
-            });
-            (None, true, worst)
+            (None, true, judge.worst(&judge.residuals(&baseline)))
         }
         None => (verdict, baseline_at_floor, worst),
     };

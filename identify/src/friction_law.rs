@@ -47,13 +47,10 @@
 use plantc_derive::model::Model;
 
 use crate::data::Experiment;
-use crate::decision::{at_floor, noise_residuals, EffectTest};
-use crate::diagnose::model_from_text;
-use crate::diagnose::DiagnoseOptions;
+use crate::decision::{effective_samples, EffectTest};
+use crate::diagnose::{model_from_text, Judge};
 use crate::experiment_sim::{dynamics_outputs, DryFriction};
-use crate::fit::{
-    fit, measured_of, residual_count, simulate_as, values_from, FitOptions, FitResult, GiveUp,
-};
+use crate::fit::{fit, simulate_as, values_from, FitOptions, FitResult, GiveUp};
 
 /// Grid points per decade of the width scan. The scan only places the
 /// fits' starts, at its best point and every half-decade above: two points
@@ -161,10 +158,10 @@ fn width_bracket(
 pub(crate) fn creeping_law(
     text: &str,
     model: &Model,
-    experiments: &[Experiment],
-    opts: &DiagnoseOptions,
+    judge: &Judge<'_>,
     baseline: &FitResult,
 ) -> Option<CreepingLaw> {
+    let (experiments, opts) = (judge.experiments(), judge.options());
     if opts.fit.sim.dry_friction != DryFriction::Sticking || baseline.segments.is_some() {
         return None;
     }
@@ -174,14 +171,8 @@ pub(crate) fn creeping_law(
         return None;
     }
     let (lo, hi) = width_bracket(model, experiments, baseline, &dry)?;
-    let measured = measured_of(model, experiments);
-    let noise: Vec<f64> = baseline.weights.iter().map(|w| w.noise).collect();
-    let samples = residual_count(model, experiments);
-    let effective = crate::decision::effective_samples(&noise_residuals(
-        &measured,
-        &baseline.simulated,
-        &noise,
-    ));
+    // (the baseline's: `decide` may have replaced the judge's)
+    let effective = effective_samples(&judge.residuals(baseline));
     let law = |dry_friction: DryFriction| FitOptions {
         sim: crate::experiment_sim::SimOptions {
             dry_friction,
@@ -198,15 +189,8 @@ pub(crate) fn creeping_law(
     //    beats sticking there by the rule's likelihood part
     let scan = |w: Option<f64>| -> f64 {
         let fo = w.map_or_else(|| law(DryFriction::Sticking), &under);
-        match simulate_as(model, experiments, &fo, baseline, &baseline.base) {
-            Ok(sim) => noise_residuals(&measured, &sim, &noise)
-                .iter()
-                .flatten()
-                .flatten()
-                .map(|r| r * r)
-                .sum(),
-            Err(_) => f64::INFINITY,
-        }
+        simulate_as(model, experiments, &fo, baseline, &baseline.base)
+            .map_or(f64::INFINITY, |sim| judge.ssr_of(&sim))
     };
     let costs: Vec<f64> =
         crate::parallel::par_map(grid.len() + 1, |k| scan((k < grid.len()).then(|| grid[k])));
@@ -214,7 +198,10 @@ pub(crate) fn creeping_law(
     let best = (0..grid.len())
         .filter(|&k| costs[k].is_finite())
         .min_by(|&a, &b| costs[a].total_cmp(&costs[b]))?;
-    if !EffectTest::new(sticking, costs[best], samples, effective, 1).likely() {
+    if !judge
+        .likelihood_test(sticking, costs[best], effective, 1)
+        .likely()
+    {
         return None;
     }
     // 2. the width fitted with the model's values, as a parameter of the
@@ -223,8 +210,8 @@ pub(crate) fn creeping_law(
     //    sticking fit's values finds the width too narrow: a sticking
     //    model lets a held joint move only by lowering its friction level,
     //    and with the level restored the same motion needs a wider creep;
-    //    so the fit starts at the scan's best and a half-decade and a
-    //    decade above it, the best end kept. A start that cannot reach the
+    //    so the fit starts at the scan's best and every half-decade above
+    //    it, the best end kept. A start that cannot reach the
     //    floor (its weighted RMS below sqrt(2) times the floor's, as every
     //    channel must be) stops there ([`GiveUp`]): the law is adopted
     //    only at the floor.
@@ -271,10 +258,8 @@ pub(crate) fn creeping_law(
         ..under(width)
     };
     let f = fit(model, experiments, &fo).ok()?;
-    let ssr = |f: &FitResult| f.after_cost * f.after_cost * samples as f64;
-    let test = EffectTest::new(ssr(baseline), ssr(&f), samples, effective, 1);
-    let at_the_floor = at_floor(&noise_residuals(&measured, &f.simulated, &noise));
-    (test.likely() && at_the_floor).then_some(CreepingLaw {
+    let test = judge.likelihood_test(judge.ssr(baseline), judge.ssr(&f), effective, 1);
+    (test.likely() && judge.fit_at_floor(&f)).then_some(CreepingLaw {
         width,
         fit: f,
         test,

@@ -589,6 +589,18 @@ fn story(
             current_fit = Some(refitted);
         }
         let cost_before = d.baseline.after_cost;
+        // the model as it stands, at the diagnosis' own baseline fit (a
+        // better minimum, or the fit under an adopted friction law)
+        let baseline_stage = |label: &str| {
+            stage(
+                label,
+                &current_text,
+                &current_model,
+                Some(&d.baseline),
+                experiments,
+                opts,
+            )
+        };
         let top = d.verdict.as_ref().and_then(|_| d.ranking.first()).cloned();
         let (inst, edited, m2, f, test) = match top {
             Some(top) => {
@@ -605,14 +617,7 @@ fn story(
                 // (round 1: the nominal model refitted above is the fit
                 // under the law)
                 if round > 1 {
-                    stages.push(stage(
-                        "dry friction creeping, refitted",
-                        &current_text,
-                        &current_model,
-                        Some(&d.baseline),
-                        experiments,
-                        opts,
-                    )?);
+                    stages.push(baseline_stage("dry friction creeping, refitted")?);
                     current_fit = Some(d.baseline.clone());
                 }
                 stop = d.verdict_line();
@@ -629,14 +634,7 @@ fn story(
                     .is_some_and(|f| d.baseline.after_cost < f.after_cost);
                 if improved && round > 1 {
                     better_start = Some(stages.len());
-                    stages.push(stage(
-                        "refitted from a better start",
-                        &current_text,
-                        &current_model,
-                        Some(&d.baseline),
-                        experiments,
-                        opts,
-                    )?);
+                    stages.push(baseline_stage("refitted from a better start")?);
                     current_fit = Some(d.baseline.clone());
                     // the verdict was judged against the worse minimum: the
                     // round is diagnosed again from the better one (once: the
