@@ -133,8 +133,10 @@ pub struct FitOptions {
     pub weights: Vec<(String, f64)>,
     /// Estimate each experiment's initial velocities (on by default).
     pub estimate_velocities: bool,
-    /// Estimate each experiment's initial positions (off by default: the
-    /// first sample is taken; segments always estimate theirs).
+    /// Estimate each experiment's initial positions (on by default, within
+    /// each channel's noise: a quantised first sample is up to half a
+    /// quantum off, and a sensor zero standing in for that error biases
+    /// the whole record; segments always estimate theirs).
     pub estimate_positions: bool,
     /// Per-experiment sensor offsets.
     pub offsets: Offsets,
@@ -262,7 +264,7 @@ impl Default for FitOptions {
             correlation_threshold: 0.95,
             weights: Vec::new(),
             estimate_velocities: true,
-            estimate_positions: false,
+            estimate_positions: true,
             offsets: Offsets::Auto,
             closed_loop: ClosedLoop::Auto,
             scan: true,

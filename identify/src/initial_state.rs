@@ -19,8 +19,8 @@
 //!   quantum per window), and, added in quadrature, the difference between
 //!   that slope and the local line's on the same samples (the smoother's
 //!   own bias, largest where a one-sided window meets a transient);
-//! - **position** (blocks that estimate theirs: segments, or
-//!   `--estimate-initial positions`): the measured value, within the
+//! - **position** (estimated by default; `--estimate-initial velocities`
+//!   takes the first sample as it is): the measured value, within the
 //!   channel's noise: the unknown is the deviation `delta` from the
 //!   measurement (minus the offsets), prior `N(0, noise)`.
 //!

@@ -356,12 +356,14 @@ pub struct FitControlArgs {
     /// (repeatable; default: 1 / the channel's noise floor: encoder quantum or measured high-frequency noise).
     #[arg(long = "weight", value_name = "COORD=W")]
     pub weights: Vec<String>,
-    /// Initial state estimated per experiment: `velocities` (default),
-    /// `positions,velocities`, or `none` (measured positions, zero velocities).
+    /// Initial state estimated per experiment: `positions,velocities`
+    /// (default; the positions within their noise), `velocities` (the first
+    /// samples taken as the positions), or `none` (measured positions, zero
+    /// velocities).
     #[arg(
         long = "estimate-initial",
         value_name = "WHAT",
-        default_value = "velocities"
+        default_value = "positions,velocities"
     )]
     pub estimate_initial: String,
     /// Per-experiment sensor zero offsets: `auto` (coordinates whose value

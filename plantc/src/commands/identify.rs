@@ -285,9 +285,24 @@ fn story(
 
     // 1. the nominal model
     let nominal = &s.stages[0];
+    let mut estimated: Vec<&str> = Vec::new();
+    if opts.fit.estimate_positions {
+        estimated.push("initial positions");
+    }
+    if opts.fit.estimate_velocities {
+        estimated.push("initial velocities");
+    }
+    if !matches!(opts.fit.offsets, plantc_identify::Offsets::None) {
+        estimated.push("sensor zeros");
+    }
+    let estimated = match estimated.split_last() {
+        None => "nothing".to_string(),
+        Some((last, [])) => last.to_string(),
+        Some((last, rest)) => format!("{} and {last}", rest.join(", ")),
+    };
     let _ = writeln!(
         out,
-        "1. nominal model `{}` against {} experiment(s) (initial velocities and sensor zeros estimated per experiment)",
+        "1. nominal model `{}` against {} experiment(s) ({estimated} estimated per experiment)",
         args.model.display(),
         measured.len()
     );
