@@ -226,8 +226,8 @@ fn diagnosis_does_not_absorb_the_controller() {
 /// episode that starts clipped is followed only after its release transient
 /// (the hand that still holds the pendulum when the controller starts,
 /// `plantc_identify::fit::ExperimentEstimate::release`).
-/// Measured 2026-11-28 (release build, both splits about 60 s wall on 2
-/// threads): simulation 90.5-96.3 % arm, 85.3-92.1 % pendulum; 0.5 s ahead
+/// Measured 2026-11-28 (release build, both splits 42 s wall, 78 s CPU on 2
+/// threads): simulation 90.5-96.3 % arm, 86.1-92.2 % pendulum; 0.5 s ahead
 /// 92.2-96.5 % / 87.7-91.5 %; the 9 clipped episodes followed from t = 0.25
 /// or 0.5 s, 5 of the 7 unclipped ones too (the hand holds them as well,
 /// with a smaller kick). Before the
