@@ -136,7 +136,9 @@ pub struct FitOptions {
     /// Estimate each experiment's initial positions (on by default, within
     /// each channel's noise: a quantised first sample is up to half a
     /// quantum off, and a sensor zero standing in for that error biases
-    /// the whole record; segments always estimate theirs).
+    /// the whole record, or the observed velocities make up for it over
+    /// the observer's window, a start a long simulation amplifies; segments
+    /// always estimate theirs).
     pub estimate_positions: bool,
     /// Per-experiment sensor offsets.
     pub offsets: Offsets,

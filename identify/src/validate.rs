@@ -183,15 +183,6 @@ pub fn validate(
         free: Some(Vec::new()),
         start: Some(base.to_vec()),
         horizon: Horizon::Whole,
-        // a held-out record's initial state is observed in full when it is
-        // observed at all: its first samples measure the positions only to
-        // their noise (a quantised first sample is up to half a quantum
-        // off), and the observer's velocities would otherwise make up for
-        // that error over its window, a start that a long simulation
-        // amplifies (a double pendulum on a cart swinging freely from rest:
-        // 82.8 / 71.8 % with the first sample taken, 99.5 / 99.7 % with it
-        // observed). The positions stay within their noise prior.
-        estimate_positions: opts.fit.estimate_positions || opts.fit.estimate_velocities,
         offsets: match &opts.fit.offsets {
             // on held-out data every eligible offset is estimated (nothing
             // is dropped afterwards)

@@ -13,26 +13,33 @@
 
 mod common;
 
-use plantc_derive::model::{load_model, ParameterValues};
+use plantc_derive::model::{load_model, CoordinateKind, Model, ParameterValues};
 use plantc_identify::synth::parse_experiment_spec;
 use plantc_identify::{
     diagnose, read_experiment, synthesize, validate, ChannelSpec, Experiment, FitOptions, Kind,
     SynthOptions, SynthSpec, ValidateOptions,
 };
 
-/// `experiments` (synth specs) of the bundled model `file` (its own
-/// values, 500 Hz, 4096-count encoders on the angles), read back with
-/// `channels`.
-fn synthesized(
-    test: &str,
-    file: &str,
-    experiments: &[&str],
-    channels: &ChannelSpec,
-) -> Vec<Experiment> {
+/// The bundled model `file` (its text and the model), `experiments`
+/// (synth specs) made from it with its own values (500 Hz, 4096-count
+/// encoders on the angles) and read back with its channels (both models
+/// here are pushed by a force).
+fn synthesized(test: &str, file: &str, experiments: &[&str]) -> (String, Model, Vec<Experiment>) {
     let path = std::path::Path::new(env!("CARGO_MANIFEST_DIR"))
         .join("../models")
         .join(file);
     let text = std::fs::read_to_string(&path).expect("bundled model");
+    let model = load_model(&path).expect("model loads").model;
+    let mut channels = ChannelSpec::new();
+    for c in &model.coordinates {
+        channels = match c.kind {
+            CoordinateKind::Angle => channels.angle(&c.name),
+            CoordinateKind::Length => channels.length(&c.name),
+        };
+    }
+    for i in &model.inputs {
+        channels = channels.input(&i.name, Kind::Force);
+    }
     let spec = SynthSpec {
         case: test.into(),
         model_name: file.into(),
@@ -46,13 +53,15 @@ fn synthesized(
         options: SynthOptions::default(),
     };
     let out = synthesize(&text, &spec).expect("synthesizes");
-    out.files
+    let exps = out
+        .files
         .iter()
         .map(|f| {
             let p = common::write(test, &f.file_name, &f.text);
-            read_experiment(&p, channels).expect("reads").0
+            read_experiment(&p, &channels).expect("reads").0
         })
-        .collect()
+        .collect();
+    (text, model, exps)
 }
 
 /// In a fit: a cart-pole (`models/cart_pole.plant`, its own values)
@@ -65,21 +74,14 @@ fn synthesized(
 /// clean records are adequate.
 #[test]
 fn a_clean_cart_pole_is_adequate() {
-    let channels = ChannelSpec::new()
-        .length("x")
-        .angle("th")
-        .input("F", Kind::Force);
-    let exps = synthesized(
+    let (text, _, exps) = synthesized(
         "initial_positions_cart_pole",
         "cart_pole.plant",
         &[
             "driven:th0=180deg,band=0.3-6,rms=2,seed=1,duration=10",
             "free_swing:th0=150deg,duration=10",
         ],
-        &channels,
     );
-    let path = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("../models/cart_pole.plant");
-    let text = std::fs::read_to_string(&path).expect("models/cart_pole.plant");
     let d = diagnose(&text, &exps, &FitOptions::default()).expect("diagnoses");
     eprintln!("{}", d.verdict_line());
     assert!(d.adequate(), "{}", d.verdict_line());
@@ -87,19 +89,10 @@ fn a_clean_cart_pole_is_adequate() {
 
 #[test]
 fn a_release_from_rest_is_followed_at_the_true_values() {
-    let path = std::path::Path::new(env!("CARGO_MANIFEST_DIR"))
-        .join("../models/double_pendulum_cart.plant");
-    let model = load_model(&path).expect("model loads").model;
-    let channels = ChannelSpec::new()
-        .length("x")
-        .angle("th1")
-        .angle("th2")
-        .input("F", Kind::Force);
-    let exps = synthesized(
+    let (_, model, exps) = synthesized(
         "initial_positions_dpc",
         "double_pendulum_cart.plant",
         &["free_swing:th10=170deg,th20=170deg,duration=10,name=swing"],
-        &channels,
     );
     let base = ParameterValues::new(&model, None, &[])
         .expect("values")
