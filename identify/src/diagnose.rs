@@ -1018,25 +1018,30 @@ impl Search<'_> {
             .judge(&mut ranking[idx], &self.edited[idx].0, self.s0);
     }
 
-    /// Compute the next [`Step`]s of `upcoming` (in that order) ahead on
-    /// the other cores: the first [`crate::parallel::threads`] of them not
-    /// already computed from their candidate's present state. Each is the
-    /// same function of that state as when run in turn (a refit or a second
-    /// start, then the judgement), and is used only if the state is still
-    /// the same when its turn comes: the outcome is that of the sequential
-    /// search on any number of threads.
-    fn look_ahead(&self, ranking: &[Ranked], step: Step, upcoming: &[usize]) {
+    /// Compute the [`Step`]s of `upcoming` (in that order) ahead on the
+    /// other cores, from their candidates' present states, up to the first
+    /// result that `stop`s the caller's walk of that list (a refit that
+    /// settles the diagnosis; see [`crate::speculate`] for the rule). Each
+    /// is the same function of that state as when run in turn (a refit or a
+    /// second start, then the judgement), and is used only if the state is
+    /// still the same when its turn comes: the outcome is that of the
+    /// sequential search on any number of threads.
+    fn look_ahead(
+        &self,
+        ranking: &[Ranked],
+        step: Step,
+        upcoming: &[usize],
+        stop: impl Fn(&Ranked) -> bool + Sync,
+    ) {
         let (judge, model, baseline, edited, s0) =
             (self.judge, self.model, self.baseline, self.edited, self.s0);
-        let shown = |batch: &[usize]| {
-            if let Some(&a) = batch.first() {
-                let label = ranking[a].candidate.label();
-                let which: Vec<usize> = batch.iter().map(|i| i + 1).collect();
-                crate::progress::candidates(&which, ranking.len(), &label);
-            }
-        };
-        self.ahead
-            .compute(step, ranking, upcoming, shown, |r, idx| {
+        let n = ranking.len();
+        self.ahead.compute(
+            step,
+            ranking,
+            upcoming,
+            |r, idx| {
+                crate::progress::candidates(&[idx + 1], n, &r.candidate.label());
                 let m = &edited[idx].0;
                 let opts = judge.screening_options(r, baseline);
                 match step {
@@ -1046,7 +1051,9 @@ impl Search<'_> {
                     }
                 }
                 judge.judge(r, m, s0);
-            });
+            },
+            stop,
+        );
     }
 
     fn may_restart(&self) -> bool {
@@ -1091,7 +1098,7 @@ impl Search<'_> {
     /// A candidate that passes with its residual at the floor: nothing is
     /// left for another to explain.
     fn settles(&self, r: &Ranked) -> bool {
-        r.passes() && r.fit.as_ref().is_some_and(|f| self.judge.fit_at_floor(f))
+        settles(self.judge, r)
     }
 
     /// Refit the simpler effect `r` contains (Coulomb under Stribeck), for
@@ -1174,7 +1181,9 @@ impl Search<'_> {
         };
         let mut settled = false;
         for (k, &idx) in leaders.iter().enumerate() {
-            self.look_ahead(ranking, Step::Refit, &leaders[k..]);
+            self.look_ahead(ranking, Step::Refit, &leaders[k..], |r| {
+                settles(self.judge, r)
+            });
             if try_one(self, ranking, idx) {
                 settled = true;
                 break;
@@ -1198,7 +1207,9 @@ impl Search<'_> {
                 ));
             }
             for (k, &idx) in rest.iter().enumerate() {
-                self.look_ahead(ranking, Step::Refit, &rest[k..]);
+                self.look_ahead(ranking, Step::Refit, &rest[k..], |r| {
+                    settles(self.judge, r)
+                });
                 if try_one(self, ranking, idx) {
                     settled = true;
                     break;
@@ -1240,7 +1251,14 @@ impl Search<'_> {
                         .copied()
                         .filter(|i| !self.second_started.contains(i))
                         .collect();
-                    self.look_ahead(ranking, Step::SecondStart, &next);
+                    // (the walk ends at one that settles, and may end at
+                    // the first likely one that did not start from the
+                    // baseline: the restart check below)
+                    self.look_ahead(ranking, Step::SecondStart, &next, |r| {
+                        settles(self.judge, r)
+                            || (!r.from_baseline
+                                && r.test.as_ref().is_some_and(EffectTest::likely))
+                    });
                 }
                 self.second_start(ranking, idx);
                 if self.settles(&ranking[idx]) {
@@ -1288,7 +1306,7 @@ impl Search<'_> {
             // second starts, is the same as one after the other per
             // candidate)
             for (k, &j) in stand_ins.iter().enumerate() {
-                self.look_ahead(ranking, Step::Refit, &stand_ins[k..]);
+                self.look_ahead(ranking, Step::Refit, &stand_ins[k..], |_| false);
                 self.refit(ranking, j);
             }
             for (k, &j) in stand_ins.iter().enumerate() {
@@ -1298,7 +1316,7 @@ impl Search<'_> {
                         .copied()
                         .filter(|i| !self.second_started.contains(i))
                         .collect();
-                    self.look_ahead(ranking, Step::SecondStart, &next);
+                    self.look_ahead(ranking, Step::SecondStart, &next, |_| false);
                 }
                 self.second_start(ranking, j);
             }
@@ -1312,6 +1330,12 @@ impl Search<'_> {
         self.stribeck_from_coulomb(ranking, &mut stribecks);
         crate::progress::clear();
     }
+}
+
+/// A candidate that passes with its residual at the floor (see
+/// [`Search::settles`]).
+fn settles(judge: &Judge<'_>, r: &Ranked) -> bool {
+    r.passes() && r.fit.as_ref().is_some_and(|f| judge.fit_at_floor(f))
 }
 
 /// The force effects that are functions of their target's speed (the

@@ -5,25 +5,29 @@
 //! candidate comes next depends on the ones before. Each refit, though, is
 //! a function of its own candidate's state only (the baseline, the edited
 //! model and the candidate's estimates). So when the search is about to
-//! refit a candidate nobody has computed yet, the next
-//! [`crate::parallel::threads`] candidates of its list are refitted at once
-//! ([`Ahead::compute`]), each from a copy of its present state, and kept
-//! beside the input state they were computed from. When a candidate's turn
-//! comes, its result is used only if its state is still equal to that input
-//! ([`Ahead::take`]); otherwise it is computed again in turn. The search
-//! therefore does exactly what it does on one thread, whatever the number
-//! of threads: the work ahead that a settled search no longer needs (at
-//! most `threads - 1` refits per batch) is the price of the wall time.
+//! refit a candidate nobody has computed yet, the candidates of its list
+//! are refitted ahead on the workers ([`Ahead::compute`]), each from a copy
+//! of its present state, and kept beside the input state they were
+//! computed from. When a candidate's turn comes, its result is used only if
+//! its state is still equal to that input ([`Ahead::take`]); otherwise it
+//! is computed again in turn. The search therefore does exactly what it
+//! does on one thread, whatever the number of threads.
 //!
-//! The rule for starting a batch: only when the candidate whose turn it is
-//! has not been computed (no work further ahead than one batch), and only
-//! with two or more candidates to share out (one alone runs in turn, where
-//! its fit spreads its own experiments over the cores instead).
+//! The rule for the work ahead: the list is taken in the search's order by
+//! whichever worker is free ([`crate::parallel::par_map_until`]: a long
+//! refit does not hold the other cores idle until it ends, as fixed batches
+//! did; the QUBE round-1 refits take 0.3 to 2.3 s each), and no worker
+//! takes a candidate past the first result that ends the search's walk of
+//! the list (the search's own `stop` test: a candidate that settles the
+//! diagnosis). The work ahead that the search no longer needs is at most
+//! the refits in flight when that result came in, one per other worker:
+//! the price of the wall time. A list of one candidate runs in turn, where
+//! its fit spreads its own experiments over the cores instead.
 
 use std::cell::RefCell;
 
 use crate::diagnose::Ranked;
-use crate::parallel::{par_map, workers_for};
+use crate::parallel::{par_map_until, workers_for};
 
 /// Which computation on a candidate.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -64,17 +68,17 @@ impl Ahead {
     }
 
     /// Compute `step` (`run` on a copy of the candidate and its index) for
-    /// the first candidates of `upcoming` (indices into `ranking`, in the
+    /// the candidates of `upcoming` (indices into `ranking`, in the
     /// search's order) on the workers, if the first has not been computed
-    /// from its present state (see the module docs for the rule); `shown`
-    /// is told the batch first (progress).
+    /// from its present state, up to the first result that `stop`s the
+    /// search's walk (see the module docs for the rule).
     pub(crate) fn compute(
         &self,
         step: Step,
         ranking: &[Ranked],
         upcoming: &[usize],
-        shown: impl Fn(&[usize]),
         run: impl Fn(&mut Ranked, usize) + Sync,
+        stop: impl Fn(&Ranked) -> bool + Sync,
     ) {
         let Some(&first) = upcoming.first() else {
             return;
@@ -82,26 +86,29 @@ impl Ahead {
         if self.has(step, first, &ranking[first]) {
             return;
         }
-        let workers = workers_for(upcoming.len());
         let batch: Vec<usize> = upcoming
             .iter()
             .copied()
             .filter(|&i| !self.has(step, i, &ranking[i]))
-            .take(workers)
             .collect();
-        if batch.len() < 2 {
+        if batch.len() < 2 || workers_for(batch.len()) < 2 {
             return;
         }
-        shown(&batch);
-        let results = par_map(batch.len(), |b| {
-            let idx = batch[b];
-            let mut r = ranking[idx].clone();
-            run(&mut r, idx);
-            r
-        });
+        let results = par_map_until(
+            batch.len(),
+            |b| {
+                let idx = batch[b];
+                let mut r = ranking[idx].clone();
+                run(&mut r, idx);
+                r
+            },
+            stop,
+        );
         let mut done = self.done.borrow_mut();
         for (idx, after) in batch.into_iter().zip(results) {
-            done.push((step, idx, ranking[idx].clone(), after));
+            if let Some(after) = after {
+                done.push((step, idx, ranking[idx].clone(), after));
+            }
         }
     }
 }
