@@ -359,7 +359,13 @@ impl EffectTest {
         format!(
             "weighted RMS ratio {:.3} (without / with); N_eff ln(S0/S1) = {:.1} against k ln N_eff = {:.1} (k = {}, N_eff = {:.0} of {}){size}{form}",
             self.rms_ratio(),
-            self.statistic,
+            // (a refit that gained nothing, to the rounding of its cost,
+            // reads 0.0, not -0.0)
+            if self.statistic.abs() < 0.05 {
+                0.0
+            } else {
+                self.statistic
+            },
             self.threshold,
             self.parameters,
             self.effective_samples,

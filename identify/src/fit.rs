@@ -172,12 +172,12 @@ pub struct FitOptions {
     /// horizons and the nuisance-only start: for a refit near a fitted
     /// point (a candidate effect added to a fitted baseline).
     pub warm: Option<WarmStart>,
-    /// Another start (base values, model order) for a warm fit: the fit
-    /// starts from whichever of `start` and this one the whole records,
-    /// from the warm nuisance, fit better (two more simulations). A lower
-    /// cost is no proof of a better basin: the caller offers this only
-    /// where any start will do (see the diagnosis' refits).
-    pub alternative_start: Option<Vec<f64>>,
+    /// Other starts (base values, model order) for a warm fit: the fit
+    /// starts from whichever of `start` and these the whole records, from
+    /// the warm nuisance, fit best (the first on a tie; one more simulation
+    /// each). A lower cost is no proof of a better basin: the caller offers
+    /// these only where any start will do (see the diagnosis' refits).
+    pub alternative_starts: Vec<Vec<f64>>,
     /// Keep the simulation at the start ([`FitResult::simulated_start`]):
     /// one more nuisance fit and simulation, for a caller that shows the
     /// start values as a stage of their own (the identify story's nominal
@@ -275,7 +275,7 @@ impl Default for FitOptions {
             tolerance: FINAL_TOLERANCE,
             coarse_far_above_floor: false,
             warm: None,
-            alternative_start: None,
+            alternative_starts: Vec::new(),
             simulate_start: false,
             starts: None,
             give_up: None,
@@ -1829,34 +1829,43 @@ fn follows(pb: &Problem<'_>, pt: &Point) -> bool {
 }
 
 /// The free values of the start of a fit: those of [`FitOptions::start`],
-/// or of [`FitOptions::alternative_start`] when the fit is warm and the
-/// whole records, with the warm nuisance, fit better from there (two
-/// simulations).
+/// or of the [`FitOptions::alternative_starts`] whose whole records, with
+/// the warm nuisance, fit best when the fit is warm (the first on a tie;
+/// a simulation per distinct start).
 fn better_start(setup: &Setup<'_>, run: &mut Run<'_>) -> Vec<f64> {
     let g0 = setup.free_values(&setup.base);
-    // (the alternative is weighed on whole records)
+    // (the alternatives are weighed on whole records)
     let warm = setup.opts.warm.is_some() && !matches!(setup.opts.horizon, Horizon::Segments(_));
-    let alt = match &setup.opts.alternative_start {
-        Some(a) if warm && a.len() == setup.base.len() => setup.free_values(a),
-        _ => return g0,
-    };
-    if alt == g0 || alt.iter().any(|v| !v.is_finite()) {
+    if !warm {
         return g0;
     }
+    let mut starts = vec![g0];
+    for a in &setup.opts.alternative_starts {
+        if a.len() != setup.base.len() {
+            continue;
+        }
+        let g = setup.free_values(a);
+        if g.iter().all(|v| v.is_finite()) && !starts.contains(&g) {
+            starts.push(g);
+        }
+    }
+    if starts.len() == 1 {
+        return starts.swap_remove(0);
+    }
     let pb = setup.problem(None);
-    let mut cost_at = |g: &[f64]| {
+    let mut best = (f64::INFINITY, 0);
+    for (k, g) in starts.iter().enumerate() {
         let mut pt = setup.start_point(&pb, g);
         setup.apply_warm(&pb, &mut pt);
         run.simulations += 1;
-        pb.cost(&pt, f64::INFINITY)
-            .map_or(f64::INFINITY, |(s, _)| s)
-    };
-    let (own, other) = (cost_at(&g0), cost_at(&alt));
-    if other < own {
-        alt
-    } else {
-        g0
+        let cost = pb
+            .cost(&pt, f64::INFINITY)
+            .map_or(f64::INFINITY, |(s, _)| s);
+        if cost < best.0 {
+            best = (cost, k);
+        }
     }
+    starts.swap_remove(best.1)
 }
 
 /// Where a fit on one layout (whole records or segments) ended.
