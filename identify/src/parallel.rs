@@ -58,37 +58,10 @@ pub fn workers_for(count: usize) -> usize {
 /// in index order. On one worker (or inside another map's worker) the
 /// calls run inline, in order, on this thread.
 pub fn par_map<T: Send>(count: usize, f: impl Fn(usize) -> T + Sync) -> Vec<T> {
-    let workers = workers_for(count);
-    if workers <= 1 {
-        return (0..count).map(f).collect();
-    }
-    let next = AtomicUsize::new(0);
-    let slots: Vec<Mutex<Option<T>>> = (0..count).map(|_| Mutex::new(None)).collect();
-    std::thread::scope(|s| {
-        for _ in 0..workers {
-            s.spawn(|| {
-                IN_WORKER.with(|w| w.set(true));
-                loop {
-                    let i = next.fetch_add(1, Ordering::Relaxed);
-                    if i >= count {
-                        break;
-                    }
-                    let v = f(i);
-                    if let Ok(mut slot) = slots[i].lock() {
-                        *slot = Some(v);
-                    }
-                }
-            });
-        }
-    });
-    slots
+    // (never stopped: every item is computed)
+    par_map_until(count, f, |_| false)
         .into_iter()
-        .map(|m| {
-            m.into_inner()
-                .ok()
-                .flatten()
-                .expect("every item was computed")
-        })
+        .map(|v| v.expect("every item was computed"))
         .collect()
 }
 
