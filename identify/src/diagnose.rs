@@ -223,6 +223,13 @@ impl Ranked {
         self.test.as_ref().is_some_and(EffectTest::passes)
     }
 
+    /// A likely refit that did not start from the baseline: its gain may be
+    /// the restart's (the model without it, refitted from its values, may
+    /// end below the baseline; see `decide`).
+    fn likely_restart(&self) -> bool {
+        !self.from_baseline && self.test.as_ref().is_some_and(EffectTest::likely)
+    }
+
     /// Its refit stopped where it could no longer pass ([`crate::GiveUp`]):
     /// its cost is not refined.
     pub fn stopped_short(&self) -> bool {
@@ -665,12 +672,7 @@ impl<'a> Judge<'a> {
         };
         t.in_own_form = !form || effect.in_own_form(value);
         if t.likely() && t.in_own_form {
-            let mut base = f.base.clone();
-            for (name, v) in effect.null_values(nested, value) {
-                if let Some(i) = m.parameters.iter().position(|p| p.name == name) {
-                    base[i] = v;
-                }
-            }
+            let base = effect.nulled(m, &f.base, nested);
             t.contribution = Some(
                 match simulate_as(m, self.experiments, &self.opts.fit, f, &base) {
                     Ok(without) => Contribution::between(
@@ -1071,7 +1073,7 @@ impl Search<'_> {
     /// owes its gain to the restart: the model without its effect, refitted
     /// from its values, ends below the baseline (the check `decide` makes).
     fn restart_is_the_baselines(&mut self, r: &Ranked) -> bool {
-        if r.from_baseline || !r.test.as_ref().is_some_and(EffectTest::likely) {
+        if !r.likely_restart() {
             return false;
         }
         let Some(f) = r.fit.as_ref() else {
@@ -1253,8 +1255,7 @@ impl Search<'_> {
                     // the first likely one that did not start from the
                     // baseline: the restart check below)
                     self.look_ahead(ranking, Step::SecondStart, &next, |r| {
-                        settles(self.judge, r)
-                            || (!r.from_baseline && r.test.as_ref().is_some_and(EffectTest::likely))
+                        settles(self.judge, r) || r.likely_restart()
                     });
                 }
                 self.second_start(ranking, idx);
@@ -1271,8 +1272,7 @@ impl Search<'_> {
                 if !checked_restart && self.restart_is_the_baselines(&ranking[idx]) {
                     break;
                 }
-                checked_restart |= ranking[idx].test.as_ref().is_some_and(EffectTest::likely)
-                    && !ranking[idx].from_baseline;
+                checked_restart |= ranking[idx].likely_restart();
             }
         }
         // a speed force that passes without reaching the floor may stand in
@@ -1432,10 +1432,7 @@ fn decide(
             ranking
                 .iter()
                 .filter(|r| {
-                    r.fit.is_some()
-                        && !r.from_baseline
-                        && r.test.as_ref().is_some_and(EffectTest::likely)
-                        && !checked.contains(&r.candidate.label())
+                    r.fit.is_some() && r.likely_restart() && !checked.contains(&r.candidate.label())
                 })
                 .max_by(|a, b| margin(a).total_cmp(&margin(b)))
         };
@@ -1940,18 +1937,8 @@ fn refit_from(
     // the same effect (0.9 -> 3.5 s CPU on that record).
     let alternatives: Vec<Vec<f64>> = match from {
         Some(_) if !candidate.linear_in_parameters() => vec![start.clone()],
-        Some(_) => {
-            let mut null = start.clone();
-            for (name, v) in candidate.null_values(false, |_| f64::NAN) {
-                if let Some(j) = m.parameters.iter().position(|q| q.name == name) {
-                    null[j] = match m.parameters[j].estimate {
-                        Some((lo, hi)) => v.clamp(lo, hi),
-                        None => v,
-                    };
-                }
-            }
-            vec![start.clone(), null]
-        }
+        // (every such effect's null, a level at zero, is inside its box)
+        Some(_) => vec![start.clone(), candidate.nulled(m, &start, false)],
         None => Vec::new(),
     };
     for e in estimates {

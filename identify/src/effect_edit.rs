@@ -471,6 +471,20 @@ impl EffectInstance {
             .collect()
     }
 
+    /// `base` (parameter values in `m`'s order) with the effect at its
+    /// null value ([`EffectInstance::null_values`], `nested` as there; the
+    /// current values read from `base`).
+    pub fn nulled(&self, m: &Model, base: &[f64], nested: bool) -> Vec<f64> {
+        let index = |name: &str| m.parameters.iter().position(|p| p.name == name);
+        let mut out = base.to_vec();
+        for (name, v) in self.null_values(nested, |n| index(n).map_or(f64::NAN, |i| base[i])) {
+            if let Some(i) = index(&name) {
+                out[i] = v;
+            }
+        }
+        out
+    }
+
     /// Whether fitted values (`value` by model name) describe the effect
     /// in its own form, the one its name claims. A Stribeck friction has
     /// its hump: a sliding level above zero, a static level above it (`0 <

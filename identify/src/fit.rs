@@ -175,8 +175,8 @@ pub struct FitOptions {
     /// Other starts (base values, model order) for a warm fit: the fit
     /// starts from whichever of `start` and these the whole records, from
     /// the warm nuisance, fit best (the first on a tie; one more simulation
-    /// each). A lower cost is no proof of a better basin: the caller offers
-    /// these only where any start will do (see the diagnosis' refits).
+    /// each). A lower cost is no proof of a better basin: the diagnosis'
+    /// refits, which offer these, say where that costs them.
     pub alternative_starts: Vec<Vec<f64>>,
     /// Keep the simulation at the start ([`FitResult::simulated_start`]):
     /// one more nuisance fit and simulation, for a caller that shows the
