@@ -542,12 +542,21 @@ fn diagnose(
             experiment: experiment.to_string(),
             channel: channel.to_string(),
             ratio: summary.rmse / motion.max(f64::MIN_POSITIVE),
-            sentence: format!(
-                "the simulation diverged: its error RMS {}{u} is {:.0}x the channel's own motion ({}{u}); the pattern of its error says nothing about a missing effect",
-                sci(summary.rmse),
-                summary.rmse / motion.max(f64::MIN_POSITIVE),
-                sci(motion)
-            ),
+            // a channel that never moved has no motion to compare with
+            // (its ratio, printed in full, ran to 300 digits)
+            sentence: if motion > 0.0 {
+                format!(
+                    "the simulation diverged: its error RMS {}{u} is {}x the channel's own motion ({}{u}); the pattern of its error says nothing about a missing effect",
+                    sci(summary.rmse),
+                    sci(summary.rmse / motion),
+                    sci(motion)
+                )
+            } else {
+                format!(
+                    "the simulation diverged: its error RMS is {}{u} where the measured channel never moves; the pattern of its error says nothing about a missing effect",
+                    sci(summary.rmse)
+                )
+            },
         }];
     }
 
