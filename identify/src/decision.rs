@@ -43,6 +43,13 @@
 //! bigger effect wins over its simpler form only by paying for its extra
 //! parameters).
 //!
+//! A channel's `sigma` is its sensor noise ([`crate::weights`]) and, where
+//! plantc's own integrator misses the records by more than the fit
+//! resolves, that error in quadrature: a model with its true parameters
+//! misses by it too, so it is noise to every decision
+//! ([`crate::fit::simulation_error`], measured on each diagnosis' baseline:
+//! the model's stiffness, a smooth dry friction's, comes with its effects).
+//!
 //! **The floor**, from the same size test: noise of RMS `sigma` plus a
 //! missing effect of RMS at least `sigma` leaves a residual of RMS at
 //! least `sqrt(2) sigma` (the two are uncorrelated). A residual below

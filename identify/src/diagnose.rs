@@ -58,8 +58,9 @@ use crate::equation_error::{
     EquationError, EquationErrorError, EquationErrorOptions, Regressor, Score, Share,
 };
 use crate::fit::{
-    fit, measured_of, replay_follows, residual_count, simulate_as, values_from, with_estimates,
-    Estimate, FitError, FitOptions, FitResult, GiveUp, Horizon, NuisanceFlag, Offsets,
+    fit, measured_of, replay_follows, residual_count, simulate_as, simulation_error, values_from,
+    with_estimates, Estimate, FitError, FitOptions, FitResult, GiveUp, Horizon, NuisanceFlag,
+    Offsets,
 };
 use crate::friction_law::{creeping_law, CreepingLaw};
 use crate::speculate::Step;
@@ -532,6 +533,72 @@ pub fn diagnose_with(
     diagnose_from(text, experiments, baseline, opts)
 }
 
+/// `baseline` (the fit of `model` under `opts`) and `opts`, with the
+/// channels' floors raised by the simulation's own error where it is
+/// measurable on that fit ([`simulation_error`], [`floor_raises`]; each
+/// channel keeps the larger of its error in `opts` and the new one) and
+/// the baseline refitted from where it stood under those floors. The
+/// error is the model's: a dry friction under the smooth law is stiff at
+/// zero speed, so a baseline without one has none and the model with it
+/// may. Records from plantc's own integrator cancel it and are judged as
+/// before.
+fn with_raised_floor(
+    model: &Model,
+    experiments: &[Experiment],
+    baseline: FitResult,
+    opts: &DiagnoseOptions,
+) -> Result<(FitResult, DiagnoseOptions), DiagnoseError> {
+    // an error that cannot be measured (the finer simulation fails where
+    // the fit's own retried with shorter substeps) is not added
+    let errors = simulation_error(model, experiments, &opts.fit, &baseline).unwrap_or_default();
+    let raised = floor_raises(&baseline, &errors, opts.fit.tolerance);
+    if raised.is_empty() {
+        return Ok((baseline, opts.clone()));
+    }
+    let mut errors = opts.fit.simulation_error.clone();
+    for (name, e) in raised {
+        match errors.iter_mut().find(|(n, _)| *n == name) {
+            Some(old) => old.1 = old.1.max(e),
+            None => errors.push((name, e)),
+        }
+    }
+    let opts = DiagnoseOptions {
+        fit: FitOptions {
+            simulation_error: errors,
+            ..opts.fit.clone()
+        },
+        ..opts.clone()
+    };
+    let fo = FitOptions {
+        start: Some(baseline.base.clone()),
+        warm: Some(baseline.warm.clone()),
+        coarse_far_above_floor: true,
+        ..opts.fit.clone()
+    };
+    let refitted = fit(model, experiments, &fo).map_err(DiagnoseError::Fit)?;
+    Ok((refitted, opts))
+}
+
+/// The channels of fit `f` whose floor the simulation's own `errors`
+/// raise: those where `error^2 > tolerance noise^2`. The weighted sum of
+/// squares of a channel scales by `noise^2 / (noise^2 + error^2)`, about
+/// `1 - error^2 / noise^2`: a smaller change is below what the fit resolves
+/// (it stops on a relative change of `tolerance`), and the floor is the
+/// noise's alone (records from plantc's own integrator, or sensors whose
+/// noise dwarfs the integrator's error, are judged as before).
+fn floor_raises(f: &FitResult, errors: &[(String, f64)], tolerance: f64) -> Vec<(String, f64)> {
+    errors
+        .iter()
+        .filter(|(name, e)| {
+            f.weights
+                .iter()
+                .find(|w| &w.name == name)
+                .is_some_and(|w| e * e > tolerance * w.noise * w.noise)
+        })
+        .cloned()
+        .collect()
+}
+
 /// What the decision rule reads about the records and the model without
 /// the effects under test: the measurements, the channels' noise, the
 /// residual count and that fit's effective sample count.
@@ -766,6 +833,7 @@ pub fn diagnose_from(
     opts: &DiagnoseOptions,
 ) -> Result<Diagnosis, DiagnoseError> {
     let model = model_from_text("baseline", text)?;
+    let (baseline, opts) = with_raised_floor(&model, experiments, baseline, opts)?;
     // every refit is judged on the samples the baseline was (a record's
     // release transient left out, [`crate::release`])
     let opts = &DiagnoseOptions {

@@ -1546,14 +1546,19 @@ pub const MAX_SUBSTEP: f64 = 2e-3;
 /// up to [`MAX_SUBSTEP`]; with the smooth law `min(1 ms, T/2)`, which its
 /// stiffness at zero speed needs (notes trap 8).
 pub(crate) fn substep_for(sig: &Signals, opts: &SimOptions) -> Result<f64, SimError> {
+    substep_at(sig.sample_time(), opts)
+}
+
+/// [`substep_for`] a record sampled every `dt` seconds.
+pub(crate) fn substep_at(dt: f64, opts: &SimOptions) -> Result<f64, SimError> {
     match (opts.substep, opts.dry_friction) {
         (Some(h), _) if h > 0.0 && h.is_finite() => Ok(h),
         (Some(h), _) => Err(SimError::BadOption(format!(
             "substep must be positive, got {h}"
         ))),
-        (None, DryFriction::Sticking) => Ok(sig.sample_time().min(MAX_SUBSTEP)),
+        (None, DryFriction::Sticking) => Ok(dt.min(MAX_SUBSTEP)),
         (None, DryFriction::Smooth { .. } | DryFriction::SmoothFitted { .. }) => {
-            Ok((sig.sample_time() / 2.0).min(1e-3))
+            Ok((dt / 2.0).min(1e-3))
         }
     }
 }

@@ -91,8 +91,8 @@ pub use experiment_sim::{
     Simulator, Trajectory,
 };
 pub use fit::{
-    fit, fit_with_progress, resolve_closed_loop, signals_for, ClosedLoop, Estimate,
-    ExperimentEstimate, FitError, FitOptions, FitProgress, FitResult, GiveUp, Horizon,
+    fit, fit_with_progress, resolve_closed_loop, signals_for, simulation_error, ClosedLoop,
+    Estimate, ExperimentEstimate, FitError, FitOptions, FitProgress, FitResult, GiveUp, Horizon,
     NuisanceFlag, NuisanceValue, Offsets, WarmStart,
 };
 pub use identifiability::Identifiability;

@@ -540,6 +540,16 @@ fn story(
         if opts.fit.starts.is_none() {
             opts.fit.starts = Some(d.baseline.warm.starts().to_vec());
         }
+        // the floors a diagnosis raised by the simulation's own error hold
+        // for every later fit and stage
+        {
+            opts.fit.simulation_error = d
+                .baseline
+                .weights
+                .iter()
+                .filter_map(|w| Some((w.name.clone(), w.simulation_error?)))
+                .collect();
+        }
         // the records follow the creeping dry-friction law: every later fit
         // and stage is simulated under it
         if let Some(law) = &d.creeping {

@@ -50,6 +50,9 @@ pub struct ChannelWeight {
     pub basis: String,
     /// True when the user set the weight.
     pub overridden: bool,
+    /// The simulation's own error on this channel (RMS, SI) when it is
+    /// part of the floor ([`with_simulation_error`]).
+    pub simulation_error: Option<f64>,
 }
 
 /// The quantisation step of a signal, when it is quantised: the smallest
@@ -210,9 +213,36 @@ pub fn channel_weights(
                 weight: over.unwrap_or(auto),
                 overridden: over.is_some(),
                 basis,
+                simulation_error: None,
             }
         })
         .collect()
+}
+
+/// Raise the floors of `weights` by the simulation's own error on each
+/// channel `(name, RMS)` ([`crate::fit::simulation_error`]): the noise
+/// becomes `sqrt(noise^2 + error^2)` and a weight not set by the user
+/// `1 / that`. A model with its true parameters still misses the data by
+/// the integrator's error, so that error is part of what no effect can be
+/// told from, like the sensor's noise (the two are independent).
+pub fn with_simulation_error(weights: &mut [ChannelWeight], errors: &[(String, f64)]) {
+    for w in weights.iter_mut() {
+        let Some(&(_, e)) = errors.iter().find(|(n, _)| *n == w.name) else {
+            continue;
+        };
+        if !(e > 0.0 && e.is_finite()) {
+            continue;
+        }
+        w.noise = w.noise.hypot(e);
+        if !w.overridden {
+            w.weight = 1.0 / w.noise.max(f64::MIN_POSITIVE.sqrt());
+        }
+        w.basis = format!(
+            "{} and the simulation's own error {e:.3e} (step halving)",
+            w.basis
+        );
+        w.simulation_error = Some(e);
+    }
 }
 
 /// One line per channel saying what weighs it (for reports).
