@@ -64,6 +64,27 @@ impl Experiment {
     pub fn channel_names(&self) -> Vec<&str> {
         self.channels.iter().map(|c| c.name.as_str()).collect()
     }
+
+    /// The record with its channels `inputs` taken as samples of a signal
+    /// that varies continuously between them (a simulator integrating a
+    /// continuous input, a sensor sampling one), for a simulation that
+    /// holds each input value over its sample interval: each sample becomes
+    /// the mean over its interval of the line through it and the next,
+    /// `(u_k + u_{k+1}) / 2` (the last is kept). Held as recorded, such an
+    /// input acts half a sample late.
+    pub fn with_continuous_inputs(&self, inputs: &[String]) -> Experiment {
+        let mut e = self.clone();
+        for c in e.channels.iter_mut().filter(|c| inputs.contains(&c.name)) {
+            let v = &c.values;
+            c.values = (0..v.len())
+                .map(|k| match v.get(k + 1) {
+                    Some(next) => 0.5 * (v[k] + next),
+                    None => v[k],
+                })
+                .collect();
+        }
+        e
+    }
 }
 
 /// The channels a model needs from a file: coordinates (angles or lengths) and

@@ -77,6 +77,9 @@ pub struct DiagnoseOptions {
     /// How many leaders of the equation-error ranking are refitted before
     /// the search widens.
     pub refit: usize,
+    /// The records' inputs are read as continuous signals already
+    /// ([`Diagnosis::continuous_inputs`]): the reading is not tried again.
+    pub inputs_continuous: bool,
 }
 
 impl Default for DiagnoseOptions {
@@ -85,6 +88,7 @@ impl Default for DiagnoseOptions {
             fit: FitOptions::default(),
             equation_error: EquationErrorOptions::default(),
             refit: 3,
+            inputs_continuous: false,
         }
     }
 }
@@ -286,6 +290,12 @@ pub struct Diagnosis {
     /// ([`crate::friction_law`]): then `baseline` is the fit under it, at
     /// the floor, and there is no verdict.
     pub creeping: Option<CreepingLaw>,
+    /// When the records' inputs fit better taken as continuous signals
+    /// ([`continuous_inputs`]): the baseline's weighted RMS with the inputs
+    /// held as recorded, then with them continuous. The baseline and every
+    /// refit are then on the records so read
+    /// ([`Experiment::with_continuous_inputs`]).
+    pub continuous_inputs: Option<(f64, f64)>,
 }
 
 impl Diagnosis {
@@ -531,6 +541,70 @@ pub fn diagnose_with(
     };
     let baseline = fit(&model, experiments, &fo).map_err(DiagnoseError::Fit)?;
     diagnose_from(text, experiments, baseline, opts)
+}
+
+/// The model's inputs every record has a column for.
+pub(crate) fn recorded_inputs(model: &Model, experiments: &[Experiment]) -> Vec<String> {
+    model
+        .inputs
+        .iter()
+        .map(|i| i.name.clone())
+        .filter(|n| experiments.iter().all(|e| e.values(n).is_some()))
+        .collect()
+}
+
+/// The records with their inputs read as continuous signals
+/// ([`Experiment::with_continuous_inputs`]), the baseline refitted on them
+/// and the reading's margin under the decision rule, when it fits better.
+/// How the inputs act between samples is the records', not an effect (like
+/// the dry-friction law, [`crate::friction_law`]): a rig's converter holds
+/// each input over its sample interval, as plantc's simulation does, while
+/// a simulator that integrates a continuous input (or a sensor that samples
+/// one) records points of a signal that moves in between, which a held
+/// simulation follows half a sample late (a clean rotary pendulum driven at
+/// 0.3-6 Hz, 500 Hz records: a Stribeck friction and two springs named from
+/// that alone). The reading has no parameter: its margin is `N_eff
+/// ln(S_held / S_continuous)` (`k = 0`), and [`diagnose_from`] takes it when
+/// no effect of the round passes with a larger margin (a missing effect
+/// that a half-sample shift partly mimics is named first, and the reading
+/// is tried again next round). A weighted sum of squares lower by less
+/// than the fit resolves (its relative tolerance) is no gain. Tried only
+/// above the floor (at it there is nothing to gain), open loop (a recorded
+/// controller's inputs are computed), with inputs recorded.
+fn continuous_inputs(
+    model: &Model,
+    experiments: &[Experiment],
+    opts: &DiagnoseOptions,
+    baseline: &FitResult,
+) -> Result<Option<(Vec<Experiment>, FitResult, f64)>, DiagnoseError> {
+    let inputs = recorded_inputs(model, experiments);
+    if opts.inputs_continuous || inputs.is_empty() || baseline.closed_loop.is_some() {
+        return Ok(None);
+    }
+    let judge = Judge::new(model, experiments, opts, baseline);
+    if judge.fit_at_floor(baseline) {
+        return Ok(None);
+    }
+    let records: Vec<Experiment> = experiments
+        .iter()
+        .map(|e| e.with_continuous_inputs(&inputs))
+        .collect();
+    let fo = FitOptions {
+        start: Some(baseline.base.clone()),
+        warm: Some(baseline.warm.clone()),
+        starts: Some(baseline.warm.starts().to_vec()),
+        coarse_far_above_floor: true,
+        ..opts.fit.clone()
+    };
+    let Ok(alt) = fit(model, &records, &fo) else {
+        return Ok(None);
+    };
+    let resolved = (1.0 - opts.fit.tolerance).sqrt();
+    if alt.after_cost >= resolved * baseline.after_cost {
+        return Ok(None);
+    }
+    let margin = judge.effective * 2.0 * (baseline.after_cost / alt.after_cost).ln();
+    Ok(Some((records, alt, margin)))
 }
 
 /// `baseline` (the fit of `model` under `opts`) and `opts`, with the
@@ -833,6 +907,38 @@ pub fn diagnose_from(
     opts: &DiagnoseOptions,
 ) -> Result<Diagnosis, DiagnoseError> {
     let model = model_from_text("baseline", text)?;
+    let reading = continuous_inputs(&model, experiments, opts, &baseline)?;
+    let held_cost = baseline.after_cost;
+    let d = diagnose_on(text, experiments, baseline, opts)?;
+    let Some((records, alt, hold_margin)) = reading else {
+        return Ok(d);
+    };
+    // the inputs' reading against the round's verdict, by margin
+    if d.verdict.is_some() && d.ranking.first().map(margin) >= Some(hold_margin) {
+        return Ok(d);
+    }
+    let costs = (held_cost, alt.after_cost);
+    let opts = DiagnoseOptions {
+        inputs_continuous: true,
+        ..opts.clone()
+    };
+    let mut d = diagnose_on(text, &records, alt, &opts)?;
+    d.notes.push(format!(
+        "inputs read as continuous signals, not held over each sample interval: weighted RMS {:.4e} held, {:.4e} continuous (margin {hold_margin:.1}, beyond every effect's: records made by integrating a continuous input, or sampling one)",
+        costs.0, costs.1
+    ));
+    d.continuous_inputs = Some(costs);
+    Ok(d)
+}
+
+/// [`diagnose_from`] with the records' inputs as they are read.
+fn diagnose_on(
+    text: &str,
+    experiments: &[Experiment],
+    baseline: FitResult,
+    opts: &DiagnoseOptions,
+) -> Result<Diagnosis, DiagnoseError> {
+    let model = model_from_text("baseline", text)?;
     let (baseline, opts) = with_raised_floor(&model, experiments, baseline, opts)?;
     // every refit is judged on the samples the baseline was (a record's
     // release transient left out, [`crate::release`])
@@ -997,6 +1103,7 @@ pub fn diagnose_from(
         worst,
         notes,
         creeping,
+        continuous_inputs: None,
     })
 }
 

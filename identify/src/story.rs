@@ -167,6 +167,12 @@ pub struct Story {
     /// adopted it ([`crate::friction_law`]): the stages from that round on
     /// are simulated under it.
     pub creeping: Option<CreepingLaw>,
+    /// When a diagnosis read the records' inputs as continuous signals
+    /// ([`crate::Diagnosis::continuous_inputs`]): its round (1 = the
+    /// first), then the weighted RMS of that round's baseline with them
+    /// held and continuous. From that round on every stage is fitted on the
+    /// records so read.
+    pub continuous_inputs: Option<(usize, f64, f64)>,
 }
 
 impl Story {
@@ -515,6 +521,9 @@ fn story(
     // baseline was (each record from where that fitted model follows it, a
     // release transient left out, [`crate::release`])
     let mut opts = opts.clone();
+    // the records as the first diagnosis read them (inputs held as recorded,
+    // or continuous: [`crate::diagnose::Diagnosis::continuous_inputs`])
+    let mut records: std::borrow::Cow<'_, [Experiment]> = std::borrow::Cow::Borrowed(experiments);
     let mut stages = Vec::new();
     let mut rounds: Vec<Round> = Vec::new();
     let mut current_text = text.to_string();
@@ -525,6 +534,7 @@ fn story(
     // minimum of the same model (see below)
     let mut repeated = false;
     let mut creeping: Option<CreepingLaw> = None;
+    let mut continuous_inputs = None;
     let stop;
     loop {
         let round = rounds.len() + 1;
@@ -533,12 +543,20 @@ fn story(
         // later rounds diagnose against the last round's fit (the model as
         // it now stands, fitted under the same options)
         let d = match current_fit.clone() {
-            Some(f) => diagnose_from(&current_text, experiments, f, &dopts),
-            None => diagnose_with(&current_text, experiments, &dopts),
+            Some(f) => diagnose_from(&current_text, &records, f, &dopts),
+            None => diagnose_with(&current_text, &records, &dopts),
         }
         .map_err(StoryError::Diagnose)?;
         if opts.fit.starts.is_none() {
             opts.fit.starts = Some(d.baseline.warm.starts().to_vec());
+        }
+        if d.continuous_inputs.is_some() && !opts.diagnose.inputs_continuous {
+            continuous_inputs = d.continuous_inputs.map(|(h, c)| (round, h, c));
+            opts.diagnose.inputs_continuous = true;
+            let inputs = crate::diagnose::recorded_inputs(model, experiments);
+            let continuous = |e: &Experiment| e.with_continuous_inputs(&inputs);
+            records = std::borrow::Cow::Owned(experiments.iter().map(continuous).collect());
+            opts.validate = opts.validate.iter().map(continuous).collect();
         }
         // the floors a diagnosis raised by the simulation's own error hold
         // for every later fit and stage
@@ -561,7 +579,7 @@ fn story(
         if rounds.is_empty() {
             // (the baseline as the diagnosis fitted it: a better baseline
             // that decide() found started elsewhere)
-            stages.push(nominal_stage(text, model, &d.baseline, experiments, opts)?);
+            stages.push(nominal_stage(text, model, &d.baseline, &records, opts)?);
             // far above the floor the diagnosis' baseline stopped at the
             // screening tolerance ([`FitOptions::coarse_far_above_floor`]):
             // with no effect to follow it is the story's answer, fitted on
@@ -570,7 +588,7 @@ fn story(
                 .then(|| {
                     fit_with_progress(
                         &current_model,
-                        experiments,
+                        &records,
                         &FitOptions {
                             start: Some(d.baseline.base.clone()),
                             warm: Some(d.baseline.warm.clone()),
@@ -593,7 +611,7 @@ fn story(
                 &current_text,
                 &current_model,
                 Some(&refitted),
-                experiments,
+                &records,
                 opts,
             )?);
             current_fit = Some(refitted);
@@ -607,7 +625,7 @@ fn story(
                 &current_text,
                 &current_model,
                 Some(&d.baseline),
-                experiments,
+                &records,
                 opts,
             )
         };
@@ -617,7 +635,7 @@ fn story(
                 let (inst, edited, m2, f) = add_and_fit(
                     &top,
                     (&current_text, &current_model, current_fit.as_ref()),
-                    experiments,
+                    &records,
                     opts,
                     progress,
                 )?;
@@ -676,7 +694,7 @@ fn story(
             }
         };
         let label = format!("+ {}, fitted", inst.label());
-        stages.push(stage(&label, &edited, &m2, Some(&f), experiments, opts)?);
+        stages.push(stage(&label, &edited, &m2, Some(&f), &records, opts)?);
         rounds.push(Round {
             ranking: d.ranking,
             effect: Some(inst),
@@ -702,7 +720,7 @@ fn story(
         removals: Vec::new(),
         stages,
     };
-    end.run(text, &rounds, experiments, &opts, progress)?;
+    end.run(text, &rounds, &records, &opts, progress)?;
     Ok(Story {
         stages: end.stages,
         rounds,
@@ -716,6 +734,7 @@ fn story(
         unexplained,
         effects: end.applied.into_iter().flatten().collect(),
         creeping,
+        continuous_inputs,
     })
 }
 

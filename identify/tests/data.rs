@@ -3,7 +3,9 @@
 mod common;
 
 use common::*;
-use plantc_identify::{read_experiment, read_experiments, DataError, DataWarning, ReadOptions};
+use plantc_identify::{
+    read_experiment, read_experiments, DataError, DataWarning, Experiment, ReadOptions,
+};
 
 /// Reads a file that must fail; returns the error and its Display text.
 fn fail(test: &str, text: &str) -> (DataError, String) {
@@ -435,4 +437,29 @@ fn absurd_magnitudes_are_errors_at_their_cell() {
             .any(|w| matches!(w, DataWarning::DroppedColumn { line: 5, .. })),
         "{w:?}"
     );
+}
+
+/// Inputs read as continuous signals: each sample becomes the mean of the
+/// line through it and the next over its interval (the last is kept); the
+/// other channels are left alone.
+#[test]
+fn continuous_inputs_are_interval_means() {
+    let channel = |name: &str, values: &[f64]| plantc_identify::Channel {
+        name: name.into(),
+        unit_note: None,
+        values: values.to_vec(),
+    };
+    let e = Experiment {
+        name: "e".into(),
+        file: "e.csv".into(),
+        t: vec![0.0, 0.1, 0.3, 0.4],
+        channels: vec![
+            channel("theta", &[0.0, 1.0, 2.0, 3.0]),
+            channel("Vm", &[0.0, 2.0, 4.0, 10.0]),
+        ],
+    };
+    let c = e.with_continuous_inputs(&["Vm".to_string()]);
+    assert_eq!(c.values("Vm").unwrap(), &[1.0, 3.0, 7.0, 10.0]);
+    assert_eq!(c.values("theta").unwrap(), e.values("theta").unwrap());
+    assert_eq!(c.t, e.t);
 }

@@ -142,3 +142,58 @@ fn viscous_only_model_first_finds_coulomb_friction() {
     // from the template's start (1e-4 N m) toward the lab's level
     assert!(fc > 0.3 * lab && fc < 3.0 * lab, "Fc = {fc}");
 }
+
+/// Issue 26 (item 7 and the DFKI acceptance): `identify` with the
+/// viscous-only model should find both joints' dry friction, each within
+/// 20 % of the lab's 0.146 / 0.123 N m (the lab's `cf atan(100 q')` at
+/// speed, see `measured_torques_fit_both_joints`). Not yet: measured
+/// 2026-11-28 (release, 32 s wall): Coulomb on q2 (0.172, then 0.144 N m,
+/// +17 %), then a deadzone on tau2 (weighted RMS ratio 1.144 against the
+/// q1 Coulomb friction's 1.137: the two barely differ), then the measured
+/// torques read as continuous signals (`Diagnosis::continuous_inputs`,
+/// margin 2.6) and nothing more. Read as continuous from the first round
+/// (the reading's margin there, 7, is below the q2 friction's 135, so the
+/// rule names the friction first), the second round named the q1 Coulomb
+/// friction (0.126, -13 %; q2 0.138, +12 %): the order of the two findings
+/// decides, and the rule has no ground to read the inputs first.
+#[test]
+#[ignore = "issue 26 open: the second round names a deadzone on tau2 (ratio 1.144) over the q1 Coulomb friction (1.137), measured 2026-11-28"]
+fn identify_finds_both_joints_dry_friction() {
+    let Some(exps) = read_trajectory() else {
+        return;
+    };
+    let text = common::double_pendulum_without_dry_friction();
+    let t = std::time::Instant::now();
+    let story = plantc_identify::identify(
+        &text,
+        &exps,
+        &plantc_identify::StoryOptions::default(),
+        &mut |_| {},
+    )
+    .expect("identifies");
+    common::show_rounds(&story);
+    let effects = common::final_effects(&story);
+    eprintln!(
+        "{} in {:.1} s; inputs {:?}; final effects {effects:?}",
+        story.stop,
+        t.elapsed().as_secs_f64(),
+        story.continuous_inputs
+    );
+    assert!(story.continuous_inputs.is_some());
+    let model = plantc_identify::diagnose::model_from_text("final", &story.text).expect("checks");
+    for (joint, lab) in [("q1", 0.146), ("q2", 0.123)] {
+        assert!(
+            effects.contains(&format!("coulomb_friction@{joint}")),
+            "{effects:?}"
+        );
+        let name = format!("Fc_{joint}");
+        let i = model
+            .parameters
+            .iter()
+            .position(|p| p.name == name)
+            .expect("in the final model");
+        let fc = story.fit.base[i];
+        eprintln!("{name} = {fc:.4} N m (lab {lab})");
+        assert!((fc / lab - 1.0).abs() < 0.2, "{name} = {fc}");
+    }
+}

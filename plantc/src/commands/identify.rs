@@ -341,6 +341,12 @@ fn story(
         .label
         .strip_prefix("nominal, refitted")
         .unwrap_or_default();
+    if let Some((round, held, continuous)) = s.continuous_inputs {
+        let _ = writeln!(
+            out,
+            "   inputs read as continuous signals, not held over each sample interval, from round {round} on: weighted RMS {held:.4e} held, {continuous:.4e} continuous (records made by integrating a continuous input, or sampling one)"
+        );
+    }
     let _ = writeln!(
         out,
         "   nominal model refitted{law}: RMSE {:.3e}; where it still fails:",
@@ -583,6 +589,10 @@ fn story(
             "adequate"
         },
         "stop": s.stop,
+        "inputs": match s.continuous_inputs {
+            Some((round, held, continuous)) => serde_json::json!({"read": "continuous", "from_round": round, "weighted_rms_held": held, "weighted_rms_continuous": continuous}),
+            None => serde_json::json!({"read": "held"}),
+        },
         "dry_friction": match &s.creeping {
             Some(law) => serde_json::json!({"law": "creeping", "width": law.width}),
             None => serde_json::json!({"law": "sticking"}),
