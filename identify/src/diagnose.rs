@@ -77,9 +77,10 @@ pub struct DiagnoseOptions {
     /// How many leaders of the equation-error ranking are refitted before
     /// the search widens.
     pub refit: usize,
-    /// The records' inputs are read as continuous signals already
-    /// ([`Diagnosis::continuous_inputs`]): the reading is not tried again.
-    pub inputs_continuous: bool,
+    /// How the records' inputs act between samples is settled (held or
+    /// continuous, by the user or an earlier round): the continuous reading
+    /// ([`Diagnosis::continuous_inputs`]) is not tried.
+    pub inputs_read: bool,
 }
 
 impl Default for DiagnoseOptions {
@@ -88,7 +89,7 @@ impl Default for DiagnoseOptions {
             fit: FitOptions::default(),
             equation_error: EquationErrorOptions::default(),
             refit: 3,
-            inputs_continuous: false,
+            inputs_read: false,
         }
     }
 }
@@ -578,7 +579,7 @@ fn continuous_inputs(
     baseline: &FitResult,
 ) -> Result<Option<(Vec<Experiment>, FitResult, f64)>, DiagnoseError> {
     let inputs = recorded_inputs(model, experiments);
-    if opts.inputs_continuous || inputs.is_empty() || baseline.closed_loop.is_some() {
+    if opts.inputs_read || inputs.is_empty() || baseline.closed_loop.is_some() {
         return Ok(None);
     }
     let judge = Judge::new(model, experiments, opts, baseline);
@@ -919,7 +920,7 @@ pub fn diagnose_from(
     }
     let costs = (held_cost, alt.after_cost);
     let opts = DiagnoseOptions {
-        inputs_continuous: true,
+        inputs_read: true,
         ..opts.clone()
     };
     let mut d = diagnose_on(text, &records, alt, &opts)?;

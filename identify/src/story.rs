@@ -550,9 +550,9 @@ fn story(
         if opts.fit.starts.is_none() {
             opts.fit.starts = Some(d.baseline.warm.starts().to_vec());
         }
-        if d.continuous_inputs.is_some() && !opts.diagnose.inputs_continuous {
+        if d.continuous_inputs.is_some() && !opts.diagnose.inputs_read {
             continuous_inputs = d.continuous_inputs.map(|(h, c)| (round, h, c));
-            opts.diagnose.inputs_continuous = true;
+            opts.diagnose.inputs_read = true;
             let inputs = crate::diagnose::recorded_inputs(model, experiments);
             let continuous = |e: &Experiment| e.with_continuous_inputs(&inputs);
             records = std::borrow::Cow::Owned(experiments.iter().map(continuous).collect());

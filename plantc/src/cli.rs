@@ -346,6 +346,15 @@ pub struct DataArgs {
     /// (repeatable, or comma-separated).
     #[arg(long = "map", value_name = "NAME=COLUMN")]
     pub map: Vec<String>,
+    /// How the recorded inputs act between samples: `held` (each value over
+    /// its sample interval, as a rig's converter holds it), `continuous`
+    /// (points of a signal that moves in between: records from a simulator
+    /// that integrates a continuous input, a sampled sensor such as a
+    /// measured torque), or `auto` (`identify` and `diagnose` read them as
+    /// continuous when that explains the records better than any effect,
+    /// and say so; `compare` and `fit` hold them).
+    #[arg(long, value_name = "READING", default_value = "auto")]
+    pub inputs: String,
 }
 
 /// How a model is fitted to or judged on measurements (shared by compare,

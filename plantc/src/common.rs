@@ -238,12 +238,33 @@ pub fn read_data(
                 .map_err(|e| CliError::input(format!("error: {e}")))?,
         );
     }
+    let continuous = inputs_settled(data)?;
     let (exps, warnings) = plantc_identify::read_experiments(&data.data, &spec, &options)
         .map_err(|e| CliError::input(format!("error: {e}")))?;
     for w in warnings {
         let _ = writeln!(err, "{w}");
     }
+    if continuous == Some(true) {
+        let inputs: Vec<String> = model.inputs.iter().map(|i| i.name.clone()).collect();
+        return Ok(exps
+            .iter()
+            .map(|e| e.with_continuous_inputs(&inputs))
+            .collect());
+    }
     Ok(exps)
+}
+
+/// `--inputs`: `Some(true)` continuous, `Some(false)` held, `None` auto
+/// (the diagnosis decides).
+pub fn inputs_settled(data: &crate::cli::DataArgs) -> Result<Option<bool>, CliError> {
+    match data.inputs.trim() {
+        "auto" => Ok(None),
+        "held" => Ok(Some(false)),
+        "continuous" => Ok(Some(true)),
+        other => Err(CliError::input(format!(
+            "error: --inputs: expected `held`, `continuous` or `auto`, got `{other}`"
+        ))),
+    }
 }
 
 /// Reads the held-out files of `--validate` (none given: no experiments)

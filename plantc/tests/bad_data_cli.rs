@@ -156,3 +156,35 @@ fn missing_file_and_unknown_unit() {
     let f = write(&dir, "unit.csv", "t,theta,alpha[grad],Vm", &rows(20));
     assert_rejected(&f, &[&format!("{f}:1:3:"), "unknown unit suffix `[grad]`"]);
 }
+
+/// An unknown `--inputs` reading is refused before anything is fitted, by
+/// every command that reads records.
+#[test]
+fn unknown_inputs_reading() {
+    let dir = tmp("inputs-reading");
+    let file = write(&dir, "run.csv", "t,theta,alpha,Vm", &rows(20));
+    let out_dir = dir.join("identify-out").display().to_string();
+    for cmd in [
+        vec!["compare", &model(), &file, "--inputs", "zoh"],
+        vec!["fit", &model(), &file, "--inputs", "zoh"],
+        vec!["diagnose", &model(), &file, "--inputs", "zoh"],
+        vec![
+            "identify",
+            &model(),
+            &file,
+            "--inputs",
+            "zoh",
+            "-o",
+            &out_dir,
+        ],
+    ] {
+        let (code, out, err) = plantc(&cmd);
+        assert_eq!(code, 2, "{cmd:?}: {out}{err}");
+        assert!(
+            err.contains("--inputs: expected `held`, `continuous` or `auto`, got `zoh`"),
+            "{cmd:?}: {err}"
+        );
+        assert!(!err.contains("panicked"), "{err}");
+    }
+    assert!(!Path::new(&out_dir).exists(), "nothing written");
+}

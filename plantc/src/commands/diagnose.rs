@@ -7,7 +7,7 @@
 
 use std::io::Write;
 
-use plantc_identify::{diagnose, fitted_instance, Diagnosis, Ranked};
+use plantc_identify::{fitted_instance, Diagnosis, Ranked};
 
 use crate::cli::DiagnoseArgs;
 use crate::commands::fit::with_progress;
@@ -102,8 +102,15 @@ pub fn run(args: &DiagnoseArgs, out: &mut dyn Write, err: &mut dyn Write) -> Res
         "refitting the model with each candidate effect on {} experiment(s)...",
         measured.len()
     );
-    let d = with_progress("diagnosing", |_| diagnose(&text, &measured, &fit_opts))
-        .map_err(|e| CliError::failure(format!("error: {e}")))?;
+    let dopts = plantc_identify::DiagnoseOptions {
+        fit: fit_opts,
+        inputs_read: crate::common::inputs_settled(&args.data)?.is_some(),
+        ..plantc_identify::DiagnoseOptions::default()
+    };
+    let d = with_progress("diagnosing", |_| {
+        plantc_identify::diagnose_with(&text, &measured, &dopts)
+    })
+    .map_err(|e| CliError::failure(format!("error: {e}")))?;
     let findings = findings(&d);
     if args.apply {
         if let (Some(o), Some(top)) = (&args.out, findings.first()) {

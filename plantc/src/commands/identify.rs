@@ -266,6 +266,10 @@ fn story(
         max_effects: args.max_effects,
         validate: held_out.clone(),
         predict: args.predict,
+        diagnose: plantc_identify::DiagnoseOptions {
+            inputs_read: crate::common::inputs_settled(&args.data)?.is_some(),
+            ..plantc_identify::DiagnoseOptions::default()
+        },
         ..StoryOptions::default()
     };
     // inputs are checked before anything is written; the new directory is
