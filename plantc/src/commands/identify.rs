@@ -270,7 +270,6 @@ fn story(
             inputs_read: crate::common::inputs_settled(&args.data)?.is_some(),
             ..plantc_identify::DiagnoseOptions::default()
         },
-        ..StoryOptions::default()
     };
     // inputs are checked before anything is written; the new directory is
     // built aside and swapped in at the end: a killed run leaves the old one
