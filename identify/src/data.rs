@@ -282,13 +282,65 @@ pub fn read_experiment_with(
             }
         }
     };
-    warnings.extend(crate::plausibility::check(&exp, expected));
+    let checks = crate::plausibility::check(&exp, expected);
+    let degrees: Vec<String> = checks
+        .iter()
+        .filter_map(|w| match w {
+            DataWarning::LooksLikeDegrees { column, .. } => Some(column.clone()),
+            _ => None,
+        })
+        .collect();
+    warnings.extend(checks);
     for (name, col) in &options.rename {
         if let Some(c) = exp.channels.iter_mut().find(|c| &c.name == col) {
             c.name = name.clone();
         }
     }
+    // angles wrapped into one turn (not those that look like degrees: their
+    // turn is 360, and the user is told to say so)
+    for (name, kind) in &expected.coordinates {
+        if *kind != Kind::Angle || degrees.contains(name) {
+            continue;
+        }
+        if let Some(c) = exp.channels.iter_mut().find(|c| &c.name == name) {
+            let jumps = unwrap_angle(&mut c.values);
+            if jumps > 0 {
+                warnings.push(DataWarning::WrappedAngle {
+                    file: exp.file.clone(),
+                    column: name.clone(),
+                    jumps,
+                });
+            }
+        }
+    }
     Ok((exp, warnings))
+}
+
+/// Unwrap an angle series in place: a step of more than half a turn (pi)
+/// between two samples is taken as the wrap of an angle kept within one
+/// turn, and whole turns are added from there on so that the step is the
+/// one below half a turn. A joint would need to turn more than half a turn
+/// per sample to make such a step (1,570 rad/s at 500 Hz): aliased at any
+/// real speed. Returns the number of steps unwrapped.
+pub fn unwrap_angle(values: &mut [f64]) -> usize {
+    use std::f64::consts::PI;
+    let mut shift = 0.0;
+    let mut jumps = 0;
+    let mut prev = match values.first() {
+        Some(v) => *v,
+        None => return 0,
+    };
+    for v in values.iter_mut().skip(1) {
+        let raw = *v;
+        let step = raw - prev;
+        if step.abs() > PI && step.is_finite() {
+            shift -= 2.0 * PI * (step / (2.0 * PI)).round();
+            jumps += 1;
+        }
+        prev = raw;
+        *v = raw + shift;
+    }
+    jumps
 }
 
 /// Reads several files: one experiment each. Stops at the first error.

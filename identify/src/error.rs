@@ -451,6 +451,17 @@ pub enum DataWarning {
         /// The median step of time as read (s).
         median_dt: f64,
     },
+    /// An angle column that jumps by more than half a turn between two
+    /// samples: wrapped into a range of one turn by whatever wrote it; read
+    /// unwrapped.
+    WrappedAngle {
+        /// The file.
+        file: PathBuf,
+        /// The column name.
+        column: String,
+        /// How many steps were unwrapped.
+        jumps: usize,
+    },
     /// Something about a MAT file's layout was assumed.
     MatLayout {
         /// The file.
@@ -506,6 +517,11 @@ impl fmt::Display for DataWarning {
                 "{}: warning: time column `t` has no unit suffix and steps by {median_dt} s (a {} Hz sampling rate, implausibly slow for a rig): if it is in milliseconds write `t[ms]` in the header (`t[us]` for microseconds)",
                 file.display(),
                 crate::plausibility::rate_text(*median_dt)
+            ),
+            DataWarning::WrappedAngle { file, column, jumps } => write!(
+                f,
+                "{}: warning: angle column `{column}` jumps by more than half a turn between samples {jumps} time(s), as an angle wrapped into one turn does (a real joint would need more than half a turn per sample); read unwrapped, each jump taken as whole turns",
+                file.display()
             ),
             DataWarning::MatLayout { file, message } => {
                 write!(f, "{}: warning: {message}", file.display())

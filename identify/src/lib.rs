@@ -50,7 +50,7 @@ pub mod weights;
 
 pub use data::{
     parse_channel_map, parse_rename, read_experiment, read_experiment_with, read_experiments,
-    Channel, ChannelSpec, Experiment, ReadOptions,
+    unwrap_angle, Channel, ChannelSpec, Experiment, ReadOptions,
 };
 pub use error::{CellProblem, DataError, DataWarning};
 pub use units::Kind;

@@ -463,3 +463,36 @@ fn continuous_inputs_are_interval_means() {
     assert_eq!(c.values("theta").unwrap(), e.values("theta").unwrap());
     assert_eq!(c.t, e.t);
 }
+
+/// An angle written wrapped into one turn (a pendulum swinging through its
+/// upright at pi, written in [-pi, pi)) is read unwrapped, with a warning
+/// that names the column; degrees with a suffix are unwrapped after the
+/// conversion, and the other channels are left alone.
+#[test]
+fn wrapped_angles_are_read_unwrapped() {
+    use std::f64::consts::PI;
+    let wrap = |a: f64| (a + PI).rem_euclid(2.0 * PI) - PI;
+    // alpha swings 3.0 -> 3.5 -> 3.0 rad through pi: two wraps
+    let truth = |k: usize| 3.0 + 0.5 * (PI * k as f64 / 19.0).sin();
+    let mut s = String::from("t,theta,alpha[deg],Vm\n");
+    s += &rows(20, |k, t| {
+        format!("{t},0.1,{:.9},4.0", wrap(truth(k)).to_degrees())
+    });
+    let p = write("wrapped", "w.csv", &s);
+    let (e, w) = read_experiment(&p, &pendulum_spec()).unwrap();
+    let alpha = e.values("alpha").unwrap();
+    for (k, a) in alpha.iter().enumerate() {
+        assert!((a - truth(k)).abs() < 1e-8, "{k}: {a} vs {}", truth(k));
+    }
+    assert_eq!(w.len(), 1, "{w:?}");
+    let msg = w[0].to_string();
+    assert!(
+        msg.contains("`alpha`") && msg.contains("2 time(s)"),
+        "{msg}"
+    );
+    assert_eq!(e.values("Vm").unwrap()[3], 4.0);
+    // a swing that stays within half a turn per sample is left alone
+    let mut v = vec![0.0, 3.0, 6.0, 3.0];
+    assert_eq!(plantc_identify::unwrap_angle(&mut v), 0);
+    assert_eq!(v, vec![0.0, 3.0, 6.0, 3.0]);
+}
