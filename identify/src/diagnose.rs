@@ -544,16 +544,6 @@ pub fn diagnose_with(
     diagnose_from(text, experiments, baseline, opts)
 }
 
-/// The model's inputs every record has a column for.
-pub(crate) fn recorded_inputs(model: &Model, experiments: &[Experiment]) -> Vec<String> {
-    model
-        .inputs
-        .iter()
-        .map(|i| i.name.clone())
-        .filter(|n| experiments.iter().all(|e| e.values(n).is_some()))
-        .collect()
-}
-
 /// The records with their inputs read as continuous signals
 /// ([`Experiment::with_continuous_inputs`]), the baseline refitted on them
 /// and the reading's margin under the decision rule, when it fits better.
@@ -578,7 +568,7 @@ fn continuous_inputs(
     opts: &DiagnoseOptions,
     baseline: &FitResult,
 ) -> Result<Option<(Vec<Experiment>, FitResult, f64)>, DiagnoseError> {
-    let inputs = recorded_inputs(model, experiments);
+    let inputs = crate::fit::recorded_inputs(model, experiments);
     if opts.inputs_read || inputs.is_empty() || baseline.closed_loop.is_some() {
         return Ok(None);
     }

@@ -2940,6 +2940,71 @@ pub fn simulation_error(
     Ok(out)
 }
 
+/// The model's inputs every record has a column for.
+pub fn recorded_inputs(model: &Model, experiments: &[Experiment]) -> Vec<String> {
+    model
+        .inputs
+        .iter()
+        .map(|i| i.name.clone())
+        .filter(|n| experiments.iter().all(|e| e.values(n).is_some()))
+        .collect()
+}
+
+/// [`fit`] with the records' inputs read as they were made: held over each
+/// sample interval (a rig's converter, plantc's simulation) or continuous
+/// (a simulator integrating a continuous input, a sampled sensor such as a
+/// measured torque: [`Experiment::with_continuous_inputs`]). The fit with
+/// them held is refitted from where it ended with them continuous (open
+/// loop, inputs recorded); that reading has no parameter, so it is kept
+/// when its weighted sum of squares is lower by more than the fit resolves
+/// (its relative tolerance). Returns the fit kept and, when the inputs are
+/// read as continuous, the weighted RMS held and continuous (validate
+/// held-out records read the same way). The continuous fit's "before" (the
+/// start values, the cost and fit % there) is the held fit's: the same
+/// start model, with the inputs held. In a diagnosis the reading also
+/// competes with the candidate effects ([`crate::diagnose`]).
+pub fn fit_reading_inputs(
+    model: &Model,
+    experiments: &[Experiment],
+    opts: &FitOptions,
+    progress: &mut dyn FnMut(&FitProgress),
+) -> Result<(FitResult, Option<(f64, f64)>), FitError> {
+    let held = fit_with_progress(model, experiments, opts, progress)?;
+    let inputs = recorded_inputs(model, experiments);
+    if inputs.is_empty() || held.closed_loop.is_some() {
+        return Ok((held, None));
+    }
+    let records: Vec<Experiment> = experiments
+        .iter()
+        .map(|e| e.with_continuous_inputs(&inputs))
+        .collect();
+    let fo = FitOptions {
+        start: Some(held.base.clone()),
+        warm: Some(held.warm.clone()),
+        starts: Some(held.warm.starts().to_vec()),
+        ..opts.clone()
+    };
+    let Ok(continuous) = fit_with_progress(model, &records, &fo, progress) else {
+        return Ok((held, None));
+    };
+    if continuous.after_cost < (1.0 - opts.tolerance).sqrt() * held.after_cost {
+        let costs = (held.after_cost, continuous.after_cost);
+        let mut kept = continuous;
+        kept.before_cost = held.before_cost;
+        kept.before_rmse = held.before_rmse;
+        for (k, h) in kept.parameters.iter_mut().zip(&held.parameters) {
+            k.start = h.start;
+        }
+        for (k, h) in kept.experiments.iter_mut().zip(&held.experiments) {
+            k.rmse_before.clone_from(&h.rmse_before);
+            k.fit_before.clone_from(&h.fit_before);
+        }
+        Ok((kept, Some(costs)))
+    } else {
+        Ok((held, None))
+    }
+}
+
 /// The measured coordinates of `experiments` in `model`'s order
 /// (`[experiment][coordinate][sample]`; NaN for a missing channel).
 pub fn measured_of(model: &Model, experiments: &[Experiment]) -> Vec<Vec<Vec<f64>>> {

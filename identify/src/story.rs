@@ -553,7 +553,7 @@ fn story(
         if d.continuous_inputs.is_some() && !opts.diagnose.inputs_read {
             continuous_inputs = d.continuous_inputs.map(|(h, c)| (round, h, c));
             opts.diagnose.inputs_read = true;
-            let inputs = crate::diagnose::recorded_inputs(model, experiments);
+            let inputs = crate::fit::recorded_inputs(model, experiments);
             let continuous = |e: &Experiment| e.with_continuous_inputs(&inputs);
             records = std::borrow::Cow::Owned(experiments.iter().map(continuous).collect());
             opts.validate = opts.validate.iter().map(continuous).collect();

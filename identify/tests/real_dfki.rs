@@ -9,7 +9,7 @@ use std::path::{Path, PathBuf};
 
 use plantc_derive::model::load_model;
 use plantc_identify::{
-    fit, read_experiments, ChannelSpec, Experiment, FitOptions, Kind, ReadOptions,
+    fit_reading_inputs, read_experiments, ChannelSpec, Experiment, FitOptions, Kind, ReadOptions,
 };
 
 fn repo() -> PathBuf {
@@ -46,7 +46,11 @@ fn read_trajectory() -> Option<Vec<Experiment>> {
 /// values (`model_parameters_design_A.0_model_2.0.yml`: viscous 0.001 N m s,
 /// Coulomb 0.093 / 0.078 N m in `cf atan(100 q')`, i.e. 0.146 / 0.123 N m
 /// at speed; the lab's 2022-08-19 controller files list 0.0928 / 0.0771 N m
-/// and 0.0111 / 0.0044 N m s).
+/// and 0.0111 / 0.0044 N m s), and each Coulomb level is within 20 % of the
+/// lab's (issue 26's DFKI acceptance). The measured torques are samples of
+/// a continuous signal, and the fit reads them so (`fit_reading_inputs`,
+/// weighted RMS 56.18 held, 54.36 continuous). Measured 2026-11-28: Fc1
+/// 0.1265 (-13 %), Fc2 0.1376 (+12 %); held, 0.1286 and 0.1495 (+22 %).
 #[test]
 fn measured_torques_fit_both_joints() {
     let Some(exps) = read_trajectory() else {
@@ -56,7 +60,10 @@ fn measured_torques_fit_both_joints() {
         .expect("model loads")
         .model;
     let t = std::time::Instant::now();
-    let r = fit(&model, &exps, &FitOptions::default()).expect("fits");
+    let (r, continuous) =
+        fit_reading_inputs(&model, &exps, &FitOptions::default(), &mut |_| {}).expect("fits");
+    eprintln!("inputs read as continuous: {continuous:?}");
+    assert!(continuous.is_some(), "the measured torques read as sampled");
     eprintln!(
         "fit in {:.1} s; notes {:?}",
         t.elapsed().as_secs_f64(),
@@ -94,8 +101,11 @@ fn measured_torques_fit_both_joints() {
     }
     assert!(e.fit_after[0].expect("q1 fit") >= 92.0);
     assert!(e.fit_after[1].expect("q2 fit") >= 92.0);
-    // dry friction is what this rig has: both levels clearly above zero
-    assert!(get("Fc1").value > 0.05 && get("Fc2").value > 0.05);
+    // dry friction is what this rig has: both levels near the lab's
+    for (name, lab) in [("Fc1", 0.146), ("Fc2", 0.123)] {
+        let v = get(name).value;
+        assert!((v / lab - 1.0).abs() < 0.2, "{name} = {v} against {lab}");
+    }
 }
 
 /// Acceptance (issue 11): with a viscous-only model (the dry friction taken

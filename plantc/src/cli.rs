@@ -350,9 +350,10 @@ pub struct DataArgs {
     /// its sample interval, as a rig's converter holds it), `continuous`
     /// (points of a signal that moves in between: records from a simulator
     /// that integrates a continuous input, a sampled sensor such as a
-    /// measured torque), or `auto` (`identify` and `diagnose` read them as
-    /// continuous when that explains the records better than any effect,
-    /// and say so; `compare` and `fit` hold them).
+    /// measured torque), or `auto` (`fit` reads them as continuous when
+    /// that fits better, `identify` and `diagnose` when that explains the
+    /// records better than any effect, and they say so; `compare` holds
+    /// them).
     #[arg(long, value_name = "READING", default_value = "auto")]
     pub inputs: String,
 }

@@ -306,7 +306,8 @@ pub fn run(args: &FitArgs, out: &mut dyn Write, err: &mut dyn Write) -> Result<(
         None => None,
     };
     let measured = read_data(model, &args.data, err)?;
-    let held_out = read_held_out(model, &args.data, &args.validate, err)?;
+    let mut held_out = read_held_out(model, &args.data, &args.validate, err)?;
+    let auto_inputs = crate::common::inputs_settled(&args.data)?.is_none();
     let opts = FitOptions {
         free,
         start: Some(vals.base.clone()),
@@ -322,10 +323,26 @@ pub fn run(args: &FitArgs, out: &mut dyn Write, err: &mut dyn Write) -> Result<(
         measured.len()
     );
     let started = Instant::now();
-    let result = with_progress("fitting", |set| {
-        fit_with_progress(model, &measured, &opts, &mut |p| set(progress_text(p)))
+    let (result, continuous) = with_progress("fitting", |set| {
+        let mut progress = |p: &plantc_identify::FitProgress| set(progress_text(p));
+        if auto_inputs {
+            plantc_identify::fit_reading_inputs(model, &measured, &opts, &mut progress)
+        } else {
+            fit_with_progress(model, &measured, &opts, &mut progress).map(|r| (r, None))
+        }
     })
     .map_err(fit_error)?;
+    if let Some((held, cont)) = continuous {
+        let _ = writeln!(
+            err,
+            "inputs read as continuous signals, not held over each sample interval: weighted RMS {held:.4e} held, {cont:.4e} continuous (records made by integrating a continuous input, or sampling one; --inputs held keeps them held)"
+        );
+        let inputs = plantc_identify::recorded_inputs(model, &measured);
+        held_out = held_out
+            .iter()
+            .map(|e| e.with_continuous_inputs(&inputs))
+            .collect();
+    }
     let _ = writeln!(
         err,
         "fit done in {:.1} s: {} iterations, {} simulations",
@@ -372,6 +389,12 @@ pub fn run(args: &FitArgs, out: &mut dyn Write, err: &mut dyn Write) -> Result<(
     }
     if args.json {
         let mut j = fit_json(&result);
+        j["inputs"] = match continuous {
+            Some((held, cont)) => {
+                serde_json::json!({"read": "continuous", "weighted_rms_held": held, "weighted_rms_continuous": cont})
+            }
+            None => serde_json::json!({"read": "held"}),
+        };
         if let Some(v) = &validation {
             j["validation"] =
                 serde_json::to_value(v).map_err(|e| CliError::failure(e.to_string()))?;
