@@ -568,26 +568,20 @@ fn continuous_inputs(
     opts: &DiagnoseOptions,
     baseline: &FitResult,
 ) -> Result<Option<(Vec<Experiment>, FitResult, f64)>, DiagnoseError> {
-    let inputs = crate::fit::recorded_inputs(model, experiments);
-    if opts.inputs_read || inputs.is_empty() || baseline.closed_loop.is_some() {
+    if opts.inputs_read {
         return Ok(None);
     }
     let judge = Judge::new(model, experiments, opts, baseline);
     if judge.fit_at_floor(baseline) {
         return Ok(None);
     }
-    let records: Vec<Experiment> = experiments
-        .iter()
-        .map(|e| e.with_continuous_inputs(&inputs))
-        .collect();
     let fo = FitOptions {
-        start: Some(baseline.base.clone()),
-        warm: Some(baseline.warm.clone()),
-        starts: Some(baseline.warm.starts().to_vec()),
         coarse_far_above_floor: true,
         ..opts.fit.clone()
     };
-    let Ok(alt) = fit(model, &records, &fo) else {
+    let Some((records, alt)) =
+        crate::fit::refit_continuous(model, experiments, &fo, baseline, &mut |_| {})
+    else {
         return Ok(None);
     };
     let resolved = (1.0 - opts.fit.tolerance).sqrt();

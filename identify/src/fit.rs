@@ -2970,21 +2970,7 @@ pub fn fit_reading_inputs(
     progress: &mut dyn FnMut(&FitProgress),
 ) -> Result<(FitResult, Option<(f64, f64)>), FitError> {
     let held = fit_with_progress(model, experiments, opts, progress)?;
-    let inputs = recorded_inputs(model, experiments);
-    if inputs.is_empty() || held.closed_loop.is_some() {
-        return Ok((held, None));
-    }
-    let records: Vec<Experiment> = experiments
-        .iter()
-        .map(|e| e.with_continuous_inputs(&inputs))
-        .collect();
-    let fo = FitOptions {
-        start: Some(held.base.clone()),
-        warm: Some(held.warm.clone()),
-        starts: Some(held.warm.starts().to_vec()),
-        ..opts.clone()
-    };
-    let Ok(continuous) = fit_with_progress(model, &records, &fo, progress) else {
+    let Some((_, continuous)) = refit_continuous(model, experiments, opts, &held, progress) else {
         return Ok((held, None));
     };
     if continuous.after_cost < (1.0 - opts.tolerance).sqrt() * held.after_cost {
@@ -3003,6 +2989,36 @@ pub fn fit_reading_inputs(
     } else {
         Ok((held, None))
     }
+}
+
+/// `experiments` with their recorded inputs read as continuous signals
+/// ([`Experiment::with_continuous_inputs`]) and `held` (their fit under
+/// `opts` with the inputs held) refitted on them from where it ended (its
+/// values, nuisance and first samples). None in a closed loop (the inputs
+/// are computed), without recorded inputs, or when the refit fails.
+pub(crate) fn refit_continuous(
+    model: &Model,
+    experiments: &[Experiment],
+    opts: &FitOptions,
+    held: &FitResult,
+    progress: &mut dyn FnMut(&FitProgress),
+) -> Option<(Vec<Experiment>, FitResult)> {
+    let inputs = recorded_inputs(model, experiments);
+    if inputs.is_empty() || held.closed_loop.is_some() {
+        return None;
+    }
+    let records: Vec<Experiment> = experiments
+        .iter()
+        .map(|e| e.with_continuous_inputs(&inputs))
+        .collect();
+    let fo = FitOptions {
+        start: Some(held.base.clone()),
+        warm: Some(held.warm.clone()),
+        starts: Some(held.warm.starts().to_vec()),
+        ..opts.clone()
+    };
+    let refit = fit_with_progress(model, &records, &fo, progress).ok()?;
+    Some((records, refit))
 }
 
 /// The measured coordinates of `experiments` in `model`'s order
