@@ -44,19 +44,24 @@ fn as_continuous_input(mut e: plantc_identify::Experiment) -> plantc_identify::E
     e
 }
 
+/// The story of the model on `exps`, default options.
+fn identified(exps: &[plantc_identify::Experiment]) -> plantc_identify::Story {
+    plantc_identify::identify(
+        &model_text(),
+        exps,
+        &plantc_identify::StoryOptions::default(),
+        &mut |_| {},
+    )
+    .expect("identifies")
+}
+
 #[test]
 fn a_continuous_input_is_read_as_one_and_names_nothing() {
     let exps: Vec<_> = clean_records("input_hold_continuous")
         .into_iter()
         .map(as_continuous_input)
         .collect();
-    let story = plantc_identify::identify(
-        &model_text(),
-        &exps,
-        &plantc_identify::StoryOptions::default(),
-        &mut |_| {},
-    )
-    .expect("identifies");
+    let story = identified(&exps);
     common::show_rounds(&story);
     eprintln!(
         "{}; inputs {:?}; effects {:?}",
@@ -73,13 +78,7 @@ fn a_continuous_input_is_read_as_one_and_names_nothing() {
 #[test]
 fn a_held_input_stays_held() {
     let exps = clean_records("input_hold_held");
-    let story = plantc_identify::identify(
-        &model_text(),
-        &exps,
-        &plantc_identify::StoryOptions::default(),
-        &mut |_| {},
-    )
-    .expect("identifies");
+    let story = identified(&exps);
     eprintln!("{}; inputs {:?}", story.stop, story.continuous_inputs);
     assert_eq!(story.continuous_inputs, None);
     assert!(common::final_effects(&story).is_empty());
