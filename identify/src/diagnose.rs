@@ -559,7 +559,7 @@ pub fn diagnose_with(
 /// no effect of the round passes with a larger margin (a missing effect
 /// that a half-sample shift partly mimics is named first, and the reading
 /// is tried again next round). A weighted sum of squares lower by less
-/// than the fit resolves (its relative tolerance) is no gain. Tried only
+/// than the fit resolves is no gain ([`crate::fit::refit_continuous`]). Tried only
 /// above the floor (at it there is nothing to gain), open loop (a recorded
 /// controller's inputs are computed), with inputs recorded.
 fn continuous_inputs(
@@ -567,29 +567,22 @@ fn continuous_inputs(
     experiments: &[Experiment],
     opts: &DiagnoseOptions,
     baseline: &FitResult,
-) -> Result<Option<(Vec<Experiment>, FitResult, f64)>, DiagnoseError> {
+) -> Option<(Vec<Experiment>, FitResult, f64)> {
     if opts.inputs_read {
-        return Ok(None);
+        return None;
     }
     let judge = Judge::new(model, experiments, opts, baseline);
     if judge.fit_at_floor(baseline) {
-        return Ok(None);
+        return None;
     }
     let fo = FitOptions {
         coarse_far_above_floor: true,
         ..opts.fit.clone()
     };
-    let Some((records, alt)) =
-        crate::fit::refit_continuous(model, experiments, &fo, baseline, &mut |_| {})
-    else {
-        return Ok(None);
-    };
-    let resolved = (1.0 - opts.fit.tolerance).sqrt();
-    if alt.after_cost >= resolved * baseline.after_cost {
-        return Ok(None);
-    }
+    let (records, alt) =
+        crate::fit::refit_continuous(model, experiments, &fo, baseline, &mut |_| {})?;
     let margin = judge.effective * 2.0 * (baseline.after_cost / alt.after_cost).ln();
-    Ok(Some((records, alt, margin)))
+    Some((records, alt, margin))
 }
 
 /// `baseline` (the fit of `model` under `opts`) and `opts`, with the
@@ -892,7 +885,7 @@ pub fn diagnose_from(
     opts: &DiagnoseOptions,
 ) -> Result<Diagnosis, DiagnoseError> {
     let model = model_from_text("baseline", text)?;
-    let reading = continuous_inputs(&model, experiments, opts, &baseline)?;
+    let reading = continuous_inputs(&model, experiments, opts, &baseline);
     let held_cost = baseline.after_cost;
     let d = diagnose_on(text, experiments, baseline, opts)?;
     let Some((records, alt, hold_margin)) = reading else {

@@ -2950,6 +2950,16 @@ pub fn recorded_inputs(model: &Model, experiments: &[Experiment]) -> Vec<String>
         .collect()
 }
 
+/// `experiments` with the model's inputs, where recorded, read as
+/// continuous signals ([`Experiment::with_continuous_inputs`]).
+pub fn continuous_records(model: &Model, experiments: &[Experiment]) -> Vec<Experiment> {
+    let inputs: Vec<String> = model.inputs.iter().map(|i| i.name.clone()).collect();
+    experiments
+        .iter()
+        .map(|e| e.with_continuous_inputs(&inputs))
+        .collect()
+}
+
 /// [`fit`] with the records' inputs read as they were made: held over each
 /// sample interval (a rig's converter, plantc's simulation) or continuous
 /// (a simulator integrating a continuous input, a sampled sensor such as a
@@ -2970,10 +2980,7 @@ pub fn fit_reading_inputs(
     progress: &mut dyn FnMut(&FitProgress),
 ) -> Result<(FitResult, Option<(f64, f64)>), FitError> {
     let held = fit_with_progress(model, experiments, opts, progress)?;
-    let Some((_, continuous)) = refit_continuous(model, experiments, opts, &held, progress) else {
-        return Ok((held, None));
-    };
-    if continuous.after_cost < (1.0 - opts.tolerance).sqrt() * held.after_cost {
+    if let Some((_, continuous)) = refit_continuous(model, experiments, opts, &held, progress) {
         let costs = (held.after_cost, continuous.after_cost);
         let mut kept = continuous;
         kept.before_cost = held.before_cost;
@@ -2994,8 +3001,11 @@ pub fn fit_reading_inputs(
 /// `experiments` with their recorded inputs read as continuous signals
 /// ([`Experiment::with_continuous_inputs`]) and `held` (their fit under
 /// `opts` with the inputs held) refitted on them from where it ended (its
-/// values, nuisance and first samples). None in a closed loop (the inputs
-/// are computed), without recorded inputs, or when the refit fails.
+/// values, nuisance and first samples), when that fits better: its
+/// weighted sum of squares lower by more than the fit resolves (its
+/// relative tolerance; the reading has no parameter, so the likelihood
+/// ratio alone decides). None in a closed loop (the inputs are computed),
+/// without recorded inputs, when the refit fails or gains no more than that.
 pub(crate) fn refit_continuous(
     model: &Model,
     experiments: &[Experiment],
@@ -3003,14 +3013,10 @@ pub(crate) fn refit_continuous(
     held: &FitResult,
     progress: &mut dyn FnMut(&FitProgress),
 ) -> Option<(Vec<Experiment>, FitResult)> {
-    let inputs = recorded_inputs(model, experiments);
-    if inputs.is_empty() || held.closed_loop.is_some() {
+    if recorded_inputs(model, experiments).is_empty() || held.closed_loop.is_some() {
         return None;
     }
-    let records: Vec<Experiment> = experiments
-        .iter()
-        .map(|e| e.with_continuous_inputs(&inputs))
-        .collect();
+    let records = continuous_records(model, experiments);
     let fo = FitOptions {
         start: Some(held.base.clone()),
         warm: Some(held.warm.clone()),
@@ -3018,7 +3024,8 @@ pub(crate) fn refit_continuous(
         ..opts.clone()
     };
     let refit = fit_with_progress(model, &records, &fo, progress).ok()?;
-    Some((records, refit))
+    let resolved = (1.0 - opts.tolerance).sqrt();
+    (refit.after_cost < resolved * held.after_cost).then_some((records, refit))
 }
 
 /// The measured coordinates of `experiments` in `model`'s order

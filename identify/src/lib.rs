@@ -91,9 +91,10 @@ pub use experiment_sim::{
     Simulator, Trajectory,
 };
 pub use fit::{
-    fit, fit_reading_inputs, fit_with_progress, recorded_inputs, resolve_closed_loop, signals_for,
-    simulation_error, ClosedLoop, Estimate, ExperimentEstimate, FitError, FitOptions, FitProgress,
-    FitResult, GiveUp, Horizon, NuisanceFlag, NuisanceValue, Offsets, WarmStart,
+    continuous_records, fit, fit_reading_inputs, fit_with_progress, recorded_inputs,
+    resolve_closed_loop, signals_for, simulation_error, ClosedLoop, Estimate, ExperimentEstimate,
+    FitError, FitOptions, FitProgress, FitResult, GiveUp, Horizon, NuisanceFlag, NuisanceValue,
+    Offsets, WarmStart,
 };
 pub use identifiability::Identifiability;
 pub use metrics::{compare, fit_percent, rmse, ChannelFit, ExperimentFit, FitReport, MetricsError};

@@ -553,21 +553,17 @@ fn story(
         if d.continuous_inputs.is_some() && !opts.diagnose.inputs_read {
             continuous_inputs = d.continuous_inputs.map(|(h, c)| (round, h, c));
             opts.diagnose.inputs_read = true;
-            let inputs = crate::fit::recorded_inputs(model, experiments);
-            let continuous = |e: &Experiment| e.with_continuous_inputs(&inputs);
-            records = std::borrow::Cow::Owned(experiments.iter().map(continuous).collect());
-            opts.validate = opts.validate.iter().map(continuous).collect();
+            records = std::borrow::Cow::Owned(crate::fit::continuous_records(model, experiments));
+            opts.validate = crate::fit::continuous_records(model, &opts.validate);
         }
         // the floors a diagnosis raised by the simulation's own error hold
         // for every later fit and stage
-        {
-            opts.fit.simulation_error = d
-                .baseline
-                .weights
-                .iter()
-                .filter_map(|w| Some((w.name.clone(), w.simulation_error?)))
-                .collect();
-        }
+        opts.fit.simulation_error = d
+            .baseline
+            .weights
+            .iter()
+            .filter_map(|w| Some((w.name.clone(), w.simulation_error?)))
+            .collect();
         // the records follow the creeping dry-friction law: every later fit
         // and stage is simulated under it
         if let Some(law) = &d.creeping {

@@ -203,7 +203,7 @@ pub fn channel_weights(
         .map(|(name, recs)| {
             let (noise, quantum, basis) = noise_floor_with_basis(recs);
             let spread = pooled_spread(recs);
-            let auto = 1.0 / noise.max(f64::MIN_POSITIVE.sqrt());
+            let auto = weight_of(noise);
             let over = overrides.iter().find(|(n, _)| n == name).map(|o| o.1);
             ChannelWeight {
                 name: name.clone(),
@@ -217,6 +217,12 @@ pub fn channel_weights(
             }
         })
         .collect()
+}
+
+/// The weight of a channel of noise floor `noise`: `1 / noise` (finite for
+/// a noiseless channel).
+fn weight_of(noise: f64) -> f64 {
+    1.0 / noise.max(f64::MIN_POSITIVE.sqrt())
 }
 
 /// Raise the floors of `weights` by the simulation's own error on each
@@ -235,7 +241,7 @@ pub fn with_simulation_error(weights: &mut [ChannelWeight], errors: &[(String, f
         }
         w.noise = w.noise.hypot(e);
         if !w.overridden {
-            w.weight = 1.0 / w.noise.max(f64::MIN_POSITIVE.sqrt());
+            w.weight = weight_of(w.noise);
         }
         w.basis = format!(
             "{} and the simulation's own error {e:.3e} (step halving)",

@@ -245,11 +245,7 @@ pub fn read_data(
         let _ = writeln!(err, "{w}");
     }
     if continuous == Some(true) {
-        let inputs: Vec<String> = model.inputs.iter().map(|i| i.name.clone()).collect();
-        return Ok(exps
-            .iter()
-            .map(|e| e.with_continuous_inputs(&inputs))
-            .collect());
+        return Ok(plantc_identify::continuous_records(model, &exps));
     }
     Ok(exps)
 }

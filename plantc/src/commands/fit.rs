@@ -337,11 +337,7 @@ pub fn run(args: &FitArgs, out: &mut dyn Write, err: &mut dyn Write) -> Result<(
             err,
             "inputs read as continuous signals, not held over each sample interval: weighted RMS {held:.4e} held, {cont:.4e} continuous (records made by integrating a continuous input, or sampling one; --inputs held keeps them held)"
         );
-        let inputs = plantc_identify::recorded_inputs(model, &measured);
-        held_out = held_out
-            .iter()
-            .map(|e| e.with_continuous_inputs(&inputs))
-            .collect();
+        held_out = plantc_identify::continuous_records(model, &held_out);
     }
     let _ = writeln!(
         err,
