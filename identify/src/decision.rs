@@ -33,7 +33,9 @@
 //!
 //! 3. *Form*: its fitted parameters describe the effect its name claims
 //!    ([`crate::effect_edit::EffectInstance::in_own_form`]: a Stribeck
-//!    friction with a hump, `Fs > Fc`). A better fit by a curve of another
+//!    friction with a hump, `Fs > Fc`, over a positive sliding level: its own
+//!    `Fc` plus the dry friction the model already gives the joint, which
+//!    the data cannot tell from it). A better fit by a curve of another
 //!    shape (a friction that falls at low speed, fitting the stick-slip
 //!    transitions of a simulation that resolves them on another step) is
 //!    not that effect, and its name would be false.

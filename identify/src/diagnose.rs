@@ -663,9 +663,62 @@ pub(crate) struct Judge<'a> {
     channels: Vec<String>,
     samples: usize,
     effective: f64,
+    /// The model without the candidates, for [`Judge::dry_level`].
+    model: Model,
+    /// Its dry-friction level per coordinate (derived once, when a form
+    /// test first asks).
+    dry_levels: std::sync::OnceLock<Vec<plantc_derive::sym::Expr>>,
 }
 
 impl<'a> Judge<'a> {
+    /// The dry-friction level (`D` in `Q = ... - D sign(q')`) the model
+    /// without the candidates gives coordinate `target` at rest, at the
+    /// parameter values `value` gives by name (0 without one, or when the
+    /// equations cannot be derived): the sliding level a Stribeck hump on
+    /// that joint stands on besides its own `Fc`.
+    fn dry_level(&self, target: &str, value: impl Fn(&str) -> f64) -> f64 {
+        let Some(i) = self.model.coordinates.iter().position(|c| c.name == target) else {
+            return 0.0;
+        };
+        let levels = self.dry_levels.get_or_init(|| {
+            plantc_derive::mechanics::derive_equations(&self.model)
+                .map(|eqs| {
+                    plantc_derive::mechanics::decompose_dry_friction(
+                        &eqs,
+                        plantc_derive::mechanics::FALLBACK_SIGN_WIDTH,
+                    )
+                    .levels
+                    .into_iter()
+                    .map(|l| self.model.expand_derived(l))
+                    .collect()
+                })
+                .unwrap_or_default()
+        });
+        let Some(level) = levels.get(i) else {
+            return 0.0;
+        };
+        let names: Vec<&str> = self
+            .model
+            .parameters
+            .iter()
+            .map(|p| p.name.as_str())
+            .collect();
+        // (a parameter by its fitted value; a state at rest)
+        let v = level.eval_with(&mut |s| {
+            let name = s.name();
+            if names.contains(&name) {
+                value(name)
+            } else {
+                0.0
+            }
+        });
+        if v.is_finite() {
+            v
+        } else {
+            0.0
+        }
+    }
+
     /// The judge of effects added to `model` fitted by `null` (the fit
     /// without them) on `experiments`.
     pub(crate) fn new(
@@ -686,6 +739,8 @@ impl<'a> Judge<'a> {
             effective: effective_samples(&res),
             measured,
             noise,
+            model: model.clone(),
+            dry_levels: std::sync::OnceLock::new(),
         }
     }
 
@@ -789,7 +844,7 @@ impl<'a> Judge<'a> {
                 .position(|p| p.name == name)
                 .map_or(f64::NAN, |i| f.base[i])
         };
-        t.in_own_form = !form || effect.in_own_form(value);
+        t.in_own_form = !form || effect.in_own_form(value, self.dry_level(&effect.target, value));
         if t.likely() && t.in_own_form {
             let base = effect.nulled(m, &f.base, nested);
             t.contribution = Some(
