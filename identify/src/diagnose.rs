@@ -1483,48 +1483,52 @@ impl Search<'_> {
                 checked_restart |= ranking[idx].likely_restart();
             }
         }
-        // a speed force that passes without reaching the floor may stand in
-        // for another speed force on its target (a drag for a Stribeck hump
-        // over a gearbox friction): those are refitted too, from the
-        // baseline and from the nominal values
+        // a speed force that passes may stand in for another speed force on
+        // its target (a drag for a Stribeck hump over a gearbox friction;
+        // at the floor, a Stribeck friction with the gearbox friction
+        // lowered for a drag): those are refitted too, from the baseline
+        // and from the nominal values. Where one settles the diagnosis
+        // only those with fewer parameters can still win: at the floor both
+        // sums of squares are the noise's, and the margin then differs by
+        // the parameters' price `k ln N_eff`.
         let targets: Vec<String> = ranking
             .iter()
-            .filter(|r| {
-                SPEED_FORCES.contains(&r.candidate.effect.as_str())
-                    && r.passes()
-                    && !self.settles(r)
-            })
+            .filter(|r| SPEED_FORCES.contains(&r.candidate.effect.as_str()) && r.passes())
             .map(|r| r.candidate.target.clone())
             .collect();
-        if !ranking.iter().any(|r| self.settles(r)) {
-            let stand_ins: Vec<usize> = (0..n)
-                .filter(|&j| {
-                    let c = &ranking[j].candidate;
-                    ranking[j].fit.is_none()
-                        && ranking[j].error.is_none()
-                        && SPEED_FORCES.contains(&c.effect.as_str())
-                        && targets.contains(&c.target)
-                        && self.edited[j].1 .1
-                })
-                .collect();
-            // (each touches only its own candidate: all refits, then all
-            // second starts, is the same as one after the other per
-            // candidate)
-            for (k, &j) in stand_ins.iter().enumerate() {
-                self.look_ahead(ranking, Step::Refit, &stand_ins[k..], |_| false);
-                self.refit(ranking, j);
+        let settled_k = ranking
+            .iter()
+            .filter(|r| self.settles(r))
+            .map(|r| r.candidate.parameters.len())
+            .min();
+        let stand_ins: Vec<usize> = (0..n)
+            .filter(|&j| {
+                let c = &ranking[j].candidate;
+                ranking[j].fit.is_none()
+                    && ranking[j].error.is_none()
+                    && SPEED_FORCES.contains(&c.effect.as_str())
+                    && targets.contains(&c.target)
+                    && self.edited[j].1 .1
+                    && settled_k.is_none_or(|k| c.parameters.len() < k)
+            })
+            .collect();
+        // (each touches only its own candidate: all refits, then all
+        // second starts, is the same as one after the other per
+        // candidate)
+        for (k, &j) in stand_ins.iter().enumerate() {
+            self.look_ahead(ranking, Step::Refit, &stand_ins[k..], |_| false);
+            self.refit(ranking, j);
+        }
+        for (k, &j) in stand_ins.iter().enumerate() {
+            if self.may_restart() {
+                let next: Vec<usize> = stand_ins[k..]
+                    .iter()
+                    .copied()
+                    .filter(|i| !self.second_started.contains(i))
+                    .collect();
+                self.look_ahead(ranking, Step::SecondStart, &next, |_| false);
             }
-            for (k, &j) in stand_ins.iter().enumerate() {
-                if self.may_restart() {
-                    let next: Vec<usize> = stand_ins[k..]
-                        .iter()
-                        .copied()
-                        .filter(|i| !self.second_started.contains(i))
-                        .collect();
-                    self.look_ahead(ranking, Step::SecondStart, &next, |_| false);
-                }
-                self.second_start(ranking, j);
-            }
+            self.second_start(ranking, j);
         }
         // every passing effect competes with the simpler one it contains
         for idx in 0..n {

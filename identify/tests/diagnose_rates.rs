@@ -208,7 +208,6 @@ fn quadratic_drag_on_the_pendulum_is_named_first() {
 }
 
 #[test]
-#[ignore = "issue 26 open: under the one decision rule quadratic drag on the arm is first in 4 of 5 rigs (speed_limit@theta in one), measured 2026-11-28"]
 fn quadratic_drag_on_the_arm_is_named_first() {
     rate(
         "rate_drag_theta",
