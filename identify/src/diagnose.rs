@@ -1296,7 +1296,7 @@ impl Search<'_> {
         ) else {
             return false;
         };
-        let lower = again.after_cost < self.baseline.after_cost;
+        let lower = lower_minimum(&again, self.baseline);
         self.restart_fit = Some(RestartFit {
             label: r.candidate.label(),
             from_cost: f.after_cost,
@@ -1664,7 +1664,7 @@ fn decide(
                 Err(_) => return verdict,
             },
         };
-        if again.after_cost >= baseline.after_cost {
+        if !lower_minimum(&again, baseline) {
             if passing {
                 return verdict;
             }
@@ -1782,9 +1782,14 @@ fn sensor_offsets_from_nuisance(
             continue;
         };
         // the candidate (its refit has no per-experiment offset there),
-        // started at the offsets' mean
-        let b = match r.fit.clone() {
-            Some(f) => f,
+        // started at the offsets' mean. Both it and its null `a` start from
+        // the baseline's values (unless the search's refit was a second
+        // start): no restart is in the gain, and the restart check of
+        // `decide`, which refits the model *with* the per-experiment
+        // offsets, would compare it with another null (one that holds the
+        // offset in the files' zeros)
+        let (b, from_baseline) = match r.fit.clone() {
+            Some(f) => (f, r.from_baseline),
             None => {
                 for e in r.parameters.iter_mut().take(1) {
                     e.value = mean;
@@ -1798,7 +1803,7 @@ fn sensor_offsets_from_nuisance(
                     judge.experiments,
                     opts,
                 ) {
-                    Ok(f) => f,
+                    Ok(f) => (f, true),
                     Err(_) => continue,
                 }
             }
@@ -1808,7 +1813,7 @@ fn sensor_offsets_from_nuisance(
             "the per-experiment offsets of {coord} agree (mean {mean:.4e}): one sensor offset; {}",
             r.evidence.acts_where
         );
-        credit(r, b, false);
+        credit(r, b, from_baseline);
         let s0 = judge.ssr(&a);
         judge.judge(r, &m, s0);
     }
@@ -1992,6 +1997,18 @@ fn stribeck_from_coulomb(
 /// nominal values, stopped at 2.05x with 1e-3 and went on to 53x with
 /// 2e-4).
 pub const SCREENING_TOLERANCE: f64 = 2e-4;
+
+/// Whether `again`, the baseline model refitted from a candidate's values,
+/// found a lower minimum than `baseline`: its weighted sum of squares lower
+/// by more than a screening refit resolves ([`SCREENING_TOLERANCE`], a
+/// relative change of the sum of squares). Two refits of one model that end
+/// closer are at the same minimum, and a tie is no reason to replace the
+/// baseline every candidate was judged against (one at 1.000x did, and the
+/// effect the records had was then judged against a null no better than
+/// the first).
+fn lower_minimum(again: &FitResult, baseline: &FitResult) -> bool {
+    again.after_cost < (1.0 - SCREENING_TOLERANCE).sqrt() * baseline.after_cost
+}
 
 /// Refit one candidate's model from the baseline (its estimates, its
 /// nuisance as a warm start) and the equation-error estimates of the

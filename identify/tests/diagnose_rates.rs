@@ -238,7 +238,6 @@ fn spring_on_the_pendulum_is_named_first() {
 }
 
 #[test]
-#[ignore = "issue 26 open: under the one decision rule the sensor offset is first in 2 of 5 rigs (adequate in three: the offset taken by the per-file zeros), measured 2026-11-28"]
 fn sensor_offset_is_named_first() {
     rate(
         "rate_offset",
