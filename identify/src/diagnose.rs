@@ -1519,9 +1519,13 @@ impl Search<'_> {
             self.look_ahead(ranking, Step::Refit, &stand_ins[k..], |_| false);
             self.refit(ranking, j);
         }
-        for (k, &j) in stand_ins.iter().enumerate() {
+        // (second starts are for a baseline the missing effect distorted:
+        // where a candidate settles, the baseline is one effect away from
+        // the records and the refits from it stand)
+        let restarts: &[usize] = if settled_k.is_some() { &[] } else { &stand_ins };
+        for (k, &j) in restarts.iter().enumerate() {
             if self.may_restart() {
-                let next: Vec<usize> = stand_ins[k..]
+                let next: Vec<usize> = restarts[k..]
                     .iter()
                     .copied()
                     .filter(|i| !self.second_started.contains(i))
