@@ -664,7 +664,7 @@ pub(crate) struct Judge<'a> {
     samples: usize,
     effective: f64,
     /// The model without the candidates, for [`Judge::dry_level`].
-    model: Model,
+    model: &'a Model,
     /// Its dry-friction level per coordinate (derived once, when a form
     /// test first asks).
     dry_levels: std::sync::OnceLock<Vec<plantc_derive::sym::Expr>>,
@@ -681,7 +681,7 @@ impl<'a> Judge<'a> {
             return 0.0;
         };
         let levels = self.dry_levels.get_or_init(|| {
-            plantc_derive::mechanics::derive_equations(&self.model)
+            plantc_derive::mechanics::derive_equations(self.model)
                 .map(|eqs| {
                     plantc_derive::mechanics::decompose_dry_friction(
                         &eqs,
@@ -697,16 +697,10 @@ impl<'a> Judge<'a> {
         let Some(level) = levels.get(i) else {
             return 0.0;
         };
-        let names: Vec<&str> = self
-            .model
-            .parameters
-            .iter()
-            .map(|p| p.name.as_str())
-            .collect();
         // (a parameter by its fitted value; a state at rest)
         let v = level.eval_with(&mut |s| {
             let name = s.name();
-            if names.contains(&name) {
+            if self.model.parameters.iter().any(|p| p.name == name) {
                 value(name)
             } else {
                 0.0
@@ -722,7 +716,7 @@ impl<'a> Judge<'a> {
     /// The judge of effects added to `model` fitted by `null` (the fit
     /// without them) on `experiments`.
     pub(crate) fn new(
-        model: &Model,
+        model: &'a Model,
         experiments: &'a [Experiment],
         opts: &'a DiagnoseOptions,
         null: &FitResult,
@@ -739,7 +733,7 @@ impl<'a> Judge<'a> {
             effective: effective_samples(&res),
             measured,
             noise,
-            model: model.clone(),
+            model,
             dry_levels: std::sync::OnceLock::new(),
         }
     }
@@ -844,7 +838,8 @@ impl<'a> Judge<'a> {
                 .position(|p| p.name == name)
                 .map_or(f64::NAN, |i| f.base[i])
         };
-        t.in_own_form = !form || effect.in_own_form(value, self.dry_level(&effect.target, value));
+        t.in_own_form =
+            !form || effect.in_own_form(value, || self.dry_level(&effect.target, value));
         if t.likely() && t.in_own_form {
             let base = effect.nulled(m, &f.base, nested);
             t.contribution = Some(
@@ -942,7 +937,7 @@ pub fn diagnose_from(
     let model = model_from_text("baseline", text)?;
     let reading = continuous_inputs(&model, experiments, opts, &baseline);
     let held_cost = baseline.after_cost;
-    let d = diagnose_on(text, experiments, baseline, opts)?;
+    let d = diagnose_on((text, &model), experiments, baseline, opts)?;
     let Some((records, alt, hold_margin)) = reading else {
         return Ok(d);
     };
@@ -955,7 +950,7 @@ pub fn diagnose_from(
         inputs_read: true,
         ..opts.clone()
     };
-    let mut d = diagnose_on(text, &records, alt, &opts)?;
+    let mut d = diagnose_on((text, &model), &records, alt, &opts)?;
     d.notes.push(format!(
         "inputs read as continuous signals, not held over each sample interval: weighted RMS {:.4e} held, {:.4e} continuous (margin {hold_margin:.1}, beyond every effect's: records made by integrating a continuous input, or sampling one)",
         costs.0, costs.1
@@ -964,15 +959,15 @@ pub fn diagnose_from(
     Ok(d)
 }
 
-/// [`diagnose_from`] with the records' inputs as they are read.
+/// [`diagnose_from`] with the records' inputs as they are read (`model`:
+/// `text` checked and lowered).
 fn diagnose_on(
-    text: &str,
+    (text, model): (&str, &Model),
     experiments: &[Experiment],
     baseline: FitResult,
     opts: &DiagnoseOptions,
 ) -> Result<Diagnosis, DiagnoseError> {
-    let model = model_from_text("baseline", text)?;
-    let (baseline, opts) = with_raised_floor(&model, experiments, baseline, opts)?;
+    let (baseline, opts) = with_raised_floor(model, experiments, baseline, opts)?;
     // every refit is judged on the samples the baseline was (a record's
     // release transient left out, [`crate::release`])
     let opts = &DiagnoseOptions {
@@ -982,9 +977,9 @@ fn diagnose_on(
         },
         ..opts.clone()
     };
-    let nuisance = opts.fit.free_names(&model);
+    let nuisance = opts.fit.free_names(model);
     let ee = EquationError::new(
-        &model,
+        model,
         &baseline.base,
         &nuisance,
         experiments,
@@ -996,7 +991,7 @@ fn diagnose_on(
     }
     // equation-error scores
     let mut scored = Vec::new();
-    for c in candidates(&model) {
+    for c in candidates(model) {
         let edited = c.apply(text).map_err(|error| DiagnoseError::Edit {
             which: c.label(),
             error,
@@ -1047,7 +1042,7 @@ fn diagnose_on(
         edited.push((m, standing));
     }
     let floor = crate::weights::noise_cost(&baseline.weights);
-    let judge = Judge::new(&model, experiments, opts, &baseline);
+    let judge = Judge::new(model, experiments, opts, &baseline);
     let base_res = judge.residuals(&baseline);
     let baseline_at_floor = at_floor(&base_res);
     let worst = judge.worst(&base_res);
@@ -1063,7 +1058,7 @@ fn diagnose_on(
     let s0 = judge.ssr(&baseline);
     let mut search = Search {
         judge: &judge,
-        model: &model,
+        model,
         baseline: &baseline,
         edited: &edited,
         s0,
@@ -1082,7 +1077,7 @@ fn diagnose_on(
         .iter()
         .any(|r| r.passes() && r.fit.as_ref().is_some_and(|f| judge.fit_at_floor(f)));
     if !explained {
-        sensor_offsets_from_nuisance(&mut ranking, text, &model, &baseline, &judge);
+        sensor_offsets_from_nuisance(&mut ranking, text, model, &baseline, &judge);
     }
     if search.restart_ok.get() == Some(&false) {
         notes.push(
@@ -1095,7 +1090,7 @@ fn diagnose_on(
     let verdict = decide(
         &mut ranking,
         &by_label,
-        &model,
+        model,
         &mut baseline,
         &judge,
         restart_fit,
@@ -1106,7 +1101,7 @@ fn diagnose_on(
     // floor, adopted when it reaches the floor with a larger margin than
     // the verdict's
     let creeping = (!baseline_at_floor)
-        .then(|| creeping_law(text, &model, &judge, &baseline))
+        .then(|| creeping_law(text, model, &judge, &baseline))
         .flatten()
         .filter(|law| {
             let verdict_margin = verdict
@@ -2003,15 +1998,13 @@ fn stribeck_from_coulomb(
 pub const SCREENING_TOLERANCE: f64 = 2e-4;
 
 /// Whether `again`, the baseline model refitted from a candidate's values,
-/// found a lower minimum than `baseline`: its weighted sum of squares lower
-/// by more than a screening refit resolves ([`SCREENING_TOLERANCE`], a
-/// relative change of the sum of squares). Two refits of one model that end
-/// closer are at the same minimum, and a tie is no reason to replace the
-/// baseline every candidate was judged against (one at 1.000x did, and the
-/// effect the records had was then judged against a null no better than
-/// the first).
+/// found a lower minimum than `baseline` (lower by more than a screening
+/// refit resolves, [`crate::fit::lower_beyond`]): a tie is no reason to
+/// replace the baseline every candidate was judged against (one at 1.000x
+/// did, and the effect the records had was then judged against a null no
+/// better than the first).
 fn lower_minimum(again: &FitResult, baseline: &FitResult) -> bool {
-    again.after_cost < (1.0 - SCREENING_TOLERANCE).sqrt() * baseline.after_cost
+    crate::fit::lower_beyond(again, baseline, SCREENING_TOLERANCE)
 }
 
 /// Refit one candidate's model from the baseline (its estimates, its

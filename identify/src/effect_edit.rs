@@ -489,7 +489,7 @@ impl EffectInstance {
     /// in its own form, the one its name claims. A Stribeck friction has
     /// its hump: a sliding level above zero, a static level above it (`0 <
     /// Fc + D < Fs + D`, `D` the dry friction the model already gives the
-    /// joint, `underneath`; with `Fs <= Fc` the curve is a friction that
+    /// joint, which `underneath` gives, asked only for a Stribeck friction; with `Fs <= Fc` the curve is a friction that
     /// falls at low speed, with no sliding level one that vanishes at
     /// speed; where the model has its own dry friction on the joint that
     /// level and `Fc` are one to the data, and the fit leaves `Fc` at its
@@ -499,7 +499,11 @@ impl EffectInstance {
     /// before the input delay was in, `Fc = 0` and `vs` at its 10 rad/s
     /// edge took part of the delay's error). The other effects' boxes
     /// already hold their forms.
-    pub fn in_own_form(&self, value: impl Fn(&str) -> f64, underneath: f64) -> bool {
+    pub fn in_own_form(
+        &self,
+        value: impl Fn(&str) -> f64,
+        underneath: impl FnOnce() -> f64,
+    ) -> bool {
         match (
             self.effect.as_str(),
             self.parameter_name("Fs"),
@@ -518,7 +522,7 @@ impl EffectInstance {
                         let tol = 1e-6 * (hi - lo);
                         v > lo + tol && v < hi - tol
                     });
-                fc + underneath > 0.0 && fs > fc && width_inside
+                fc + underneath() > 0.0 && fs > fc && width_inside
             }
             _ => true,
         }

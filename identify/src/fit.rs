@@ -3024,8 +3024,17 @@ pub(crate) fn refit_continuous(
         ..opts.clone()
     };
     let refit = fit_with_progress(model, &records, &fo, progress).ok()?;
-    let resolved = (1.0 - opts.tolerance).sqrt();
-    (refit.after_cost < resolved * held.after_cost).then_some((records, refit))
+    lower_beyond(&refit, held, opts.tolerance).then_some((records, refit))
+}
+
+/// Whether fit `a` ends lower than fit `b` by more than a fit resolves: its
+/// weighted sum of squares below `b`'s by more than `tolerance`, the fits'
+/// relative tolerance on it. Two fits that end closer are at the same
+/// minimum, and an alternative without a parameter of its own (another
+/// reading of the records, the same model from another start) gains
+/// nothing from such a difference.
+pub(crate) fn lower_beyond(a: &FitResult, b: &FitResult, tolerance: f64) -> bool {
+    a.after_cost < (1.0 - tolerance).sqrt() * b.after_cost
 }
 
 /// The measured coordinates of `experiments` in `model`'s order

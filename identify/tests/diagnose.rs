@@ -481,13 +481,7 @@ fn coulomb_case_story_names_the_friction_then_the_creeping_law() {
     assert_eq!(effects, ["coulomb_friction@alpha"], "{}", story.stop);
     let law = story.creeping.as_ref().expect("the creeping law adopted");
     assert!((law.width / 1e-3 - 1.0).abs() < 0.3, "width {}", law.width);
-    let model = model_from_text("final", &story.text).expect("checks");
-    let i = model
-        .parameters
-        .iter()
-        .position(|p| p.name == "Fc_alpha")
-        .expect("Fc_alpha");
-    let fc = story.fit.base[i];
+    let fc = common::final_value(&story, "Fc_alpha").expect("Fc_alpha");
     let want = truth["effect_parameters"]["Fc"].as_f64().expect("Fc");
     eprintln!(
         "Fc_alpha {fc:.4e} (true {want:.4e}), width {:.3e}",

@@ -515,14 +515,7 @@ fn story_on_held_out_rig(test: &str, effects: &[&str]) -> plantc_identify::Story
         ],
         500.0,
     );
-    let story = plantc_identify::identify(
-        &text,
-        &exps,
-        &plantc_identify::StoryOptions::default(),
-        &mut |_| {},
-    )
-    .expect("identifies");
-    common::show_rounds(&story);
+    let story = common::identify(&text, &exps);
     eprintln!("{}", story.stop);
     story
 }
@@ -536,14 +529,7 @@ fn final_at_floor(story: &plantc_identify::Story) -> impl Fn(&str) -> Option<f64
         "final cost {:.3e} vs floor {floor:.3e}",
         story.fit.after_cost
     );
-    let model = plantc_identify::diagnose::model_from_text("final", &story.text).expect("checks");
-    move |name: &str| {
-        model
-            .parameters
-            .iter()
-            .position(|p| p.name == name)
-            .map(|i| story.fit.base[i])
-    }
+    move |name: &str| common::final_value(story, name)
 }
 
 /// Two effects that each hide the other: a spring on the arm (2.5e-3 N m

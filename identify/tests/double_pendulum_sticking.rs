@@ -30,8 +30,7 @@ mod common;
 
 use plantc_identify::synth::{parse_effect_spec, parse_experiment_spec};
 use plantc_identify::{
-    read_experiment, synthesize, ChannelSpec, Experiment, Kind, Story, StoryOptions, SynthOptions,
-    SynthSpec,
+    read_experiment, synthesize, ChannelSpec, Experiment, Kind, Story, SynthOptions, SynthSpec,
 };
 
 fn shipped() -> String {
@@ -105,9 +104,7 @@ fn records(test: &str, effects: &[&str], fc: (f64, f64)) -> Vec<Experiment> {
 /// named and not removed again) and a reader of its final values.
 fn story(test: &str, text: &str, exps: &[Experiment]) -> (Story, Vec<String>) {
     let t = std::time::Instant::now();
-    let story = plantc_identify::identify(text, exps, &StoryOptions::default(), &mut |_| {})
-        .expect("identifies");
-    common::show_rounds(&story);
+    let story = common::identify(text, exps);
     let effects = common::final_effects(&story);
     eprintln!(
         "{test}: {} in {:.1} s wall; final effects {effects:?}",
@@ -119,13 +116,7 @@ fn story(test: &str, text: &str, exps: &[Experiment]) -> (Story, Vec<String>) {
 
 /// The final value of parameter `name` in `story`.
 fn value(story: &Story, name: &str) -> f64 {
-    let model = plantc_identify::diagnose::model_from_text("final", &story.text).expect("checks");
-    let i = model
-        .parameters
-        .iter()
-        .position(|p| p.name == name)
-        .unwrap_or_else(|| panic!("no `{name}` in the final model"));
-    story.fit.base[i]
+    common::final_value(story, name).unwrap_or_else(|| panic!("no `{name}` in the final model"))
 }
 
 /// Within 2 % of the truth (the acceptance's bound), printed.

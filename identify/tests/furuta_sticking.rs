@@ -100,14 +100,7 @@ fn an_arm_held_by_static_friction_and_the_pendulums_dry_friction_are_both_named(
             - th.iter().cloned().fold(f64::MAX, f64::min);
         assert!(span < 0.01, "{}: the arm moved {span} rad", e.name);
     }
-    let story = plantc_identify::identify(
-        FURUTA,
-        &exps,
-        &plantc_identify::StoryOptions::default(),
-        &mut |_| {},
-    )
-    .expect("identifies");
-    common::show_rounds(&story);
+    let story = common::identify(FURUTA, &exps);
     eprintln!("{}", story.stop);
     let final_effects = common::final_effects(&story);
     eprintln!("final effects: {final_effects:?}");
@@ -120,14 +113,7 @@ fn an_arm_held_by_static_friction_and_the_pendulums_dry_friction_are_both_named(
             .all(|l| l.starts_with("coulomb_friction")),
         "{final_effects:?}"
     );
-    let model = plantc_identify::diagnose::model_from_text("final", &story.text).expect("checks");
-    let value = |name: &str| {
-        model
-            .parameters
-            .iter()
-            .position(|p| p.name == name)
-            .map(|i| story.fit.base[i])
-    };
+    let value = |name: &str| common::final_value(&story, name);
     let arm = value("Fc_theta");
     let pendulum = value("Fc_alpha");
     eprintln!("Fc_theta {arm:?} (truth {ARM_FC}), Fc_alpha {pendulum:?} (truth {PENDULUM_FC})");

@@ -174,14 +174,7 @@ fn identify_finds_both_joints_dry_friction() {
     };
     let text = common::double_pendulum_without_dry_friction();
     let t = std::time::Instant::now();
-    let story = plantc_identify::identify(
-        &text,
-        &exps,
-        &plantc_identify::StoryOptions::default(),
-        &mut |_| {},
-    )
-    .expect("identifies");
-    common::show_rounds(&story);
+    let story = common::identify(&text, &exps);
     let effects = common::final_effects(&story);
     eprintln!(
         "{} in {:.1} s; inputs {:?}; final effects {effects:?}",
@@ -190,19 +183,13 @@ fn identify_finds_both_joints_dry_friction() {
         story.continuous_inputs
     );
     assert!(story.continuous_inputs.is_some());
-    let model = plantc_identify::diagnose::model_from_text("final", &story.text).expect("checks");
     for (joint, lab) in [("q1", 0.146), ("q2", 0.123)] {
         assert!(
             effects.contains(&format!("coulomb_friction@{joint}")),
             "{effects:?}"
         );
         let name = format!("Fc_{joint}");
-        let i = model
-            .parameters
-            .iter()
-            .position(|p| p.name == name)
-            .expect("in the final model");
-        let fc = story.fit.base[i];
+        let fc = common::final_value(&story, &name).expect("in the final model");
         eprintln!("{name} = {fc:.4} N m (lab {lab})");
         assert!((fc / lab - 1.0).abs() < 0.2, "{name} = {fc}");
     }

@@ -91,13 +91,7 @@ fn smooth_law_records_name_the_friction_not_the_integrators_error() {
     assert!(x.basis.contains("simulation's own error"), "{}", x.basis);
     // far above the 9-decimal floor, far below the cart's motion (0.39 m)
     assert!(e > 1e-7 && e < 1e-3, "{e}");
-    let model = plantc_identify::diagnose::model_from_text("final", &story.text).expect("checks");
-    let i = model
-        .parameters
-        .iter()
-        .position(|p| p.name == "Fc_x")
-        .expect("Fc_x in the final model");
-    let fc = story.fit.base[i];
+    let fc = common::final_value(&story, "Fc_x").expect("Fc_x in the final model");
     eprintln!("Fc_x = {fc} (truth 0.05)");
     assert!((fc / 0.05 - 1.0).abs() < 0.02, "Fc_x = {fc}");
 }

@@ -134,6 +134,31 @@ pub fn synthesized(test: &str, text: &str, spec: &SynthSpec) -> Vec<Experiment> 
         .collect()
 }
 
+/// The identify story of `text` on `exps` with the default options, its
+/// rounds printed ([`show_rounds`]).
+pub fn identify(text: &str, exps: &[Experiment]) -> plantc_identify::Story {
+    let story = plantc_identify::identify(
+        text,
+        exps,
+        &plantc_identify::StoryOptions::default(),
+        &mut |_| {},
+    )
+    .expect("identifies");
+    show_rounds(&story);
+    story
+}
+
+/// The fitted value of parameter `name` in `story`'s final model (None
+/// when that model has no such parameter).
+pub fn final_value(story: &plantc_identify::Story, name: &str) -> Option<f64> {
+    let model = plantc_identify::diagnose::model_from_text("final", &story.text).expect("checks");
+    model
+        .parameters
+        .iter()
+        .position(|p| p.name == name)
+        .map(|i| story.fit.base[i])
+}
+
 /// Print each round of a story (effect, cost before and after) to stderr.
 pub fn show_rounds(story: &plantc_identify::Story) {
     for (k, r) in story.rounds.iter().enumerate() {
