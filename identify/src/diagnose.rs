@@ -297,6 +297,12 @@ pub struct Diagnosis {
     /// refit are then on the records so read
     /// ([`Experiment::with_continuous_inputs`]).
     pub continuous_inputs: Option<(f64, f64)>,
+    /// When no simulation follows the whole records (the replay at half
+    /// the step parts from the replay by the channel's own motion at the
+    /// fitted values, [`crate::fit::StepDifference::parts`]: chaotic
+    /// motion): the segment length the baseline and every refit were then
+    /// fitted on.
+    pub unpredictable: Option<f64>,
 }
 
 impl Diagnosis {
@@ -585,6 +591,19 @@ fn continuous_inputs(
     Some((records, alt, margin))
 }
 
+/// What [`with_raised_floor`] returns: the baseline and the options with
+/// the floors raised, and, when no simulation follows the whole records,
+/// the segment length both were moved to with the note that says why.
+struct RaisedFloor {
+    baseline: FitResult,
+    opts: DiagnoseOptions,
+    unpredictable: Option<(f64, String)>,
+}
+
+/// How a diagnosis' note on records no simulation follows begins
+/// ([`Diagnosis::unpredictable`]).
+pub const UNPREDICTABLE_NOTE: &str = "no simulation follows the whole records";
+
 /// `baseline` (the fit of `model` under `opts`) and `opts`, with the
 /// channels' floors raised by the simulation's own error where it is
 /// measurable on that fit ([`simulation_error`], [`floor_raises`]; each
@@ -599,13 +618,57 @@ fn with_raised_floor(
     experiments: &[Experiment],
     baseline: FitResult,
     opts: &DiagnoseOptions,
-) -> Result<(FitResult, DiagnoseOptions), DiagnoseError> {
+) -> Result<RaisedFloor, DiagnoseError> {
     // an error that cannot be measured (the finer simulation fails where
     // the fit's own retried with shorter substeps) is not added
-    let errors = simulation_error(model, experiments, &opts.fit, &baseline).unwrap_or_default();
+    let differences =
+        simulation_error(model, experiments, &opts.fit, &baseline).unwrap_or_default();
+    // whole records no simulation follows (chaotic motion): the baseline
+    // on segments, and every refit after it
+    if baseline.segments.is_none() && matches!(opts.fit.horizon, Horizon::Auto) {
+        if let Some(d) = differences.iter().find(|d| d.parts(&baseline.weights)) {
+            let h = crate::fit::segment_length(model, experiments, &opts.fit, &baseline)
+                .map_err(DiagnoseError::Fit)?;
+            let spread = baseline
+                .weights
+                .iter()
+                .find(|w| w.name == d.name)
+                .map_or(f64::NAN, |w| w.spread);
+            let note = format!(
+                "{UNPREDICTABLE_NOTE}: at the fitted values the replay at half the step parts from the replay by {:.3e} on {} (its spread in the records {:.3e}; chaotic motion, where the step, a rounding or the last digit of a state decide more than the parameters): the baseline and every refit are fitted on {h} s segments, each from its own estimated state",
+                d.largest, d.name, spread
+            );
+            let opts = DiagnoseOptions {
+                fit: FitOptions {
+                    horizon: Horizon::Segments(h),
+                    ..opts.fit.clone()
+                },
+                ..opts.clone()
+            };
+            let fo = FitOptions {
+                start: Some(baseline.base.clone()),
+                coarse_far_above_floor: true,
+                ..opts.fit.clone()
+            };
+            let on_segments = fit(model, experiments, &fo).map_err(DiagnoseError::Fit)?;
+            let raised = with_raised_floor(model, experiments, on_segments, &opts)?;
+            return Ok(RaisedFloor {
+                unpredictable: Some((h, note)),
+                ..raised
+            });
+        }
+    }
+    let errors: Vec<(String, f64)> = differences
+        .iter()
+        .map(|d| (d.name.clone(), d.rms))
+        .collect();
     let raised = floor_raises(&baseline, &errors, opts.fit.tolerance);
     if raised.is_empty() {
-        return Ok((baseline, opts.clone()));
+        return Ok(RaisedFloor {
+            baseline,
+            opts: opts.clone(),
+            unpredictable: None,
+        });
     }
     let mut errors = opts.fit.simulation_error.clone();
     for (name, e) in raised {
@@ -628,7 +691,11 @@ fn with_raised_floor(
         ..opts.fit.clone()
     };
     let refitted = fit(model, experiments, &fo).map_err(DiagnoseError::Fit)?;
-    Ok((refitted, opts))
+    Ok(RaisedFloor {
+        baseline: refitted,
+        opts,
+        unpredictable: None,
+    })
 }
 
 /// The channels of fit `f` whose floor the simulation's own `errors`
@@ -967,7 +1034,11 @@ fn diagnose_on(
     baseline: FitResult,
     opts: &DiagnoseOptions,
 ) -> Result<Diagnosis, DiagnoseError> {
-    let (baseline, opts) = with_raised_floor(model, experiments, baseline, opts)?;
+    let RaisedFloor {
+        baseline,
+        opts,
+        unpredictable,
+    } = with_raised_floor(model, experiments, baseline, opts)?;
     // every refit is judged on the samples the baseline was (a record's
     // release transient left out, [`crate::release`])
     let opts = &DiagnoseOptions {
@@ -986,6 +1057,10 @@ fn diagnose_on(
         &opts.equation_error,
     )?;
     let mut notes = Vec::new();
+    let unpredictable = unpredictable.map(|(h, note)| {
+        notes.push(note);
+        h
+    });
     if let Some(sf) = ee.scale_fixed() {
         notes.push(format!("equation-error ranking: {sf}"));
     }
@@ -1132,6 +1207,7 @@ fn diagnose_on(
         notes,
         creeping,
         continuous_inputs: None,
+        unpredictable,
     })
 }
 

@@ -2882,42 +2882,66 @@ pub fn simulate_as(
     Ok(pb.predict(&pt)?)
 }
 
-/// The simulation's own error on each measured channel of fit `at`: per
-/// coordinate, the largest RMS over the records of the difference between
-/// the simulation at `opts`' substep and one at half the shortest substep
-/// any record takes (automatic or set), with the parameters and nuisance
-/// as fitted. For RK4, fourth order, that difference is 15/16 of the
-/// coarse simulation's error where the error follows the order; at a
-/// stability limit (a smooth dry friction's slope near zero speed) the
-/// finer simulation is stable and the difference is the error itself.
-/// Records that follow plantc's own integrator to the sample cancel it;
-/// records from any other simulator or from a rig do not. Channels not
-/// measured anywhere are left out.
-pub fn simulation_error(
-    model: &Model,
-    experiments: &[Experiment],
-    opts: &FitOptions,
-    at: &FitResult,
-) -> Result<Vec<(String, f64)>, FitError> {
-    // (the fit's own prediction is the simulation at `opts`' substep)
-    let coarse = &at.simulated;
+/// The options of the finer simulation [`simulation_error`] and
+/// [`replay_predictable`] compare with: half the shortest substep any
+/// record takes under `opts` (automatic or set).
+fn finer(experiments: &[Experiment], opts: &FitOptions) -> Result<FitOptions, FitError> {
     let mut h = f64::INFINITY;
     for e in experiments {
         let dt = crate::data::median_dt(&e.t).unwrap_or(1e-3);
         h = h.min(crate::experiment_sim::substep_at(dt, &opts.sim)?);
     }
-    let fine_opts = FitOptions {
+    Ok(FitOptions {
         sim: SimOptions {
             substep: Some(h / 2.0),
             ..opts.sim
         },
         ..opts.clone()
-    };
-    let fine = simulate_as(model, experiments, &fine_opts, at, &at.base)?;
+    })
+}
+
+/// How far a simulation at `opts`' substep and one at half of it lie apart
+/// on one measured channel, over the records: see [`simulation_error`].
+#[derive(Clone, Debug, PartialEq)]
+pub struct StepDifference {
+    /// The coordinate.
+    pub name: String,
+    /// The largest RMS difference over the records.
+    pub rms: f64,
+    /// The largest difference at any sample.
+    pub largest: f64,
+}
+
+impl StepDifference {
+    /// Whether the two simulations part by the channel's own motion: at
+    /// some sample they lie a `spread` (the channel's standard deviation,
+    /// [`ChannelWeight::spread`]) or more apart. Two signals of standard
+    /// deviation `s` that differ by `e` in RMS are correlated at
+    /// `1 - e^2 / (2 s^2)`; a difference of `s` leaves them half their
+    /// variance in common, as a trajectory shares with an unrelated stretch
+    /// of itself. From there on a replay depends on the step (and on a
+    /// rounding, the last digit of an initial state) more than on the
+    /// parameters: the motion is chaotic on the records' time scale, and
+    /// no simulation follows the whole records.
+    pub fn parts(&self, weights: &[ChannelWeight]) -> bool {
+        weights
+            .iter()
+            .find(|w| w.name == self.name)
+            .is_some_and(|w| w.spread > 0.0 && self.largest >= w.spread)
+    }
+}
+
+/// Per measured channel, the differences between `coarse` and `fine`
+/// (`[experiment][coordinate][sample]`), non-finite samples left out.
+fn step_differences(
+    model: &Model,
+    coarse: &[Vec<Vec<f64>>],
+    fine: &[Vec<Vec<f64>>],
+) -> Vec<StepDifference> {
     let mut out = Vec::new();
     for (c, coord) in model.coordinates.iter().enumerate() {
-        let mut worst: Option<f64> = None;
-        for (a, b) in coarse.iter().zip(&fine) {
+        let mut worst: Option<(f64, f64)> = None;
+        for (a, b) in coarse.iter().zip(fine) {
             let (Some(a), Some(b)) = (a.get(c), b.get(c)) else {
                 continue;
             };
@@ -2931,13 +2955,109 @@ pub fn simulation_error(
                 continue;
             }
             let rms = (d.iter().map(|v| v * v).sum::<f64>() / d.len() as f64).sqrt();
-            worst = Some(worst.map_or(rms, |w: f64| w.max(rms)));
+            let largest = d.iter().fold(0.0f64, |m, v| m.max(v.abs()));
+            worst = Some(worst.map_or((rms, largest), |(r, l)| (r.max(rms), l.max(largest))));
         }
-        if let Some(w) = worst {
-            out.push((coord.name.clone(), w));
+        if let Some((rms, largest)) = worst {
+            out.push(StepDifference {
+                name: coord.name.clone(),
+                rms,
+                largest,
+            });
         }
     }
-    Ok(out)
+    out
+}
+
+/// The simulation's own error on each measured channel of fit `at`: per
+/// coordinate, the largest RMS over the records of the difference between
+/// the simulation at `opts`' substep and one at half the shortest substep
+/// any record takes (automatic or set), with the parameters and nuisance
+/// as fitted (and the largest difference at any sample,
+/// [`StepDifference::parts`]). For RK4, fourth order, that difference is
+/// 15/16 of the coarse simulation's error where the error follows the
+/// order; at a stability limit (a smooth dry friction's slope near zero
+/// speed) the finer simulation is stable and the difference is the error
+/// itself. Records that follow plantc's own integrator to the sample
+/// cancel it; records from any other simulator or from a rig do not.
+/// Channels not measured anywhere are left out.
+pub fn simulation_error(
+    model: &Model,
+    experiments: &[Experiment],
+    opts: &FitOptions,
+    at: &FitResult,
+) -> Result<Vec<StepDifference>, FitError> {
+    // (the fit's own prediction is the simulation at `opts`' substep)
+    let fine = simulate_as(model, experiments, &finer(experiments, opts)?, at, &at.base)?;
+    Ok(step_differences(model, &at.simulated, &fine))
+}
+
+/// Does the replay of the whole records from the start values (the
+/// nuisance at its data estimates) agree with itself at half the
+/// simulation step ([`StepDifference::parts`] on no channel)? A replay
+/// that cannot be run is no evidence either way (true).
+pub fn replay_predictable(
+    model: &Model,
+    experiments: &[Experiment],
+    opts: &FitOptions,
+) -> Result<bool, FitError> {
+    let free_names = opts.free_names(model);
+    // the replay under `o` (None when it cannot be run) and the weights
+    type Replay = (Option<Vec<Vec<Vec<f64>>>>, Vec<ChannelWeight>);
+    let replay = |o: &FitOptions| -> Result<Replay, FitError> {
+        let setup = Setup::new(model, experiments, o, &free_names)?;
+        let pb = setup.problem(None);
+        let pt = setup.start_point(&pb, &setup.free_values(&setup.base));
+        Ok((pb.predict(&pt).ok(), setup.weights.clone()))
+    };
+    let (Some(coarse), weights) = replay(opts)? else {
+        return Ok(true);
+    };
+    let (Some(fine), _) = replay(&finer(experiments, opts)?)? else {
+        return Ok(true);
+    };
+    Ok(!step_differences(model, &coarse, &fine)
+        .iter()
+        .any(|d| d.parts(&weights)))
+}
+
+/// The segment length a fit of `model` at `at`'s values takes when the
+/// whole records cannot be fitted: the longest of [`AUTO_SEGMENTS`] whose
+/// segments, each from its own state fitted at those values, follow the
+/// data (as [`Horizon::Auto`] chooses it at the start values).
+pub fn segment_length(
+    model: &Model,
+    experiments: &[Experiment],
+    opts: &FitOptions,
+    at: &FitResult,
+) -> Result<f64, FitError> {
+    let o = FitOptions {
+        start: Some(at.base.clone()),
+        warm: None,
+        ..opts.clone()
+    };
+    let free_names = o.free_names(model);
+    let setup = Setup::new(model, experiments, &o, &free_names)?;
+    let mut sink = |_: &FitProgress| {};
+    let mut run = Run {
+        bounded: false,
+        hold_locals: false,
+        tolerance: o.tolerance,
+        coarse_above: f64::INFINITY,
+        give_up: None,
+        gave_up: false,
+        last_normal: None,
+        iterations: 0,
+        simulations: 0,
+        stage: 0,
+        stages: 1,
+        progress: &mut sink,
+    };
+    Ok(choose_segments(
+        &setup,
+        &setup.free_values(&setup.base),
+        &mut run,
+    ))
 }
 
 /// The model's inputs every record has a column for.

@@ -173,6 +173,11 @@ pub struct Story {
     /// held and continuous. From that round on every stage is fitted on the
     /// records so read.
     pub continuous_inputs: Option<(usize, f64, f64)>,
+    /// When no simulation follows the whole records
+    /// ([`crate::Diagnosis::unpredictable`]): the round whose diagnosis
+    /// found it, the segment length every fit from then on is on, and the
+    /// diagnosis' words.
+    pub unpredictable: Option<(usize, f64, String)>,
 }
 
 impl Story {
@@ -478,6 +483,8 @@ fn stabilised_replay(
         || !matches!(opts.fit.closed_loop, ClosedLoop::Auto)
         || matches!(opts.fit.horizon, Horizon::Segments(_))
         || replay_follows(model, experiments, &opts.fit).map_err(StoryError::Fit)?
+        || !crate::fit::replay_predictable(model, experiments, &opts.fit)
+            .map_err(StoryError::Fit)?
     {
         return Ok(None);
     }
@@ -535,6 +542,7 @@ fn story(
     let mut repeated = false;
     let mut creeping: Option<CreepingLaw> = None;
     let mut continuous_inputs = None;
+    let mut unpredictable = None;
     let stop;
     loop {
         let round = rounds.len() + 1;
@@ -564,6 +572,18 @@ fn story(
             .iter()
             .filter_map(|w| Some((w.name.clone(), w.simulation_error?)))
             .collect();
+        // no simulation follows the whole records: every later fit and
+        // stage is on the diagnosis' segments
+        if let Some(h) = d.unpredictable {
+            opts.fit.horizon = Horizon::Segments(h);
+            let words = d
+                .notes
+                .iter()
+                .find(|n| n.starts_with(crate::diagnose::UNPREDICTABLE_NOTE))
+                .cloned()
+                .unwrap_or_default();
+            unpredictable.get_or_insert((round, h, words));
+        }
         // the records follow the creeping dry-friction law: every later fit
         // and stage is simulated under it
         if let Some(law) = &d.creeping {
@@ -731,6 +751,7 @@ fn story(
         effects: end.applied.into_iter().flatten().collect(),
         creeping,
         continuous_inputs,
+        unpredictable,
     })
 }
 

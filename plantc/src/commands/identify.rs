@@ -350,6 +350,9 @@ fn story(
             "   inputs read as continuous signals, not held over each sample interval, from round {round} on: weighted RMS {held:.4e} held, {continuous:.4e} continuous (records made by integrating a continuous input, or sampling one)"
         );
     }
+    if let Some((round, _, words)) = &s.unpredictable {
+        let _ = writeln!(out, "   from round {round} on, {words}");
+    }
     let _ = writeln!(
         out,
         "   nominal model refitted{law}: RMSE {:.3e}; where it still fails:",
@@ -569,13 +572,34 @@ fn story(
         .collect();
     let _ = writeln!(out, "\nbefore and after:");
     table(out, &stage_refs, &measured, &channels);
-    let first = stage_refs.first().map_or(f64::NAN, |s| s.report.rmse);
-    let last = stage_refs.last().map_or(f64::NAN, |s| s.report.rmse);
+    // whole-record simulations at both ends (a stage's segments are its
+    // own column, and said apart)
+    let first = s.stages.first().map_or(f64::NAN, |st| st.report.rmse);
+    let last = s.stages.last().map_or(f64::NAN, |st| st.report.rmse);
+    let shown = |v: f64| {
+        if v.is_finite() {
+            format!("{v:.3e}")
+        } else {
+            "diverged".to_string()
+        }
+    };
+    let ratio = if first.is_finite() && last.is_finite() {
+        format!(" (RMSE ratio {:.1})", first / last.max(f64::MIN_POSITIVE))
+    } else {
+        String::new()
+    };
+    let on_segments = s
+        .stages
+        .last()
+        .and_then(|st| st.segment_report.as_ref())
+        .map(|r| format!("; on the segments as fitted {}", shown(r.rmse)))
+        .unwrap_or_default();
     let elapsed = started.elapsed().as_secs_f64();
     let _ = writeln!(
         out,
-        "RMSE {first:.3e} -> {last:.3e} (RMSE ratio {:.1}); {} ({} effect(s) in the final model); model -> {}, figures -> {}/ ({elapsed:.1} s)",
-        first / last.max(f64::MIN_POSITIVE),
+        "RMSE {} -> {}{ratio}{on_segments}; {} ({} effect(s) in the final model); model -> {}, figures -> {}/ ({elapsed:.1} s)",
+        shown(first),
+        shown(last),
         s.stop,
         s.effects_added(),
         dir.join("fitted.plant").display(),
@@ -606,6 +630,11 @@ fn story(
             "gains": r.gains,
             "poles": [r.poles.0, r.poles.1],
             "block": r.block,
+        })),
+        "unpredictable": s.unpredictable.as_ref().map(|(round, h, words)| serde_json::json!({
+            "round": round,
+            "segments": h,
+            "note": words,
         })),
         "rounds": summary_rounds,
         "simplified": summary_simplified,

@@ -1,0 +1,124 @@
+//! Records of chaotic motion: the pendubot (`models/pendubot.plant`, an
+//! underactuated double pendulum) driven at the shoulder into tumbling
+//! (the elbow turns 6-15 revolutions, up to 67 rad/s), beside a free swing
+//! near hanging. Synthetic (`synth`, sticking dry friction, 500 Hz, 4096-count
+//! encoders), the rig off the model's values (`I1` 8e-4, `b2` 2e-4).
+//!
+//! Such a replay depends on the simulation step as much as on the
+//! parameters: at the nominal values the replay at half the step parts
+//! from the replay by 8.8 rad on `q1` (the channel's spread 5.3 rad).
+//! Measured 2026-11-28 before the rule ([`replay_predictable`],
+//! [`StepDifference::parts`]), `plantc identify` on these records:
+//! - clean: the story replayed the records under a stabilising feedback
+//!   (made for a plant a controller balanced) and named a cogging, an input
+//!   delay and a Coulomb friction from a refit landscape full of local
+//!   minima (185 s CPU); the open-loop fit reaches the noise floor;
+//! - a Coulomb friction of 5e-4 N m on the elbow: the floor was raised by the
+//!   step-halving difference (13,000 to 78,000 times the sensor noise) and
+//!   the records called adequate at "the noise floor" with a whole-record
+//!   RMSE of 5.9 rad.
+//!
+//! [`replay_predictable`]: plantc_identify::fit::replay_predictable
+//! [`StepDifference::parts`]: plantc_identify::fit::StepDifference::parts
+
+mod common;
+
+use plantc_identify::synth::{parse_effect_spec, parse_experiment_spec};
+use plantc_identify::{
+    diagnose_with, read_experiment, synthesize, ChannelSpec, DiagnoseOptions, Experiment, Kind,
+    SynthOptions, SynthSpec,
+};
+
+fn shipped() -> String {
+    let path = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("../models/pendubot.plant");
+    std::fs::read_to_string(path).expect("models/pendubot.plant")
+}
+
+/// The rig's records with `effects` hidden, read back as the CLI would.
+fn records(test: &str, effects: &[&str]) -> Vec<Experiment> {
+    let spec = SynthSpec {
+        case: test.into(),
+        model_name: "pendubot.plant".into(),
+        effects: effects
+            .iter()
+            .map(|e| parse_effect_spec(e).expect("effect"))
+            .collect(),
+        parameter_set: None,
+        values: vec![("I1".into(), 8e-4), ("b2".into(), 2e-4)],
+        experiments: [
+            "free_swing:q10=170deg,q20=30deg,duration=10,name=free_swing",
+            "driven:q10=180deg,duration=10,rms=0.2,band=0.3-5,seed=2,name=driven",
+        ]
+        .iter()
+        .map(|e| parse_experiment_spec(e).expect("experiment"))
+        .collect(),
+        options: SynthOptions {
+            seed: 1,
+            ..SynthOptions::default()
+        },
+    };
+    let out = synthesize(&shipped(), &spec).expect("synthesizes");
+    let channels = ChannelSpec::new()
+        .angle("q1")
+        .angle("q2")
+        .input("tau", Kind::Torque);
+    let dir = common::scratch(test);
+    out.files
+        .iter()
+        .map(|f| {
+            let p = dir.join(&f.file_name);
+            std::fs::write(&p, &f.text).expect("writes");
+            read_experiment(&p, &channels).expect("reads").0
+        })
+        .collect()
+}
+
+/// A clean rig names nothing: no stabilising feedback is designed for
+/// records whose replay does not agree with itself, and the open-loop fit
+/// reaches the floor (2.5 s CPU in release, measured 2026-11-28).
+#[test]
+fn clean_chaotic_records_name_nothing() {
+    let exps = records("chaotic_clean", &[]);
+    let story = common::identify(&shipped(), &exps);
+    eprintln!("{}", story.stop);
+    assert!(story.stabilised.is_none(), "a stabilised replay was used");
+    assert!(
+        common::final_effects(&story).is_empty(),
+        "named {:?}: {}",
+        common::final_effects(&story),
+        story.stop
+    );
+}
+
+/// A Coulomb friction on the elbow: the diagnosis says no simulation
+/// follows the whole records, judges on segments, and names the friction
+/// within 10 % (5.34e-4 N m against 5e-4, measured 2026-11-28).
+#[test]
+fn a_coulomb_friction_in_chaotic_records_is_named_on_segments() {
+    let exps = records("chaotic_coulomb", &["coulomb_friction:q2=5e-4"]);
+    let d = diagnose_with(&shipped(), &exps, &DiagnoseOptions::default()).expect("diagnoses");
+    eprintln!("{}", d.verdict_line());
+    for n in &d.notes {
+        eprintln!("  note: {n}");
+    }
+    assert!(d.unpredictable.is_some(), "the whole records were judged");
+    assert!(
+        d.segments_caveat().is_some(),
+        "the verdict does not say it is on segments"
+    );
+    let v = d.verdict.as_ref().map(|c| c.label());
+    assert_eq!(
+        v.as_deref(),
+        Some("coulomb_friction@q2"),
+        "{}",
+        d.verdict_line()
+    );
+    let fc = d.ranking[0]
+        .parameters
+        .iter()
+        .find(|p| p.name == "Fc_q2")
+        .map(|p| p.value)
+        .expect("Fc_q2");
+    eprintln!("Fc_q2 = {fc:.4e} (truth 5e-4)");
+    assert!((fc / 5e-4 - 1.0).abs() < 0.1, "Fc_q2 = {fc}");
+}
