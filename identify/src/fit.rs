@@ -778,6 +778,28 @@ struct Run<'a> {
     progress: &'a mut dyn FnMut(&FitProgress),
 }
 
+impl<'a> Run<'a> {
+    /// A run from nothing done yet, at `tolerance`, over `stages` stages
+    /// (for progress), reporting to `progress`; nothing bounded or held,
+    /// no give-up, the screening tolerance never taken.
+    fn new(tolerance: f64, stages: usize, progress: &'a mut dyn FnMut(&FitProgress)) -> Self {
+        Run {
+            bounded: false,
+            hold_locals: false,
+            tolerance,
+            coarse_above: f64::INFINITY,
+            give_up: None,
+            gave_up: false,
+            last_normal: None,
+            iterations: 0,
+            simulations: 0,
+            stage: 0,
+            stages,
+            progress,
+        }
+    }
+}
+
 /// How an LM run ended.
 #[derive(Copy, Clone, Debug, PartialEq)]
 enum Stop {
@@ -1522,22 +1544,13 @@ fn fit_on_starts(
     let free = setup.free.clone();
     let floor = crate::weights::noise_cost(&setup.weights);
     let mut run = Run {
-        bounded: false,
-        hold_locals: false,
-        tolerance: opts.tolerance,
         coarse_above: if opts.coarse_far_above_floor && floor > 0.0 {
             FAR_ABOVE_FLOOR * floor
         } else {
             f64::INFINITY
         },
         give_up: opts.give_up,
-        gave_up: false,
-        last_normal: None,
-        iterations: 0,
-        simulations: 0,
-        stage: 0,
-        stages: 1,
-        progress,
+        ..Run::new(opts.tolerance, 1, progress)
     };
     let g0 = better_start(&setup, &mut run);
     let mut notes = Vec::new();
@@ -2252,17 +2265,7 @@ pub(crate) fn observe_nuisance(
     let mut sink = |_: &FitProgress| {};
     let mut run = Run {
         bounded: true,
-        hold_locals: false,
-        tolerance: FINAL_TOLERANCE,
-        coarse_above: f64::INFINITY,
-        give_up: None,
-        gave_up: false,
-        last_normal: None,
-        iterations: 0,
-        simulations: 0,
-        stage: 0,
-        stages: OBSERVER_HORIZONS.len() + 1,
-        progress: &mut sink,
+        ..Run::new(FINAL_TOLERANCE, OBSERVER_HORIZONS.len() + 1, &mut sink)
     };
     let cost_over = |q: &Point, h: f64| match pb.cost(q, h) {
         Ok((s, _)) => s,
@@ -3039,20 +3042,7 @@ pub fn segment_length(
     let free_names = o.free_names(model);
     let setup = Setup::new(model, experiments, &o, &free_names)?;
     let mut sink = |_: &FitProgress| {};
-    let mut run = Run {
-        bounded: false,
-        hold_locals: false,
-        tolerance: o.tolerance,
-        coarse_above: f64::INFINITY,
-        give_up: None,
-        gave_up: false,
-        last_normal: None,
-        iterations: 0,
-        simulations: 0,
-        stage: 0,
-        stages: 1,
-        progress: &mut sink,
-    };
+    let mut run = Run::new(o.tolerance, 1, &mut sink);
     Ok(choose_segments(
         &setup,
         &setup.free_values(&setup.base),

@@ -25,8 +25,8 @@ mod common;
 
 use plantc_identify::synth::{parse_effect_spec, parse_experiment_spec};
 use plantc_identify::{
-    diagnose_with, read_experiment, synthesize, ChannelSpec, DiagnoseOptions, Experiment, Kind,
-    SynthOptions, SynthSpec,
+    diagnose_with, synthesize, ChannelSpec, DiagnoseOptions, Experiment, Kind, SynthOptions,
+    SynthSpec,
 };
 
 fn shipped() -> String {
@@ -62,15 +62,7 @@ fn records(test: &str, effects: &[&str]) -> Vec<Experiment> {
         .angle("q1")
         .angle("q2")
         .input("tau", Kind::Torque);
-    let dir = common::scratch(test);
-    out.files
-        .iter()
-        .map(|f| {
-            let p = dir.join(&f.file_name);
-            std::fs::write(&p, &f.text).expect("writes");
-            read_experiment(&p, &channels).expect("reads").0
-        })
-        .collect()
+    common::read_back(test, &out, &channels)
 }
 
 /// A clean rig names nothing: no stabilising feedback is designed for

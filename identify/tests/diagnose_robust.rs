@@ -450,11 +450,9 @@ fn coulomb_friction_and_drag_on_another_rig_end_named_as_such() {
 /// hump (measured 2026-11-28: hump 4.01e-3, `vs` 0.197).
 #[test]
 fn a_mild_stribeck_hump_on_the_arm_is_named() {
-    let text = pendulum_text();
-    let exps = synth(
+    let (fc, fs, vs) = stribeck_named(
         "stribeck_arm_mild",
-        &text,
-        &["stribeck_friction:theta:Fc=4e-3,Fs=8e-3,vs=0.2"],
+        "stribeck_friction:theta:Fc=4e-3,Fs=8e-3,vs=0.2",
         &[
             ("J1", 1.45e-3),
             ("l2", 0.159),
@@ -467,26 +465,8 @@ fn a_mild_stribeck_hump_on_the_arm_is_named() {
             "free_swing:alpha0=160deg,duration=15,name=fs2",
             "driven:alpha0=180deg,band=0.2-5,rms=1.2,seed=7,duration=15,name=driven",
         ],
-        500.0,
     );
-    let d = diagnose_with(&text, &exps, &DiagnoseOptions::default()).expect("diagnoses");
-    show("stribeck_arm_mild", &d);
-    assert_eq!(
-        verdict(&d).as_deref(),
-        Some("stribeck_friction@theta"),
-        "{}",
-        d.verdict_line()
-    );
-    let top = &d.ranking[0];
-    let value = |name: &str| {
-        top.parameters
-            .iter()
-            .find(|p| p.name == name)
-            .map(|p| p.value)
-            .expect(name)
-    };
-    let hump = value("Fs_theta") - value("Fc_theta");
-    let vs = value("vs_theta");
+    let hump = fs - fc;
     eprintln!("hump {hump:.4e} N m (truth 4e-3), vs {vs:.4} rad/s (truth 0.2)");
     assert!((hump / 4e-3 - 1.0).abs() < 0.15, "hump = {hump}");
     assert!((vs / 0.2 - 1.0).abs() < 0.15, "vs = {vs}");
@@ -503,11 +483,9 @@ fn a_mild_stribeck_hump_on_the_arm_is_named() {
 /// (0.82; measured 2026-11-28 on the bench case).
 #[test]
 fn a_stribeck_hump_on_the_pendulum_is_named() {
-    let text = pendulum_text();
-    let exps = synth(
+    let (fc, fs, vs) = stribeck_named(
         "stribeck_pendulum",
-        &text,
-        &["stribeck_friction:alpha:Fc=4e-4,Fs=1.1e-3,vs=0.1"],
+        "stribeck_friction:alpha:Fc=4e-4,Fs=1.1e-3,vs=0.1",
         &[
             ("J1", 1.35e-3),
             ("l2", 0.161),
@@ -520,29 +498,44 @@ fn a_stribeck_hump_on_the_pendulum_is_named() {
             "free_swing:alpha0=165deg,duration=20,name=free_swing_small",
             "driven:alpha0=180deg,band=0.3-6,rms=1.5,seed=3,duration=20",
         ],
-        500.0,
     );
-    let d = diagnose_with(&text, &exps, &DiagnoseOptions::default()).expect("diagnoses");
-    show("stribeck_pendulum", &d);
-    assert_eq!(
-        verdict(&d).as_deref(),
-        Some("stribeck_friction@alpha"),
-        "{}",
-        d.verdict_line()
-    );
-    let top = &d.ranking[0];
-    let value = |name: &str| {
-        top.parameters
-            .iter()
-            .find(|p| p.name == name)
-            .map(|p| p.value)
-            .expect(name)
-    };
-    let (fc, fs, vs) = (value("Fc_alpha"), value("Fs_alpha"), value("vs_alpha"));
     eprintln!("Fc {fc:.4e}, Fs {fs:.4e} N m (truth 4e-4, 1.1e-3), vs {vs:.4} rad/s (truth 0.1)");
     assert!((fc / 4e-4 - 1.0).abs() < 0.15, "Fc = {fc}");
     assert!((fs / 1.1e-3 - 1.0).abs() < 0.15, "Fs = {fs}");
     assert!((vs / 0.1 - 1.0).abs() < 0.2, "vs = {vs}");
+}
+
+/// The pendulum rig at `values` with Stribeck friction `effect`
+/// (`stribeck_friction:TARGET:...`) hidden, 500 Hz: the diagnosis must name
+/// that Stribeck friction; its fitted `(Fc, Fs, vs)`.
+fn stribeck_named(
+    test: &str,
+    effect: &str,
+    values: &[(&str, f64)],
+    experiments: &[&str],
+) -> (f64, f64, f64) {
+    let target = effect.split(':').nth(1).expect("a target");
+    let text = pendulum_text();
+    let exps = synth(test, &text, &[effect], values, experiments, 500.0);
+    let d = diagnose_with(&text, &exps, &DiagnoseOptions::default()).expect("diagnoses");
+    show(test, &d);
+    let want = format!("stribeck_friction@{target}");
+    assert_eq!(
+        verdict(&d).as_deref(),
+        Some(want.as_str()),
+        "{}",
+        d.verdict_line()
+    );
+    let top = &d.ranking[0];
+    let value = |base: &str| {
+        let name = format!("{base}_{target}");
+        top.parameters
+            .iter()
+            .find(|p| p.name == name)
+            .map(|p| p.value)
+            .expect("a Stribeck parameter")
+    };
+    (value("Fc"), value("Fs"), value("vs"))
 }
 
 /// The held-out-style rig of the tests below (values off nominal, a

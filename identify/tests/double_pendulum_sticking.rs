@@ -29,9 +29,7 @@
 mod common;
 
 use plantc_identify::synth::{parse_effect_spec, parse_experiment_spec};
-use plantc_identify::{
-    read_experiment, synthesize, ChannelSpec, Experiment, Kind, Story, SynthOptions, SynthSpec,
-};
+use plantc_identify::{synthesize, ChannelSpec, Experiment, Kind, Story, SynthOptions, SynthSpec};
 
 fn shipped() -> String {
     let path =
@@ -89,15 +87,7 @@ fn records(test: &str, effects: &[&str], fc: (f64, f64)) -> Vec<Experiment> {
         .angle("q2")
         .input("tau1", Kind::Torque)
         .input("tau2", Kind::Torque);
-    let dir = common::scratch(test);
-    out.files
-        .iter()
-        .map(|f| {
-            let p = dir.join(&f.file_name);
-            std::fs::write(&p, &f.text).expect("writes");
-            read_experiment(&p, &channels).expect("reads").0
-        })
-        .collect()
+    common::read_back(test, &out, &channels)
 }
 
 /// The story of `text` on the records, with its final effects (those

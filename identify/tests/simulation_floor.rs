@@ -22,8 +22,7 @@ mod common;
 
 use plantc_identify::synth::{parse_effect_spec, parse_experiment_spec};
 use plantc_identify::{
-    read_experiment, synthesize, ChannelSpec, DryFriction, Kind, StoryOptions, SynthOptions,
-    SynthSpec,
+    synthesize, ChannelSpec, DryFriction, Kind, StoryOptions, SynthOptions, SynthSpec,
 };
 
 #[test]
@@ -55,16 +54,7 @@ fn smooth_law_records_name_the_friction_not_the_integrators_error() {
         .length("x")
         .angle("th")
         .input("F", Kind::Force);
-    let dir = common::scratch("simulation_floor");
-    let exps: Vec<_> = out
-        .files
-        .iter()
-        .map(|f| {
-            let p = dir.join(&f.file_name);
-            std::fs::write(&p, &f.text).expect("writes");
-            read_experiment(&p, &channels).expect("reads").0
-        })
-        .collect();
+    let exps = common::read_back("simulation_floor", &out, &channels);
     let mut opts = StoryOptions::default();
     opts.fit.sim.dry_friction = law;
     let t = std::time::Instant::now();

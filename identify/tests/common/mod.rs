@@ -8,6 +8,7 @@ use std::path::PathBuf;
 use plantc_identify::synth::{parse_effect_spec, parse_experiment_spec};
 use plantc_identify::{
     read_experiment, synthesize, ChannelSpec, Experiment, Kind, SynthOptions, SynthSpec,
+    Synthesized,
 };
 
 /// The rotary pendulum's channels.
@@ -118,6 +119,20 @@ pub fn synth_pendulum(
         },
     };
     synthesized(test, text, &spec)
+}
+
+/// Write `out`'s files in the test's scratch directory and read them back
+/// as the CLI would, with `channels`.
+pub fn read_back(test: &str, out: &Synthesized, channels: &ChannelSpec) -> Vec<Experiment> {
+    let dir = scratch(test);
+    out.files
+        .iter()
+        .map(|f| {
+            let p = dir.join(&f.file_name);
+            std::fs::write(&p, &f.text).expect("writes");
+            read_experiment(&p, channels).expect("reads").0
+        })
+        .collect()
 }
 
 /// Synthesise `spec` from model `text`, write its files in the test's
