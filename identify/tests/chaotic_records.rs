@@ -67,7 +67,8 @@ fn records(test: &str, effects: &[&str]) -> Vec<Experiment> {
 
 /// A clean rig names nothing: no stabilising feedback is designed for
 /// records whose replay does not agree with itself, and the open-loop fit
-/// reaches the floor (2.5 s CPU in release, measured 2026-11-28).
+/// reaches the floor (2.1 s CPU in release, on 1 s segments, measured
+/// 2026-11-29).
 #[test]
 fn clean_chaotic_records_name_nothing() {
     let exps = records("chaotic_clean", &[]);
@@ -84,7 +85,9 @@ fn clean_chaotic_records_name_nothing() {
 
 /// A Coulomb friction on the elbow: the diagnosis says no simulation
 /// follows the whole records, judges on segments, and names the friction
-/// within 10 % (5.34e-4 N m against 5e-4, measured 2026-11-28).
+/// within 2 % (4.993e-4 N m against 5e-4, measured 2026-11-29; 5.34e-4
+/// while the segments' velocity priors ignored the third derivative, and
+/// a deadzone and an input offset were named after it).
 #[test]
 fn a_coulomb_friction_in_chaotic_records_is_named_on_segments() {
     let exps = records("chaotic_coulomb", &["coulomb_friction:q2=5e-4"]);
@@ -112,5 +115,5 @@ fn a_coulomb_friction_in_chaotic_records_is_named_on_segments() {
         .map(|p| p.value)
         .expect("Fc_q2");
     eprintln!("Fc_q2 = {fc:.4e} (truth 5e-4)");
-    assert!((fc / 5e-4 - 1.0).abs() < 0.1, "Fc_q2 = {fc}");
+    assert!((fc / 5e-4 - 1.0).abs() < 0.02, "Fc_q2 = {fc}");
 }
