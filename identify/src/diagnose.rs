@@ -301,8 +301,8 @@ pub struct Diagnosis {
     /// the step parts from the replay by the channel's own motion at the
     /// fitted values, [`crate::fit::StepDifference::parts`]: chaotic
     /// motion): the segment length the baseline and every refit were then
-    /// fitted on.
-    pub unpredictable: Option<f64>,
+    /// fitted on, and the words that say why (also among `notes`).
+    pub unpredictable: Option<(f64, String)>,
 }
 
 impl Diagnosis {
@@ -600,10 +600,6 @@ struct RaisedFloor {
     unpredictable: Option<(f64, String)>,
 }
 
-/// How a diagnosis' note on records no simulation follows begins
-/// ([`Diagnosis::unpredictable`]).
-pub const UNPREDICTABLE_NOTE: &str = "no simulation follows the whole records";
-
 /// `baseline` (the fit of `model` under `opts`) and `opts`, with the
 /// channels' floors raised by the simulation's own error where it is
 /// measurable on that fit ([`simulation_error`], [`floor_raises`]; each
@@ -612,7 +608,10 @@ pub const UNPREDICTABLE_NOTE: &str = "no simulation follows the whole records";
 /// error is the model's: a dry friction under the smooth law is stiff at
 /// zero speed, so a baseline without one has none and the model with it
 /// may. Records from plantc's own integrator cancel it and are judged as
-/// before.
+/// before. Where the same step-halving difference shows that no
+/// simulation follows the whole records ([`crate::fit::StepDifference::
+/// parts`], the horizon automatic), the baseline is first refitted on
+/// segments and its floors measured there.
 fn with_raised_floor(
     model: &Model,
     experiments: &[Experiment],
@@ -635,7 +634,7 @@ fn with_raised_floor(
                 .find(|w| w.name == d.name)
                 .map_or(f64::NAN, |w| w.spread);
             let note = format!(
-                "{UNPREDICTABLE_NOTE}: at the fitted values the replay at half the step parts from the replay by {:.3e} on {} (its spread in the records {:.3e}; chaotic motion, where the step, a rounding or the last digit of a state decide more than the parameters): the baseline and every refit are fitted on {h} s segments, each from its own estimated state",
+                "no simulation follows the whole records: at the fitted values the replay at half the step parts from the replay by {:.3e} on {} (its spread in the records {:.3e}; chaotic motion, where the step, a rounding or the last digit of a state decide more than the parameters): the baseline and every refit are fitted on {h} s segments, each from its own estimated state",
                 d.largest, d.name, spread
             );
             let opts = DiagnoseOptions {
@@ -1057,10 +1056,9 @@ fn diagnose_on(
         &opts.equation_error,
     )?;
     let mut notes = Vec::new();
-    let unpredictable = unpredictable.map(|(h, note)| {
-        notes.push(note);
-        h
-    });
+    if let Some((_, note)) = &unpredictable {
+        notes.push(note.clone());
+    }
     if let Some(sf) = ee.scale_fixed() {
         notes.push(format!("equation-error ranking: {sf}"));
     }

@@ -489,8 +489,9 @@ impl EffectInstance {
     /// in its own form, the one its name claims. A Stribeck friction has
     /// its hump: a sliding level above zero, a static level above it (`0 <
     /// Fc + D < Fs + D`, `D` the dry friction the model already gives the
-    /// joint, which `underneath` gives, asked only for a Stribeck friction; with `Fs <= Fc` the curve is a friction that
-    /// falls at low speed, with no sliding level one that vanishes at
+    /// joint, which `underneath` gives, asked only for a Stribeck
+    /// friction; with `Fs <= Fc` the curve is a friction that falls at low
+    /// speed, with no sliding level one that vanishes at
     /// speed; where the model has its own dry friction on the joint that
     /// level and `Fc` are one to the data, and the fit leaves `Fc` at its
     /// bound 0 with the sliding level in `D`), and the hump's

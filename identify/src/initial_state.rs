@@ -176,35 +176,15 @@ fn cubic_slope(t: &[f64], y: &[f64], (a, b): (usize, usize), tk: f64, scale: f64
     if b + 1 - a < 4 {
         return None;
     }
-    // normal equations [m | r], solved by Gaussian elimination with
-    // partial pivoting
-    let mut m = [[0.0f64; 5]; 4];
+    let mut m = nalgebra::Matrix4::<f64>::zeros();
+    let mut r = nalgebra::Vector4::<f64>::zeros();
     for i in a..=b {
         let s = (t[i] - tk) / scale;
-        let pw = [1.0, s, s * s, s * s * s];
-        for u in 0..4 {
-            for v in 0..4 {
-                m[u][v] += pw[u] * pw[v];
-            }
-            m[u][4] += pw[u] * y[i];
-        }
+        let pw = nalgebra::Vector4::new(1.0, s, s * s, s * s * s);
+        m += pw * pw.transpose();
+        r += pw * y[i];
     }
-    for col in 0..4 {
-        let pivot = (col..4).max_by(|&i, &j| m[i][col].abs().total_cmp(&m[j][col].abs()))?;
-        if m[pivot][col] == 0.0 || m[pivot][col].is_nan() {
-            return None;
-        }
-        m.swap(col, pivot);
-        for row in 0..4 {
-            if row != col {
-                let f = m[row][col] / m[col][col];
-                for k in col..5 {
-                    m[row][k] -= f * m[col][k];
-                }
-            }
-        }
-    }
-    let slope = m[1][4] / m[1][1];
+    let slope = m.lu().solve(&r)?[1];
     slope.is_finite().then_some(slope)
 }
 

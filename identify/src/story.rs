@@ -574,15 +574,9 @@ fn story(
             .collect();
         // no simulation follows the whole records: every later fit and
         // stage is on the diagnosis' segments
-        if let Some(h) = d.unpredictable {
-            opts.fit.horizon = Horizon::Segments(h);
-            let words = d
-                .notes
-                .iter()
-                .find(|n| n.starts_with(crate::diagnose::UNPREDICTABLE_NOTE))
-                .cloned()
-                .unwrap_or_default();
-            unpredictable.get_or_insert((round, h, words));
+        if let Some((h, words)) = &d.unpredictable {
+            opts.fit.horizon = Horizon::Segments(*h);
+            unpredictable.get_or_insert((round, *h, words.clone()));
         }
         // the records follow the creeping dry-friction law: every later fit
         // and stage is simulated under it

@@ -139,14 +139,11 @@ pub fn read_back(test: &str, out: &Synthesized, channels: &ChannelSpec) -> Vec<E
 /// scratch directory and read them back as the CLI would (the pendulum's
 /// channels).
 pub fn synthesized(test: &str, text: &str, spec: &SynthSpec) -> Vec<Experiment> {
-    let out = synthesize(text, spec).expect("synthesizes");
-    out.files
-        .iter()
-        .map(|f| {
-            let p = write(test, &f.file_name, &f.text);
-            read_experiment(&p, &pendulum_spec()).expect("reads").0
-        })
-        .collect()
+    read_back(
+        test,
+        &synthesize(text, spec).expect("synthesizes"),
+        &pendulum_spec(),
+    )
 }
 
 /// The identify story of `text` on `exps` with the default options, its
