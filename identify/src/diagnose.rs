@@ -561,11 +561,24 @@ pub fn diagnose_with(
 /// simulation follows half a sample late (a clean rotary pendulum driven at
 /// 0.3-6 Hz, 500 Hz records: a Stribeck friction and two springs named from
 /// that alone). The reading has no parameter: its margin is `N_eff
-/// ln(S_held / S_continuous)` (`k = 0`), and [`diagnose_from`] takes it when
-/// no effect of the round passes with a larger margin (a missing effect
-/// that a half-sample shift partly mimics is named first, and the reading
-/// is tried again next round). A weighted sum of squares lower by less
-/// than the fit resolves is no gain ([`crate::fit::refit_continuous`]). Tried only
+/// ln(S_held / S_continuous)` (`k = 0`), and [`diagnose_from`] weighs it
+/// against the round's effect: the continuous one is taken when its
+/// margin beats the effect named with the inputs held (a missing effect that a half-sample
+/// shift partly mimics is named first, and the reading is weighed again
+/// next round with it in the model), or, when the continuous records name
+/// another effect, when its margin plus that effect's beats the held one
+/// (diagnosed so only where that pair can win, see [`diagnose_from`]; the
+/// pair is chosen now: on the DFKI double pendulum's measured torques
+/// a deadzone on the elbow's torque, held, margin 15.3, stood in for the
+/// shoulder's Coulomb friction to the end; read continuous, 10.9 + 8.4, the
+/// shoulder's friction is named). Where both readings name the same
+/// effect, their difference before it is in the model is mostly its misfit
+/// (synthetic held records of a double pendulum whose model lacks its dry
+/// friction: the reading 0.06, the same Coulomb friction 267.4 read
+/// continuous against 266.8 held; summed, they read the records
+/// continuous, and an input delay was named to undo it). A weighted sum of
+/// squares lower by less than the fit resolves is no gain
+/// ([`crate::fit::refit_continuous`]). Tried only
 /// above the floor (at it there is nothing to gain), open loop (a recorded
 /// controller's inputs are computed), with inputs recorded.
 fn continuous_inputs(
@@ -573,7 +586,7 @@ fn continuous_inputs(
     experiments: &[Experiment],
     opts: &DiagnoseOptions,
     baseline: &FitResult,
-) -> Option<(Vec<Experiment>, FitResult, f64)> {
+) -> Option<Reading> {
     if opts.inputs_read {
         return None;
     }
@@ -588,7 +601,30 @@ fn continuous_inputs(
     let (records, alt) =
         crate::fit::refit_continuous(model, experiments, &fo, baseline, &mut |_| {})?;
     let margin = judge.effective * 2.0 * (baseline.after_cost / alt.after_cost).ln();
-    Some((records, alt, margin))
+    let z = crate::decision::vuong_z(
+        &judge.residuals(baseline),
+        &judge.residuals(&alt),
+        judge.effective,
+    );
+    Some(Reading {
+        records,
+        fit: alt,
+        margin,
+        z,
+    })
+}
+
+/// The records' inputs read as continuous signals ([`continuous_inputs`]).
+struct Reading {
+    /// The records so read.
+    records: Vec<Experiment>,
+    /// The baseline refitted on them.
+    fit: FitResult,
+    /// Its margin over the held baseline, `N_eff ln(S_held / S_continuous)`.
+    margin: f64,
+    /// Vuong's statistic of the continuous fit against the held one
+    /// ([`crate::decision::vuong_z`]).
+    z: f64,
 }
 
 /// What [`with_raised_floor`] returns: the baseline and the options with
@@ -1003,12 +1039,36 @@ pub fn diagnose_from(
     let model = model_from_text("baseline", text)?;
     let reading = continuous_inputs(&model, experiments, opts, &baseline);
     let held_cost = baseline.after_cost;
+    let judge = Judge::new(&model, experiments, opts, &baseline);
+    let s0 = judge.ssr_of(&baseline.simulated);
     let d = diagnose_on((text, &model), experiments, baseline, opts)?;
-    let Some((records, alt, hold_margin)) = reading else {
+    let Some(Reading {
+        records,
+        fit: alt,
+        margin: hold_margin,
+        z,
+    }) = reading
+    else {
         return Ok(d);
     };
-    // the inputs' reading against the round's verdict, by margin
-    if d.verdict.is_some() && d.ranking.first().map(margin) >= Some(hold_margin) {
+    // the reading against the round's effect: taken when its own margin
+    // beats the effect named with the inputs held. Where it does not, the
+    // held effect may stand in for it, and the records read continuous
+    // name another: the pair (reading and that effect) is taken when its
+    // margin beats the held effect's (decided now: deferred, the reading
+    // would be weighed next round against a model that holds the
+    // stand-in). Where both readings name the same effect it is named
+    // held, and the reading is weighed again next round with that effect
+    // in the model. The continuous records are diagnosed for the pair only
+    // when it can win: the reading is significant (Vuong's test) and some
+    // other effect refitted held could beat the held one with the whole of
+    // the reading's gain added (`stand_in_possible`).
+    let held_best = verdict_margin(&d).unwrap_or(0.0);
+    let alone = d.verdict.is_none() || hold_margin > held_best;
+    let delta = s0 - judge.ssr_of(&alt.simulated);
+    let pair_may_win =
+        z > crate::decision::VUONG_99 && stand_in_possible(&d, &judge, (s0, delta), held_best);
+    if !(alone || pair_may_win) {
         return Ok(d);
     }
     let costs = (held_cost, alt.after_cost);
@@ -1016,13 +1076,73 @@ pub fn diagnose_from(
         inputs_read: true,
         ..opts.clone()
     };
-    let mut d = diagnose_on((text, &model), &records, alt, &opts)?;
-    d.notes.push(format!(
-        "inputs read as continuous signals, not held over each sample interval: weighted RMS {:.4e} held, {:.4e} continuous (margin {hold_margin:.1}, beyond every effect's: records made by integrating a continuous input, or sampling one)",
+    let mut c = diagnose_on((text, &model), &records, alt, &opts)?;
+    let continuous_best = hold_margin + verdict_margin(&c).unwrap_or(0.0).max(0.0);
+    let other_effect = match (&d.verdict, &c.verdict) {
+        (Some(h), Some(v)) => h.label() != v.label(),
+        _ => false,
+    };
+    if !(alone || other_effect && continuous_best > held_best) {
+        return Ok(d);
+    }
+    let with = match (&c.verdict, verdict_margin(&c)) {
+        (Some(v), Some(m)) => format!(
+            "{hold_margin:.1}, {continuous_best:.1} with {} (margin {m:.1} on the records so read)",
+            v.label()
+        ),
+        _ => format!("{hold_margin:.1}"),
+    };
+    let against = match (&d.verdict, d.ranking.first()) {
+        (Some(v), Some(_)) => format!("{} held ({held_best:.1})", v.label()),
+        _ => "any effect with the inputs held".to_string(),
+    };
+    c.notes.push(format!(
+        "inputs read as continuous signals, not held over each sample interval: weighted RMS {:.4e} held, {:.4e} continuous (margin {with}, beyond {against}: records made by integrating a continuous input, or sampling one)",
         costs.0, costs.1
     ));
-    d.continuous_inputs = Some(costs);
-    Ok(d)
+    c.continuous_inputs = Some(costs);
+    Ok(c)
+}
+
+/// Whether an effect other than `d`'s verdict, refitted with the inputs
+/// held, could beat the verdict's margin `held_best` on the records read
+/// continuous, with the reading's margin counted in: its sum of squares
+/// less the reading's whole gain `delta` (from the held baseline's `s0`,
+/// both in `judge`'s units) beats it. An effect cannot gain more from the
+/// reading than the baseline does: what the reading removes is a part of
+/// the residual, which an effect leaves (it does not touch it: the gain is
+/// the same) or takes part of (it stood in for the reading: less is left
+/// for it). So its sum of squares on the records read continuous is at
+/// least its held one less `delta`, and its margin there at most the
+/// bound tested.
+fn stand_in_possible(
+    d: &Diagnosis,
+    judge: &Judge<'_>,
+    (s0, delta): (f64, f64),
+    held_best: f64,
+) -> bool {
+    let verdict = d.verdict.as_ref().map(Candidate::label);
+    let n = judge.effective_samples();
+    d.ranking
+        .iter()
+        .filter(|r| Some(r.candidate.label()) != verdict)
+        .filter_map(|r| {
+            Some((
+                judge.ssr_of(&r.fit.as_ref()?.simulated),
+                r.candidate.parameters.len(),
+            ))
+        })
+        .any(|(s, k)| {
+            let reach = s - delta;
+            reach <= 0.0 || n * (s0 / reach).ln() - k as f64 * n.ln() > held_best
+        })
+}
+
+/// The margin of a diagnosis' verdict under the decision rule, when it
+/// names an effect.
+fn verdict_margin(d: &Diagnosis) -> Option<f64> {
+    d.verdict.as_ref()?;
+    d.ranking.first().map(margin)
 }
 
 /// [`diagnose_from`] with the records' inputs as they are read (`model`:

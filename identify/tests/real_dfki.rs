@@ -154,20 +154,17 @@ fn viscous_only_model_first_finds_coulomb_friction() {
 }
 
 /// Issue 26 (item 7 and the DFKI acceptance): `identify` with the
-/// viscous-only model should find both joints' dry friction, each within
-/// 20 % of the lab's 0.146 / 0.123 N m (the lab's `cf atan(100 q')` at
-/// speed, see `measured_torques_fit_both_joints`). Not yet: measured
-/// 2026-11-28 (release, 32 s wall): Coulomb on q2 (0.172, then 0.144 N m,
-/// +17 %), then a deadzone on tau2 (weighted RMS ratio 1.144 against the
-/// q1 Coulomb friction's 1.137: the two barely differ), then the measured
-/// torques read as continuous signals (`Diagnosis::continuous_inputs`,
-/// margin 2.6) and nothing more. Read as continuous from the first round
-/// (the reading's margin there, 7, is below the q2 friction's 135, so the
-/// rule names the friction first), the second round named the q1 Coulomb
-/// friction (0.126, -13 %; q2 0.138, +12 %): the order of the two findings
-/// decides, and the rule has no ground to read the inputs first.
+/// viscous-only model finds both joints' dry friction, each within 20 % of
+/// the lab's 0.146 / 0.123 N m (the lab's `cf atan(100 q')` at speed, see
+/// `measured_torques_fit_both_joints`). The measured torques are read as
+/// continuous signals with the first round's effect (the reading's margin
+/// plus that of the q2 Coulomb friction it then names beat the friction
+/// held), and the second round names q1's. Measured 2026-11-29 (release,
+/// 21 s wall): Fc_q1 0.1264 (-13 %), Fc_q2 0.1376 (+12 %). Before the
+/// reading was chosen with the round's effect, it was weighed against the
+/// effect alone: q2's friction held, then a deadzone on tau2 (weighted RMS
+/// ratio 1.144) over q1's friction (1.137), then the continuous reading.
 #[test]
-#[ignore = "issue 26 open: the second round names a deadzone on tau2 (ratio 1.144) over the q1 Coulomb friction (1.137), measured 2026-11-28"]
 fn identify_finds_both_joints_dry_friction() {
     let Some(exps) = read_trajectory() else {
         return;
