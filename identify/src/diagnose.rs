@@ -1113,8 +1113,11 @@ pub fn diagnose_from(
 /// the residual, which an effect leaves (it does not touch it: the gain is
 /// the same) or takes part of (it stood in for the reading: less is left
 /// for it). So its sum of squares on the records read continuous is at
-/// least its held one less `delta`, and its margin there at most the
-/// bound tested.
+/// least its held one less `delta`, and no less than the noise's own (one
+/// per residual in noise units: a fit is not expected below it), and its
+/// margin there at most the bound tested. (At a baseline far from the
+/// records `delta` can exceed what an effect leaves: 8.9e4 on the noisy
+/// Coulomb case, whose Coulomb friction leaves 6.0e4 of the noise's 6.0e4.)
 fn stand_in_possible(
     d: &Diagnosis,
     judge: &Judge<'_>,
@@ -1123,6 +1126,7 @@ fn stand_in_possible(
 ) -> bool {
     let verdict = d.verdict.as_ref().map(Candidate::label);
     let n = judge.effective_samples();
+    let noise = judge.samples as f64;
     d.ranking
         .iter()
         .filter(|r| Some(r.candidate.label()) != verdict)
@@ -1133,8 +1137,8 @@ fn stand_in_possible(
             ))
         })
         .any(|(s, k)| {
-            let reach = s - delta;
-            reach <= 0.0 || n * (s0 / reach).ln() - k as f64 * n.ln() > held_best
+            let reach = (s - delta).max(noise);
+            n * (s0 / reach).ln() - k as f64 * n.ln() > held_best
         })
 }
 
