@@ -65,6 +65,19 @@ use crate::fit::{
 use crate::friction_law::{creeping_law, CreepingLaw};
 use crate::speculate::Step;
 
+/// The records' inputs read as continuous signals by a diagnosis
+/// ([`Diagnosis::continuous_inputs`]).
+#[derive(Clone, Debug, PartialEq)]
+pub struct ContinuousInputs {
+    /// The baseline's weighted RMS with the inputs held as recorded.
+    pub held: f64,
+    /// The baseline's weighted RMS with them continuous.
+    pub continuous: f64,
+    /// Why, in words: the reading's margin under the decision rule, with
+    /// the effect it was taken with, against the effect named held.
+    pub why: String,
+}
+
 /// Options of [`diagnose_with`].
 #[derive(Clone, Debug, PartialEq)]
 pub struct DiagnoseOptions {
@@ -291,12 +304,11 @@ pub struct Diagnosis {
     /// ([`crate::friction_law`]): then `baseline` is the fit under it, at
     /// the floor, and there is no verdict.
     pub creeping: Option<CreepingLaw>,
-    /// When the records' inputs fit better taken as continuous signals
-    /// ([`continuous_inputs`]): the baseline's weighted RMS with the inputs
-    /// held as recorded, then with them continuous. The baseline and every
-    /// refit are then on the records so read
+    /// When the records' inputs are read as continuous signals
+    /// ([`continuous_inputs`]): the baseline's weighted RMS both ways and
+    /// why. The baseline and every refit are then on the records so read
     /// ([`Experiment::with_continuous_inputs`]).
-    pub continuous_inputs: Option<(f64, f64)>,
+    pub continuous_inputs: Option<ContinuousInputs>,
     /// When no simulation follows the whole records (the replay at half
     /// the step parts from the replay by the channel's own motion at the
     /// fitted values, [`crate::fit::StepDifference::parts`]: chaotic
@@ -1085,22 +1097,29 @@ pub fn diagnose_from(
     if !(alone || other_effect && continuous_best > held_best) {
         return Ok(d);
     }
-    let with = match (&c.verdict, verdict_margin(&c)) {
-        (Some(v), Some(m)) => format!(
-            "{hold_margin:.1}, {continuous_best:.1} with {} (margin {m:.1} on the records so read)",
+    let against = match &d.verdict {
+        Some(v) => format!("{}'s {held_best:.1} held", v.label()),
+        None => "any effect named held".to_string(),
+    };
+    let margins = match (&c.verdict, verdict_margin(&c)) {
+        (Some(v), Some(m)) if !alone => format!(
+            "margin {hold_margin:.1} plus {m:.1} for {} named on the records so read: {continuous_best:.1}",
             v.label()
         ),
-        _ => format!("{hold_margin:.1}"),
+        _ => format!("margin {hold_margin:.1}"),
     };
-    let against = match (&d.verdict, d.ranking.first()) {
-        (Some(v), Some(_)) => format!("{} held ({held_best:.1})", v.label()),
-        _ => "any effect with the inputs held".to_string(),
-    };
+    let why = format!(
+        "{margins}, beyond {against}: records made by integrating a continuous input, or sampling one"
+    );
     c.notes.push(format!(
-        "inputs read as continuous signals, not held over each sample interval: weighted RMS {:.4e} held, {:.4e} continuous (margin {with}, beyond {against}: records made by integrating a continuous input, or sampling one)",
+        "inputs read as continuous signals, not held over each sample interval: weighted RMS {:.4e} held, {:.4e} continuous ({why})",
         costs.0, costs.1
     ));
-    c.continuous_inputs = Some(costs);
+    c.continuous_inputs = Some(ContinuousInputs {
+        held: costs.0,
+        continuous: costs.1,
+        why,
+    });
     Ok(c)
 }
 

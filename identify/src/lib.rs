@@ -79,8 +79,8 @@ pub mod where_it_fails;
 
 pub use closed_loop::LoopLaw;
 pub use diagnose::{
-    candidates, diagnose, diagnose_from, diagnose_with, Candidate, DiagnoseError, DiagnoseOptions,
-    Diagnosis, Evidence, Ranked,
+    candidates, diagnose, diagnose_from, diagnose_with, Candidate, ContinuousInputs, DiagnoseError,
+    DiagnoseOptions, Diagnosis, Evidence, Ranked,
 };
 pub use effect_edit::{EffectEditError, EffectInstance, EffectKind};
 pub use equation_error::{

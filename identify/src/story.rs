@@ -14,8 +14,8 @@ use plantc_derive::model::{Model, ParameterValues};
 use crate::data::Experiment;
 use crate::decision::EffectTest;
 use crate::diagnose::{
-    diagnose_from, diagnose_with, model_from_text, DiagnoseError, DiagnoseOptions, Judge, Ranked,
-    NESTED,
+    diagnose_from, diagnose_with, model_from_text, ContinuousInputs, DiagnoseError,
+    DiagnoseOptions, Judge, Ranked, NESTED,
 };
 use crate::effect_edit::EffectInstance;
 use crate::experiment_sim::DryFriction;
@@ -169,10 +169,10 @@ pub struct Story {
     pub creeping: Option<CreepingLaw>,
     /// When a diagnosis read the records' inputs as continuous signals
     /// ([`crate::Diagnosis::continuous_inputs`]): its round (1 = the
-    /// first), then the weighted RMS of that round's baseline with them
-    /// held and continuous. From that round on every stage is fitted on the
-    /// records so read.
-    pub continuous_inputs: Option<(usize, f64, f64)>,
+    /// first), then that round's baseline's weighted RMS both ways and
+    /// why. From that round on every stage is fitted on the records so
+    /// read.
+    pub continuous_inputs: Option<(usize, ContinuousInputs)>,
     /// When no simulation follows the whole records
     /// ([`crate::Diagnosis::unpredictable`]): the round whose diagnosis
     /// found it, the segment length every fit from then on is on, and the
@@ -559,7 +559,7 @@ fn story(
             opts.fit.starts = Some(d.baseline.warm.starts().to_vec());
         }
         if d.continuous_inputs.is_some() && !opts.diagnose.inputs_read {
-            continuous_inputs = d.continuous_inputs.map(|(h, c)| (round, h, c));
+            continuous_inputs = d.continuous_inputs.clone().map(|r| (round, r));
             opts.diagnose.inputs_read = true;
             records = std::borrow::Cow::Owned(crate::fit::continuous_records(model, experiments));
             opts.validate = crate::fit::continuous_records(model, &opts.validate);

@@ -69,7 +69,8 @@ fn a_continuous_input_is_read_as_one_and_names_nothing() {
         story.continuous_inputs,
         common::final_effects(&story)
     );
-    let (_, held, continuous) = story.continuous_inputs.expect("read as continuous");
+    let (_, reading) = story.continuous_inputs.clone().expect("read as continuous");
+    let (held, continuous) = (reading.held, reading.continuous);
     assert!(continuous < held, "{continuous} vs {held}");
     assert!(common::final_effects(&story).is_empty());
     assert!(!story.unexplained, "{}", story.stop);

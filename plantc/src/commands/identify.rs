@@ -344,10 +344,11 @@ fn story(
         .label
         .strip_prefix("nominal, refitted")
         .unwrap_or_default();
-    if let Some((round, held, continuous)) = s.continuous_inputs {
+    if let Some((round, r)) = &s.continuous_inputs {
         let _ = writeln!(
             out,
-            "   inputs read as continuous signals, not held over each sample interval, from round {round} on: weighted RMS {held:.4e} held, {continuous:.4e} continuous (records made by integrating a continuous input, or sampling one)"
+            "   inputs read as continuous signals, not held over each sample interval, from round {round} on: weighted RMS {:.4e} held, {:.4e} continuous ({})",
+            r.held, r.continuous, r.why
         );
     }
     if let Some((round, _, words)) = &s.unpredictable {
@@ -616,8 +617,8 @@ fn story(
             "adequate"
         },
         "stop": s.stop,
-        "inputs": match s.continuous_inputs {
-            Some((round, held, continuous)) => serde_json::json!({"read": "continuous", "from_round": round, "weighted_rms_held": held, "weighted_rms_continuous": continuous}),
+        "inputs": match &s.continuous_inputs {
+            Some((round, r)) => serde_json::json!({"read": "continuous", "from_round": round, "weighted_rms_held": r.held, "weighted_rms_continuous": r.continuous, "why": r.why}),
             None => serde_json::json!({"read": "held"}),
         },
         "dry_friction": match &s.creeping {
