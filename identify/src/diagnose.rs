@@ -574,11 +574,12 @@ pub fn diagnose_with(
 /// 0.3-6 Hz, 500 Hz records: a Stribeck friction and two springs named from
 /// that alone). The reading has no parameter: its margin is `N_eff
 /// ln(S_held / S_continuous)` (`k = 0`), and [`diagnose_from`] weighs it
-/// against the round's effect: the continuous one is taken when its
-/// margin beats the effect named with the inputs held (a missing effect that a half-sample
-/// shift partly mimics is named first, and the reading is weighed again
-/// next round with it in the model), or, when the continuous records name
-/// another effect, when its margin plus that effect's beats the held one
+/// against the round's effect: the reading is taken when its margin beats
+/// the effect named with the inputs held (a missing effect that a
+/// half-sample shift partly mimics is named first, and the reading is
+/// weighed again next round with it in the model), or, when the records
+/// read continuous name another effect, when its margin plus that effect's
+/// beats the held one
 /// (diagnosed so only where that pair can win, see [`diagnose_from`]; the
 /// pair is chosen now: on the DFKI double pendulum's measured torques
 /// a deadzone on the elbow's torque, held, margin 15.3, stood in for the
