@@ -163,7 +163,8 @@ pub const VUONG_99: f64 = 2.326;
 
 /// Vuong's statistic for two non-nested fits with as many parameters over
 /// the same samples (residuals `a` and `b` in noise units, shaped as
-/// [`noise_residuals`]): the mean of the per-sample differences of squares
+/// [`noise_residuals`]; a record's channel counts only where both kept the
+/// same samples): the mean of the per-sample differences of squares
 /// `a_i^2 - b_i^2` (twice the log-likelihood difference) over its standard
 /// error with `effective` independent samples. Above [`VUONG_99`], `b`
 /// explains the records better than `a` beyond what the sample's own
@@ -174,6 +175,9 @@ pub fn vuong_z(a: &[Vec<Vec<f64>>], b: &[Vec<Vec<f64>>], effective: f64) -> f64 
         .iter()
         .flatten()
         .zip(b.iter().flatten())
+        // (a channel whose simulations ended on other samples, one of them
+        // diverged, has no pairs)
+        .filter(|(x, y)| x.len() == y.len())
         .flat_map(|(x, y)| x.iter().zip(y).map(|(x, y)| x * x - y * y))
         .filter(|v| v.is_finite())
         .collect();
