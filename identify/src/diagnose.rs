@@ -594,12 +594,12 @@ pub fn diagnose_with(
 /// ([`crate::fit::refit_continuous`]). Tried only
 /// above the floor (at it there is nothing to gain), open loop (a recorded
 /// controller's inputs are computed), with inputs recorded.
-fn continuous_inputs(
-    model: &Model,
-    experiments: &[Experiment],
-    opts: &DiagnoseOptions,
+fn continuous_inputs<'a>(
+    model: &'a Model,
+    experiments: &'a [Experiment],
+    opts: &'a DiagnoseOptions,
     baseline: &FitResult,
-) -> Option<Reading> {
+) -> Option<Reading<'a>> {
     if opts.inputs_read {
         return None;
     }
@@ -619,16 +619,21 @@ fn continuous_inputs(
         &judge.residuals(&alt),
         judge.effective,
     );
+    let s0 = judge.ssr_of(&baseline.simulated);
+    let gain = s0 - judge.ssr_of(&alt.simulated);
     Some(Reading {
         records,
         fit: alt,
         margin,
         z,
+        judge,
+        s0,
+        gain,
     })
 }
 
 /// The records' inputs read as continuous signals ([`continuous_inputs`]).
-struct Reading {
+struct Reading<'a> {
     /// The records so read.
     records: Vec<Experiment>,
     /// The baseline refitted on them.
@@ -638,6 +643,12 @@ struct Reading {
     /// Vuong's statistic of the continuous fit against the held one
     /// ([`crate::decision::vuong_z`]).
     z: f64,
+    /// The held baseline's judge (its noise and effective sample count).
+    judge: Judge<'a>,
+    /// The held baseline's weighted sum of squares, in `judge`'s units.
+    s0: f64,
+    /// The reading's whole gain on it: `s0` less the continuous fit's.
+    gain: f64,
 }
 
 /// What [`with_raised_floor`] returns: the baseline and the options with
@@ -677,11 +688,7 @@ fn with_raised_floor(
         if let Some(d) = differences.iter().find(|d| d.parts(&baseline.weights)) {
             let h = crate::fit::segment_length(model, experiments, &opts.fit, &baseline)
                 .map_err(DiagnoseError::Fit)?;
-            let spread = baseline
-                .weights
-                .iter()
-                .find(|w| w.name == d.name)
-                .map_or(f64::NAN, |w| w.spread);
+            let spread = d.spread(&baseline.weights).unwrap_or(f64::NAN);
             let note = format!(
                 "no simulation follows the whole records: at the fitted values the replay at half the step parts from the replay by {:.3e} on {} (its spread in the records {:.3e}; chaotic motion, where the step, a rounding or the last digit of a state decide more than the parameters): the baseline and every refit are fitted on {h} s segments, each from its own estimated state",
                 d.largest, d.name, spread
@@ -1052,14 +1059,15 @@ pub fn diagnose_from(
     let model = model_from_text("baseline", text)?;
     let reading = continuous_inputs(&model, experiments, opts, &baseline);
     let held_cost = baseline.after_cost;
-    let judge = Judge::new(&model, experiments, opts, &baseline);
-    let s0 = judge.ssr_of(&baseline.simulated);
     let d = diagnose_on((text, &model), experiments, baseline, opts)?;
     let Some(Reading {
         records,
         fit: alt,
         margin: hold_margin,
         z,
+        judge,
+        s0,
+        gain,
     }) = reading
     else {
         return Ok(d);
@@ -1078,13 +1086,12 @@ pub fn diagnose_from(
     // the reading's gain added (`stand_in_possible`).
     let held_best = verdict_margin(&d).unwrap_or(0.0);
     let alone = d.verdict.is_none() || hold_margin > held_best;
-    let delta = s0 - judge.ssr_of(&alt.simulated);
     let pair_may_win =
-        z > crate::decision::VUONG_99 && stand_in_possible(&d, &judge, (s0, delta), held_best);
+        z > crate::decision::VUONG_99 && stand_in_possible(&d, &judge, (s0, gain), held_best);
     if !(alone || pair_may_win) {
         return Ok(d);
     }
-    let costs = (held_cost, alt.after_cost);
+    let continuous_cost = alt.after_cost;
     let opts = DiagnoseOptions {
         inputs_read: true,
         ..opts.clone()
@@ -1114,11 +1121,11 @@ pub fn diagnose_from(
     );
     c.notes.push(format!(
         "inputs read as continuous signals, not held over each sample interval: weighted RMS {:.4e} held, {:.4e} continuous ({why})",
-        costs.0, costs.1
+        held_cost, continuous_cost
     ));
     c.continuous_inputs = Some(ContinuousInputs {
-        held: costs.0,
-        continuous: costs.1,
+        held: held_cost,
+        continuous: continuous_cost,
         why,
     });
     Ok(c)

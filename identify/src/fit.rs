@@ -1834,11 +1834,23 @@ pub fn replay_follows(
     experiments: &[Experiment],
     opts: &FitOptions,
 ) -> Result<bool, FitError> {
+    at_start_values(model, experiments, opts, |_, pb, pt| follows(pb, pt))
+}
+
+/// `what` of the whole records' problem at the start values, the nuisance
+/// at its data estimates (the replay [`replay_follows`] and
+/// [`replay_predictable`] judge).
+fn at_start_values<T>(
+    model: &Model,
+    experiments: &[Experiment],
+    opts: &FitOptions,
+    what: impl FnOnce(&Setup, &Problem<'_>, &Point) -> T,
+) -> Result<T, FitError> {
     let free_names = opts.free_names(model);
     let setup = Setup::new(model, experiments, opts, &free_names)?;
     let pb = setup.problem(None);
     let pt = setup.start_point(&pb, &setup.free_values(&setup.base));
-    Ok(follows(&pb, &pt))
+    Ok(what(&setup, &pb, &pt))
 }
 
 /// Does the simulation of `pb` at `pt` over everything follow the data
@@ -2927,10 +2939,16 @@ impl StepDifference {
     /// parameters: the motion is chaotic on the records' time scale, and
     /// no simulation follows the whole records.
     pub fn parts(&self, weights: &[ChannelWeight]) -> bool {
+        self.spread(weights)
+            .is_some_and(|s| s > 0.0 && self.largest >= s)
+    }
+
+    /// The channel's spread among `weights` ([`ChannelWeight::spread`]).
+    pub fn spread(&self, weights: &[ChannelWeight]) -> Option<f64> {
         weights
             .iter()
             .find(|w| w.name == self.name)
-            .is_some_and(|w| w.spread > 0.0 && self.largest >= w.spread)
+            .map(|w| w.spread)
     }
 }
 
@@ -3004,19 +3022,20 @@ pub fn replay_predictable(
     experiments: &[Experiment],
     opts: &FitOptions,
 ) -> Result<bool, FitError> {
-    let free_names = opts.free_names(model);
-    // the replay under `o` (None when it cannot be run) and the weights
-    type Replay = (Option<Vec<Vec<Vec<f64>>>>, Vec<ChannelWeight>);
-    let replay = |o: &FitOptions| -> Result<Replay, FitError> {
-        let setup = Setup::new(model, experiments, o, &free_names)?;
-        let pb = setup.problem(None);
-        let pt = setup.start_point(&pb, &setup.free_values(&setup.base));
-        Ok((pb.predict(&pt).ok(), setup.weights.clone()))
-    };
-    let (Some(coarse), weights) = replay(opts)? else {
+    // the replay (None when it cannot be run) and the weights
+    let (Some(coarse), weights) = at_start_values(model, experiments, opts, |s, pb, pt| {
+        (pb.predict(pt).ok(), s.weights.clone())
+    })?
+    else {
         return Ok(true);
     };
-    let (Some(fine), _) = replay(&finer(experiments, opts)?)? else {
+    let fine = at_start_values(
+        model,
+        experiments,
+        &finer(experiments, opts)?,
+        |_, pb, pt| pb.predict(pt).ok(),
+    )?;
+    let Some(fine) = fine else {
         return Ok(true);
     };
     Ok(!step_differences(model, &coarse, &fine)

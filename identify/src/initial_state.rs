@@ -108,24 +108,10 @@ pub fn smoothed_state(t: &[f64], y: &[f64], k: usize, noise: f64) -> (f64, Prior
     }
     // least squares y = c0 + c1 s + c2 s^2, s = (t - t_k)/scale
     let scale = (t[b] - t[a]).max(f64::MIN_POSITIVE);
-    let mut m = [0.0f64; 9];
-    let mut r = [0.0f64; 3];
-    for i in a..=b {
-        let s = (t[i] - tk) / scale;
-        let pw = [1.0, s, s * s];
-        for u in 0..3 {
-            r[u] += pw[u] * y[i];
-            for v in 0..3 {
-                m[u * 3 + v] += pw[u] * pw[v];
-            }
-        }
-    }
-    let Some(inv) = invert3(&m) else {
+    let window = (a, b);
+    let Some((c, inv)) = local_polynomial::<3>((t, y), window, tk, scale) else {
         return fallback;
     };
-    let c: Vec<f64> = (0..3)
-        .map(|u| (0..3).map(|v| inv[u * 3 + v] * r[v]).sum())
-        .collect();
     let count = b + 1 - a;
     let rss: f64 = (a..=b)
         .map(|i| {
@@ -138,77 +124,55 @@ pub fn smoothed_state(t: &[f64], y: &[f64], k: usize, noise: f64) -> (f64, Prior
     // smoother's order is its own bias, and it counts in the prior (at a
     // record's start inside a fast transient the quadratic extrapolates:
     // flat for three samples, then 250 rad/s^2, its slope at t0 -1.3 rad/s
-    // where the line's is +0.9 and the truth about 0)
-    let (mut sl, mut ss, mut st, mut sst) = (0.0, 0.0, 0.0, 0.0);
-    for i in a..=b {
-        let s = (t[i] - tk) / scale;
-        sl += y[i];
-        ss += s;
-        st += s * y[i];
-        sst += s * s;
-    }
-    let m_count = count as f64;
-    let den = m_count * sst - ss * ss;
-    let line = if den > 0.0 {
-        (m_count * st - ss * sl) / den
-    } else {
-        c[1]
-    };
-    // and the local cubic's: on a symmetric window the line's slope is the
-    // quadratic's, and a third derivative projects onto the slope unseen
-    // by either's residual (a tumbling elbow at 40 rad/s: slope priors of
-    // +-0.025 rad/s that the segments' states ended against)
-    let cubic = cubic_slope(t, y, (a, b), tk, scale).unwrap_or(c[1]);
+    // where the line's is +0.9 and the truth about 0); and the local
+    // cubic's: on a symmetric window the line's slope is the quadratic's,
+    // and a third derivative projects onto the slope unseen by either's
+    // residual (a tumbling elbow at 40 rad/s: slope priors of +-0.025 rad/s
+    // that the segments' states ended against)
+    let line = local_polynomial::<2>((t, y), window, tk, scale).map_or(c[1], |(l, _)| l[1]);
+    let cubic = local_polynomial::<4>((t, y), window, tk, scale)
+        .map(|(q, _)| q[1])
+        .filter(|v| v.is_finite())
+        .unwrap_or(c[1]);
     let bias = ((c[1] - line).abs().max((c[1] - cubic).abs())) / scale;
     (
         c[0],
         Prior {
             mean: c[1] / scale,
-            sigma: ((s2 * inv[4]) / (scale * scale) + bias * bias).sqrt(),
+            sigma: ((s2 * inv[(1, 1)]) / (scale * scale) + bias * bias).sqrt(),
         },
     )
 }
 
-/// The slope at `tk` (in units of `s = (t - tk) / scale`) of the
-/// least-squares cubic through samples `a..=b`, None when those samples
-/// cannot determine it (fewer than four, or singular).
-fn cubic_slope(t: &[f64], y: &[f64], (a, b): (usize, usize), tk: f64, scale: f64) -> Option<f64> {
-    if b + 1 - a < 4 {
+/// The least-squares polynomial with `D` coefficients in `s = (t - tk) /
+/// scale` through samples `a..=b` of `(t, y)`: its coefficients (lowest
+/// power first) and the inverse of its normal matrix (their covariance per
+/// unit residual variance); None when those samples cannot determine it
+/// (fewer than `D`, or a singular normal matrix).
+fn local_polynomial<const D: usize>(
+    (t, y): (&[f64], &[f64]),
+    (a, b): (usize, usize),
+    tk: f64,
+    scale: f64,
+) -> Option<(nalgebra::SVector<f64, D>, nalgebra::SMatrix<f64, D, D>)> {
+    if b + 1 - a < D {
         return None;
     }
-    let mut m = nalgebra::Matrix4::<f64>::zeros();
-    let mut r = nalgebra::Vector4::<f64>::zeros();
+    let mut m = nalgebra::SMatrix::<f64, D, D>::zeros();
+    let mut r = nalgebra::SVector::<f64, D>::zeros();
     for i in a..=b {
         let s = (t[i] - tk) / scale;
-        let pw = nalgebra::Vector4::new(1.0, s, s * s, s * s * s);
+        let mut pw = nalgebra::SVector::<f64, D>::zeros();
+        let mut p = 1.0;
+        for k in 0..D {
+            pw[k] = p;
+            p *= s;
+        }
         m += pw * pw.transpose();
         r += pw * y[i];
     }
-    let slope = m.lu().solve(&r)?[1];
-    slope.is_finite().then_some(slope)
-}
-
-/// Inverse of a symmetric 3x3 matrix (row-major), None when singular.
-fn invert3(m: &[f64; 9]) -> Option<[f64; 9]> {
-    let c00 = m[4] * m[8] - m[5] * m[7];
-    let c01 = m[5] * m[6] - m[3] * m[8];
-    let c02 = m[3] * m[7] - m[4] * m[6];
-    let det = m[0] * c00 + m[1] * c01 + m[2] * c02;
-    if det.is_nan() || det == 0.0 || !det.is_finite() {
-        return None;
-    }
-    let inv = [
-        c00 / det,
-        (m[2] * m[7] - m[1] * m[8]) / det,
-        (m[1] * m[5] - m[2] * m[4]) / det,
-        c01 / det,
-        (m[0] * m[8] - m[2] * m[6]) / det,
-        (m[2] * m[3] - m[0] * m[5]) / det,
-        c02 / det,
-        (m[1] * m[6] - m[0] * m[7]) / det,
-        (m[0] * m[4] - m[1] * m[3]) / det,
-    ];
-    Some(inv)
+    let inv = m.try_inverse()?;
+    Some((inv * r, inv))
 }
 
 /// Where a prior bounds its unknown, in standard deviations, for `count`
