@@ -53,16 +53,18 @@ use crate::data::Experiment;
 use crate::decision::{
     at_floor, effective_samples, noise_residuals, worst_channel, Contribution, EffectTest,
 };
-use crate::effect_edit::{all_candidates, EffectEditError, EffectInstance, EffectKind};
+use crate::effect_edit::{all_candidates, EffectEditError, EffectInstance, EffectKind, Reach};
 use crate::equation_error::{
     EquationError, EquationErrorError, EquationErrorOptions, Regressor, Score, Share,
 };
+use crate::experiment_sim::Signals;
 use crate::fit::{
     fit, measured_of, replay_follows, residual_count, simulate_as, simulation_error, values_from,
     with_estimates, Estimate, FitError, FitOptions, FitResult, GiveUp, Horizon, NuisanceFlag,
     Offsets,
 };
 use crate::friction_law::{creeping_law, CreepingLaw};
+use crate::savitzky_golay;
 use crate::speculate::Step;
 
 /// The records' inputs read as continuous signals by a diagnosis
@@ -2389,8 +2391,21 @@ fn refit_from(
     // floor where the estimate's reached it); the search then refits the
     // rest and starts the leader again from the nominal values, and names
     // the same effect (0.9 -> 3.5 s CPU on that record).
+    // A threshold effect's template can lie beyond everything the records
+    // reach (a 5 V saturation on a 1.2 V RMS multisine): there it acts on
+    // no sample, so that start is the baseline itself with the effect's
+    // sensitivities zero, and a refit from it ends on the baseline's cost
+    // (the rotary pendulum's saturation and speed limit, first by
+    // equation error, refitted to a weighted RMS ratio of exactly 1 while
+    // a fit from the scan's level reached the noise floor). Not offered.
     let alternatives: Vec<Vec<f64>> = match from {
-        Some(_) if !candidate.linear_in_parameters() => vec![start.clone()],
+        Some(_) if !candidate.linear_in_parameters() => {
+            if acts_on_records(candidate, m, &start, experiments, &opts.equation_error) {
+                vec![start.clone()]
+            } else {
+                Vec::new()
+            }
+        }
         // (every such effect's null, a level at zero, is inside its box)
         Some(_) => vec![start.clone(), candidate.nulled(m, &start, false)],
         None => Vec::new(),
@@ -2409,6 +2424,58 @@ fn refit_from(
     fo.warm = from.filter(|_| warm).map(|(_, b)| b.warm.clone());
     fo.alternative_starts = alternatives;
     fit(m, experiments, &fo)
+}
+
+/// Whether `candidate` acts on the records at `values` (`m`'s parameter
+/// order): a threshold effect ([`EffectInstance::threshold`]) only when
+/// its level lies below what its target reaches on some record, the
+/// largest magnitude of the recorded input, or the largest speed of the
+/// coordinate as the equation-error ranking smooths it (the same
+/// Savitzky-Golay derivative its level scan reads); any other effect
+/// always. A record that cannot be read so counts as reached.
+fn acts_on_records(
+    candidate: &Candidate,
+    m: &Model,
+    values: &[f64],
+    experiments: &[Experiment],
+    smoothing: &EquationErrorOptions,
+) -> bool {
+    let Some((name, reach)) = candidate.threshold() else {
+        return true;
+    };
+    let Some(level) = m
+        .parameters
+        .iter()
+        .position(|p| p.name == name)
+        .and_then(|j| values.get(j).copied())
+    else {
+        return true;
+    };
+    let target = &candidate.target;
+    experiments.iter().any(|e| {
+        let Ok(sig) = Signals::from_experiment(m, e) else {
+            return true;
+        };
+        match reach {
+            Reach::InputMagnitude => match m.inputs.iter().position(|u| u.name == *target) {
+                Some(j) => sig.u[j].iter().any(|u| u.abs() > level),
+                None => true,
+            },
+            Reach::Speed => {
+                let Some(i) = m.coordinates.iter().position(|c| c.name == *target) else {
+                    return true;
+                };
+                let dt = sig.sample_time();
+                let h = ((smoothing.half_window / dt).round() as usize).max(smoothing.order + 1);
+                match savitzky_golay::kernel(h, smoothing.order, 1, dt) {
+                    Ok(k1) if sig.q[i].len() > 2 * h + 1 => savitzky_golay::apply(&k1, &sig.q[i])
+                        .iter()
+                        .any(|v| v.abs() > level),
+                    _ => true,
+                }
+            }
+        }
+    })
 }
 
 /// The fit options of a screening refit: every `estimate` parameter free

@@ -309,6 +309,16 @@ pub struct NewParameter {
     pub estimate: Option<(f64, f64)>,
 }
 
+/// What a threshold effect's level is compared with
+/// ([`EffectInstance::threshold`]).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Reach {
+    /// The magnitude of the target input as recorded.
+    InputMagnitude,
+    /// The speed of the target coordinate.
+    Speed,
+}
+
 /// One effect on one target with its new parameters.
 #[derive(Clone, Debug, PartialEq)]
 pub struct EffectInstance {
@@ -546,6 +556,23 @@ impl EffectInstance {
     /// phase, a speed limit, a delay, a deadzone or saturation level.
     pub fn linear_in_parameters(&self) -> bool {
         !SHAPED_EFFECTS.contains(&self.effect.as_str())
+    }
+
+    /// A threshold effect's level and what it is compared with: the effect
+    /// acts only where its target's magnitude goes beyond the level (a
+    /// saturation clips the input beyond `L`; a speed limit brakes the
+    /// joint beyond `vmax`). The level's model parameter name; None for an
+    /// effect that acts wherever its size is not null.
+    pub fn threshold(&self) -> Option<(&str, Reach)> {
+        let (base, reach) = match self.effect.as_str() {
+            "saturation" => ("L", Reach::InputMagnitude),
+            "speed_limit" => ("vmax", Reach::Speed),
+            _ => return None,
+        };
+        self.parameters
+            .iter()
+            .find(|p| p.base == base)
+            .map(|p| (p.name.as_str(), reach))
     }
 
     /// `effect@target`.

@@ -114,13 +114,11 @@ fn cogging_is_named_first() {
 }
 
 #[test]
-#[ignore = "issue 26 open: under the one decision rule saturation is first in 3 of 5 rigs (speed_limit@theta, quadratic_drag@theta in the others: speed-dependent forces on the arm the records do not tell apart), measured 2026-11-27"]
 fn actuator_saturation_is_named_first() {
     rate("rate_saturation", "saturation:Vm={v}", 1.5, "saturation@Vm");
 }
 
 #[test]
-#[ignore = "issue 26 open: under the one decision rule speed_limit is first in 2 of 5 rigs (quadratic_drag@theta in the others), measured 2026-11-28"]
 fn speed_limit_is_named_first() {
     rate(
         "rate_speed_limit",
