@@ -955,6 +955,10 @@ impl Dynamics for SensDynamics<'_> {
         self.plain.has_dry()
     }
 
+    fn dry_joints(&self) -> usize {
+        self.plain.dry_joints()
+    }
+
     fn tangent_len(&self) -> usize {
         2 * self.n
     }
