@@ -23,11 +23,7 @@
 
 mod common;
 
-use plantc_identify::synth::{parse_effect_spec, parse_experiment_spec};
-use plantc_identify::{
-    diagnose_with, synthesize, ChannelSpec, DiagnoseOptions, Experiment, Kind, SynthOptions,
-    SynthSpec,
-};
+use plantc_identify::{diagnose_with, synthesize, ChannelSpec, DiagnoseOptions, Experiment, Kind};
 
 fn shipped() -> String {
     let path = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("../models/pendubot.plant");
@@ -36,27 +32,17 @@ fn shipped() -> String {
 
 /// The rig's records with `effects` hidden, read back as the CLI would.
 fn records(test: &str, effects: &[&str]) -> Vec<Experiment> {
-    let spec = SynthSpec {
-        case: test.into(),
-        model_name: "pendubot.plant".into(),
-        effects: effects
-            .iter()
-            .map(|e| parse_effect_spec(e).expect("effect"))
-            .collect(),
-        parameter_set: None,
-        values: vec![("I1".into(), 8e-4), ("b2".into(), 2e-4)],
-        experiments: [
+    let spec = common::synth_spec(
+        test,
+        "pendubot.plant",
+        effects,
+        &[("I1", 8e-4), ("b2", 2e-4)],
+        &[
             "free_swing:q10=170deg,q20=30deg,duration=10,name=free_swing",
             "driven:q10=180deg,duration=10,rms=0.2,band=0.3-5,seed=2,name=driven",
-        ]
-        .iter()
-        .map(|e| parse_experiment_spec(e).expect("experiment"))
-        .collect(),
-        options: SynthOptions {
-            seed: 1,
-            ..SynthOptions::default()
-        },
-    };
+        ],
+        1,
+    );
     let out = synthesize(&shipped(), &spec).expect("synthesizes");
     let channels = ChannelSpec::new()
         .angle("q1")

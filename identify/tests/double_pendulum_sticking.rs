@@ -28,8 +28,7 @@
 
 mod common;
 
-use plantc_identify::synth::{parse_effect_spec, parse_experiment_spec};
-use plantc_identify::{synthesize, ChannelSpec, Experiment, Kind, Story, SynthOptions, SynthSpec};
+use plantc_identify::{synthesize, ChannelSpec, Experiment, Kind, Story};
 
 fn shipped() -> String {
     let path =
@@ -55,31 +54,21 @@ const FC_FAR: (f64, f64) = (0.19, 0.09);
 /// Synthesise the rig's records (the shipped model's structure, `effects`
 /// hidden, dry friction `fc`) and read them back as the CLI would.
 fn records(test: &str, effects: &[&str], fc: (f64, f64)) -> Vec<Experiment> {
-    let mut values: Vec<(String, f64)> = RIG.iter().map(|(n, v)| (n.to_string(), *v)).collect();
-    values.push(("Fc1".into(), fc.0));
-    values.push(("Fc2".into(), fc.1));
-    let spec = SynthSpec {
-        case: test.into(),
-        model_name: "double_pendulum.plant".into(),
-        effects: effects
-            .iter()
-            .map(|e| parse_effect_spec(e).expect("effect"))
-            .collect(),
-        parameter_set: None,
-        values,
-        experiments: [
+    let mut values = RIG.to_vec();
+    values.push(("Fc1", fc.0));
+    values.push(("Fc2", fc.1));
+    let spec = common::synth_spec(
+        test,
+        "double_pendulum.plant",
+        effects,
+        &values,
+        &[
             "driven:band=0.3-5,rms=1.2,input=tau1,seed=3,duration=8,name=drive1",
             "driven:band=0.3-5,rms=0.3,input=tau2,seed=4,duration=8,name=drive2",
             "free_swing:q10=40deg,q20=-20deg,duration=8,name=swing",
-        ]
-        .iter()
-        .map(|e| parse_experiment_spec(e).expect("experiment"))
-        .collect(),
-        options: SynthOptions {
-            seed: 1,
-            ..SynthOptions::default()
-        },
-    };
+        ],
+        1,
+    );
     let out = synthesize(&shipped(), &spec).expect("synthesizes");
     assert_eq!(out.files.len(), 3);
     let channels = ChannelSpec::new()

@@ -17,32 +17,24 @@
 mod common;
 
 use plantc_identify::diagnose::{diagnose_with, DiagnoseOptions};
-use plantc_identify::synth::{parse_effect_spec, parse_experiment_spec};
-use plantc_identify::{synthesize, ChannelSpec, Kind, SynthOptions, SynthSpec};
+use plantc_identify::{synthesize, ChannelSpec, Kind};
 
 #[test]
 fn a_leader_that_reaches_the_floor_once_refined_settles_the_search() {
     let path = std::path::Path::new(env!("CARGO_MANIFEST_DIR"))
         .join("../models/double_pendulum_cart.plant");
     let text = std::fs::read_to_string(path).expect("models/double_pendulum_cart.plant");
-    let spec = SynthSpec {
-        case: "leader_refined".into(),
-        model_name: "double_pendulum_cart.plant".into(),
-        effects: vec![parse_effect_spec("saturation:F=4").expect("effect")],
-        parameter_set: None,
-        values: vec![("mc".into(), 1.2), ("b1".into(), 2e-3)],
-        experiments: [
+    let spec = common::synth_spec(
+        "leader_refined",
+        "double_pendulum_cart.plant",
+        &["saturation:F=4"],
+        &[("mc", 1.2), ("b1", 2e-3)],
+        &[
             "free_swing:th10=160deg,th20=150deg,duration=10,name=swing",
             "driven:th10=180deg,th20=180deg,duration=10,rms=3,band=0.3-5,seed=2,name=driven",
-        ]
-        .iter()
-        .map(|e| parse_experiment_spec(e).expect("experiment"))
-        .collect(),
-        options: SynthOptions {
-            seed: 1,
-            ..SynthOptions::default()
-        },
-    };
+        ],
+        1,
+    );
     let out = synthesize(&text, &spec).expect("synthesizes");
     let channels = ChannelSpec::new()
         .length("x")

@@ -19,6 +19,38 @@ pub fn pendulum_spec() -> ChannelSpec {
         .input("Vm", Kind::Voltage)
 }
 
+/// A synth spec for `case`: the bundled `model_name` (e.g.
+/// `pendubot.plant`) at the true `values` with `effects` hidden and
+/// `experiments`, both spelled as `plantc synth` takes them, the noise
+/// and the multisines' phases drawn from `seed`.
+pub fn synth_spec(
+    case: &str,
+    model_name: &str,
+    effects: &[&str],
+    values: &[(&str, f64)],
+    experiments: &[&str],
+    seed: u64,
+) -> SynthSpec {
+    SynthSpec {
+        case: case.into(),
+        model_name: model_name.into(),
+        effects: effects
+            .iter()
+            .map(|e| parse_effect_spec(e).expect("effect"))
+            .collect(),
+        parameter_set: None,
+        values: values.iter().map(|(n, v)| (n.to_string(), *v)).collect(),
+        experiments: experiments
+            .iter()
+            .map(|e| parse_experiment_spec(e).expect("experiment"))
+            .collect(),
+        options: SynthOptions {
+            seed,
+            ..SynthOptions::default()
+        },
+    }
+}
+
 /// A fresh scratch directory for one test.
 pub fn scratch(test: &str) -> PathBuf {
     let dir = std::env::temp_dir().join(format!("plantc-identify-{}-{}", std::process::id(), test));
