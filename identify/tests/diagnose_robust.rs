@@ -7,7 +7,6 @@ mod common;
 
 use common::simulated::pendulum_text;
 
-use plantc_identify::synth::{parse_effect_spec, parse_experiment_spec};
 use plantc_identify::{
     diagnose_with, DiagnoseOptions, Diagnosis, Experiment, FitOptions, SynthOptions, SynthSpec,
 };
@@ -23,23 +22,12 @@ fn synth(
     rate: f64,
 ) -> Vec<Experiment> {
     let spec = SynthSpec {
-        case: test.into(),
-        model_name: "model.plant".into(),
-        effects: effects
-            .iter()
-            .map(|e| parse_effect_spec(e).expect("effect"))
-            .collect(),
-        parameter_set: None,
-        values: values.iter().map(|(n, v)| (n.to_string(), *v)).collect(),
-        experiments: experiments
-            .iter()
-            .map(|e| parse_experiment_spec(e).expect("experiment"))
-            .collect(),
         options: SynthOptions {
             rate,
             seed: 1,
             ..SynthOptions::default()
         },
+        ..common::synth_spec(test, "model.plant", effects, values, experiments, 1)
     };
     common::synthesized(test, text, &spec)
 }

@@ -131,25 +131,17 @@ pub fn synth_pendulum(
     experiments: &[String],
     seed: u64,
 ) -> Vec<Experiment> {
-    let spec = SynthSpec {
-        case: test.into(),
-        model_name: "rotary_pendulum.plant".into(),
-        effects: if effect.is_empty() {
-            Vec::new()
-        } else {
-            vec![parse_effect_spec(effect).expect("effect")]
-        },
-        parameter_set: None,
-        values,
-        experiments: experiments
-            .iter()
-            .map(|e| parse_experiment_spec(e).expect("experiment"))
-            .collect(),
-        options: SynthOptions {
-            seed,
-            ..SynthOptions::default()
-        },
-    };
+    let effects: Vec<&str> = Some(effect).filter(|e| !e.is_empty()).into_iter().collect();
+    let values: Vec<(&str, f64)> = values.iter().map(|(n, v)| (n.as_str(), *v)).collect();
+    let experiments: Vec<&str> = experiments.iter().map(String::as_str).collect();
+    let spec = synth_spec(
+        test,
+        "rotary_pendulum.plant",
+        &effects,
+        &values,
+        &experiments,
+        seed,
+    );
     synthesized(test, text, &spec)
 }
 
