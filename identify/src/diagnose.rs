@@ -453,6 +453,13 @@ fn margin(r: &Ranked) -> f64 {
         .map_or(f64::NEG_INFINITY, EffectTest::margin)
 }
 
+/// The passing candidate with the largest margin (the last of equal ones).
+fn best_passing(ranking: &[Ranked]) -> Option<usize> {
+    (0..ranking.len())
+        .filter(|&i| ranking[i].passes())
+        .max_by(|&a, &b| margin(&ranking[a]).total_cmp(&margin(&ranking[b])))
+}
+
 /// The columns of a candidate for the equation-error ranking. Effects that
 /// add parameters to the model's equations are handled generically through
 /// the edited model (`edited` = the candidate applied to the model text).
@@ -1542,10 +1549,7 @@ impl Search<'_> {
     /// still missing holds above the floor) leaves everything as it was,
     /// for one sensitivity simulation or a few.
     fn refine_to_floor(&self, ranking: &mut [Ranked]) -> bool {
-        let Some(best) = (0..ranking.len())
-            .filter(|&i| ranking[i].passes())
-            .max_by(|&a, &b| margin(&ranking[a]).total_cmp(&margin(&ranking[b])))
-        else {
+        let Some(best) = best_passing(ranking) else {
             return false;
         };
         let Some(f) = ranking[best].fit.as_ref() else {
@@ -1718,10 +1722,7 @@ impl Search<'_> {
         // the nominal values, and so is whichever candidate then leads,
         // until the leader has had its second start or settles.
         while !settled {
-            let Some(best) = (0..n)
-                .filter(|&i| ranking[i].passes())
-                .max_by(|&a, &b| margin(&ranking[a]).total_cmp(&margin(&ranking[b])))
-            else {
+            let Some(best) = best_passing(ranking) else {
                 break;
             };
             if self.second_started.contains(&best) || !self.may_restart() {
@@ -2532,7 +2533,7 @@ fn acts_on_records(
                     return true;
                 };
                 let dt = sig.sample_time();
-                let h = ((smoothing.half_window / dt).round() as usize).max(smoothing.order + 1);
+                let h = smoothing.half_width(dt);
                 match savitzky_golay::kernel(h, smoothing.order, 1, dt) {
                     Ok(k1) if sig.q[i].len() > 2 * h + 1 => savitzky_golay::apply(&k1, &sig.q[i])
                         .iter()

@@ -87,6 +87,14 @@ pub struct EquationErrorOptions {
     pub friction_width: Option<f64>,
 }
 
+impl EquationErrorOptions {
+    /// The Savitzky-Golay half width in samples at sample time `dt`
+    /// ([`EquationErrorOptions::half_window`]).
+    pub fn half_width(&self, dt: f64) -> usize {
+        ((self.half_window / dt).round() as usize).max(self.order + 1)
+    }
+}
+
 impl Default for EquationErrorOptions {
     fn default() -> Self {
         EquationErrorOptions {
@@ -765,7 +773,7 @@ impl EquationError {
                 1
             };
             let dt = dt0 * block as f64;
-            let h = ((opts.half_window / dt).round() as usize).max(opts.order + 1);
+            let h = opts.half_width(dt);
             let q_red: Vec<Vec<f64>> = sig.q.iter().map(|y| block_means(y, block)).collect();
             if q_red.first().map_or(0, Vec::len) <= 2 * h + 1 {
                 continue;
