@@ -76,6 +76,15 @@ pub enum StabiliseError {
     /// The model linearised at the data's mean position is stable: its
     /// replay leaving the data is no loop's doing.
     Stable,
+    /// An angle coordinate turns through a full revolution in a record
+    /// (`coordinate` in `experiment`): the plant tumbled, no loop held it
+    /// near an equilibrium, and the data's mean position is none.
+    Tumbles {
+        /// The record's name.
+        experiment: String,
+        /// The coordinate that turned.
+        coordinate: String,
+    },
 }
 
 impl std::fmt::Display for StabiliseError {
@@ -85,6 +94,13 @@ impl std::fmt::Display for StabiliseError {
             StabiliseError::Design(e) => write!(f, "the LQR design: {e}"),
             StabiliseError::MissingChannel(c) => write!(f, "a record has no column `{c}`"),
             StabiliseError::Stable => write!(f, "the linearised plant is stable"),
+            StabiliseError::Tumbles {
+                experiment,
+                coordinate,
+            } => write!(
+                f,
+                "`{coordinate}` turns through a full revolution in `{experiment}`: no loop held it"
+            ),
         }
     }
 }
@@ -164,6 +180,24 @@ impl StabilisedReplay {
         for e in experiments.iter().filter(|e| !e.t.is_empty()) {
             for (i, c) in model.coordinates.iter().enumerate() {
                 let q = column(e, &c.name)?;
+                // a loop that balances the plant keeps it near one
+                // equilibrium: an angle that turns a full revolution (its
+                // range 2 pi or more) was held by none, and the mean
+                // position of a tumbling record is no operating point
+                if c.kind == CoordinateKind::Angle {
+                    let (lo, hi) = q
+                        .iter()
+                        .filter(|v| v.is_finite())
+                        .fold((f64::INFINITY, f64::NEG_INFINITY), |(l, h), &v| {
+                            (l.min(v), h.max(v))
+                        });
+                    if hi - lo >= std::f64::consts::TAU {
+                        return Err(StabiliseError::Tumbles {
+                            experiment: e.name.clone(),
+                            coordinate: c.name.clone(),
+                        });
+                    }
+                }
                 // velocities over 20 ms, quantisation averaged out
                 let span = e.t.partition_point(|&t| t < e.t[0] + 0.02).max(1);
                 for k in span..q.len() {

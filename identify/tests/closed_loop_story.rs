@@ -329,3 +329,37 @@ fn the_replay_block_names_keep_clear_of_the_models() {
         assert!(replay.block.contains(own), "{own}\n{}", replay.block);
     }
 }
+
+/// A record in which the pendulum turns through full revolutions, beside
+/// the balanced ones: no loop held that one, the data's mean position is no
+/// operating point, and no stabilising feedback is designed (the pendubot
+/// driven into tumbling, whose angles span 8 revolutions, had been replayed
+/// under an LQR designed at such a mean and an elbow spring went unnamed,
+/// a deadzone, a saturation and an input offset named instead).
+#[test]
+fn a_tumbling_record_gets_no_stabilising_feedback() {
+    use plantc_identify::stabilised_replay::{StabiliseError, StabilisedReplay};
+    let mut exps = closed_loop_runs("cl_tumbling", ("", "", &[]));
+    let m = model(&pendulum_text());
+    assert!(StabilisedReplay::design(&m, &exps).is_ok());
+    // the first record again, its pendulum turning 1.1 revolutions
+    let mut spun = exps[0].clone();
+    spun.name = "spun".into();
+    let n = spun.t.len() as f64;
+    for c in spun.channels.iter_mut().filter(|c| c.name == "alpha") {
+        for (k, v) in c.values.iter_mut().enumerate() {
+            *v += 1.1 * std::f64::consts::TAU * k as f64 / n;
+        }
+    }
+    exps.push(spun);
+    match StabilisedReplay::design(&m, &exps) {
+        Err(StabiliseError::Tumbles {
+            experiment,
+            coordinate,
+        }) => assert_eq!(
+            (experiment.as_str(), coordinate.as_str()),
+            ("spun", "alpha")
+        ),
+        other => panic!("{:?}", other.map(|r| r.poles)),
+    }
+}
