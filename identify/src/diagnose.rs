@@ -748,10 +748,17 @@ fn with_raised_floor(
         },
         ..opts.clone()
     };
+    // (on the baseline's own horizon: the refit moves the floors, not the
+    // question; from a baseline at the floor on 2 s segments of a tumbling
+    // pendubot, an automatic horizon went to the whole records, where the
+    // replay stayed within the angles' spread, and ended 120 times above)
     let fo = FitOptions {
         start: Some(baseline.base.clone()),
         warm: Some(baseline.warm.clone()),
         coarse_far_above_floor: true,
+        horizon: baseline
+            .segments
+            .map_or(opts.fit.horizon, Horizon::Segments),
         ..opts.fit.clone()
     };
     let refitted = fit(model, experiments, &fo).map_err(DiagnoseError::Fit)?;
