@@ -35,7 +35,9 @@
 //!    ([`crate::effect_edit::EffectInstance::in_own_form`]: a Stribeck
 //!    friction with a hump, `Fs > Fc`, over a positive sliding level: its own
 //!    `Fc` plus the dry friction the model already gives the joint, which
-//!    the data cannot tell from it). A better fit by a curve of another
+//!    the data cannot tell from it; a cogging with half a period, its
+//!    swing from peak to trough, within the range its target covers in a
+//!    record). A better fit by a curve of another
 //!    shape (a friction that falls at low speed, fitting the stick-slip
 //!    transitions of a simulation that resolves them on another step) is
 //!    not that effect, and its name would be false.

@@ -809,6 +809,28 @@ pub(crate) struct Judge<'a> {
 }
 
 impl<'a> Judge<'a> {
+    /// The largest range (largest less smallest sample) coordinate
+    /// `target` covers in one record (0 where no record measures it).
+    fn covered(&self, target: &str) -> f64 {
+        self.experiments
+            .iter()
+            .filter_map(|e| e.values(target))
+            .map(|v| {
+                let (lo, hi) = v
+                    .iter()
+                    .filter(|x| x.is_finite())
+                    .fold((f64::INFINITY, f64::NEG_INFINITY), |(l, h), &x| {
+                        (l.min(x), h.max(x))
+                    });
+                if hi >= lo {
+                    hi - lo
+                } else {
+                    0.0
+                }
+            })
+            .fold(0.0, f64::max)
+    }
+
     /// The dry-friction level (`D` in `Q = ... - D sign(q')`) the model
     /// without the candidates gives coordinate `target` at rest, at the
     /// parameter values `value` gives by name (0 without one, or when the
@@ -976,8 +998,12 @@ impl<'a> Judge<'a> {
                 .position(|p| p.name == name)
                 .map_or(f64::NAN, |i| f.base[i])
         };
-        t.in_own_form =
-            !form || effect.in_own_form(value, || self.dry_level(&effect.target, value));
+        t.in_own_form = !form
+            || effect.in_own_form(
+                value,
+                || self.dry_level(&effect.target, value),
+                || self.covered(&effect.target),
+            );
         if t.likely() && t.in_own_form {
             let base = effect.nulled(m, &f.base, nested);
             t.contribution = Some(

@@ -70,6 +70,24 @@ pub struct ParamTemplate {
     pub hi: f64,
 }
 
+/// How much larger a level (a generalised force, a force per unit of
+/// speed or position, an inertia) is on a length coordinate than the
+/// template's, which is an angle's, in m^-2: the boxes span the same
+/// decelerations, decay rates and natural frequencies (`F/M`, `b/M`,
+/// `k/M`) for a cart of up to 10 kg as for a link of up to 0.1 kg m^2 about
+/// its joint (a spring box of 1 N m/rad reaches 0.5 Hz on that link; read
+/// as 1 N/m it reached 0.15 Hz on a 1.2 kg cart, and a cart's 2 N/m spring
+/// ended at the box's edge while a cogging of period 2.9 m took its
+/// place).
+pub const LENGTH_LEVEL_SCALE: f64 = 100.0;
+
+/// Is a parameter in angle unit `unit` a level ([`LENGTH_LEVEL_SCALE`]):
+/// a torque or a torque per unit of speed or angle (`N*m...`), or an
+/// inertia (`kg*m^2`)? Speeds, counts and phases are not.
+fn is_level(unit: &str) -> bool {
+    unit.starts_with("N*m") || unit.starts_with("kg*m^2")
+}
+
 const fn pt(
     base: &'static str,
     unit_angle: &'static str,
@@ -409,12 +427,22 @@ impl EffectInstance {
             if model.parameters.iter().any(|p| p.name == name) {
                 return Err(EffectEditError::NameTaken { name });
             }
+            // a level on a length coordinate: its start and box scaled
+            // ([`LENGTH_LEVEL_SCALE`])
+            let scale = match (t.unit, coordinate_kind) {
+                (TemplateUnit::Coordinate { angle, .. }, Some(CoordinateKind::Length))
+                    if is_level(angle) =>
+                {
+                    LENGTH_LEVEL_SCALE
+                }
+                _ => 1.0,
+            };
             let value = values
                 .iter()
                 .rev()
                 .find(|(n, _)| n == t.base)
                 .map(|(_, v)| *v)
-                .unwrap_or(t.start);
+                .unwrap_or(scale * t.start);
             let unit = match (t.unit, coordinate_kind) {
                 (TemplateUnit::Coordinate { length, .. }, Some(CoordinateKind::Length)) => {
                     length.to_string()
@@ -431,7 +459,7 @@ impl EffectInstance {
                 name,
                 unit,
                 value,
-                estimate: estimate.then_some((t.lo, t.hi)),
+                estimate: estimate.then_some((scale * t.lo, scale * t.hi)),
             });
         }
         Ok(EffectInstance {
@@ -508,13 +536,25 @@ impl EffectInstance {
     /// width inside its box (a width at the box's edge says the data want
     /// a curve the form does not describe: in the main job's first round,
     /// before the input delay was in, `Fc = 0` and `vs` at its 10 rad/s
-    /// edge took part of the delay's error). The other effects' boxes
+    /// edge took part of the delay's error). A cogging is a force periodic
+    /// in its target: at least half its period, `pi / N`, lies within the
+    /// largest range the target covers in a record, which `covered` gives
+    /// (asked only for a cogging), so that the force swings through its
+    /// whole amplitude, peak to trough, where the records show it; over
+    /// less, its amplitude is an extrapolation of a smooth curve of the
+    /// position that a spring or an offset draws as well (a cart on a
+    /// spring, its travel 0.92 m: a cogging of period 2.9 m, a third of it
+    /// seen, was named in the spring's place). The other effects' boxes
     /// already hold their forms.
     pub fn in_own_form(
         &self,
         value: impl Fn(&str) -> f64,
         underneath: impl FnOnce() -> f64,
+        covered: impl FnOnce() -> f64,
     ) -> bool {
+        if let ("cogging", Some(n)) = (self.effect.as_str(), self.parameter_name("N")) {
+            return value(n).abs() * covered() >= std::f64::consts::PI;
+        }
         match (
             self.effect.as_str(),
             self.parameter_name("Fs"),

@@ -355,3 +355,35 @@ fn fit_recovers_hidden_offsets_and_delay() {
         assert!((e.value - want).abs() < 1e-8 * want, "{name}: {}", e.value);
     }
 }
+
+/// A level on a length coordinate gets the angle template's start and box
+/// times `LENGTH_LEVEL_SCALE` (the same decelerations, decay rates and
+/// natural frequencies for a cart of up to 10 kg as for a link of up to
+/// 0.1 kg m^2); speeds, counts and phases keep theirs. A cogging is in its
+/// own form only with half a period within the range its target covers.
+#[test]
+fn levels_on_a_length_coordinate_are_scaled_and_coggings_need_a_period() {
+    use plantc_identify::effect_edit::LENGTH_LEVEL_SCALE;
+    let m = model(MASS);
+    let k = EffectInstance::candidate(&m, "spring", "x").expect("candidate");
+    assert_eq!(k.parameters[0].unit, "N/m");
+    assert_eq!(
+        k.parameters[0].estimate,
+        Some((0.0, LENGTH_LEVEL_SCALE * 1.0))
+    );
+    assert_eq!(k.parameters[0].value, LENGTH_LEVEL_SCALE * 1e-3);
+    let s = EffectInstance::candidate(&m, "stribeck_friction", "x").expect("candidate");
+    let vs = s.parameters.iter().find(|p| p.base == "vs").expect("vs");
+    assert_eq!((vs.unit.as_str(), vs.estimate), ("m/s", Some((1e-3, 10.0))));
+    let fs = s.parameters.iter().find(|p| p.base == "Fs").expect("Fs");
+    assert_eq!(fs.estimate, Some((0.0, LENGTH_LEVEL_SCALE * 20.0)));
+    let c = EffectInstance::candidate(&m, "cogging", "x").expect("candidate");
+    let n = |v: f64| move |name: &str| if name == "N_x" { v } else { 0.5 };
+    // a period of 2.9 m over a travel of 0.92 m: a smooth curve, no cogging
+    assert!(!c.in_own_form(n(2.16), || 0.0, || 0.92));
+    // just under half a period (N = 3 /m over 1 m: 0.48 of one)
+    assert!(!c.in_own_form(n(3.0), || 0.0, || 1.0));
+    // half a period and more
+    assert!(c.in_own_form(n(3.2), || 0.0, || 1.0));
+    assert!(c.in_own_form(n(24.0), || 0.0, || 0.4));
+}
