@@ -53,8 +53,10 @@ fn records(test: &str, effects: &[&str]) -> Vec<Experiment> {
 
 /// A clean rig names nothing: no stabilising feedback is designed for
 /// records whose replay does not agree with itself, and the open-loop fit
-/// reaches the floor (2.1 s CPU in release, on 1 s segments, measured
-/// 2026-11-29).
+/// reaches the floor (1.5 s CPU in release, on 0.25 s segments, measured
+/// 2026-11-29; on 1 s segments, 2.1 s, while the automatic horizon still
+/// went back to the whole records first and the diagnosis chose the
+/// segments again at the values fitted there).
 #[test]
 fn clean_chaotic_records_name_nothing() {
     let exps = records("chaotic_clean", &[]);
