@@ -45,6 +45,19 @@ impl Experiment {
         self.channel(name).map(|c| c.values.as_slice())
     }
 
+    /// The range (largest less smallest finite value) of the channel with
+    /// this name; None without that channel or a finite value in it.
+    pub fn range(&self, name: &str) -> Option<f64> {
+        let (lo, hi) = self
+            .values(name)?
+            .iter()
+            .filter(|v| v.is_finite())
+            .fold((f64::INFINITY, f64::NEG_INFINITY), |(l, h), &v| {
+                (l.min(v), h.max(v))
+            });
+        (hi >= lo).then_some(hi - lo)
+    }
+
     /// Number of samples.
     pub fn len(&self) -> usize {
         self.t.len()

@@ -814,20 +814,7 @@ impl<'a> Judge<'a> {
     fn covered(&self, target: &str) -> f64 {
         self.experiments
             .iter()
-            .filter_map(|e| e.values(target))
-            .map(|v| {
-                let (lo, hi) = v
-                    .iter()
-                    .filter(|x| x.is_finite())
-                    .fold((f64::INFINITY, f64::NEG_INFINITY), |(l, h), &x| {
-                        (l.min(x), h.max(x))
-                    });
-                if hi >= lo {
-                    hi - lo
-                } else {
-                    0.0
-                }
-            })
+            .filter_map(|e| e.range(target))
             .fold(0.0, f64::max)
     }
 

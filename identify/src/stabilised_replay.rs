@@ -184,19 +184,13 @@ impl StabilisedReplay {
                 // equilibrium: an angle that turns a full revolution (its
                 // range 2 pi or more) was held by none, and the mean
                 // position of a tumbling record is no operating point
-                if c.kind == CoordinateKind::Angle {
-                    let (lo, hi) = q
-                        .iter()
-                        .filter(|v| v.is_finite())
-                        .fold((f64::INFINITY, f64::NEG_INFINITY), |(l, h), &v| {
-                            (l.min(v), h.max(v))
-                        });
-                    if hi - lo >= std::f64::consts::TAU {
-                        return Err(StabiliseError::Tumbles {
-                            experiment: e.name.clone(),
-                            coordinate: c.name.clone(),
-                        });
-                    }
+                if c.kind == CoordinateKind::Angle
+                    && e.range(&c.name).unwrap_or(0.0) >= std::f64::consts::TAU
+                {
+                    return Err(StabiliseError::Tumbles {
+                        experiment: e.name.clone(),
+                        coordinate: c.name.clone(),
+                    });
                 }
                 // velocities over 20 ms, quantisation averaged out
                 let span = e.t.partition_point(|&t| t < e.t[0] + 0.02).max(1);
