@@ -1568,7 +1568,9 @@ fn fit_on_starts(
 
     // 1. horizon: whole records unless the replay diverges; then segments,
     // and back to whole records when the segments' estimates follow the data
-    let whole_follows = |g: &[f64], locals: Option<&Outcome>, run: &mut Run<'_>| -> bool {
+    // (the simulator at half the step, compiled when first asked)
+    let mut fine_sim: Option<Option<Simulator>> = None;
+    let mut whole_follows = |g: &[f64], locals: Option<&Outcome>, run: &mut Run<'_>| -> bool {
         let pb = setup.problem(None);
         let mut pt = setup.start_point(&pb, g);
         if let Some(o) = locals {
@@ -1585,7 +1587,7 @@ fn fit_on_starts(
         // test can tell any more)
         follows(&pb, &pt) && {
             run.simulations += 2;
-            predictable_at(model, experiments, opts, &pb.base_at(g))
+            predictable(&setup, &pb, &pt, experiments, &mut fine_sim)
         }
     };
     let out = match opts.horizon {
@@ -3052,21 +3054,42 @@ pub fn replay_predictable(
         .any(|d| d.parts(&weights)))
 }
 
-/// [`replay_predictable`] at the parameter values `base` (a replay that
-/// cannot be run, or a finer simulation that cannot be set up, is no
-/// evidence either way: true).
-fn predictable_at(
-    model: &Model,
+/// Does the replay of `pb` at `pt` agree with itself at half the
+/// simulation step ([`StepDifference::parts`] on no channel), as
+/// [`replay_predictable`] asks at the start values? `fine` holds the
+/// simulator at half the step once made (None inside when it cannot be).
+/// A replay that cannot be run is no evidence either way (true).
+fn predictable(
+    setup: &Setup<'_>,
+    pb: &Problem<'_>,
+    pt: &Point,
     experiments: &[Experiment],
-    opts: &FitOptions,
-    base: &[f64],
+    fine: &mut Option<Option<Simulator>>,
 ) -> bool {
-    let o = FitOptions {
-        start: Some(base.to_vec()),
-        warm: None,
-        ..opts.clone()
+    let sim = fine.get_or_insert_with(|| {
+        let o = finer(experiments, setup.opts).ok()?;
+        let s = Simulator::new(setup.model, o.sim).ok()?;
+        Some(match setup.sim.law() {
+            Some(l) => s.with_loop(l.clone()),
+            None => s,
+        })
+    });
+    let Some(sim) = sim.as_ref() else {
+        return true;
     };
-    replay_predictable(model, experiments, &o).unwrap_or(true)
+    let (Ok(coarse), Ok(fine)) = (
+        pb.predict(pt),
+        Problem {
+            sim,
+            ..setup.problem(None)
+        }
+        .predict(pt),
+    ) else {
+        return true;
+    };
+    !step_differences(setup.model, &coarse, &fine)
+        .iter()
+        .any(|d| d.parts(&setup.weights))
 }
 
 /// The segment length a fit of `model` at `at`'s values takes when the
