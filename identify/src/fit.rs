@@ -3033,30 +3033,17 @@ pub fn replay_predictable(
     experiments: &[Experiment],
     opts: &FitOptions,
 ) -> Result<bool, FitError> {
-    // the replay (None when it cannot be run) and the weights
-    let (Some(coarse), weights) = at_start_values(model, experiments, opts, |s, pb, pt| {
-        (pb.predict(pt).ok(), s.weights.clone())
-    })?
-    else {
-        return Ok(true);
-    };
-    let fine = at_start_values(
-        model,
-        experiments,
-        &finer(experiments, opts)?,
-        |_, pb, pt| pb.predict(pt).ok(),
-    )?;
-    let Some(fine) = fine else {
-        return Ok(true);
-    };
-    Ok(!step_differences(model, &coarse, &fine)
-        .iter()
-        .any(|d| d.parts(&weights)))
+    // (the finer step's own error, as its simulation would give it)
+    finer(experiments, opts)?;
+    at_start_values(model, experiments, opts, |s, pb, pt| {
+        predictable(s, pb, pt, experiments, &mut None)
+    })
 }
 
 /// Does the replay of `pb` at `pt` agree with itself at half the
-/// simulation step ([`StepDifference::parts`] on no channel), as
-/// [`replay_predictable`] asks at the start values? `fine` holds the
+/// simulation step ([`StepDifference::parts`] on no channel)? What
+/// [`replay_predictable`] asks at the start values and the automatic
+/// horizon wherever it would fit whole records. `fine` holds the
 /// simulator at half the step once made (None inside when it cannot be).
 /// A replay that cannot be run is no evidence either way (true).
 fn predictable(

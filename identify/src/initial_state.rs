@@ -90,13 +90,7 @@ pub fn smoothed_state(t: &[f64], y: &[f64], k: usize, noise: f64) -> (f64, Prior
         return fallback;
     }
     let tk = t[k];
-    let (mut a, mut b) = (k, k);
-    while a > 0 && tk - t[a - 1] <= MIN_WINDOW {
-        a -= 1;
-    }
-    while b + 1 < n && t[b + 1] - tk <= MIN_WINDOW {
-        b += 1;
-    }
+    let (mut a, mut b) = within(&t[..n], (k, k), tk, MIN_WINDOW);
     // widen, alternating sides, to the fewest samples
     while b + 1 - a < MIN_WINDOW_SAMPLES.min(n) {
         if b + 1 < n {
@@ -167,13 +161,7 @@ fn third_derivative_bias(
 ) -> f64 {
     let n = t.len().min(y.len());
     let reach = 2.0 * (tk - t[a]).max(t[b] - tk);
-    let (mut wa, mut wb) = (a, b);
-    while wa > 0 && tk - t[wa - 1] <= reach {
-        wa -= 1;
-    }
-    while wb + 1 < n && t[wb + 1] - tk <= reach {
-        wb += 1;
-    }
+    let (wa, wb) = within(&t[..n], (a, b), tk, reach);
     let wide = (t[wb] - t[wa]).max(f64::MIN_POSITIVE);
     let Some((c, _)) = local_polynomial::<4>((t, y), (wa, wb), tk, wide) else {
         return 0.0;
@@ -190,6 +178,18 @@ fn third_derivative_bias(
         })
         .sum();
     (c3 * proj).abs() / scale
+}
+
+/// Samples `a..=b` of `t` widened on each side to every sample within
+/// `reach` of `tk`.
+fn within(t: &[f64], (mut a, mut b): (usize, usize), tk: f64, reach: f64) -> (usize, usize) {
+    while a > 0 && tk - t[a - 1] <= reach {
+        a -= 1;
+    }
+    while b + 1 < t.len() && t[b + 1] - tk <= reach {
+        b += 1;
+    }
+    (a, b)
 }
 
 /// The least-squares polynomial with `D` coefficients in `s = (t - tk) /

@@ -26,8 +26,7 @@ mod common;
 use plantc_identify::{diagnose_with, synthesize, ChannelSpec, DiagnoseOptions, Experiment, Kind};
 
 fn shipped() -> String {
-    let path = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("../models/pendubot.plant");
-    std::fs::read_to_string(path).expect("models/pendubot.plant")
+    common::bundled_model("pendubot.plant")
 }
 
 /// The rig's records with `effects` hidden, read back as the CLI would.
@@ -143,8 +142,7 @@ fn an_elbow_spring_in_chaotic_records_is_named_alone() {
 /// 3.4) and a 1 ms input delay was named, 197 s CPU; now adequate, 22 s.
 #[test]
 fn a_tumbling_chain_keeps_its_held_inputs_and_names_nothing() {
-    let path = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("../models/chain4.plant");
-    let text = std::fs::read_to_string(path).expect("models/chain4.plant");
+    let text = common::bundled_model("chain4.plant");
     let spec = common::synth_spec(
         "chain_clean",
         "chain4.plant",

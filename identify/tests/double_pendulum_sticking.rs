@@ -31,9 +31,7 @@ mod common;
 use plantc_identify::{synthesize, ChannelSpec, Experiment, Kind, Story};
 
 fn shipped() -> String {
-    let path =
-        std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("../models/double_pendulum.plant");
-    std::fs::read_to_string(path).expect("models/double_pendulum.plant")
+    common::bundled_model("double_pendulum.plant")
 }
 
 /// The rig's values (SI) off the model's nominal ones, dry friction apart.

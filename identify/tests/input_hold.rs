@@ -19,9 +19,7 @@
 mod common;
 
 fn model_text() -> String {
-    let path =
-        std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("../models/rotary_pendulum.plant");
-    std::fs::read_to_string(path).expect("models/rotary_pendulum.plant")
+    common::bundled_model("rotary_pendulum.plant")
 }
 
 fn clean_records(test: &str) -> Vec<plantc_identify::Experiment> {

@@ -21,9 +21,7 @@ use plantc_identify::{synthesize, ChannelSpec, Kind};
 
 #[test]
 fn a_leader_that_reaches_the_floor_once_refined_settles_the_search() {
-    let path = std::path::Path::new(env!("CARGO_MANIFEST_DIR"))
-        .join("../models/double_pendulum_cart.plant");
-    let text = std::fs::read_to_string(path).expect("models/double_pendulum_cart.plant");
+    let text = common::bundled_model("double_pendulum_cart.plant");
     let spec = common::synth_spec(
         "leader_refined",
         "double_pendulum_cart.plant",

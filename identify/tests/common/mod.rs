@@ -19,6 +19,14 @@ pub fn pendulum_spec() -> ChannelSpec {
         .input("Vm", Kind::Voltage)
 }
 
+/// The text of the bundled model `models/NAME` (e.g. `pendubot.plant`).
+pub fn bundled_model(name: &str) -> String {
+    let path = PathBuf::from(env!("CARGO_MANIFEST_DIR"))
+        .join("../models")
+        .join(name);
+    std::fs::read_to_string(&path).unwrap_or_else(|e| panic!("models/{name}: {e}"))
+}
+
 /// A synth spec for `case`: the bundled `model_name` (e.g.
 /// `pendubot.plant`) at the true `values` with `effects` hidden and
 /// `experiments`, both spelled as `plantc synth` takes them, the noise
