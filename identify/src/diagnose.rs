@@ -57,7 +57,7 @@ use crate::effect_edit::{all_candidates, EffectEditError, EffectInstance, Effect
 use crate::equation_error::{
     EquationError, EquationErrorError, EquationErrorOptions, Regressor, Score, Share,
 };
-use crate::experiment_sim::Signals;
+use crate::experiment_sim::{DryFriction, Signals};
 use crate::fit::{
     fit, measured_of, replay_follows, residual_count, simulate_as, simulation_error, values_from,
     with_estimates, Estimate, FitError, FitOptions, FitResult, GiveUp, Horizon, NuisanceFlag,
@@ -1033,9 +1033,10 @@ impl<'a> Judge<'a> {
     /// refitted to the tolerance: its sensitivity can vanish at a start
     /// and its cost has several basins (a Stribeck hump on the QUBE arm
     /// that a long descent takes to a weighted RMS ratio of 1.050 was
-    /// stopped at 1.001 on that word).
+    /// stopped at 1.001 on that word); nor is a dry friction that holds
+    /// its joint ([`first_order_at_null`]).
     fn screening_options(&self, r: &Ranked, baseline: &FitResult) -> DiagnoseOptions {
-        if !r.candidate.linear_in_parameters() {
+        if !first_order_at_null(&r.candidate, self.opts) {
             return self.opts.clone();
         }
         let n = self.effective.max(1.0);
@@ -1043,7 +1044,7 @@ impl<'a> Judge<'a> {
         DiagnoseOptions {
             fit: FitOptions {
                 give_up: Some(GiveUp {
-                    once_at: baseline.after_cost,
+                    once_at: tie_level(baseline),
                     unless_below: baseline.after_cost * (-k * n.ln() / (2.0 * n)).exp(),
                 }),
                 ..self.opts.fit.clone()
@@ -2314,6 +2315,17 @@ fn stribeck_from_coulomb(
 /// 2e-4).
 pub const SCREENING_TOLERANCE: f64 = 2e-4;
 
+/// The weighted RMS up to which a screening refit ties with `baseline`:
+/// its sum of squares above the baseline's by less than the screening
+/// tolerance, the relative change a screening refit no longer resolves
+/// (the mirror of [`lower_minimum`]). A candidate's refit that starts at the
+/// baseline's own values (its effect nulled) reproduces the baseline's cost
+/// only to rounding; within this level it is as good as the baseline: its
+/// give-up may stop it there ([`GiveUp::once_at`]) and it was not trapped.
+fn tie_level(baseline: &FitResult) -> f64 {
+    baseline.after_cost / (1.0 - SCREENING_TOLERANCE).sqrt()
+}
+
 /// Whether `again`, the baseline model refitted from a candidate's values,
 /// found a lower minimum than `baseline` (lower by more than a screening
 /// refit resolves, [`crate::fit::lower_beyond`]): a tie is no reason to
@@ -2328,7 +2340,9 @@ fn lower_minimum(again: &FitResult, baseline: &FitResult) -> bool {
 /// nuisance as a warm start) and the equation-error estimates of the
 /// candidate's own parameters; if that ends above the baseline (the
 /// candidate contains the baseline, so it can do at least as well: the
-/// warm start trapped it), again from the same values with the growing
+/// warm start trapped it; beyond a tie for a refit that may give up, and
+/// anywhere not below it for a dry friction that holds its joint, see
+/// [`first_order_at_null`]), again from the same values with the growing
 /// horizons, the better kept; if both fail, from the model's nominal
 /// values.
 fn refit(
@@ -2351,10 +2365,22 @@ fn refit(
         opts,
     );
     // (not on segments: there is no growing horizon to take)
+    // (a refit that may give up stops within a tie of the baseline
+    // ([`tie_level`]): not trapped there; a dry friction that holds its
+    // joint, refitted from the baseline's nuisance (fitted for a joint that
+    // moves), found nothing when it ends at the baseline's cost, not below
+    // it ([`first_order_at_null`]); an effect with a shape parameter is
+    // trapped above the baseline)
     let trapped = baseline.segments.is_none()
-        && outcome
-            .as_ref()
-            .map_or(true, |f| f.after_cost > baseline.after_cost);
+        && outcome.as_ref().map_or(true, |f| {
+            if first_order_at_null(&r.candidate, opts) {
+                f.after_cost > tie_level(baseline)
+            } else if r.candidate.linear_in_parameters() {
+                !lower_minimum(f, baseline)
+            } else {
+                f.after_cost > baseline.after_cost
+            }
+        });
     if trapped {
         let cold = refit_from(
             (&r.candidate, &r.parameters),
@@ -2493,6 +2519,7 @@ fn refit_from(
                 Vec::new()
             }
         }
+        Some(_) if !first_order_at_null(candidate, opts) => vec![start.clone()],
         // (every such effect's null, a level at zero, is inside its box)
         Some(_) => vec![start.clone(), candidate.nulled(m, &start, false)],
         None => Vec::new(),
@@ -2511,6 +2538,25 @@ fn refit_from(
     fo.warm = from.filter(|_| warm).map(|(_, b)| b.warm.clone());
     fo.alternative_starts = alternatives;
     fit(m, experiments, &fo)
+}
+
+/// Whether what `candidate` does near its null is its first-order term, so
+/// that the Gauss-Newton model at the baseline (the effect at zero) is the
+/// score test of the effect: an effect linear in its parameters
+/// ([`EffectInstance::linear_in_parameters`]), but not a Coulomb friction
+/// under the sticking law, whose level also decides where its joint holds
+/// (a mode, not a term): at zero the joint never sticks and the
+/// sensitivity is the sliding term alone (a Furuta arm held by 0.015 N m
+/// through its free swings: the warm refits from zero and from the
+/// equation-error estimate stayed at a weighted RMS ratio of 1.000, the
+/// refit with the growing horizons reached 52.8). Such an effect is
+/// refitted from its estimate only, to the tolerance, and a warm refit of
+/// it that ends at the baseline's cost is started again with the growing
+/// horizons (see `refit`).
+fn first_order_at_null(candidate: &Candidate, opts: &DiagnoseOptions) -> bool {
+    candidate.linear_in_parameters()
+        && !(candidate.effect == "coulomb_friction"
+            && matches!(opts.fit.sim.dry_friction, DryFriction::Sticking))
 }
 
 /// Whether `candidate` acts on the records at `values` (`m`'s parameter

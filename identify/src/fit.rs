@@ -1642,8 +1642,10 @@ fn fit_on_starts(
             pb.normal(&pt, f64::INFINITY)?
         }
     };
-    // 6. per-experiment offsets that are not significant are dropped
-    if matches!(opts.offsets, Offsets::Auto) && !pb.offsets.is_empty() {
+    // 6. per-experiment offsets that are not significant are dropped (not
+    // from a fit that gave up: dropping nuisance refines a cost that is
+    // not to be refined, see [`GiveUp`])
+    if matches!(opts.offsets, Offsets::Auto) && !pb.offsets.is_empty() && !run.gave_up {
         let (cov, _) = covariance(&nrm, &frozen, unknowns);
         let mut dropped = Vec::new();
         let mut q = pt.clone();
