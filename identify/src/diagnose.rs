@@ -1034,7 +1034,7 @@ impl<'a> Judge<'a> {
     /// and its cost has several basins (a Stribeck hump on the QUBE arm
     /// that a long descent takes to a weighted RMS ratio of 1.050 was
     /// stopped at 1.001 on that word); nor is a dry friction that holds
-    /// its joint ([`first_order_at_null`]).
+    /// its joint ([`holds_its_joint`]).
     fn screening_options(&self, r: &Ranked, baseline: &FitResult) -> DiagnoseOptions {
         if !first_order_at_null(&r.candidate, self.opts) {
             return self.opts.clone();
@@ -2342,7 +2342,7 @@ fn lower_minimum(again: &FitResult, baseline: &FitResult) -> bool {
 /// candidate contains the baseline, so it can do at least as well: the
 /// warm start trapped it; beyond a tie for a refit that may give up, and
 /// anywhere not below it for a dry friction that holds its joint, see
-/// [`first_order_at_null`]), again from the same values with the growing
+/// [`holds_its_joint`]), again from the same values with the growing
 /// horizons, the better kept; if both fail, from the model's nominal
 /// values.
 fn refit(
@@ -2369,14 +2369,14 @@ fn refit(
     // ([`tie_level`]): not trapped there; a dry friction that holds its
     // joint, refitted from the baseline's nuisance (fitted for a joint that
     // moves), found nothing when it ends at the baseline's cost, not below
-    // it ([`first_order_at_null`]); an effect with a shape parameter is
+    // it ([`holds_its_joint`]); an effect with a shape parameter is
     // trapped above the baseline)
     let trapped = baseline.segments.is_none()
         && outcome.as_ref().map_or(true, |f| {
-            if first_order_at_null(&r.candidate, opts) {
-                f.after_cost > tie_level(baseline)
-            } else if r.candidate.linear_in_parameters() {
+            if holds_its_joint(&r.candidate, opts) {
                 !lower_minimum(f, baseline)
+            } else if r.candidate.linear_in_parameters() {
+                f.after_cost > tie_level(baseline)
             } else {
                 f.after_cost > baseline.after_cost
             }
@@ -2542,11 +2542,16 @@ fn refit_from(
 /// Whether what `candidate` does near its null is its first-order term, so
 /// that the Gauss-Newton model at the baseline (the effect at zero) is the
 /// score test of the effect: an effect linear in its parameters
-/// ([`EffectInstance::linear_in_parameters`]), but not a Coulomb friction
-/// under the sticking law, whose level also decides where its joint holds
-/// (a mode, not a term): at zero the joint never sticks and the
-/// sensitivity is the sliding term alone (a Furuta arm held by 0.015 N m
-/// through its free swings: the warm refits from zero and from the
+/// ([`EffectInstance::linear_in_parameters`]) that does not hold its joint
+/// ([`holds_its_joint`]).
+fn first_order_at_null(candidate: &Candidate, opts: &DiagnoseOptions) -> bool {
+    candidate.linear_in_parameters() && !holds_its_joint(candidate, opts)
+}
+
+/// A Coulomb friction under the sticking law: its level also decides where
+/// its joint holds (a mode, not a term), so at zero, where the joint never
+/// sticks, its sensitivity is the sliding term alone (a Furuta arm held by
+/// 0.015 N m through its free swings: the warm refits from zero and from the
 /// equation-error estimate stayed at a weighted RMS ratio of 1.000, the
 /// refit with the growing horizons reached 52.8). Such an effect is
 /// refitted to the tolerance (no give-up), and a warm refit of it that ends
@@ -2558,10 +2563,9 @@ fn refit_from(
 /// against 17.2 with the nulled start offered) but where the Stribeck
 /// refit from its values no longer reached the floor, and three false
 /// effects followed.
-fn first_order_at_null(candidate: &Candidate, opts: &DiagnoseOptions) -> bool {
-    candidate.linear_in_parameters()
-        && !(candidate.effect == "coulomb_friction"
-            && matches!(opts.fit.sim.dry_friction, DryFriction::Sticking))
+fn holds_its_joint(candidate: &Candidate, opts: &DiagnoseOptions) -> bool {
+    candidate.effect == "coulomb_friction"
+        && matches!(opts.fit.sim.dry_friction, DryFriction::Sticking)
 }
 
 /// Whether `candidate` acts on the records at `values` (`m`'s parameter

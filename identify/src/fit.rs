@@ -53,6 +53,7 @@
 //! Simulation residuals are correlated in time, so these are lower bounds;
 //! the identifiability analysis and correlations are more telling.
 
+use std::cell::OnceCell;
 use std::fmt;
 
 use plantc_derive::model::{Model, ParameterValues};
@@ -1569,8 +1570,8 @@ fn fit_on_starts(
     // 1. horizon: whole records unless the replay diverges; then segments,
     // and back to whole records when the segments' estimates follow the data
     // (the simulator at half the step, compiled when first asked)
-    let mut fine_sim: Option<Option<Simulator>> = None;
-    let mut whole_follows = |g: &[f64], locals: Option<&Outcome>, run: &mut Run<'_>| -> bool {
+    let fine_sim = OnceCell::new();
+    let whole_follows = |g: &[f64], locals: Option<&Outcome>, run: &mut Run<'_>| -> bool {
         let pb = setup.problem(None);
         let mut pt = setup.start_point(&pb, g);
         if let Some(o) = locals {
@@ -1587,7 +1588,7 @@ fn fit_on_starts(
         // test can tell any more)
         follows(&pb, &pt) && {
             run.simulations += 2;
-            predictable(&setup, &pb, &pt, experiments, &mut fine_sim)
+            predictable(&setup, &pb, &pt, experiments, &fine_sim)
         }
     };
     let out = match opts.horizon {
@@ -3035,10 +3036,12 @@ pub fn replay_predictable(
     experiments: &[Experiment],
     opts: &FitOptions,
 ) -> Result<bool, FitError> {
-    // (the finer step's own error, as its simulation would give it)
+    // (options whose step cannot be halved are an error here, as the
+    // simulation at half the step would report it; `predictable` itself
+    // takes a finer simulator it cannot make as no evidence)
     finer(experiments, opts)?;
     at_start_values(model, experiments, opts, |s, pb, pt| {
-        predictable(s, pb, pt, experiments, &mut None)
+        predictable(s, pb, pt, experiments, &OnceCell::new())
     })
 }
 
@@ -3053,9 +3056,9 @@ fn predictable(
     pb: &Problem<'_>,
     pt: &Point,
     experiments: &[Experiment],
-    fine: &mut Option<Option<Simulator>>,
+    fine: &OnceCell<Option<Simulator>>,
 ) -> bool {
-    let sim = fine.get_or_insert_with(|| {
+    let sim = fine.get_or_init(|| {
         let o = finer(experiments, setup.opts).ok()?;
         let s = Simulator::new(setup.model, o.sim).ok()?;
         Some(match setup.sim.law() {
