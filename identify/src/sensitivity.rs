@@ -55,7 +55,7 @@
 
 use std::cell::RefCell;
 
-use plantc_derive::mechanics::stick_slip::mat_vec;
+use plantc_derive::mechanics::stick_slip::{mat_vec, Mode};
 use plantc_derive::model::Model;
 use plantc_derive::sym::{diff, Expr, SplitTape, Tape};
 
@@ -566,7 +566,11 @@ impl SensitivitySimulator {
             self.probe.as_ref(),
             &start.x0,
         )?;
-        let h = h.refined(refine);
+        let mut h = h.refined(refine);
+        if self.law.is_some() {
+            // (the controller writes the input at every sample)
+            h.span = None;
+        }
         let (n, m, p) = (self.n, self.m, self.free.len());
         check_start(sig, start, n)?;
         let nx = 2 * n;
@@ -977,6 +981,10 @@ impl Dynamics for SensDynamics<'_> {
 
     fn stuck(&self, j: usize) -> bool {
         self.plain.mode.stuck[j]
+    }
+
+    fn mode(&self) -> &Mode {
+        &self.plain.mode
     }
 
     fn begin_segment(&mut self, seg: &Segment) {

@@ -1,0 +1,122 @@
+//! Spans: one RK4 step over several sample intervals where the inputs hold
+//! (`experiment_sim::MAX_SPAN`). References: central differences of the
+//! plain simulation (the sensitivities stay the exact derivatives of what
+//! is simulated), the interval-by-interval simulation (an explicit 2 ms
+//! substep takes no span) for the accuracy, and the bound the constant's
+//! doc derives (1.1e-5 rad at most over 20 s of a pendulum swing).
+
+mod common;
+
+use std::f64::consts::PI;
+
+use common::simulated::{check_sensitivities, max_diff, model, pendulum_text, pendulum_with};
+use plantc_derive::model::{Model, ParameterValues};
+use plantc_identify::{Signals, SimOptions, Simulator};
+
+/// `secs` at 500 Hz from `alpha0`: no voltage, then `volts` over
+/// `[1.0, 1.6)` s (two switches inside the record).
+fn steps(secs: f64, alpha0: f64, volts: f64) -> Signals {
+    let n = (secs * 500.0) as usize;
+    let t: Vec<f64> = (0..n).map(|k| k as f64 * 0.002).collect();
+    let u = t
+        .iter()
+        .map(|&t| if (1.0..1.6).contains(&t) { volts } else { 0.0 })
+        .collect();
+    Signals {
+        name: "steps".into(),
+        t,
+        q: vec![vec![0.0; n], vec![alpha0; n]],
+        u: vec![u],
+        replay: None,
+    }
+}
+
+fn nominal(m: &Model) -> Vec<f64> {
+    ParameterValues::from_base(m, m.parameters.iter().map(|p| p.value).collect()).full
+}
+
+fn run(m: &Model, sig: &Signals, opts: SimOptions) -> Vec<Vec<f64>> {
+    Simulator::new(m, opts)
+        .expect("compiles")
+        .simulate(sig, &nominal(m), sig.len())
+        .expect("simulates")
+        .q
+}
+
+/// Spans against one step per interval on a free swing with a voltage
+/// pulse (the arm's gearbox friction sticks and releases): different
+/// steps, within the bound of `MAX_SPAN`'s doc.
+#[test]
+fn spans_stay_within_their_accuracy_bound() {
+    let m = model(&pendulum_text());
+    let sig = steps(10.0, PI - 1.2, 1.5);
+    let spans = run(&m, &sig, SimOptions::default());
+    let intervals = run(
+        &m,
+        &sig,
+        SimOptions {
+            substep: Some(2e-3),
+            ..SimOptions::default()
+        },
+    );
+    let d = max_diff(&spans, &intervals);
+    eprintln!("spans against 2 ms steps: max difference {d:.2e} rad");
+    assert!(d > 0.0, "no span was taken");
+    assert!(d < 1.1e-5, "{d}");
+}
+
+/// Sensitivities through spans (free swing, pulse, stick-slip of the arm)
+/// against central differences.
+#[test]
+fn sensitivities_through_spans_match_central_differences() {
+    let m = model(&pendulum_text());
+    let sig = steps(3.0, PI - 1.0, 1.5);
+    check_sensitivities(&m, &sig, &["J1", "b2", "l2"], &[1e-8, 1e-7, 1e-6], 1e-4);
+}
+
+/// A delayed input: the span ends where the delayed switch arrives (3 ms
+/// after the sample that carries it), and the delay's sensitivity stays
+/// exact.
+#[test]
+fn spans_end_at_delayed_switches() {
+    let m = pendulum_with("parameter Td = 0.003 [s]\nactuator Vm = input_delay(Td)\n");
+    let sig = steps(3.0, PI - 1.0, 1.5);
+    check_sensitivities(&m, &sig, &["Td", "J1"], &[1e-7, 1e-8], 1e-4);
+}
+
+/// Dynamics ten times faster than the pendulum's (a 100 rad/s
+/// oscillator): every span's error estimate is above the tolerance, so the
+/// simulation is the interval-by-interval one to the bit.
+#[test]
+fn fast_dynamics_take_no_span() {
+    let m = model(
+        "model oscillator \"a fast oscillator\"\n\
+         coordinate q : angle\n\
+         input tau [N*m]\n\
+         parameter J = 1e-3 [kg*m^2]\n\
+         parameter k = 10 [N*m]\n\
+         kinetic T = 1/2*J*q'^2\n\
+         potential V = 1/2*k*q^2\n\
+         force q = tau\n",
+    );
+    let n = 1000;
+    let sig = Signals {
+        name: "ring".into(),
+        t: (0..n).map(|k| k as f64 * 0.002).collect(),
+        q: vec![vec![0.5; n]],
+        u: vec![vec![0.0; n]],
+        replay: None,
+    };
+    let spans = run(&m, &sig, SimOptions::default());
+    let intervals = run(
+        &m,
+        &sig,
+        SimOptions {
+            substep: Some(2e-3),
+            ..SimOptions::default()
+        },
+    );
+    let bits = |q: &[Vec<f64>]| -> Vec<u64> { q.iter().flatten().map(|v| v.to_bits()).collect() };
+    assert!(spans[0].iter().any(|v| *v < 0.0), "it swings");
+    assert_eq!(bits(&spans), bits(&intervals));
+}
