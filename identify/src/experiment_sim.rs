@@ -61,7 +61,11 @@
 //! its end or at a sample inside, otherwise the intervals are stepped one
 //! by one as above (see `Span`). A free swing then costs about a third of
 //! its RK4 stages. An explicit [`SimOptions::substep`], a smoothed dry
-//! friction and a controller in the loop take no span.
+//! friction and a controller in the loop take no span. Like any step
+//! pattern chosen from the state, the spans make the outputs jump, by their
+//! own error (below 1e-6 rad), where a parameter moves a span's end (a
+//! delayed switch crossing a sample instant, an estimate crossing its
+//! tolerance); the sensitivities are the derivatives between such points.
 //! A `sign()` that is not a dry friction of one coordinate keeps the smooth
 //! law with a note ([`Simulator::notes`]).
 //!
@@ -930,10 +934,13 @@ fn integrate_in<D: Dynamics>(
                         });
                     }
                 }
-                // the switches passed (each to the value held already)
+                // the switches passed (each to the value held already);
+                // those due at the span's end are left to the interval that
+                // starts there, which takes them as the intervals do (a
+                // delayed switch there changes the delay's sensitivity)
                 let tol = 1e-9 * (t[ke] - t[ke - 1]);
                 for (j, i) in idx.iter_mut().enumerate() {
-                    while *i + 1 < k1 && t[*i + 1] + delay(j) <= t[ke] + tol {
+                    while *i + 1 < k1 && t[*i + 1] + delay(j) < t[ke] - tol {
                         *i += 1;
                     }
                 }

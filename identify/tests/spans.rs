@@ -11,7 +11,7 @@ use std::f64::consts::PI;
 
 use common::simulated::{check_sensitivities, max_diff, model, pendulum_text, pendulum_with};
 use plantc_derive::model::{Model, ParameterValues};
-use plantc_identify::{Signals, SimOptions, Simulator};
+use plantc_identify::{SensitivitySimulator, Signals, SimOptions, Simulator};
 
 /// `secs` at 500 Hz from `alpha0`: no voltage, then `volts` over
 /// `[1.0, 1.6)` s (two switches inside the record).
@@ -43,6 +43,16 @@ fn run(m: &Model, sig: &Signals, opts: SimOptions) -> Vec<Vec<f64>> {
         .q
 }
 
+/// The simulation with spans (the default) and interval by interval (an
+/// explicit 2 ms substep takes none).
+fn spans_and_intervals(m: &Model, sig: &Signals) -> (Vec<Vec<f64>>, Vec<Vec<f64>>) {
+    let intervals = SimOptions {
+        substep: Some(2e-3),
+        ..SimOptions::default()
+    };
+    (run(m, sig, SimOptions::default()), run(m, sig, intervals))
+}
+
 /// Spans against one step per interval on a free swing with a voltage
 /// pulse (the arm's gearbox friction sticks and releases): different
 /// steps, within the bound of `MAX_SPAN`'s doc.
@@ -50,15 +60,7 @@ fn run(m: &Model, sig: &Signals, opts: SimOptions) -> Vec<Vec<f64>> {
 fn spans_stay_within_their_accuracy_bound() {
     let m = model(&pendulum_text());
     let sig = steps(10.0, PI - 1.2, 1.5);
-    let spans = run(&m, &sig, SimOptions::default());
-    let intervals = run(
-        &m,
-        &sig,
-        SimOptions {
-            substep: Some(2e-3),
-            ..SimOptions::default()
-        },
-    );
+    let (spans, intervals) = spans_and_intervals(&m, &sig);
     let d = max_diff(&spans, &intervals);
     eprintln!("spans against 2 ms steps: max difference {d:.2e} rad");
     assert!(d > 0.0, "no span was taken");
@@ -107,16 +109,49 @@ fn fast_dynamics_take_no_span() {
         u: vec![vec![0.0; n]],
         replay: None,
     };
-    let spans = run(&m, &sig, SimOptions::default());
-    let intervals = run(
-        &m,
-        &sig,
-        SimOptions {
-            substep: Some(2e-3),
-            ..SimOptions::default()
-        },
-    );
+    let (spans, intervals) = spans_and_intervals(&m, &sig);
     let bits = |q: &[Vec<f64>]| -> Vec<u64> { q.iter().flatten().map(|v| v.to_bits()).collect() };
     assert!(spans[0].iter().any(|v| *v < 0.0), "it swings");
     assert_eq!(bits(&spans), bits(&intervals));
+}
+
+/// A delay of exactly two sample intervals: each delayed switch lands on a
+/// sample instant, where a span ends and leaves the switch to the interval
+/// that starts there, which takes it with its jump of the delay's
+/// sensitivity. (A delay a hair shorter ends the spans one sample earlier:
+/// the outputs then move by the spans' own error, so the check is the
+/// one-sided difference towards longer delays, the side whose spans are
+/// these.)
+#[test]
+fn delayed_switches_on_sample_instants_keep_their_jump() {
+    let m = pendulum_with("parameter Td = 0.004 [s]\nactuator Vm = input_delay(Td)\n");
+    let sig = steps(3.0, PI - 1.0, 1.5);
+    let free = vec!["Td".to_string()];
+    let sens = SensitivitySimulator::new(&m, &free, SimOptions::default()).expect("compiles");
+    let base: Vec<f64> = m.parameters.iter().map(|p| p.value).collect();
+    let at = |td: f64| {
+        let mut b = base.clone();
+        b[sens.free_indices()[0]] = td;
+        ParameterValues::from_base(&m, b).full
+    };
+    let st = sens
+        .simulate(&sig, &at(0.004), sig.len())
+        .expect("simulates");
+    let h = 1e-8;
+    let plain = Simulator::new(&m, SimOptions::default()).expect("compiles");
+    let y0 = plain
+        .simulate(&sig, &at(0.004), sig.len())
+        .expect("simulates");
+    let y1 = plain
+        .simulate(&sig, &at(0.004 + h), sig.len())
+        .expect("simulates");
+    for i in 0..2 {
+        let scale = st.dq[i][0].iter().fold(0.0_f64, |a, v| a.max(v.abs()));
+        let worst = (0..sig.len())
+            .map(|k| ((y1.q[i][k] - y0.q[i][k]) / h - st.dq[i][0][k]).abs())
+            .fold(0.0, f64::max);
+        eprintln!("Td coord {i}: max |S| {scale:.3e}, max error {worst:.3e}");
+        assert!(scale > 0.1, "the delay's sensitivity was lost: {scale}");
+        assert!(worst <= 1e-4 * scale, "coord {i}: {worst}");
+    }
 }
