@@ -649,11 +649,13 @@ pub(crate) trait Dynamics {
     fn state_rhs(&mut self, x: &[f64], u: &[f64], dx: &mut [f64]) -> bool;
     /// The guards of the mode at state `x` ([`StickSlip::guards`]).
     fn guards(&mut self, x: &[f64], u: &[f64], g: &mut [f64]) -> bool;
-    /// Whether joint `j` is stuck in the current mode.
-    fn stuck(&self, j: usize) -> bool;
     /// The stick-slip mode of the last [`Dynamics::classify`] (with
     /// [`Dynamics::has_dry`]).
     fn mode(&self) -> &Mode;
+    /// Whether joint `j` is stuck in the current mode.
+    fn stuck(&self, j: usize) -> bool {
+        self.mode().stuck[j]
+    }
     /// A segment starts.
     fn begin_segment(&mut self, _seg: &Segment) {}
     /// After a [`Dynamics::classify`] at the start of a step: anything
@@ -1151,14 +1153,12 @@ fn span_end(
     while ke + 1 < k1 && t[ke + 1] <= limit {
         ke += 1;
     }
+    // (`held[j] <= kk < ke`: the held sample is never past the interval's
+    // start; a value at a sample after `ke` arrives after `t[ke]`)
     for (j, uj) in u.iter().enumerate() {
         let i = held[j];
-        if i + 1 >= uj.len() {
-            continue;
-        }
         let v = uj[i];
-        // (a value at a sample after `ke` arrives after `t[ke]`)
-        if let Some(off) = uj[i + 1..=ke.max(i + 1)].iter().position(|x| *x != v) {
+        if let Some(off) = uj[i + 1..=ke].iter().position(|x| *x != v) {
             let arrives = t[i + 1 + off] + delays.get(j).copied().unwrap_or(0.0);
             let tol = 1e-9 * (t[kk + 1] - t[kk]);
             while ke > kk && t[ke] > arrives + tol {
@@ -1723,16 +1723,18 @@ fn largest_row_sum(a: &[f64], n: usize) -> f64 {
 
 /// What both simulators do before integrating: check the parameter vector
 /// and the signals against the model's sizes `(n, m, n_params)`, choose the
-/// substep (probed for stiffness only where a `sign()` is smoothed),
-/// evaluate the signal effects at `params` and make the working copy of
-/// the held inputs with the deadzones and saturations applied.
+/// substep (probed for stiffness only where a `sign()` is smoothed; spans
+/// only with neither an explicit substep, a smoothed `sign()` nor a
+/// controller in the loop, `closed_loop`, which writes the input at every
+/// sample), evaluate the signal effects at `params` and make the working
+/// copy of the held inputs with the deadzones and saturations applied.
 pub(crate) fn prepare_run(
     sig: &Signals,
     params: &[f64],
     (n, m, n_params): (usize, usize, usize),
     opts: &SimOptions,
     signals: &SignalEffects,
-    probe: Option<&StiffnessProbe>,
+    (probe, closed_loop): (Option<&StiffnessProbe>, bool),
     x0: &[f64],
 ) -> Result<(Substep, SignalValues, Vec<Vec<f64>>), SimError> {
     if params.len() != n_params {
@@ -1781,7 +1783,7 @@ pub(crate) fn prepare_run(
             }
         }
     }
-    if opts.substep.is_none() && probe.is_none() {
+    if opts.substep.is_none() && probe.is_none() && !closed_loop {
         step.span = Some(MAX_SPAN);
     }
     Ok((step, effects, u))
@@ -2125,9 +2127,6 @@ impl Dynamics for StateDynamics<'_> {
     fn guards(&mut self, x: &[f64], u: &[f64], g: &mut [f64]) -> bool {
         StateDynamics::guards(self, x, u, g)
     }
-    fn stuck(&self, j: usize) -> bool {
-        self.mode.stuck[j]
-    }
     fn mode(&self) -> &Mode {
         &self.mode
     }
@@ -2340,14 +2339,10 @@ impl Simulator {
             (self.n, self.m, self.n_params),
             &self.opts,
             &self.signals,
-            self.probe.as_ref(),
+            (self.probe.as_ref(), self.law.is_some()),
             &start.x0,
         )?;
-        let mut h = h.refined(refine);
-        if self.law.is_some() {
-            // (the controller writes the input at every sample)
-            h.span = None;
-        }
+        let h = h.refined(refine);
         let (n, m) = (self.n, self.m);
         check_start(sig, start, n)?;
         let (k0, k1) = (start.range.start, start.range.end);

@@ -563,14 +563,10 @@ impl SensitivitySimulator {
             (self.n, self.m, self.n_params),
             &self.opts,
             &self.signals,
-            self.probe.as_ref(),
+            (self.probe.as_ref(), self.law.is_some()),
             &start.x0,
         )?;
-        let mut h = h.refined(refine);
-        if self.law.is_some() {
-            // (the controller writes the input at every sample)
-            h.span = None;
-        }
+        let h = h.refined(refine);
         let (n, m, p) = (self.n, self.m, self.free.len());
         check_start(sig, start, n)?;
         let nx = 2 * n;
@@ -977,10 +973,6 @@ impl Dynamics for SensDynamics<'_> {
 
     fn guards(&mut self, x: &[f64], u: &[f64], g: &mut [f64]) -> bool {
         self.plain.guards(x, u, g)
-    }
-
-    fn stuck(&self, j: usize) -> bool {
-        self.plain.mode.stuck[j]
     }
 
     fn mode(&self) -> &Mode {
