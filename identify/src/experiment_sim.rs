@@ -60,7 +60,14 @@
 //! estimate is within [`SPAN_TOLERANCE`] and no stick-slip guard fails at
 //! its end or at a sample inside, otherwise the intervals are stepped one
 //! by one as above (see `Span`). A free swing then costs about a third of
-//! its RK4 stages. An explicit [`SimOptions::substep`], a smoothed dry
+//! its RK4 stages. Where the inputs change at every sample (a driven
+//! record) and no input has a delay, a deadzone or a saturation, a span
+//! replaces each held input by the line of the same integral and first
+//! moment ([`crate::affine_input`]), under one more rule: where the line's
+//! trajectory may miss the staircase's at a sample inside (the positions
+//! by more than [`SPAN_TOLERANCE`], a sliding dry joint's velocity across
+//! zero) the span is shorter or not taken (see `AffineSpan`); a driven
+//! record then costs about two fifths of its RK4 stages. An explicit [`SimOptions::substep`], a smoothed dry
 //! friction and a controller in the loop take no span. Like any step
 //! pattern chosen from the state, the spans make the outputs jump, by their
 //! own error (below 1e-6 rad), where a parameter moves a span's end (a
@@ -88,6 +95,7 @@ use plantc_derive::mechanics::{
 use plantc_derive::model::Model;
 use plantc_derive::sym::{diff, Expr, SplitTape, Symbol, Tape};
 
+use crate::affine_input::Staircase;
 use crate::closed_loop::{LoopEval, LoopLaw, Replay};
 use crate::data::Experiment;
 
@@ -675,6 +683,12 @@ pub(crate) trait Dynamics {
     /// A delayed switch of input `l` taken at a sample instant, with the
     /// state's rates before (`f_old`) and after (`f_new`) it.
     fn switch(&mut self, _l: usize, _f_old: &[f64], _f_new: &[f64], _z: &mut [f64]) {}
+    /// The input gain `G = M^-1 B` of the current mode at `(x, u)`
+    /// (`n x m`, row-major; zero rows for stuck joints) into `g`; false
+    /// when it cannot be evaluated.
+    fn input_gain(&mut self, _x: &[f64], _u: &[f64], _g: &mut [f64]) -> bool {
+        false
+    }
 }
 
 /// `dst.copy_from_slice(src)` for the few numbers of a state, an input or
@@ -734,6 +748,11 @@ pub(crate) struct Substep {
     /// interval at a time (an explicit substep, a smoothed dry friction, a
     /// retry after a divergence, a controller in the loop).
     pub(crate) span: Option<f64>,
+    /// Whether a span may also cover intervals where the inputs change
+    /// ([`AffineSpan`]): with spans, where no input has a delay, a deadzone
+    /// or a saturation (the right-hand side then sees the inputs through
+    /// their values alone, in both simulators alike).
+    pub(crate) affine: bool,
 }
 
 impl Substep {
@@ -743,6 +762,7 @@ impl Substep {
             h,
             relaxed: None,
             span: None,
+            affine: false,
         }
     }
 
@@ -902,6 +922,16 @@ fn integrate_in<D: Dynamics>(
         u: vec![0.0; m],
         mode: Mode::new(n),
     };
+    // the intervals the next affine span tries (see `AffineSpan::step`)
+    let mut hint = usize::MAX;
+    let mut line = LineBuffers {
+        stairs: Staircase::default(),
+        gain: vec![0.0; n * m],
+        start: vec![0.0; m],
+        mid: vec![0.0; m],
+        end: vec![0.0; m],
+        held: vec![0.0; m],
+    };
     let mut kk = k0;
     while kk < k1 {
         if !at_sample(kk, &cur[..dim], u) {
@@ -940,6 +970,42 @@ fn integrate_in<D: Dynamics>(
                 // those due at the span's end are left to the interval that
                 // starts there, which takes them as the intervals do (a
                 // delayed switch there changes the delay's sensitivity)
+                let tol = 1e-9 * (t[ke] - t[ke - 1]);
+                for (j, i) in idx.iter_mut().enumerate() {
+                    while *i + 1 < k1 && t[*i + 1] + delay(j) < t[ke] - tol {
+                        *i += 1;
+                    }
+                }
+                kk = ke;
+                continue;
+            }
+        } else if let (true, Some(max)) = (substep.affine, substep.span) {
+            let spanned = AffineSpan {
+                t,
+                u,
+                from: kk,
+                held: (&idx, delays),
+            };
+            if let Some(ke) = spanned.step(
+                sys,
+                (cur, zt),
+                &mut k,
+                (&mut g, &mut inside),
+                (k1, max),
+                &mut line,
+                &mut hint,
+            ) {
+                carry.at = usize::MAX;
+                for (i, z_i) in inside.chunks_exact(dim).enumerate() {
+                    if !at_sample(kk + 1 + i, z_i, u) {
+                        return Err(SimError::Diverged {
+                            experiment: name.to_string(),
+                            time: t[kk + 1 + i],
+                        });
+                    }
+                }
+                // (as after a span: the switches due at its end are the
+                // next interval's)
                 let tol = 1e-9 * (t[ke] - t[ke - 1]);
                 for (j, i) in idx.iter_mut().enumerate() {
                     while *i + 1 < k1 && t[*i + 1] + delay(j) < t[ke] - tol {
@@ -1295,6 +1361,209 @@ impl Span<'_> {
     }
 }
 
+/// A span over sample intervals where the inputs change (a driven
+/// record): one RK4 step from sample `from` with each input replaced by the
+/// line of the same integral and first moment over the span
+/// ([`crate::affine_input`]; the stages take the line's values at their
+/// times), the samples inside from the step's cubic Hermite interpolant as
+/// for a [`Span`]. Taken under the same rules as a span (embedded estimate
+/// within [`SPAN_TOLERANCE`], no guard violated at a sample, every value
+/// finite, the mode decided at its start with the held input) and one
+/// more: at every sample inside, the positions' response to the staircase's
+/// difference from the line, `G E2` with the input gain `G = M^-1 B` at the
+/// start, is within [`SPAN_TOLERANCE`] too (where the interpolant would
+/// miss the staircase's trajectory). Where that fails, half the span is
+/// tried (down to two intervals), then the intervals one by one.
+struct AffineSpan<'a> {
+    t: &'a [f64],
+    u: &'a [Vec<f64>],
+    from: usize,
+    /// The held samples at its start and the inputs' delays.
+    held: (&'a [usize], &'a [f64]),
+}
+
+/// Work buffers of [`AffineSpan::step`]: the staircase, the input gain
+/// (`n x m`), the line's values at the step's start, middle and end, a
+/// held input.
+struct LineBuffers {
+    stairs: Staircase,
+    gain: Vec<f64>,
+    start: Vec<f64>,
+    mid: Vec<f64>,
+    end: Vec<f64>,
+    held: Vec<f64>,
+}
+
+impl AffineSpan<'_> {
+    /// Take the longest span from `cur` within `max` seconds and before
+    /// sample `k1` that the rules allow (into `cur`, `zt` a buffer; the
+    /// states at the samples inside into `inside`): its last sample, or
+    /// `None` (nothing changed).
+    #[allow(clippy::too_many_arguments)]
+    fn step<D: Dynamics>(
+        &self,
+        sys: &mut D,
+        (cur, zt): (&mut Vec<f64>, &mut Vec<f64>),
+        k: &mut Stages,
+        (g, inside): (&mut [f64], &mut Vec<f64>),
+        (k1, max): (usize, f64),
+        b: &mut LineBuffers,
+        hint: &mut usize,
+    ) -> Option<usize> {
+        let (t, kk) = (self.t, self.from);
+        let limit = t[kk] + max * (1.0 + 1e-9);
+        let mut ke = kk + 1;
+        while ke + 1 < k1 && t[ke + 1] <= limit && ke - kk < *hint {
+            ke += 1;
+        }
+        if ke < kk + 2 {
+            return None;
+        }
+        let n = sys.n();
+        let nx = 2 * n;
+        let m = self.u.len();
+        let dim = cur.len() - sys.tangent_len();
+        let t0 = t[kk];
+        let tol = 1e-9 * (t[kk + 1] - t0);
+        let LineBuffers {
+            stairs,
+            gain,
+            start,
+            mid,
+            end,
+            held: now,
+        } = b;
+        stairs.over(t, self.u, self.held, (kk, ke), tol);
+        for (j, v) in now.iter_mut().enumerate() {
+            *v = stairs.first(j);
+        }
+        if !sys.classify(&cur[..nx], now, None) || !sys.input_gain(&cur[..nx], now, gain) {
+            return None;
+        }
+        // the longest span whose staircase the line follows at the samples
+        // inside
+        let follows = |stairs: &Staircase, ke: usize| {
+            (kk + 1..ke).all(|i| {
+                let s = t[i] - t0;
+                (0..n).all(|c| {
+                    let miss: f64 = (0..m)
+                        .map(|l| gain[c * m + l] * stairs.inside_error(l, s))
+                        .sum();
+                    miss.abs() <= SPAN_TOLERANCE
+                })
+            })
+        };
+        while !follows(stairs, ke) {
+            ke = kk + (ke - kk) / 2;
+            if ke < kk + 2 {
+                return None;
+            }
+            stairs.over(t, self.u, self.held, (kk, ke), tol);
+        }
+        let held = self.held.0;
+        sys.held(&mut cur[..dim]);
+        // the step, shortened once where its estimate is above the
+        // tolerance (by the estimate's fourth power in the length); the
+        // next span starts from the length this one's estimate allows
+        let mut retried = false;
+        let len = loop {
+            let len = t[ke] - t0;
+            sys.begin_segment(&Segment {
+                len,
+                start: Boundary::Sample,
+                end: Boundary::Sample,
+            });
+            stairs.line(start, mid, end);
+            if !sys.rhs(&cur[..dim], start, held, Rate::Segment, &mut k.k1[..dim])
+                || !k.finish_between(
+                    sys,
+                    &cur[..dim],
+                    (mid, end),
+                    held,
+                    Rate::Segment,
+                    len,
+                    &mut zt[..dim],
+                )
+                || !zt[..dim].iter().all(|v| v.is_finite())
+                || !sys.rhs(&zt[..dim], end, held, Rate::Segment, &mut k.k2[..dim])
+            {
+                return None;
+            }
+            let mut worst = 0.0f64;
+            for i in 0..nx {
+                let reach = if i < n { len / 6.0 } else { len * len / 6.0 };
+                let estimate = reach * (k.k4[i] - k.k2[i]).abs();
+                if estimate.is_nan() {
+                    return None;
+                }
+                worst = worst.max(estimate);
+            }
+            let intervals = (ke - kk) as f64;
+            let allowed = intervals * 0.9 * (SPAN_TOLERANCE / worst).sqrt().sqrt();
+            *hint = (allowed.floor() as usize).clamp(2, 2 * (ke - kk));
+            if worst <= SPAN_TOLERANCE {
+                break len;
+            }
+            if retried || *hint >= ke - kk {
+                return None;
+            }
+            retried = true;
+            ke = kk + *hint;
+            stairs.over(t, self.u, self.held, (kk, ke), tol);
+            if !follows(stairs, ke) {
+                return None;
+            }
+        };
+        let dry = sys.has_dry();
+        let mut holds = |sys: &mut D, x: &[f64], s: f64, now: &mut [f64]| {
+            if !dry {
+                return true;
+            }
+            for (j, v) in now.iter_mut().enumerate() {
+                *v = stairs.before(j, s);
+            }
+            sys.guards(x, now, g) && g.iter().all(|v| *v >= 0.0)
+        };
+        if !holds(sys, &zt[..nx], len, now) {
+            return None;
+        }
+        inside.resize((ke - kk - 1) * dim, 0.0);
+        let (f0, f1) = (&k.k1[..dim], &k.k2[..dim]);
+        for (i, z_i) in inside.chunks_exact_mut(dim).enumerate() {
+            let s = t[kk + 1 + i] - t0;
+            let th = s / len;
+            let rest = 1.0 - th;
+            let h10 = th * rest * rest * len;
+            let h01 = th * th * (3.0 - 2.0 * th);
+            let h11 = -th * th * rest * len;
+            for e in 0..dim {
+                z_i[e] = cur[e] + h01 * (zt[e] - cur[e]) + h10 * f0[e] + h11 * f1[e];
+            }
+            if !z_i.iter().all(|v| v.is_finite()) || !holds(sys, &z_i[..nx], s, now) {
+                return None;
+            }
+            // a sliding dry joint's velocity must be farther from zero than
+            // the staircase's trajectory can be from the line's there (G
+            // E1): otherwise the two may stop at different samples
+            if dry {
+                let dir = &sys.mode().dir;
+                for j in 0..n {
+                    if dir[j] != 0.0 {
+                        let miss: f64 = (0..m)
+                            .map(|l| gain[j * m + l] * stairs.inside_rate_error(l, s))
+                            .sum();
+                        if z_i[n + j].abs() <= miss.abs() {
+                            return None;
+                        }
+                    }
+                }
+            }
+        }
+        std::mem::swap(cur, zt);
+        Some(ke)
+    }
+}
+
 /// The stage buffers of one RK4 step over vectors of a given length.
 struct Stages {
     k1: Vec<f64>,
@@ -1330,6 +1599,24 @@ impl Stages {
         h: f64,
         out: &mut [f64],
     ) -> bool {
+        self.finish_between(sys, z, (u, u), held, rate, h, out)
+    }
+
+    /// [`Stages::finish`] with the input `mid` at the middle stages and
+    /// `end` at the last (an input that is a line over the step, see
+    /// [`AffineSpan`]; the first stage's rates in `k1` are the caller's).
+    #[allow(clippy::too_many_arguments)]
+    #[inline]
+    fn finish_between<D: Dynamics>(
+        &mut self,
+        sys: &mut D,
+        z: &[f64],
+        (mid, end): (&[f64], &[f64]),
+        held: &[usize],
+        rate: Rate,
+        h: f64,
+        out: &mut [f64],
+    ) -> bool {
         let dim = z.len();
         let (k1, k2, k3, k4, tmp) = (
             &self.k1[..dim],
@@ -1341,19 +1628,19 @@ impl Stages {
         for i in 0..dim {
             tmp[i] = z[i] + 0.5 * h * k1[i];
         }
-        if !sys.rhs(tmp, u, held, rate, k2) {
+        if !sys.rhs(tmp, mid, held, rate, k2) {
             return false;
         }
         for i in 0..dim {
             tmp[i] = z[i] + 0.5 * h * k2[i];
         }
-        if !sys.rhs(tmp, u, held, rate, k3) {
+        if !sys.rhs(tmp, mid, held, rate, k3) {
             return false;
         }
         for i in 0..dim {
             tmp[i] = z[i] + h * k3[i];
         }
-        if !sys.rhs(tmp, u, held, rate, k4) {
+        if !sys.rhs(tmp, end, held, rate, k4) {
             return false;
         }
         for i in 0..dim {
@@ -1475,6 +1762,9 @@ pub(crate) struct SignalEffects {
     /// True if some deadzone width or saturation level depends on some free
     /// parameter.
     pub(crate) deadzone_depends_on_free: bool,
+    /// True if no input has a delay, a deadzone or a saturation (whatever
+    /// the parameters' values).
+    plain_inputs: bool,
 }
 
 /// Evaluated [`SignalEffects`].
@@ -1541,6 +1831,11 @@ impl SignalEffects {
                 .collect(),
             delay_depends_on_free,
             deadzone_depends_on_free,
+            plain_inputs: (0..m).all(|j| {
+                model.input_delay(j).is_zero()
+                    && model.input_deadzone(j).is_zero()
+                    && model.input_saturation(j).is_none()
+            }),
         })
     }
 
@@ -1785,6 +2080,7 @@ pub(crate) fn prepare_run(
     }
     if opts.substep.is_none() && probe.is_none() && !closed_loop {
         step.span = Some(MAX_SPAN);
+        step.affine = signals.plain_inputs;
     }
     Ok((step, effects, u))
 }
@@ -2073,6 +2369,25 @@ impl<'s> StateDynamics<'s> {
         )
     }
 
+    /// `M^-1 B` of the current mode at `(x, u)` ([`Dynamics::input_gain`]).
+    pub(crate) fn input_gain(&mut self, x: &[f64], u: &[f64], g: &mut [f64]) -> bool {
+        self.eval(x, u);
+        let (n, m) = (self.n, self.m);
+        if !self
+            .rules
+            .free_inverse(&self.out[..n * n], &self.mode.stuck, &mut self.minv)
+        {
+            return false;
+        }
+        let b = &self.out[n * n + n..n * n + n + n * m];
+        for i in 0..n {
+            for l in 0..m {
+                g[i * m + l] = (0..n).map(|k| self.minv[i * n + k] * b[k * m + l]).sum();
+            }
+        }
+        true
+    }
+
     /// `dx = (v, a)` of the current mode.
     pub(crate) fn rates(&mut self, x: &[f64], u: &[f64], dx: &mut [f64]) -> bool {
         if !self.accelerations(x, u) {
@@ -2135,6 +2450,9 @@ impl Dynamics for StateDynamics<'_> {
             z[self.n + ev.joint] = 0.0;
         }
         true
+    }
+    fn input_gain(&mut self, x: &[f64], u: &[f64], g: &mut [f64]) -> bool {
+        StateDynamics::input_gain(self, x, u, g)
     }
 }
 

@@ -32,6 +32,7 @@
 // numeric kernels index several arrays in step; index loops read better there
 #![allow(clippy::needless_range_loop)]
 
+mod affine_input;
 mod csv_reader;
 pub mod data;
 pub mod error;

@@ -1009,6 +1009,10 @@ impl Dynamics for SensDynamics<'_> {
         self.jumps
     }
 
+    fn input_gain(&mut self, x: &[f64], u: &[f64], g: &mut [f64]) -> bool {
+        self.plain.input_gain(x, u, g)
+    }
+
     fn held(&mut self, z: &mut [f64]) {
         let mode = &self.plain.mode;
         if !mode.any_stuck() {

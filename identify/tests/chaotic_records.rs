@@ -70,11 +70,16 @@ fn clean_chaotic_records_name_nothing() {
     );
 }
 
-/// A Coulomb friction on the elbow: the diagnosis says no simulation
-/// follows the whole records, judges on segments, and names the friction
-/// within 2 % (4.993e-4 N m against 5e-4, measured 2026-11-29; 5.34e-4
-/// while the segments' velocity priors ignored the third derivative, and
-/// a deadzone and an input offset were named after it).
+/// A Coulomb friction on the elbow: the diagnosis judges on segments, says
+/// so, and names the friction within 2 % (4.993e-4 N m against 5e-4,
+/// measured 2026-11-29; 5.34e-4 while the segments' velocity priors ignored
+/// the third derivative, and a deadzone and an input offset were named
+/// after it). Which step sends it there depends on the integrator's last
+/// digits, as the replay itself does: with spans over the driven record's
+/// changing input the baseline's own automatic horizon takes the segments
+/// (its replay at the start values parts at half the step); before, the
+/// baseline went to the whole records and the diagnosis moved it to
+/// segments with its note on unpredictable records.
 #[test]
 fn a_coulomb_friction_in_chaotic_records_is_named_on_segments() {
     let exps = records("chaotic_coulomb", &["coulomb_friction:q2=5e-4"]);
@@ -83,10 +88,9 @@ fn a_coulomb_friction_in_chaotic_records_is_named_on_segments() {
     for n in &d.notes {
         eprintln!("  note: {n}");
     }
-    assert!(d.unpredictable.is_some(), "the whole records were judged");
     assert!(
         d.segments_caveat().is_some(),
-        "the verdict does not say it is on segments"
+        "the verdict does not say it is on segments (the whole records were judged)"
     );
     let v = d.verdict.as_ref().map(|c| c.label());
     assert_eq!(

@@ -155,3 +155,96 @@ fn delayed_switches_on_sample_instants_keep_their_jump() {
         assert!(worst <= 1e-4 * scale, "coord {i}: {worst}");
     }
 }
+
+/// `secs` of the hanging pendulum at `rate` Hz driven by `volts(t)` (held
+/// sample by sample: the input changes at every sample).
+fn driven(secs: f64, rate: f64, volts: impl Fn(f64) -> f64) -> Signals {
+    let n = (secs * rate) as usize;
+    let t: Vec<f64> = (0..n).map(|k| k as f64 / rate).collect();
+    let u = t.iter().map(|&t| volts(t)).collect();
+    Signals {
+        name: "driven".into(),
+        t,
+        q: vec![vec![0.0; n], vec![PI; n]],
+        u: vec![u],
+        replay: None,
+    }
+}
+
+/// A multisine of about 1.5 V RMS over 0.3-6 Hz (as `plantc synth`'s
+/// driven experiments).
+fn multisine(t: f64) -> f64 {
+    [0.3, 0.7, 1.3, 2.1, 3.4, 4.6, 6.0]
+        .iter()
+        .enumerate()
+        .map(|(i, f)| 0.8 * (2.0 * PI * f * t + 1.7 * i as f64).sin())
+        .sum()
+}
+
+/// A pseudo-random binary voltage of +-1.5 V that switches every 12 to 40
+/// ms (jumps inside spans: the staircase's miss of the line at the
+/// samples inside decides).
+fn binary(t: f64) -> f64 {
+    let slot = (t / 4e-3) as u64;
+    let mut level = 1.0;
+    let mut s = 0x9e37_79b9_7f4a_7c15u64;
+    let mut edge = 0u64;
+    while edge <= slot {
+        s = s
+            .wrapping_mul(6_364_136_223_846_793_005)
+            .wrapping_add(1_442_695_040_888_963_407);
+        edge += 3 + (s >> 61);
+        if edge <= slot {
+            level = -level;
+        }
+    }
+    1.5 * level
+}
+
+/// The simulation with spans against the interval-by-interval one on
+/// driven records, where the spans replace the held input by a line
+/// (`affine_input`): multisine and binary voltages at 500 Hz and 1 kHz,
+/// with the arm's gearbox friction sticking at the reversals. Different
+/// (spans were taken), within the bound of `MAX_SPAN`'s doc (1.1e-5 rad,
+/// what the spans of a free swing may cost).
+#[test]
+fn spans_over_a_changing_input_stay_within_the_bound() {
+    let m = model(&pendulum_text());
+    for (rate, name, volts) in [
+        (500.0, "multisine", multisine as fn(f64) -> f64),
+        (1000.0, "multisine", multisine),
+        (500.0, "binary", binary),
+        (1000.0, "binary", binary),
+    ] {
+        let sig = driven(10.0, rate, volts);
+        let intervals = SimOptions {
+            substep: Some(1.0 / rate),
+            ..SimOptions::default()
+        };
+        let spans = run(&m, &sig, SimOptions::default());
+        let steps = run(&m, &sig, intervals);
+        let d = max_diff(&spans, &steps);
+        let swing = steps[0].iter().fold(0.0f64, |a, v| a.max(v.abs()));
+        eprintln!("{name} at {rate} Hz: arm swings {swing:.2} rad, spans against intervals max {d:.2e} rad");
+        assert!(swing > 0.1, "the arm is driven");
+        assert!(d > 0.0, "{name} at {rate} Hz: no span was taken");
+        assert!(d < 1.1e-5, "{name} at {rate} Hz: {d}");
+    }
+}
+
+/// Sensitivities through spans over a changing input (the line's values at
+/// the stages) against central differences of the plain simulation.
+#[test]
+fn sensitivities_through_spans_over_a_changing_input() {
+    let m = model(&pendulum_text());
+    for volts in [multisine as fn(f64) -> f64, binary] {
+        let sig = driven(3.0, 1000.0, volts);
+        check_sensitivities(
+            &m,
+            &sig,
+            &["J1", "b1", "l2", "Fg1"],
+            &[1e-8, 1e-8, 1e-6, 1e-7],
+            1e-4,
+        );
+    }
+}

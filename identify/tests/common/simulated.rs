@@ -52,8 +52,18 @@ pub fn max_diff(a: &[Vec<f64>], b: &[Vec<f64>]) -> f64 {
         .fold(0.0, f64::max)
 }
 
+/// The plain simulation at the nominal values, one RK4 step per sample
+/// interval (an explicit substep of the records' interval: no span). The
+/// tests compare a model with an input effect (a delay, a deadzone or a
+/// saturation: no span where the input changes) with the model without it
+/// on inputs transformed by hand, which would otherwise take spans over the
+/// changing input: the same steps for both.
 pub fn simulate(m: &Model, sig: &Signals) -> Vec<Vec<f64>> {
-    Simulator::new(m, SimOptions::default())
+    let opts = SimOptions {
+        substep: Some(sig.t[1] - sig.t[0]),
+        ..SimOptions::default()
+    };
+    Simulator::new(m, opts)
         .expect("compiles")
         .simulate(sig, &nominal(m), sig.len())
         .expect("simulates")
