@@ -946,75 +946,65 @@ fn integrate_in<D: Dynamics>(
         for (j, uj) in uh.iter_mut().enumerate() {
             *uj = u[j][idx[j]];
         }
-        if let Some(ke) = substep
-            .span
-            .and_then(|max| span_end(t, u, (&idx, delays), kk, k1, max))
-        {
-            let spanned = Span {
-                t,
-                from: kk,
-                to: ke,
-                u: &uh,
-                held: &idx,
-            };
-            if spanned.step(sys, (cur, zt), &mut k, (&mut g, &mut inside), &mut carry) {
-                for (i, z_i) in inside.chunks_exact(dim).enumerate() {
-                    if !at_sample(kk + 1 + i, z_i, u) {
-                        return Err(SimError::Diverged {
-                            experiment: name.to_string(),
-                            time: t[kk + 1 + i],
-                        });
-                    }
+        // a span: the inputs hold over it, or (without delays, deadzones or
+        // saturations) they are replaced by their lines
+        let taken = match substep.span {
+            Some(max) => match span_end(t, u, (&idx, delays), kk, k1, max) {
+                Some(ke) => Span {
+                    t,
+                    from: kk,
+                    to: ke,
+                    u: &uh,
+                    held: &idx,
                 }
-                // the switches passed (each to the value held already);
-                // those due at the span's end are left to the interval that
-                // starts there, which takes them as the intervals do (a
-                // delayed switch there changes the delay's sensitivity)
-                let tol = 1e-9 * (t[ke] - t[ke - 1]);
-                for (j, i) in idx.iter_mut().enumerate() {
-                    while *i + 1 < k1 && t[*i + 1] + delay(j) < t[ke] - tol {
-                        *i += 1;
+                .step(sys, (cur, zt), &mut k, (&mut g, &mut inside), &mut carry)
+                .then_some(ke),
+                None if substep.affine => {
+                    let ke = AffineSpan {
+                        t,
+                        u,
+                        from: kk,
+                        held: (&idx, delays),
                     }
+                    .step(
+                        sys,
+                        (cur, zt),
+                        &mut k,
+                        (&mut g, &mut inside),
+                        (k1, max),
+                        &mut line,
+                        &mut hint,
+                    );
+                    if ke.is_some() {
+                        carry.at = usize::MAX;
+                    }
+                    ke
                 }
-                kk = ke;
-                continue;
+                None => None,
+            },
+            None => None,
+        };
+        if let Some(ke) = taken {
+            for (i, z_i) in inside.chunks_exact(dim).enumerate() {
+                if !at_sample(kk + 1 + i, z_i, u) {
+                    return Err(SimError::Diverged {
+                        experiment: name.to_string(),
+                        time: t[kk + 1 + i],
+                    });
+                }
             }
-        } else if let (true, Some(max)) = (substep.affine, substep.span) {
-            let spanned = AffineSpan {
-                t,
-                u,
-                from: kk,
-                held: (&idx, delays),
-            };
-            if let Some(ke) = spanned.step(
-                sys,
-                (cur, zt),
-                &mut k,
-                (&mut g, &mut inside),
-                (k1, max),
-                &mut line,
-                &mut hint,
-            ) {
-                carry.at = usize::MAX;
-                for (i, z_i) in inside.chunks_exact(dim).enumerate() {
-                    if !at_sample(kk + 1 + i, z_i, u) {
-                        return Err(SimError::Diverged {
-                            experiment: name.to_string(),
-                            time: t[kk + 1 + i],
-                        });
-                    }
+            // the switches passed (each to the value held already, or
+            // within the line); those due at the span's end are left to the
+            // interval that starts there, which takes them as the intervals
+            // do (a delayed switch there changes the delay's sensitivity)
+            let tol = 1e-9 * (t[ke] - t[ke - 1]);
+            for (j, i) in idx.iter_mut().enumerate() {
+                while *i + 1 < k1 && t[*i + 1] + delay(j) < t[ke] - tol {
+                    *i += 1;
                 }
-                // (as after a span: the switches due at its end are the
-                // next interval's)
-                let tol = 1e-9 * (t[ke] - t[ke - 1]);
-                for (j, i) in idx.iter_mut().enumerate() {
-                    while *i + 1 < k1 && t[*i + 1] + delay(j) < t[ke] - tol {
-                        *i += 1;
-                    }
-                }
-                kk = ke;
-                continue;
             }
+            kk = ke;
+            continue;
         }
         let (t_end, dt) = (t[kk + 1], t[kk + 1] - t[kk]);
         let tol = 1e-9 * dt;
