@@ -1495,6 +1495,10 @@ impl AffineSpan<'_> {
                 }
                 worst = worst.max(estimate);
             }
+            // the estimate grows as the length's fourth power: it would
+            // equal the tolerance at `(tol / est)^(1/4)` times this length;
+            // 0.9 of that (an estimate 0.9^4 = 0.66 of the tolerance) leaves
+            // room for its change from one span to the next
             let intervals = (ke - kk) as f64;
             let allowed = intervals * 0.9 * (SPAN_TOLERANCE / worst).sqrt().sqrt();
             *hint = (allowed.floor() as usize).clamp(2, 2 * (ke - kk));
