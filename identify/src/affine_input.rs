@@ -115,13 +115,7 @@ impl Staircase {
     /// is the velocities' miss where `G E2` is the positions'.
     pub(crate) fn inside_rate_error(&self, j: usize, s: f64) -> f64 {
         let (mean, slope) = self.line[j];
-        let mut staircase = 0.0;
-        for &(a, b, v) in self.of(j) {
-            if a >= s {
-                break;
-            }
-            staircase += v * (b.min(s) - a);
-        }
+        let staircase = self.up_to(j, s, |v, a, b| v * (b - a));
         staircase - (mean * s + slope * (s * s / 2.0 - self.len * s / 2.0))
     }
 
@@ -129,16 +123,24 @@ impl Staircase {
     /// (see the module docs).
     pub(crate) fn inside_error(&self, j: usize, s: f64) -> f64 {
         let (mean, slope) = self.line[j];
-        let mut staircase = 0.0;
+        let staircase = self.up_to(j, s, |v, a, b| {
+            v * 0.5 * ((s - a).powi(2) - (s - b).powi(2))
+        });
+        let line = mean * s * s / 2.0 + slope * (s.powi(3) / 6.0 - self.len * s * s / 4.0);
+        staircase - line
+    }
+
+    /// The sum of `term(value, from, to)` over input `j`'s pieces, cut at
+    /// `s`.
+    fn up_to(&self, j: usize, s: f64, term: impl Fn(f64, f64, f64) -> f64) -> f64 {
+        let mut sum = 0.0;
         for &(a, b, v) in self.of(j) {
             if a >= s {
                 break;
             }
-            let b = b.min(s);
-            staircase += v * 0.5 * ((s - a).powi(2) - (s - b).powi(2));
+            sum += term(v, a, b.min(s));
         }
-        let line = mean * s * s / 2.0 + slope * (s.powi(3) / 6.0 - self.len * s * s / 4.0);
-        staircase - line
+        sum
     }
 }
 

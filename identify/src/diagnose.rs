@@ -1617,6 +1617,18 @@ impl Search<'_> {
         true
     }
 
+    /// The second start of candidate `idx` ([`Search::second_start`]);
+    /// true when it then settles the diagnosis (the simpler effect it
+    /// contains is refitted beside it).
+    fn restart_settles(&mut self, ranking: &mut [Ranked], idx: usize) -> bool {
+        self.second_start(ranking, idx);
+        let settles = self.settles(&ranking[idx]);
+        if settles {
+            self.refit_nested(ranking, idx);
+        }
+        settles
+    }
+
     /// A candidate that passes with its residual at the floor: nothing is
     /// left for another to explain.
     fn settles(&self, r: &Ranked) -> bool {
@@ -1726,11 +1738,7 @@ impl Search<'_> {
         // candidates were refitted before the restart reached the floor.
         if !settled {
             if let Some(best) = best_passing(ranking) {
-                self.second_start(ranking, best);
-                if self.settles(&ranking[best]) {
-                    self.refit_nested(ranking, best);
-                    settled = true;
-                }
+                settled = self.restart_settles(ranking, best);
             }
         }
         if !settled {
@@ -1769,11 +1777,7 @@ impl Search<'_> {
             if self.second_started.contains(&best) || !self.may_restart() {
                 break;
             }
-            self.second_start(ranking, best);
-            if self.settles(&ranking[best]) {
-                self.refit_nested(ranking, best);
-                settled = true;
-            }
+            settled = self.restart_settles(ranking, best);
         }
         let any = |ranking: &[Ranked]| ranking.iter().any(Ranked::passes);
         if !settled && !any(ranking) {
@@ -1796,9 +1800,7 @@ impl Search<'_> {
                         settles(self.judge, r) || r.likely_restart()
                     });
                 }
-                self.second_start(ranking, idx);
-                if self.settles(&ranking[idx]) {
-                    self.refit_nested(ranking, idx);
+                if self.restart_settles(ranking, idx) {
                     break;
                 }
                 // a restart's gain is the baseline's: once one is likely,

@@ -603,6 +603,18 @@ pub(crate) struct Segment {
     pub(crate) end: Boundary,
 }
 
+impl Segment {
+    /// A segment of length `len` from one sample instant to another (a
+    /// span's).
+    fn between_samples(len: f64) -> Segment {
+        Segment {
+            len,
+            start: Boundary::Sample,
+            end: Boundary::Sample,
+        }
+    }
+}
+
 /// What [`Dynamics::rhs`] computes.
 #[derive(Copy, Clone, Debug, PartialEq)]
 pub(crate) enum Rate {
@@ -686,9 +698,7 @@ pub(crate) trait Dynamics {
     /// The input gain `G = M^-1 B` of the current mode at `(x, u)`
     /// (`n x m`, row-major; zero rows for stuck joints) into `g`; false
     /// when it cannot be evaluated.
-    fn input_gain(&mut self, _x: &[f64], _u: &[f64], _g: &mut [f64]) -> bool {
-        false
-    }
+    fn input_gain(&mut self, x: &[f64], u: &[f64], g: &mut [f64]) -> bool;
 }
 
 /// `dst.copy_from_slice(src)` for the few numbers of a state, an input or
@@ -1282,11 +1292,7 @@ impl Span<'_> {
         let dim = cur.len() - sys.tangent_len();
         let t0 = self.t[self.from];
         let len = self.t[self.to] - t0;
-        sys.begin_segment(&Segment {
-            len,
-            start: Boundary::Sample,
-            end: Boundary::Sample,
-        });
+        sys.begin_segment(&Segment::between_samples(len));
         if !sys.classify(&cur[..nx], self.u, None) {
             return false;
         }
@@ -1311,12 +1317,9 @@ impl Span<'_> {
         {
             return false;
         }
-        for i in 0..nx {
-            let reach = if i < n { len / 6.0 } else { len * len / 6.0 };
-            let estimate = reach * (k.k4[i] - k.k2[i]).abs();
-            if estimate.is_nan() || estimate > SPAN_TOLERANCE {
-                return false;
-            }
+        let worst = k.span_estimate(n, len);
+        if worst.is_nan() || worst > SPAN_TOLERANCE {
+            return false;
         }
         let mut holds =
             |sys: &mut D, x: &[f64]| !dry || (sys.guards(x, u, g) && g.iter().all(|v| *v >= 0.0));
@@ -1328,14 +1331,7 @@ impl Span<'_> {
         let (f0, f1) = (&k.k1[..dim], &k.k2[..dim]);
         for (i, z_i) in inside.chunks_exact_mut(dim).enumerate() {
             let th = (self.t[self.from + 1 + i] - t0) / len;
-            let rest = 1.0 - th;
-            let h10 = th * rest * rest * len;
-            let h01 = th * th * (3.0 - 2.0 * th);
-            let h11 = -th * th * rest * len;
-            // (in the form that leaves a held entry exactly where it is)
-            for e in 0..dim {
-                z_i[e] = cur[e] + h01 * (zt[e] - cur[e]) + h10 * f0[e] + h11 * f1[e];
-            }
+            hermite((&cur[..dim], &zt[..dim]), (f0, f1), (th, len), z_i);
             if !z_i.iter().all(|v| v.is_finite()) || !holds(sys, &z_i[..nx]) {
                 return false;
             }
@@ -1443,10 +1439,8 @@ impl AffineSpan<'_> {
             (kk + 1..ke).all(|i| {
                 let s = t[i] - t0;
                 (0..n).all(|c| {
-                    let miss: f64 = (0..m)
-                        .map(|l| gain[c * m + l] * stairs.inside_error(l, s))
-                        .sum();
-                    miss.abs() <= SPAN_TOLERANCE
+                    gain_row_times(gain, (c, m), |l| stairs.inside_error(l, s)).abs()
+                        <= SPAN_TOLERANCE
                 })
             })
         };
@@ -1465,11 +1459,7 @@ impl AffineSpan<'_> {
         let mut retried = false;
         let len = loop {
             let len = t[ke] - t0;
-            sys.begin_segment(&Segment {
-                len,
-                start: Boundary::Sample,
-                end: Boundary::Sample,
-            });
+            sys.begin_segment(&Segment::between_samples(len));
             stairs.line(start, mid, end);
             if !sys.rhs(&cur[..dim], start, held, Rate::Segment, &mut k.k1[..dim])
                 || !k.finish_between(
@@ -1486,14 +1476,9 @@ impl AffineSpan<'_> {
             {
                 return None;
             }
-            let mut worst = 0.0f64;
-            for i in 0..nx {
-                let reach = if i < n { len / 6.0 } else { len * len / 6.0 };
-                let estimate = reach * (k.k4[i] - k.k2[i]).abs();
-                if estimate.is_nan() {
-                    return None;
-                }
-                worst = worst.max(estimate);
+            let worst = k.span_estimate(n, len);
+            if worst.is_nan() {
+                return None;
             }
             // the estimate grows as the length's fourth power: it would
             // equal the tolerance at `(tol / est)^(1/4)` times this length;
@@ -1532,14 +1517,7 @@ impl AffineSpan<'_> {
         let (f0, f1) = (&k.k1[..dim], &k.k2[..dim]);
         for (i, z_i) in inside.chunks_exact_mut(dim).enumerate() {
             let s = t[kk + 1 + i] - t0;
-            let th = s / len;
-            let rest = 1.0 - th;
-            let h10 = th * rest * rest * len;
-            let h01 = th * th * (3.0 - 2.0 * th);
-            let h11 = -th * th * rest * len;
-            for e in 0..dim {
-                z_i[e] = cur[e] + h01 * (zt[e] - cur[e]) + h10 * f0[e] + h11 * f1[e];
-            }
+            hermite((&cur[..dim], &zt[..dim]), (f0, f1), (s / len, len), z_i);
             if !z_i.iter().all(|v| v.is_finite()) || !holds(sys, &z_i[..nx], s, now) {
                 return None;
             }
@@ -1549,13 +1527,12 @@ impl AffineSpan<'_> {
             if dry {
                 let dir = &sys.mode().dir;
                 for j in 0..n {
-                    if dir[j] != 0.0 {
-                        let miss: f64 = (0..m)
-                            .map(|l| gain[j * m + l] * stairs.inside_rate_error(l, s))
-                            .sum();
-                        if z_i[n + j].abs() <= miss.abs() {
-                            return None;
-                        }
+                    if dir[j] != 0.0
+                        && z_i[n + j].abs()
+                            <= gain_row_times(gain, (j, m), |l| stairs.inside_rate_error(l, s))
+                                .abs()
+                    {
+                        return None;
                     }
                 }
             }
@@ -1563,6 +1540,30 @@ impl AffineSpan<'_> {
         std::mem::swap(cur, zt);
         Some(ke)
     }
+}
+
+/// The state at fraction `th` of a step of length `len` from `z0` (rates
+/// `f0`) to `z1` (rates `f1`) by the step's cubic Hermite interpolant, into
+/// `out`; in the form that leaves a held entry exactly where it is.
+fn hermite(
+    (z0, z1): (&[f64], &[f64]),
+    (f0, f1): (&[f64], &[f64]),
+    (th, len): (f64, f64),
+    out: &mut [f64],
+) {
+    let rest = 1.0 - th;
+    let h10 = th * rest * rest * len;
+    let h01 = th * th * (3.0 - 2.0 * th);
+    let h11 = -th * th * rest * len;
+    for e in 0..out.len() {
+        out[e] = z0[e] + h01 * (z1[e] - z0[e]) + h10 * f0[e] + h11 * f1[e];
+    }
+}
+
+/// Row `c` of an input gain `G` (`m` columns, row-major) times the inputs'
+/// `errors`.
+fn gain_row_times(gain: &[f64], (c, m): (usize, usize), errors: impl Fn(usize) -> f64) -> f64 {
+    (0..m).map(|l| gain[c * m + l] * errors(l)).sum()
 }
 
 /// The stage buffers of one RK4 step over vectors of a given length.
@@ -1648,6 +1649,23 @@ impl Stages {
             out[i] = z[i] + h / 6.0 * (k1[i] + 2.0 * k2[i] + 2.0 * k3[i] + k4[i]);
         }
         true
+    }
+
+    /// The largest embedded error estimate of a span's step of length
+    /// `len` over the `n` coordinates, whose end rates are in `k2` (see
+    /// [`Span`]): a position's `len/6 |k4 - f(z1)|`, a velocity's times
+    /// `len` (the distance it covers); NaN when one is.
+    fn span_estimate(&self, n: usize, len: f64) -> f64 {
+        let mut worst = 0.0f64;
+        for i in 0..2 * n {
+            let reach = if i < n { len / 6.0 } else { len * len / 6.0 };
+            let estimate = reach * (self.k4[i] - self.k2[i]).abs();
+            if estimate.is_nan() {
+                return f64::NAN;
+            }
+            worst = worst.max(estimate);
+        }
+        worst
     }
 
     /// An RK4 step of the state alone ([`Dynamics::state_rhs`]) of length

@@ -9,7 +9,9 @@ mod common;
 
 use std::f64::consts::PI;
 
-use common::simulated::{check_sensitivities, max_diff, model, pendulum_text, pendulum_with};
+use common::simulated::{
+    check_sensitivities, max_diff, model, nominal, pendulum_text, pendulum_with, simulate,
+};
 use plantc_derive::model::{Model, ParameterValues};
 use plantc_identify::{SensitivitySimulator, Signals, SimOptions, Simulator};
 
@@ -31,26 +33,16 @@ fn steps(secs: f64, alpha0: f64, volts: f64) -> Signals {
     }
 }
 
-fn nominal(m: &Model) -> Vec<f64> {
-    ParameterValues::from_base(m, m.parameters.iter().map(|p| p.value).collect()).full
-}
-
-fn run(m: &Model, sig: &Signals, opts: SimOptions) -> Vec<Vec<f64>> {
-    Simulator::new(m, opts)
+/// The simulation with spans (the default options) and interval by
+/// interval (`simulate`: an explicit substep of the record's interval takes
+/// none), both at the nominal values.
+fn spans_and_intervals(m: &Model, sig: &Signals) -> (Vec<Vec<f64>>, Vec<Vec<f64>>) {
+    let spans = Simulator::new(m, SimOptions::default())
         .expect("compiles")
         .simulate(sig, &nominal(m), sig.len())
         .expect("simulates")
-        .q
-}
-
-/// The simulation with spans (the default) and interval by interval (an
-/// explicit 2 ms substep takes none).
-fn spans_and_intervals(m: &Model, sig: &Signals) -> (Vec<Vec<f64>>, Vec<Vec<f64>>) {
-    let intervals = SimOptions {
-        substep: Some(2e-3),
-        ..SimOptions::default()
-    };
-    (run(m, sig, SimOptions::default()), run(m, sig, intervals))
+        .q;
+    (spans, simulate(m, sig))
 }
 
 /// Spans against one step per interval on a free swing with a voltage
@@ -158,15 +150,23 @@ fn delayed_switches_on_sample_instants_keep_their_jump() {
 
 /// `secs` of the hanging pendulum at `rate` Hz driven by `volts(t)` (held
 /// sample by sample: the input changes at every sample).
-fn driven(secs: f64, rate: f64, volts: impl Fn(f64) -> f64) -> Signals {
+fn driven(secs: f64, rate: f64, volts: fn(f64) -> f64) -> Signals {
+    driven_from(secs, rate, &[0.0, PI], &[&volts])
+}
+
+/// `secs` at `rate` Hz from the positions `q0` at rest, input `j` held at
+/// `inputs[j](t)` sample by sample.
+fn driven_from(secs: f64, rate: f64, q0: &[f64], inputs: &[&dyn Fn(f64) -> f64]) -> Signals {
     let n = (secs * rate) as usize;
     let t: Vec<f64> = (0..n).map(|k| k as f64 / rate).collect();
-    let u = t.iter().map(|&t| volts(t)).collect();
     Signals {
         name: "driven".into(),
+        u: inputs
+            .iter()
+            .map(|f| t.iter().map(|&t| f(t)).collect())
+            .collect(),
+        q: q0.iter().map(|&q| vec![q; n]).collect(),
         t,
-        q: vec![vec![0.0; n], vec![PI; n]],
-        u: vec![u],
         replay: None,
     }
 }
@@ -217,12 +217,7 @@ fn spans_over_a_changing_input_stay_within_the_bound() {
         (1000.0, "binary", binary),
     ] {
         let sig = driven(10.0, rate, volts);
-        let intervals = SimOptions {
-            substep: Some(1.0 / rate),
-            ..SimOptions::default()
-        };
-        let spans = run(&m, &sig, SimOptions::default());
-        let steps = run(&m, &sig, intervals);
+        let (spans, steps) = spans_and_intervals(&m, &sig);
         let d = max_diff(&spans, &steps);
         let swing = steps[0].iter().fold(0.0f64, |a, v| a.max(v.abs()));
         eprintln!("{name} at {rate} Hz: arm swings {swing:.2} rad, spans against intervals max {d:.2e} rad");
@@ -262,26 +257,11 @@ fn spans_over_two_changing_inputs_stay_within_the_bound() {
     let path =
         std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("../models/double_pendulum.plant");
     let m = model(&std::fs::read_to_string(path).expect("model text"));
+    let shoulder = |t: f64| 0.25 * multisine(t);
+    let elbow = |t: f64| 0.125 * multisine(t + 0.37);
     for rate in [500.0, 1000.0] {
-        let n = (10.0 * rate) as usize;
-        let t: Vec<f64> = (0..n).map(|k| k as f64 / rate).collect();
-        let torque = |t: f64, phase: f64| 0.25 * multisine(t + phase);
-        let sig = Signals {
-            name: "driven".into(),
-            t: t.clone(),
-            q: vec![vec![0.0; n], vec![0.0; n]],
-            u: vec![
-                t.iter().map(|&t| torque(t, 0.0)).collect(),
-                t.iter().map(|&t| 0.5 * torque(t, 0.37)).collect(),
-            ],
-            replay: None,
-        };
-        let intervals = SimOptions {
-            substep: Some(1.0 / rate),
-            ..SimOptions::default()
-        };
-        let spans = run(&m, &sig, SimOptions::default());
-        let steps = run(&m, &sig, intervals);
+        let sig = driven_from(10.0, rate, &[0.0, 0.0], &[&shoulder, &elbow]);
+        let (spans, steps) = spans_and_intervals(&m, &sig);
         let d = max_diff(&spans, &steps);
         let swing = steps[1].iter().fold(0.0f64, |a, v| a.max(v.abs()));
         let stops = steps[1]
