@@ -497,17 +497,20 @@ impl SampleSink for NormalSink<'_> {
             let r = w * (y[i] - self.measured[i][k]);
             part.ssr += r * r;
             part.count += 1;
-            for (c, rc) in row.iter_mut().enumerate() {
-                *rc = w * dy[i * nc + c];
+            for (rc, d) in row.iter_mut().zip(&dy[i * nc..(i + 1) * nc]) {
+                *rc = w * d;
             }
-            for c in 0..nc {
-                let rc = row[c];
+            // slices first: the stores into `jtj` then cannot be taken for
+            // stores into the vectors' headers, and the loop vectorizes
+            let (jtj, jtr) = (&mut part.jtj[..], &mut part.jtr[..]);
+            for (c, (&rc, jtr_c)) in row.iter().zip(jtr.iter_mut()).enumerate() {
                 if rc == 0.0 {
                     continue;
                 }
-                part.jtr[c] += rc * r;
-                for d in c..nc {
-                    part.jtj[c * nc + d] += rc * row[d];
+                *jtr_c += rc * r;
+                let upper = &mut jtj[c * nc + c..(c + 1) * nc];
+                for (a, &rd) in upper.iter_mut().zip(&row[c..]) {
+                    *a += rc * rd;
                 }
             }
         }
