@@ -253,14 +253,15 @@ impl Ranked {
         !self.from_baseline && self.test.as_ref().is_some_and(EffectTest::likely)
     }
 
-    /// Its refit stopped where it could no longer pass ([`crate::GiveUp`]):
+    /// Its refit stopped where it could no longer change the verdict
+    /// (it could not pass, or not beat a standing verdict; [`crate::GiveUp`]):
     /// its cost is not refined.
     pub fn stopped_short(&self) -> bool {
         self.fit.as_ref().is_some_and(|f| f.gave_up)
     }
 
     /// The decision rule's words on it: passes or not, with the test's
-    /// numbers; a refit that stopped where it could no longer pass
+    /// numbers; a refit that stopped where it could no longer change the verdict
     /// ([`crate::GiveUp`]) says so.
     pub fn rule_line(&self) -> String {
         let mut line = match &self.test {
@@ -269,7 +270,7 @@ impl Ranked {
             None => "not judged".to_string(),
         };
         if self.stopped_short() {
-            line.push_str("; refit stopped where it could no longer pass (its cost not refined)");
+            line.push_str("; refit stopped where it could no longer change the verdict (its cost not refined)");
         }
         line
     }
@@ -1021,13 +1022,17 @@ impl<'a> Judge<'a> {
 
     /// The options of a screening refit of candidate `r` against
     /// `baseline`: it gives up once it is at least as good as the baseline
-    /// but cannot pass the likelihood part of the rule, `N_eff ln(S0/S1) >
-    /// k ln N_eff`, i.e. cannot bring its weighted RMS below the
-    /// baseline's times `exp(-k ln N_eff / (2 N_eff))` ([`GiveUp`]). Such a
-    /// candidate can change no decision (it neither passes nor is likely;
-    /// against the simpler effect it contains, a bigger one that passes
-    /// passes by the same algebra), so its cost is not refined to the
-    /// screening tolerance: work in proportion to the question.
+    /// but cannot reach a margin above `bar` under the rule, `N_eff
+    /// ln(S0/S1) - k ln N_eff > bar`, i.e. cannot bring its weighted RMS
+    /// below the baseline's times `exp(-(bar + k ln N_eff) / (2 N_eff))`
+    /// ([`GiveUp`]). With `bar` 0 that is the likelihood part of the rule:
+    /// such a candidate can change no decision (it neither passes nor is
+    /// likely; against the simpler effect it contains, a bigger one that
+    /// passes passes by the same algebra). With `bar` a standing verdict's
+    /// margin ([`Search::standing_margin`]) it cannot take the verdict
+    /// from it, the one question its refit is there to answer. Either way
+    /// its cost is not refined to the screening tolerance: work in
+    /// proportion to the question.
     ///
     /// "Cannot" is the Gauss-Newton model's word, a first-order one: it is
     /// taken only for an effect linear in its parameters, whose reach
@@ -1037,7 +1042,7 @@ impl<'a> Judge<'a> {
     /// that a long descent takes to a weighted RMS ratio of 1.050 was
     /// stopped at 1.001 on that word); nor is a dry friction that holds
     /// its joint ([`holds_its_joint`]).
-    fn screening_options(&self, r: &Ranked, baseline: &FitResult) -> DiagnoseOptions {
+    fn screening_options(&self, r: &Ranked, baseline: &FitResult, bar: f64) -> DiagnoseOptions {
         if !first_order_at_null(&r.candidate, self.opts) {
             return self.opts.clone();
         }
@@ -1047,7 +1052,8 @@ impl<'a> Judge<'a> {
             fit: FitOptions {
                 give_up: Some(GiveUp {
                     once_at: tie_level(baseline),
-                    unless_below: baseline.after_cost * (-k * n.ln() / (2.0 * n)).exp(),
+                    unless_below: baseline.after_cost
+                        * (-(bar.max(0.0) + k * n.ln()) / (2.0 * n)).exp(),
                 }),
                 ..self.opts.fit.clone()
             },
@@ -1435,15 +1441,19 @@ struct RestartFit {
 }
 
 impl Search<'_> {
-    /// Refit candidate `idx` warm from the baseline and judge it.
-    fn refit(&self, ranking: &mut [Ranked], idx: usize) {
-        if let Some(done) = self.ahead.take(Step::Refit, idx, &ranking[idx]) {
+    /// Refit candidate `idx` warm from the baseline and judge it; its
+    /// refit may stop where it cannot reach a margin above `bar`
+    /// ([`Judge::screening_options`]).
+    fn refit(&self, ranking: &mut [Ranked], idx: usize, bar: f64) {
+        if let Some(done) = self.ahead.take(Step::refit(bar), idx, &ranking[idx]) {
             ranking[idx] = done;
             return;
         }
         let label = ranking[idx].candidate.label();
         crate::progress::candidates(&[idx + 1], ranking.len(), &label);
-        let opts = self.judge.screening_options(&ranking[idx], self.baseline);
+        let opts = self
+            .judge
+            .screening_options(&ranking[idx], self.baseline, bar);
         refit(
             &mut ranking[idx],
             &self.edited[idx].0,
@@ -1467,7 +1477,9 @@ impl Search<'_> {
             ranking[idx] = done;
             return;
         }
-        let opts = self.judge.screening_options(&ranking[idx], self.baseline);
+        let opts = self
+            .judge
+            .screening_options(&ranking[idx], self.baseline, 0.0);
         second_start(
             &mut ranking[idx],
             &self.edited[idx].0,
@@ -1505,10 +1517,13 @@ impl Search<'_> {
             |r, idx| {
                 crate::progress::candidates(&[idx + 1], n, &r.candidate.label());
                 let m = &edited[idx].0;
-                let opts = judge.screening_options(r, baseline);
                 match step {
-                    Step::Refit => refit(r, m, model, baseline, judge.experiments, &opts),
+                    Step::Refit { bar } => {
+                        let opts = judge.screening_options(r, baseline, f64::from_bits(bar));
+                        refit(r, m, model, baseline, judge.experiments, &opts);
+                    }
                     Step::SecondStart => {
+                        let opts = judge.screening_options(r, baseline, 0.0);
                         second_start(r, m, model, baseline, judge.experiments, &opts);
                     }
                 }
@@ -1516,6 +1531,37 @@ impl Search<'_> {
             },
             stop,
         );
+    }
+
+    /// The margin of a verdict that stands whatever the candidates not
+    /// yet refitted turn out to be, short of one with a larger margin; 0
+    /// when there is none. `decide` names the passing candidate with the
+    /// largest margin unless it is a bigger effect that loses to the
+    /// simpler one it contains, or a gain a restart made (the model without
+    /// it, refitted from its values, ends below the baseline: checked here
+    /// as `decide` would, and kept for it). A candidate that cannot reach
+    /// a larger margin cannot change such a verdict.
+    fn standing_margin(&mut self, ranking: &[Ranked]) -> f64 {
+        let Some(best) = best_passing(ranking) else {
+            return 0.0;
+        };
+        let r = &ranking[best];
+        if r.candidate.nested().is_some() {
+            return 0.0;
+        }
+        // (the model without it refitted from its values once per fit of it)
+        let known = self.restart_fit.as_ref().filter(|k| {
+            k.label == r.candidate.label()
+                && r.fit.as_ref().is_some_and(|f| f.after_cost == k.from_cost)
+        });
+        let restart = match known {
+            Some(k) => r.likely_restart() && lower_minimum(&k.fit, self.baseline),
+            None => self.restart_is_the_baselines(r),
+        };
+        if restart {
+            return 0.0;
+        }
+        margin(r).max(0.0)
     }
 
     fn may_restart(&self) -> bool {
@@ -1648,7 +1694,7 @@ impl Search<'_> {
             // (not one the model's own parameters span: a Coulomb friction
             // on a joint whose dry friction the model already estimates)
             if self.edited[j].1 .1 {
-                self.refit(ranking, j);
+                self.refit(ranking, j, 0.0);
             }
         }
     }
@@ -1705,8 +1751,8 @@ impl Search<'_> {
         // refit one candidate (warm from the baseline); true when it settles
         // the diagnosis (passes at the floor; the simpler effect it contains
         // is refitted beside it)
-        let try_one = |this: &mut Self, ranking: &mut [Ranked], idx: usize| -> bool {
-            this.refit(ranking, idx);
+        let try_one = |this: &mut Self, ranking: &mut [Ranked], idx: usize, bar: f64| -> bool {
+            this.refit(ranking, idx, bar);
             let settles = this.settles(&ranking[idx]);
             if settles {
                 this.refit_nested(ranking, idx);
@@ -1715,10 +1761,12 @@ impl Search<'_> {
         };
         let mut settled = false;
         for (k, &idx) in leaders.iter().enumerate() {
-            self.look_ahead(ranking, Step::Refit, &leaders[k..], |r| {
+            // (a verdict that stands sets the bar the others must clear)
+            let bar = self.standing_margin(ranking);
+            self.look_ahead(ranking, Step::refit(bar), &leaders[k..], |r| {
                 settles(self.judge, r)
             });
-            if try_one(self, ranking, idx) {
+            if try_one(self, ranking, idx, bar) {
                 settled = true;
                 break;
             }
@@ -1758,8 +1806,11 @@ impl Search<'_> {
                 ));
             }
             for (k, &idx) in rest.iter().enumerate() {
-                self.look_ahead(ranking, Step::Refit, &rest[k..], |r| settles(self.judge, r));
-                if try_one(self, ranking, idx) {
+                let bar = self.standing_margin(ranking);
+                self.look_ahead(ranking, Step::refit(bar), &rest[k..], |r| {
+                    settles(self.judge, r)
+                });
+                if try_one(self, ranking, idx, bar) {
                     settled = true;
                     break;
                 }
@@ -1848,8 +1899,8 @@ impl Search<'_> {
         // second starts, is the same as one after the other per
         // candidate)
         for (k, &j) in stand_ins.iter().enumerate() {
-            self.look_ahead(ranking, Step::Refit, &stand_ins[k..], |_| false);
-            self.refit(ranking, j);
+            self.look_ahead(ranking, Step::refit(0.0), &stand_ins[k..], |_| false);
+            self.refit(ranking, j, 0.0);
         }
         // (second starts are for a baseline the missing effect distorted:
         // where a candidate settles, the baseline is one effect away from

@@ -2134,7 +2134,14 @@ fn solve(
 /// optimum a fit leans on the initial states (a spring missing from the
 /// start values: held within their priors all along, the per-file offsets
 /// took up the slack and the fit stalled at 150x the floor; free, the
-/// states came back to 0.002 rad/s by the end).
+/// states came back to 0.002 rad/s by the end). Not even from a warm
+/// start, a bounded answer: the story's round-2 fit of a spring added to
+/// the arm, warm from round 1's fit, stalled at a weighted RMS of 0.792
+/// held within them where the free search and this polish reached 0.763
+/// (and the end steps could no longer tell the round-1 Stribeck friction
+/// from the Coulomb friction it was), although the polish costs a
+/// diagnosis' refits 3 to 6 more iterations each, a fifth of the
+/// two_hidden bench case's CPU time.
 fn bounded_polish(
     pb: &Problem<'_>,
     pt: Point,

@@ -32,10 +32,19 @@ use crate::parallel::{par_map_until, workers_for};
 /// Which computation on a candidate.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub(crate) enum Step {
-    /// The refit from the baseline, judged.
-    Refit,
+    /// The refit from the baseline, judged; it may stop where it cannot
+    /// reach a margin above `bar` (an f64's bits, so that steps compare
+    /// exactly; see `diagnose`'s screening options).
+    Refit { bar: u64 },
     /// The second start from the nominal values, judged.
     SecondStart,
+}
+
+impl Step {
+    /// [`Step::Refit`] against the margin `bar`.
+    pub(crate) fn refit(bar: f64) -> Step {
+        Step::Refit { bar: bar.to_bits() }
+    }
 }
 
 /// One result computed ahead: the step, the candidate's index, the state

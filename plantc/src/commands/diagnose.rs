@@ -213,7 +213,7 @@ pub fn run(args: &DiagnoseArgs, out: &mut dyn Write, err: &mut dyn Write) -> Res
     }
     let _ = writeln!(
         out,
-        "(wRMS ratio: the baseline's weighted RMS over the refit's, in noise units; rule: the decision rule against the baseline, `small` = likely but its contribution stays below the noise, `short` = fails, its refit stopped where it could no longer pass)"
+        "(wRMS ratio: the baseline's weighted RMS over the refit's, in noise units; rule: the decision rule against the baseline, `small` = likely but its contribution stays below the noise, `short` = fails, its refit stopped where it could no longer change the verdict)"
     );
     for n in &d.notes {
         let _ = writeln!(out, "note: {n}");
