@@ -1761,11 +1761,17 @@ impl Search<'_> {
         };
         let mut settled = false;
         for (k, &idx) in leaders.iter().enumerate() {
-            // (a verdict that stands sets the bar the others must clear)
+            // (a verdict that stands sets the bar the others must clear;
+            // while none does, the first leader, the likeliest to set one,
+            // is refitted alone, its fit spreading its experiments over the
+            // cores: the others computed ahead without its bar would be
+            // computed again with it)
             let bar = self.standing_margin(ranking);
-            self.look_ahead(ranking, Step::refit(bar), &leaders[k..], |r| {
-                settles(self.judge, r)
-            });
+            if k > 0 || bar > 0.0 {
+                self.look_ahead(ranking, Step::refit(bar), &leaders[k..], |r| {
+                    settles(self.judge, r)
+                });
+            }
             if try_one(self, ranking, idx, bar) {
                 settled = true;
                 break;
