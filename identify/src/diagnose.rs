@@ -1052,8 +1052,7 @@ impl<'a> Judge<'a> {
             fit: FitOptions {
                 give_up: Some(GiveUp {
                     once_at: tie_level(baseline),
-                    unless_below: baseline.after_cost
-                        * (-(bar.max(0.0) + k * n.ln()) / (2.0 * n)).exp(),
+                    unless_below: baseline.after_cost * (-(bar + k * n.ln()) / (2.0 * n)).exp(),
                 }),
                 ..self.opts.fit.clone()
             },
@@ -1440,6 +1439,16 @@ struct RestartFit {
     fit: FitResult,
 }
 
+impl RestartFit {
+    /// Whether this is the refit from `r`'s present fit.
+    fn is_of(&self, r: &Ranked) -> bool {
+        self.label == r.candidate.label()
+            && r.fit
+                .as_ref()
+                .is_some_and(|f| f.after_cost == self.from_cost)
+    }
+}
+
 impl Search<'_> {
     /// Refit candidate `idx` warm from the baseline and judge it; its
     /// refit may stop where it cannot reach a margin above `bar`
@@ -1549,16 +1558,7 @@ impl Search<'_> {
         if r.candidate.nested().is_some() {
             return 0.0;
         }
-        // (the model without it refitted from its values once per fit of it)
-        let known = self.restart_fit.as_ref().filter(|k| {
-            k.label == r.candidate.label()
-                && r.fit.as_ref().is_some_and(|f| f.after_cost == k.from_cost)
-        });
-        let restart = match known {
-            Some(k) => r.likely_restart() && lower_minimum(&k.fit, self.baseline),
-            None => self.restart_is_the_baselines(r),
-        };
-        if restart {
+        if self.restart_is_the_baselines(r) {
             return 0.0;
         }
         margin(r).max(0.0)
@@ -1585,6 +1585,10 @@ impl Search<'_> {
         let Some(f) = r.fit.as_ref() else {
             return false;
         };
+        // (once per fit of it)
+        if let Some(known) = self.restart_fit.as_ref().filter(|k| k.is_of(r)) {
+            return lower_minimum(&known.fit, self.baseline);
+        }
         let Ok(again) = refit_from_fit(
             self.model,
             &self.baseline.base,
@@ -1668,6 +1672,12 @@ impl Search<'_> {
     /// contains is refitted beside it).
     fn restart_settles(&mut self, ranking: &mut [Ranked], idx: usize) -> bool {
         self.second_start(ranking, idx);
+        self.settle(ranking, idx)
+    }
+
+    /// Whether candidate `idx` as it stands settles the diagnosis; when it
+    /// does, the simpler effect it contains is refitted beside it.
+    fn settle(&self, ranking: &mut [Ranked], idx: usize) -> bool {
         let settles = self.settles(&ranking[idx]);
         if settles {
             self.refit_nested(ranking, idx);
@@ -1753,11 +1763,7 @@ impl Search<'_> {
         // is refitted beside it)
         let try_one = |this: &mut Self, ranking: &mut [Ranked], idx: usize, bar: f64| -> bool {
             this.refit(ranking, idx, bar);
-            let settles = this.settles(&ranking[idx]);
-            if settles {
-                this.refit_nested(ranking, idx);
-            }
-            settles
+            this.settle(ranking, idx)
         };
         let mut settled = false;
         // A verdict that stands sets the bar the others must clear. It is
@@ -2061,7 +2067,7 @@ fn decide(
         let f = top.fit.as_ref().expect("passes implies refitted");
         // the model without the effect, from the candidate's values
         let again = match known.take() {
-            Some(k) if k.label == label && k.from_cost == f.after_cost => k.fit,
+            Some(k) if k.is_of(top) => k.fit,
             _ => match refit_from_fit(model, &baseline.base, f, baseline, judge) {
                 Ok(a) => a,
                 Err(_) => return verdict,

@@ -1053,15 +1053,19 @@ fn start_nuisance(setup: &Setup<'_>, pb: &Problem<'_>, pt: &mut Point, run: &mut
 
 /// Refit `q` on the whole record with the globals where `frozen` is true
 /// held (fresh damping, final tolerance); its SSR there, None when the fit
-/// or the cost could not be simulated.
+/// or the cost could not be simulated. With `kept_at`, the refit stops
+/// where the Gauss-Newton model cannot reach it ([`GiveUp`]) and the fit's
+/// own give-up is left as it was.
 fn refit_whole(
     pb: &Problem<'_>,
     q: &mut Point,
     frozen: &[bool],
     max_iterations: usize,
     run: &mut Run<'_>,
+    kept_at: Option<GiveUp>,
 ) -> Option<f64> {
     let mut lambda = 1e-3;
+    let own = kept_at.map(|g| (run.give_up.replace(g), run.gave_up));
     // (from a point within the priors' bounds, near the optimum: kept there)
     run.bounded = true;
     let out = lm(
@@ -1075,24 +1079,11 @@ fn refit_whole(
         run,
     );
     run.bounded = false;
+    if let Some((give_up, gave_up)) = own {
+        (run.give_up, run.gave_up) = (give_up, gave_up);
+    }
     out.ok()?;
     pb.cost(q, f64::INFINITY).ok().map(|(s, _)| s)
-}
-
-/// [`refit_whole`] that stops where the Gauss-Newton model cannot reach
-/// `kept_at` ([`GiveUp`]), the fit's own give-up left as it was.
-fn refit_whole_unless(
-    pb: &Problem<'_>,
-    q: &mut Point,
-    frozen: &[bool],
-    max_iterations: usize,
-    run: &mut Run<'_>,
-    kept_at: GiveUp,
-) -> Option<f64> {
-    let (give_up, gave_up) = (run.give_up.replace(kept_at), run.gave_up);
-    let out = refit_whole(pb, q, frozen, max_iterations, run);
-    (run.give_up, run.gave_up) = (give_up, gave_up);
-    out
 }
 
 /// Everything fixed for one fit: model, data, simulators, layout choices.
@@ -1701,8 +1692,14 @@ fn fit_on_starts(
                 once_at: f64::INFINITY,
                 unless_below: REDUCED_TOLERANCE * rms(best.1, count),
             };
-            let refit =
-                refit_whole_unless(&pb, &mut q, &fz, opts.max_iterations, &mut run, kept_at);
+            let refit = refit_whole(
+                &pb,
+                &mut q,
+                &fz,
+                opts.max_iterations,
+                &mut run,
+                Some(kept_at),
+            );
             run.simulations += 1;
             if let Some(s2) = refit {
                 if acceptable(s2, best.1) {
@@ -1733,7 +1730,7 @@ fn fit_on_starts(
                     fz[j] = true;
                 }
             }
-            let reduced = refit_whole(&pb, &mut q, &fz, opts.max_iterations, &mut run);
+            let reduced = refit_whole(&pb, &mut q, &fz, opts.max_iterations, &mut run, None);
             if let Some(s) = reduced {
                 if acceptable(s, best.1) {
                     notes.push(format!(
